@@ -1,0 +1,12 @@
+"""Features from one 2D laser scan: segments, edges, lines, circles (tree trunks) and clutter.
+
+Stands alone: imports nothing else of trunkslam.
+"""
+
+from features.extract import METHODS, ExtractorParams, extract_features
+from features.types import Circle, Edge, Features, Line, Scan, Segment
+
+__all__ = [
+    "Scan", "Segment", "Circle", "Line", "Edge", "Features",
+    "ExtractorParams", "extract_features", "METHODS",
+]  # fmt: skip
