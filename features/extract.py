@@ -133,7 +133,7 @@ def _chi2_tables(n_max: int, prob: float) -> tuple[np.ndarray, np.ndarray]:
     return line, circ
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _fit_method(code, x, y, lambda0, max_iter, tol):
     if code == 0:
         x0, y0, r, ok, _ = fit_circle_paper(x, y, lambda0, max_iter, tol)
@@ -146,7 +146,7 @@ def _fit_method(code, x, y, lambda0, max_iter, tol):
     return x0, y0, r, ok
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _points(ranges, angle_min, gamma, a, b, xbuf, ybuf):
     """Cartesian points of beams a..b (views into the scratch buffers) and their least range."""
     m = b - a + 1
@@ -162,7 +162,7 @@ def _points(ranges, angle_min, gamma, a, b, xbuf, ybuf):
     return x, y, rmin
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _circle_plausible(x, y, rmin, chi2_circ, sigma2, r_min, r_max):
     """A circle is plausible when the geometric fit's residuals pass the chi-square test, its
     radius is within bounds, and it is convex toward the laser. Returns (ok, ssr, x0, y0, r)."""
@@ -179,7 +179,7 @@ def _circle_plausible(x, y, rmin, chi2_circ, sigma2, r_min, r_max):
     return convex and ssr <= sigma2 * chi2_circ[x.shape[0]], ssr, gx, gy, gr
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _extract_kernel(
     ranges, angle_min, gamma, sigma_r, q, gate, max_growth, merge, method, line_test, min_points,
     min_circle_points, chi2_line, chi2_circ, lrt_threshold, sigma2, r_min, r_max, edge_jump,

@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _solve_sym3(a00, a01, a02, a11, a12, a22, b0, b1, b2):
     """Solve a symmetric positive definite 3x3 system by Cholesky, without allocating.
 
@@ -64,7 +64,7 @@ def _solve_sym3(a00, a01, a02, a11, a12, a22, b0, b1, b2):
     return x0, x1, x2, True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def fit_circle_kasa(x, y):
     """Kasa: minimise sum (x^2 + y^2 + B x + C y + D)^2, linear in (B, C, D)."""
     n = x.shape[0]
@@ -105,7 +105,7 @@ def fit_circle_kasa(x, y):
     return uc + mx, vc + my, math.sqrt(r2), True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def fit_circle_taubin(x, y):
     """Taubin's algebraic fit (Newton on the characteristic polynomial, as in Chernov's code)."""
     n = x.shape[0]
@@ -180,7 +180,7 @@ def fit_circle_taubin(x, y):
     return uc + mx, vc + my, math.sqrt(r2), True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _circle_through3(x1, y1, x2, y2, x3, y3):
     """Circumcircle of three points; ok=False when they are (nearly) collinear."""
     ax = x2 - x1
@@ -198,7 +198,7 @@ def _circle_through3(x1, y1, x2, y2, x3, y3):
     return x1 + ux, y1 + uy, math.sqrt(ux * ux + uy * uy), True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _kasa_energy(x, y, x0, y0, r):
     e = 0.0
     for i in range(x.shape[0]):
@@ -209,7 +209,7 @@ def _kasa_energy(x, y, x0, y0, r):
     return e
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def fit_circle_paper(x, y, lambda0=0.01, max_iter=100, tol=1e-10, max_init_radius=1e3):
     """The paper's modified Gauss-Newton on eq. (6); returns (x0, y0, r, ok, n_iter)."""
     n = x.shape[0]
@@ -279,7 +279,7 @@ def fit_circle_paper(x, y, lambda0=0.01, max_iter=100, tol=1e-10, max_init_radiu
     return x0, y0, r, True, it
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def circle_ssr(x, y, x0, y0, r):
     """Sum of squared orthogonal distances of the points to the circle."""
     s = 0.0
@@ -289,7 +289,7 @@ def circle_ssr(x, y, x0, y0, r):
     return s
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def fit_circle_geometric(x, y, max_iter=50, tol=1e-12):
     """Orthogonal-distance LM from Taubin's fit (Kasa if Taubin fails).
 
@@ -361,7 +361,7 @@ def fit_circle_geometric(x, y, max_iter=50, tol=1e-12):
     return x0, y0, r, True, it
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def circle_covariance(x, y, x0, y0, r, sigma2):
     """(3, 3) covariance of (x0, y0, r): sigma2 (J^T J)^-1 with J the orthogonal-distance Jacobian.
 
@@ -406,7 +406,7 @@ def circle_covariance(x, y, x0, y0, r, sigma2):
     return cov, True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def fit_line_tls(x, y, sigma2):
     """Total least squares line x cos(a) + y sin(a) = rho.
 

@@ -73,7 +73,7 @@ def planar_jacobian(x: np.ndarray, cos_gamma: float) -> np.ndarray:
     return np.array([[2.0 * x2 * x2 * cos_gamma / (D * D), -x1 * x1 / (D * D)], [1.0, 0.0]])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _segment_kernel(ranges, cos_gamma, sigma_r, q, gate, max_growth):
     """Numba kernel; see `segment_ranges`. Returns (bounds (S, 2), end_reason (S,), innov, s)."""
     n = ranges.shape[0]
@@ -119,7 +119,7 @@ def _segment_kernel(ranges, cos_gamma, sigma_r, q, gate, max_growth):
         # predict, eq. (2)
         D = 2.0 * x2 * cos_gamma - x1
         why = -1
-        if D <= 0.0 or x2 > max_growth * D:
+        if D <= 0.0 or x2 > max_growth * D or D * D == 0.0:
             why = END_DEGENERATE  # almost parallel: reject the measurement
         else:
             pred = x1 * x2 / D
@@ -258,7 +258,7 @@ def segment_ranges_numpy(
             continue
         D = 2.0 * x[1] * c - x[0]
         why = None
-        if D <= 0.0 or x[1] / D > growth:
+        if D <= 0.0 or x[1] / D > growth or D * D == 0.0:
             why = END_DEGENERATE
         else:
             x_pred = planar_predict(x, c)
