@@ -46,6 +46,7 @@ class RunContext:
 # name -> "module:function"; the function takes a RunContext. Order is the run order.
 EXPERIMENTS: dict[str, str] = {
     "features": "experiments.exp_features:run",
+    "association": "experiments.exp_association:run",
 }
 
 
@@ -54,6 +55,6 @@ def get_experiment(name: str) -> Callable[[RunContext], None]:
         target = EXPERIMENTS[name]
     except KeyError:
         known = ", ".join(EXPERIMENTS)
-        raise KeyError(f"unknown experiment {name!r}; known: {known}") from None
+        raise ValueError(f"unknown experiment {name!r}; known: {known}") from None
     module, func = target.split(":")
     return getattr(importlib.import_module(module), func)

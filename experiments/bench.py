@@ -1,0 +1,94 @@
+"""`trunkslam bench extract`: extractor throughput on the 2000 real Victoria Park scans."""
+
+from __future__ import annotations
+
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from experiments.export import markdown_table
+
+__all__ = ["bench_extract", "format_extract", "machine"]
+
+
+def machine() -> str:
+    import os
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+def bench_extract(
+    repeats: int = 3, root: Path | None = None, methods=("paper", "geometric", "bailey")
+) -> list[dict]:
+    """Time each method over all scans, single thread, after a warm-up.
+
+    The first call of a method (numba compilation, or loading its on-disk cache) is timed
+    separately as `first_call_s`. Scans are built before timing; `scan_build_us` is the cost of
+    constructing one `features.Scan` (validation and no-return masking), reported apart.
+    """
+    from experiments.victoria_park import load_victoria_park
+    from features import extract_features
+
+    if repeats < 1:
+        raise ValueError(f"repeats: must be >= 1, got {repeats}")
+    seq = load_victoria_park(root)
+    t0 = time.perf_counter()
+    scans = [seq.scan(k) for k in range(seq.n_scans)]
+    scan_build_us = (time.perf_counter() - t0) / len(scans) * 1e6
+    rows = []
+    for m in methods:
+        t0 = time.perf_counter()
+        extract_features(scans[0], m)
+        first = time.perf_counter() - t0
+        for s in scans[:50]:  # warm-up
+            extract_features(s, m)
+        per_pass = []
+        n_circles = 0
+        for _ in range(repeats):
+            n_circles = 0
+            t0 = time.perf_counter()
+            for s in scans:
+                n_circles += extract_features(s, m).n_circles
+            per_pass.append(time.perf_counter() - t0)
+        best = min(per_pass)
+        rows.append(
+            {
+                "method": m,
+                "scans": len(scans),
+                "us_per_scan": best / len(scans) * 1e6,
+                "scans_per_s": len(scans) / best,
+                "median_us_per_scan": float(np.median(per_pass)) / len(scans) * 1e6,
+                "first_call_s": first,
+                "circles_per_scan": n_circles / len(scans),
+                "scan_build_us": scan_build_us,
+            }
+        )
+    return rows
+
+
+def format_extract(rows: list[dict]) -> str:
+    header = ["method", "scans/s", "us/scan (best)", "us/scan (median)", "first call (s)",
+              "circles/scan"]  # fmt: skip
+    body = [
+        [r["method"], round(r["scans_per_s"]), round(r["us_per_scan"], 1),
+         round(r["median_us_per_scan"], 1), round(r["first_call_s"], 2),
+         round(r["circles_per_scan"], 2)]
+        for r in rows
+    ]  # fmt: skip
+    note = (
+        f"\nMachine: {machine()}. One thread, {rows[0]['scans']} Victoria Park scans of 361 beams"
+        f" per pass, best and median of the passes. Building one Scan (validation) costs"
+        f" {rows[0]['scan_build_us']:.1f} us more, not included. First call = numba compilation"
+        " or loading its cache.\n"
+    )
+    return markdown_table(header, body) + note

@@ -1,0 +1,117 @@
+"""Writing results: the features JSON of `trunkslam extract`, Markdown/CSV tables, atomic files."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from features.types import Features
+
+__all__ = ["features_to_dict", "write_atomic", "write_table", "markdown_table", "FEATURES_SCHEMA"]
+
+FEATURES_SCHEMA = "trunkslam.features/1"
+
+
+def _f(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def features_to_dict(f: Features, scan_index: int) -> dict:
+    """One scan's features as plain JSON types (laser frame, metres, radians)."""
+    return {
+        "scan": scan_index,
+        "stamp_s": f.stamp_s,
+        "method": f.method,
+        "circles": [
+            {
+                "center_xy": [_f(p[0]), _f(p[1])],
+                "radius_m": _f(p[2]),
+                "cov": np.asarray(c).round(12).tolist(),
+                "beams": [int(b[0]), int(b[1])],
+                "rms_residual_m": _f(s),
+            }
+            for p, c, b, s in zip(f.circle_params, f.circle_cov, f.circle_beams, f.circle_rms_m)
+        ],
+        "lines": [
+            {
+                "alpha_rad": _f(p[0]),
+                "rho_m": _f(p[1]),
+                "cov": np.asarray(c).round(12).tolist(),
+                "endpoints_xy": np.asarray(e).round(6).tolist(),
+                "beams": [int(b[0]), int(b[1])],
+                "rms_residual_m": _f(s),
+            }
+            for p, c, e, b, s in zip(
+                f.line_params, f.line_cov, f.line_endpoints, f.line_beams, f.line_rms_m
+            )
+        ],
+        "edges": [
+            {"point_xy": [_f(p[0]), _f(p[1])], "cov": np.asarray(c).round(12).tolist(),
+             "beam": int(b)}
+            for p, c, b in zip(f.edge_xy, f.edge_cov, f.edge_beam)
+        ],  # fmt: skip
+        "clutter": [
+            {"beams": [int(b[0]), int(b[1])]}
+            for b, k in zip(f.segment_beams, f.segment_kind)
+            if k == 0
+        ],
+    }
+
+
+def write_atomic(path: Path | str, data: str | bytes) -> Path:
+    """Write to a temporary file in the same folder, then rename over `path`."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mode = "wb" if isinstance(data, bytes) else "w"
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _cell(v) -> str:
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            return "n/a"
+        return f"{v:.4g}" if abs(v) < 1e4 else f"{v:.3e}"
+    return str(v)
+
+
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(_cell(v) for v in r) + " |" for r in rows]
+    return "\n".join(out) + "\n"
+
+
+def write_table(stem: Path, header, rows, title: str = "", notes: str = "") -> list[Path]:
+    """Write `stem`.md (title, table, notes) and `stem`.csv; returns both paths."""
+    md = (f"# {title}\n\n" if title else "") + markdown_table(header, rows)
+    if notes:
+        md += "\n" + notes.strip() + "\n"
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(header)
+    w.writerows(rows)
+    stem = Path(stem)
+    return [
+        write_atomic(stem.with_suffix(".md"), md),
+        write_atomic(stem.with_suffix(".csv"), buf.getvalue()),
+    ]
+
+
+def dumps_json(obj) -> str:
+    return json.dumps(obj, indent=1, allow_nan=False)

@@ -1,0 +1,109 @@
+"""Rerun inspection: our dataclasses as rerun entities on a `scan` timeline.
+
+The only module that imports rerun. Entities (laser frame unless a pose is given):
+  world/scan                 scan points (grey)
+  world/features/segments    one strip per segment, coloured by kind (line blue, circle green,
+                             clutter orange)
+  world/features/circles     fitted circles (outline), labelled with radius
+  world/features/lines       fitted lines (projected endpoints)
+  world/features/edges       occluding edges (red crosses)
+  world/truth/...            simulated truth when known
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+
+from features.types import Features, Scan
+
+__all__ = ["Recorder", "NullRecorder", "open_recording", "circle_polyline"]
+
+KIND_COLORS = np.array([[255, 150, 40], [60, 120, 255], [40, 200, 90]], dtype=np.uint8)
+METHOD_COLORS = {
+    "paper": [40, 200, 90],
+    "geometric": [220, 60, 220],
+    "bailey": [255, 200, 0],
+    "kasa": [0, 200, 220],
+    "taubin": [150, 150, 255],
+    "truth": [255, 255, 255],
+}
+
+
+def circle_polyline(cx: float, cy: float, r: float, n: int = 48) -> np.ndarray:
+    """(n + 1, 2) closed polyline of a circle."""
+    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    return np.stack([cx + r * np.cos(t), cy + r * np.sin(t)], axis=1)
+
+
+def _transform(xy: np.ndarray, pose: np.ndarray | None) -> np.ndarray:
+    if pose is None or len(xy) == 0:
+        return xy
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    return xy @ np.array([[c, s], [-s, c]]) + pose[:2]
+
+
+class NullRecorder:
+    """Does nothing: the default visualiser, so algorithms and loops never need rerun."""
+
+    def set_scan(self, k: int) -> None: ...
+    def log_scan(self, scan: Scan, pose=None, path: str = "world/scan") -> None: ...
+    def log_features(self, scan, features, pose=None, path="world/features") -> None: ...
+    def log_circles(self, path, circles_xyr, pose=None, method="truth", labels=None) -> None: ...
+    def close(self) -> None: ...
+
+
+class Recorder(NullRecorder):
+    """Writes a `.rrd` recording (open it with `rerun FILE.rrd`)."""
+
+    def __init__(self, path: Path | str, app_id: str = "trunkslam"):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.rec = rr.RecordingStream(app_id)
+        self.rec.save(str(self.path))
+        self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+
+    def set_scan(self, k: int) -> None:
+        self.rec.set_time("scan", sequence=int(k))
+
+    def log_scan(self, scan: Scan, pose=None, path: str = "world/scan") -> None:
+        pts = scan.points_xy[scan.valid]
+        self.rec.log(path, rr.Points2D(_transform(pts, pose), radii=0.03, colors=[180, 180, 180]))
+
+    def log_features(self, scan: Scan, features: Features, pose=None, path="world/features"):
+        pts = scan.points_xy
+        strips, colors = [], []
+        for (a, b), k in zip(features.segment_beams, features.segment_kind):
+            strips.append(_transform(pts[a : b + 1], pose))
+            colors.append(KIND_COLORS[int(k)])
+        self.rec.log(f"{path}/segments", rr.LineStrips2D(strips, colors=colors, radii=0.02))
+        self.log_circles(f"{path}/circles", features.circle_params, pose, features.method)
+        lines = [_transform(e, pose) for e in features.line_endpoints]
+        self.rec.log(f"{path}/lines", rr.LineStrips2D(lines, colors=[60, 120, 255], radii=0.04))
+        self.rec.log(
+            f"{path}/edges",
+            rr.Points2D(_transform(features.edge_xy, pose), radii=0.12, colors=[255, 40, 40]),
+        )
+
+    def log_circles(self, path, circles_xyr, pose=None, method="truth", labels=None):
+        circles_xyr = np.asarray(circles_xyr, float).reshape(-1, 3)
+        strips = [_transform(circle_polyline(*c), pose) for c in circles_xyr]
+        if labels is None:
+            labels = [f"r={c[2]:.3f} m" for c in circles_xyr]
+        self.rec.log(
+            path,
+            rr.LineStrips2D(
+                strips, colors=METHOD_COLORS.get(method, [255, 255, 255]), labels=labels,
+                radii=0.015,
+            ),
+        )  # fmt: skip
+
+    def close(self) -> None:
+        self.rec.flush()
+
+
+def open_recording(path: Path | str | None) -> NullRecorder:
+    """A Recorder writing to `path`, or a NullRecorder when path is None."""
+    return NullRecorder() if path is None else Recorder(path)
