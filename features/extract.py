@@ -65,6 +65,7 @@ class ExtractorParams:
     gate: float = 6.63  # delta of eq. (4) (paper: 6.63)
     max_incidence_deg: float = 85.0  # degenerate (almost parallel) limit
     merge_arcs: bool = True  # join gate-split neighbours that together form a circle
+    isolated_circles: bool = True  # a circle's segment ends at depth jumps or no-returns
     min_points: int = 3  # beams for a segment to be a feature
     min_circle_points: int = 4  # beams for a circle (3 points fit any circle exactly)
     line_test: str = "lrt"  # "lrt" (default, see module doc) or "paper" (eq. 5)
@@ -81,9 +82,9 @@ class ExtractorParams:
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name == "merge_arcs":
+            if f.name in ("merge_arcs", "isolated_circles"):
                 if not isinstance(v, bool):
-                    raise ValueError(f"merge_arcs: must be True or False, got {v!r}")
+                    raise ValueError(f"{f.name}: must be True or False, got {v!r}")
                 continue
             if f.name == "line_test":
                 if v not in _LINE_TESTS:
@@ -180,8 +181,32 @@ def _circle_plausible(x, y, rmin, chi2_circ, sigma2, r_min, r_max):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
+def _continuous(ranges, bounds, k, side, edge_jump):
+    """Does segment k continue, at its start (side 0) or end (side 1), into a neighbouring
+    surface at a similar range (no depth jump)? A one-beam neighbouring segment that is itself cut
+    off on its far side is taken for a mixed pixel and looked past."""
+    n = ranges.shape[0]
+    e = bounds[k, 0] if side == 0 else bounds[k, 1]
+    step = -1 if side == 0 else 1
+    nb = e + step
+    if nb < 0 or nb >= n or not (ranges[nb] == ranges[nb]):
+        return False
+    if abs(ranges[nb] - ranges[e]) >= edge_jump:
+        return False
+    kn = k + step
+    if 0 <= kn < bounds.shape[0] and bounds[kn, 0] == bounds[kn, 1]:
+        far = nb + step  # beyond the singleton
+        if far < 0 or far >= n or not (ranges[far] == ranges[far]):
+            return True
+        if abs(ranges[far] - ranges[nb]) >= edge_jump and ranges[far] > ranges[e]:
+            return False  # nb sits between this surface and a farther one: a mixed pixel
+    return True
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
 def _extract_kernel(
-    ranges, angle_min, gamma, sigma_r, q, gate, max_growth, merge, method, line_test, min_points,
+    ranges, angle_min, gamma, sigma_r, q, gate, max_growth, merge, isolate, method, line_test,
+    min_points,
     min_circle_points, chi2_line, chi2_circ, lrt_threshold, sigma2, r_min, r_max, edge_jump,
     lambda0, max_iter, tol,
 ):  # fmt: skip
@@ -259,7 +284,11 @@ def _extract_kernel(
         x, y, rmin = _points(ranges, angle_min, gamma, a, b, xbuf, ybuf)
         circle_ok = False
         ssr_c = np.inf
-        if m >= min_circle_points:
+        isolated = not isolate or (
+            not _continuous(ranges, bounds, k, 0, edge_jump)
+            and not _continuous(ranges, bounds, k, 1, edge_jump)
+        )
+        if m >= min_circle_points and isolated:
             circle_ok, ssr_c, _, _, _ = _circle_plausible(
                 x, y, rmin, chi2_circ, sigma2, r_min, r_max
             )
@@ -373,6 +402,7 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
     chi2_line, chi2_circ = _chi2_tables(scan.n_beams, p.class_prob)
     out = _extract_kernel(
         scan.ranges_m, scan.angle_min_rad, gamma, p.sigma_r_m, p.q_m2, p.gate, growth, p.merge_arcs,
+        p.isolated_circles,
         _METHOD_CODE[method], _LINE_TESTS[p.line_test], p.min_points, p.min_circle_points,
         chi2_line, chi2_circ, p.lrt_threshold, p.sigma_r_m**2 + p.roughness_m**2, p.r_min_m,
         p.r_max_m, p.edge_min_jump_m, p.lambda0, p.max_iter, p.tol,

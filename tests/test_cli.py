@@ -1,0 +1,81 @@
+"""The command line: simulate -> extract round trip, reproduce --quick, clear errors."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+from typer.testing import CliRunner
+
+from experiments.cli import app
+from experiments.sequence import load_sequence
+
+runner = CliRunner()
+
+
+def test_simulate_then_extract_finds_the_pillars(tmp_path):
+    scan = tmp_path / "scan.npz"
+    res = runner.invoke(
+        app, ["simulate", "pillar_court", "--pose", "0,0,0", "--back-to-back", "--out", str(scan),
+              "--seed", "3"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    seq = load_sequence(scan)
+    assert seq.n_scans == 1 and seq.scan_ranges.shape[1] == 720
+    out = tmp_path / "features.json"
+    rrd = tmp_path / "run.rrd"
+    res = runner.invoke(
+        app, ["extract", str(scan), "--method", "geometric", "--out", str(out),
+              "--rerun", str(rrd)],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["schema"] == "trunkslam.features/1" and doc["frame"] == "laser"
+    circles = doc["scans"][0]["circles"]
+    assert len(circles) >= 3
+    # every extracted circle lies on a true pillar (laser frame == world frame at pose 0,0,0)
+    truth = seq.truth_landmarks
+    for c in circles:
+        d = np.hypot(truth[:, 0] - c["center_xy"][0], truth[:, 1] - c["center_xy"][1])
+        k = int(np.argmin(d))
+        assert d[k] < 0.1 and abs(c["radius_m"] - truth[k, 2]) < 0.1
+        cov = np.array(c["cov"])
+        assert cov.shape == (3, 3) and np.all(np.linalg.eigvalsh(cov) > 0)
+    assert rrd.stat().st_size > 1000
+
+
+def test_extract_bailey_method(tmp_path):
+    scan = tmp_path / "scan.npz"
+    assert runner.invoke(app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)]
+                         ).exit_code == 0  # fmt: skip
+    out = tmp_path / "f.json"
+    res = runner.invoke(app, ["extract", str(scan), "--method", "bailey", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["method"] == "bailey" and all(
+        math.isfinite(c["radius_m"]) for c in doc["scans"][0]["circles"]
+    )
+
+
+def test_errors_are_one_line_and_exit_1(tmp_path):
+    res = runner.invoke(app, ["extract", str(tmp_path / "missing.npz")])
+    assert res.exit_code == 1 and "missing.npz" in res.output
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip file")
+    res = runner.invoke(app, ["extract", str(bad)])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    res = runner.invoke(app, ["simulate", "pillar_court", "--pose", "1,2", "--out",
+                              str(tmp_path / "x.npz")])  # fmt: skip
+    assert res.exit_code == 1 and "--pose" in res.output
+    res = runner.invoke(app, ["simulate", "no_such_scene", "--pose", "0,0,0"])
+    assert res.exit_code == 1 and "no_such_scene" in res.output
+    res = runner.invoke(app, ["reproduce", "no_such_experiment", "--out", str(tmp_path)])
+    assert res.exit_code == 1 and "no_such_experiment" in res.output
+
+
+def test_extract_rejects_unknown_method(tmp_path):
+    scan = tmp_path / "scan.npz"
+    runner.invoke(app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)])
+    res = runner.invoke(app, ["extract", str(scan), "--method", "hough"])
+    assert res.exit_code == 1 and "method" in res.output
