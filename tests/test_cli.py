@@ -33,15 +33,21 @@ def test_simulate_then_extract_finds_the_pillars(tmp_path):
     doc = json.loads(out.read_text())
     assert doc["schema"] == "trunkslam.features/1" and doc["frame"] == "laser"
     circles = doc["scans"][0]["circles"]
-    assert len(circles) >= 3
-    # every extracted circle lies on a true pillar (laser frame == world frame at pose 0,0,0)
     truth = seq.truth_landmarks
+    labels = seq.scan_labels[0]
+    found = set()
     for c in circles:
-        d = np.hypot(truth[:, 0] - c["center_xy"][0], truth[:, 1] - c["center_xy"][1])
-        k = int(np.argmin(d))
-        assert d[k] < 0.1 and abs(c["radius_m"] - truth[k, 2]) < 0.1
+        a, b = c["beams"]
+        lab = np.bincount(labels[a : b + 1] + 2).argmax() - 2  # majority truth label
         cov = np.array(c["cov"])
         assert cov.shape == (3, 3) and np.all(np.linalg.eigvalsh(cov) > 0)
+        if 0 <= lab < len(truth):  # on a pillar (laser frame == world frame at pose 0,0,0)
+            assert np.hypot(*(np.array(c["center_xy"]) - truth[lab, :2])) < 0.1
+            assert abs(c["radius_m"] - truth[lab, 2]) < 0.05
+            found.add(int(lab))
+    # every pillar seen with >= 6 beams is extracted
+    seen = {k for k in range(len(truth)) if np.sum(labels == k) >= 6}
+    assert len(seen) >= 3 and seen <= found
     assert rrd.stat().st_size > 1000
 
 
