@@ -3,20 +3,32 @@
 Implemented from `../shared/datasets/victoria_park/BAILEY_DETECTOR.md` (steps 1-10 below refer to
 its section 3). `detect_trees` reproduces the original's output, a (3, n) array [range (m);
 bearing (rad, 0..pi, 0 = the first beam); diameter (m)], on all 2000 raw Victoria Park scans to
-1e-6 (tests/test_bailey.py). `extract_bailey` wraps it as a `Features` in the laser frame so that
-experiments can swap it for the paper's extractor (`extract_features(scan, method="bailey")`).
+1e-6, same count in every scan (tests/test_bailey.py). `extract_bailey` wraps it as `Features` in
+the laser frame so that experiments can swap it for the paper's extractor
+(`extract_features(scan, method="bailey")`).
 
-Generalisation beyond the original's fixed 361 beams at i*pi/360 (`angles_rad`):
-- all thresholds stay the original's angles and distances (5 deg break gap, 2 deg occlusion,
+Two findings needed for the exact reproduction (checked on the 2000 scans):
+- The occlusion threshold [daMin2] is 2*pi/360 rad, i.e. **1 deg = two beam steps**; the spec's
+  table says "2*pi/360 = 2 deg" and "at most three beam steps", but a 2 deg threshold misses
+  the reference in 896 of the 2000 scans (1.5 deg: 574).
+- Gaps of exactly two beams (step 4) or ten beams (step 2) sit on the threshold, and the original
+  decides them by the floating-point rounding of its angle table i*pi/360 (a[i+2] - a[i] is below
+  2*pi/360 for 158 of the 359 positions i). Reproducing that needs that table and plain strict
+  comparisons: resolving the ties either way instead breaks 2-345 scans.
+
+Generalisation to other scans (`angles_rad`, used by `extract_bailey` for simulated scans):
+- the thresholds stay the original's angles and distances (5 deg break gap, 1 deg occlusion,
   field-of-view margin 5*pi/306 -- "306" is the original's, kept as is);
-- the one-beam width added to the diameter (step 8) is the scan's own beam spacing;
-- the field-of-view margin (step 7) is measured from the scan's own first and last beam angles,
-  and is skipped for a full 360-degree scan, which has no field-of-view border; a full scan is
-  also rotated so that its seam falls on a segment break (see `_detect`), so a trunk is never cut
-  in two by the seam.
-- Angle comparisons in steps 2 and 4 treat differences within `_ANGLE_TIE_RAD` of the threshold as
-  equal (not beyond it): a gap of exactly ten beams is "nine invalid beams", not a break, however
-  the angles were rounded. This is the documented meaning of the original's thresholds.
+- the one-beam width added to the diameter (step 8) is the scan's own mean beam spacing;
+- the field-of-view margin (step 7) is measured from the scan's own first and last beam angles
+  and skipped for a full 360-degree scan, which has no field-of-view border. A full scan is also
+  rotated so that its seam falls on a segment break (after the longest run of no-return beams,
+  else at the largest range jump), so the seam never cuts a trunk in two; the isolation and
+  occlusion tests do not look across that one break.
+- threshold ties are resolved deterministically rather than by rounding: angle differences within
+  `_ANGLE_TIE_RAD` of the break or occlusion threshold count as equal to it, so neither a break
+  nor adjacent (strict inequalities). Angles exactly equal to the original table take the
+  original's path.
 """
 
 from __future__ import annotations
@@ -25,6 +37,7 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
+from numba import njit
 
 from features.types import KIND_CIRCLE, KIND_CLUTTER, Features, Scan
 
@@ -44,7 +57,7 @@ class BaileyParams:
     break_jump_m: float = 1.5  # [M2] range jump that breaks a segment (step 2)
     break_gap_rad: float = 10 * math.pi / 360  # [M2a] angular gap that breaks a segment (step 2)
     isolation_m: float = 3.0  # [M3] end-to-start distance to the next 3 segments (step 3)
-    occlusion_gap_rad: float = math.radians(2.0)  # [daMin2] 2 deg = 4 beams, adjacency (step 4)
+    occlusion_gap_rad: float = 2 * math.pi / 360  # [daMin2] 1 deg, see the module doc (step 4)
     max_chord_m: float = 1.0  # [M5] start-to-end distance (step 6)
     fov_margin_rad: float = 5 * math.pi / 306  # [daa] sic, 306 (step 7)
     edge_ratio: float = 1.0 / 3.0  # |R_start - R_end| < ratio * diameter (step 9)
@@ -62,8 +75,7 @@ _DEFAULT = BaileyParams()
 _DEFAULT_ANGLES = np.arange(361) * math.pi / 360
 _DEFAULT_COS = np.cos(_DEFAULT_ANGLES)
 _DEFAULT_SIN = np.sin(_DEFAULT_ANGLES)
-for _a in (_DEFAULT_ANGLES, _DEFAULT_COS, _DEFAULT_SIN):
-    _a.setflags(write=False)
+# Private tables, left writable so the numba kernel sees one array type (no recompilation).
 
 
 def _check_ranges(ranges_m) -> np.ndarray:
@@ -93,10 +105,37 @@ def _check_angles(angles_rad, n_beams: int) -> np.ndarray:
     return a
 
 
-def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
+def _prepare(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
+    """Angles, trig tables and the field-of-view / tie settings for the kernel; see `_detect`."""
+    n_beams = r.shape[0]
+    if ang is None or (n_beams == 361 and np.array_equal(ang, _DEFAULT_ANGLES)):
+        if n_beams != 361:
+            raise ValueError(
+                f"ranges_m: the original detector takes 361 beams at i*pi/360, got {n_beams}; "
+                "pass angles_rad for other scans"
+            )
+        # The original: strict floating-point comparisons on the i*pi/360 table, no tie rule.
+        return (r, _DEFAULT_ANGLES, _DEFAULT_COS, _DEFAULT_SIN, BAILEY_BEAM_RAD, True, 0.0,
+                math.pi, 0.0, 0)  # fmt: skip
+    beam_rad = (ang[-1] - ang[0]) / (n_beams - 1) if n_beams > 1 else BAILEY_BEAM_RAD
+    full_circle = n_beams > 1 and (ang[-1] - ang[0]) + beam_rad >= _TWO_PI - 1e-6
+    cos_t, sin_t = np.cos(ang), np.sin(ang)
+    fov_lo, fov_hi = float(ang[0]), float(ang[-1])
+    rot = _seam(r, p) if full_circle else 0
+    if rot:
+        r = np.concatenate((r[rot:], r[:rot]))
+        ang = np.concatenate((ang[rot:], ang[:rot] + _TWO_PI))
+        cos_t = np.concatenate((cos_t[rot:], cos_t[:rot]))
+        sin_t = np.concatenate((sin_t[rot:], sin_t[:rot]))
+    return (r, ang, cos_t, sin_t, beam_rad, not full_circle, fov_lo, fov_hi, _ANGLE_TIE_RAD,
+            rot)  # fmt: skip
+
+
+def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams, kernel=None):
     """Run steps 1-10 on one scan.
 
-    r: (B,) float64 ranges, m (NaN = no return). ang: (B,) beam angles (None: i*pi/360, B = 361).
+    r: (B,) float64 ranges, m (NaN = no return), B >= 1. ang: (B,) beam angles, or None for the
+    original's i*pi/360 (B = 361). kernel: `_kernel_numba` (default) or its twin `_kernel_numpy`.
     Returns (out (3, n), seg_first (K,), seg_last (K,), kept (K,) bool, det_seg (n,)): `out` as
     `detect_trees`; seg_first/seg_last/kept describe every step-2 segment by its inclusive raw
     beam indices, in beam order, and whether it became a detection; det_seg[j] is the segment of
@@ -104,92 +143,17 @@ def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
     (its beams are first..last modulo B).
     """
     n_beams = r.shape[0]
-    if ang is None:
-        if n_beams != 361:
-            raise ValueError(
-                f"ranges_m: the original detector takes 361 beams at i*pi/360, got {n_beams}; "
-                "pass angles_rad for other scans"
-            )
-        cos_t, sin_t, ang = _DEFAULT_COS, _DEFAULT_SIN, _DEFAULT_ANGLES
-        beam_rad, full_circle, fov_lo, fov_hi = BAILEY_BEAM_RAD, False, 0.0, math.pi
-        rot = 0
-    else:
-        beam_rad = (ang[-1] - ang[0]) / (n_beams - 1) if n_beams > 1 else BAILEY_BEAM_RAD
-        full_circle = n_beams > 1 and (ang[-1] - ang[0]) + beam_rad >= _TWO_PI - 1e-6
-        fov_lo, fov_hi = ang[0], ang[-1]
-        rot = 0
-        if full_circle:
-            rot = _seam(r, p)
-            if rot:
-                r = np.concatenate((r[rot:], r[:rot]))
-                ang = np.concatenate((ang[rot:], ang[:rot] + _TWO_PI))
-        cos_t = sin_t = None
-
-    # Step 1: valid beams (NaN < x is False, so NaN is invalid).
-    with np.errstate(invalid="ignore"):
-        idx = np.flatnonzero(r < p.max_range_m)
-    n = idx.size
-    empty_i = np.zeros(0, np.int64)
-    if n == 0:
-        return np.zeros((3, 0)), empty_i, empty_i, np.zeros(0, bool), empty_i
-    R = r[idx]
-    A = ang[idx]
-
-    # Step 2: segmentation by range jumps and angular gaps.
-    brk = (np.abs(np.diff(R)) > p.break_jump_m) | (np.diff(A) > p.break_gap_rad + _ANGLE_TIE_RAD)
-    bpos = np.flatnonzero(brk)
-    s = np.empty(bpos.size + 1, np.int64)
-    e = np.empty(bpos.size + 1, np.int64)
-    s[0] = 0
-    s[1:] = bpos + 1
-    e[:-1] = bpos
-    e[-1] = n - 1
-    K = s.size
-    Rs, Re, As, Ae = R[s], R[e], A[s], A[e]
-    if cos_t is not None:
-        i_s, i_e = idx[s], idx[e]
-        xs, ys = Rs * cos_t[i_s], Rs * sin_t[i_s]
-        xe, ye = Re * cos_t[i_e], Re * sin_t[i_e]
-    else:
-        xs, ys = Rs * np.cos(As), Rs * np.sin(As)
-        xe, ye = Re * np.cos(Ae), Re * np.sin(Ae)
-
-    # Steps 3-4 run on all segments.
-    remove = np.zeros(K, bool)
-    iso2 = p.isolation_m**2
-    for d in (1, 2, 3):  # step 3: end of k against the starts of k+1..k+3
-        if K <= d:
-            break
-        close = (xe[:-d] - xs[d:]) ** 2 + (ye[:-d] - ys[d:]) ** 2 < iso2
-        remove[:-d] |= close
-        remove[d:] |= close
-    if K > 1:  # step 4: angularly adjacent neighbours, the farther one is occluded
-        adj = As[1:] - Ae[:-1] < p.occlusion_gap_rad - _ANGLE_TIE_RAD
-        next_farther = Rs[1:] > Re[:-1]
-        remove[1:] |= adj & next_farther
-        remove[:-1] |= adj & ~next_farther
-
-    # Steps 5-9: removal, chord, range and field of view, diameter, edge consistency.
-    diam = (Ae - As + beam_rad) * (Rs + Re) / 2  # step 8: arc length, one beam width added
-    keep = ~remove
-    keep &= (xe - xs) ** 2 + (ye - ys) ** 2 < p.max_chord_m**2  # step 6
-    keep &= Rs > p.min_start_range_m  # step 7
-    if not full_circle:
-        keep &= (As - fov_lo > p.fov_margin_rad) & (fov_hi - Ae > p.fov_margin_rad)
-    keep &= np.abs(Rs - Re) < p.edge_ratio * diam  # step 9
-
-    # Step 10: centre range (middle beam of the compressed run + radius) and bearing.
-    k = np.flatnonzero(keep)
-    se = s[k] + e[k]
-    r_mid = (R[se // 2] + R[(se + 1) // 2]) / 2
-    d_k = diam[k]
-    out = np.empty((3, k.size))
-    out[0] = r_mid + d_k / 2
-    out[1] = (As[k] + Ae[k]) / 2
-    out[2] = d_k
-
-    seg_first, seg_last = idx[s], idx[e]
+    r = np.array(r, dtype=np.float64)  # contiguous and writable: one numba specialisation
+    r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie, rot = _prepare(r, ang, p)
+    ang = np.array(ang, dtype=np.float64)
+    kernel = kernel or _kernel_numba
+    out, seg_first, seg_last, keep, det_seg = kernel(
+        r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie,
+        p.max_range_m, p.min_start_range_m, p.break_jump_m, p.break_gap_rad, p.isolation_m,
+        p.occlusion_gap_rad, p.max_chord_m, p.fov_margin_rad, p.edge_ratio,
+    )  # fmt: skip
     if rot:  # back to the caller's beam numbering and angle range
+        K = seg_first.size
         seg_first = seg_first + rot
         seg_last = seg_last + rot
         wrap = seg_first >= n_beams  # wholly past the caller's last beam: renumber from 0
@@ -202,10 +166,165 @@ def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
         seg_first, seg_last, keep = seg_first[seg_order], seg_last[seg_order], keep[seg_order]
         col_order = np.argsort(out[1], kind="stable")  # increasing bearing
         out = out[:, col_order]
-        det_seg = seg_rank[k[col_order]]
-    else:
-        det_seg = k
+        det_seg = seg_rank[det_seg[col_order]]
     return out, seg_first, seg_last, keep, det_seg
+
+
+def _kernel_numpy(
+    r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie,
+    max_range, min_start, jump, gap, iso, occ, chord, margin, edge_ratio,
+):  # fmt: skip
+    """Steps 1-10 vectorised with numpy: the test oracle of `_kernel_numba` (same arithmetic).
+
+    r, ang, cos_t, sin_t: (B,) ranges, beam angles and their cos/sin. beam_rad: the width added
+    to the diameter. check_fov: apply the field-of-view margin against [fov_lo, fov_hi]. tie:
+    angle differences within it of the break/occlusion thresholds count as equal to them.
+    """
+    # Step 1: valid beams (NaN < x is False, so NaN is invalid).
+    with np.errstate(invalid="ignore"):
+        idx = np.flatnonzero(r < max_range)
+    n = idx.size
+    if n == 0:
+        z = np.zeros(0, np.int64)
+        return np.zeros((3, 0)), z, z.copy(), np.zeros(0, np.bool_), z.copy()
+    R = r[idx]
+    A = ang[idx]
+
+    # Step 2: segmentation by range jumps and angular gaps.
+    brk = (np.abs(R[1:] - R[:-1]) > jump) | (A[1:] - A[:-1] > gap + tie)
+    bpos = np.flatnonzero(brk)
+    s = np.empty(bpos.size + 1, np.int64)
+    e = np.empty(bpos.size + 1, np.int64)
+    s[0] = 0
+    s[1:] = bpos + 1
+    e[:-1] = bpos
+    e[-1] = n - 1
+    K = s.size
+    i_s, i_e = idx[s], idx[e]
+    Rs, Re, As, Ae = R[s], R[e], A[s], A[e]
+    xs, ys = Rs * cos_t[i_s], Rs * sin_t[i_s]
+    xe, ye = Re * cos_t[i_e], Re * sin_t[i_e]
+
+    # Steps 3-4 run on all segments.
+    remove = np.zeros(K, np.bool_)
+    for d in (1, 2, 3):  # step 3: end of k against the starts of k+1..k+3
+        if K <= d:
+            break
+        dx = xe[:-d] - xs[d:]
+        dy = ye[:-d] - ys[d:]
+        close = dx * dx + dy * dy < iso * iso
+        remove[:-d] |= close
+        remove[d:] |= close
+    if K > 1:  # step 4: angularly adjacent neighbours, the farther one is occluded
+        adj = As[1:] - Ae[:-1] < occ - tie
+        next_farther = Rs[1:] > Re[:-1]
+        remove[1:] |= adj & next_farther
+        remove[:-1] |= adj & ~next_farther
+
+    # Steps 5-9: removal, chord, range and field of view, diameter, edge consistency.
+    diam = (Ae - As + beam_rad) * (Rs + Re) / 2  # step 8: arc length, one beam width added
+    dx = xe - xs
+    dy = ye - ys
+    keep = ~remove
+    keep &= dx * dx + dy * dy < chord * chord  # step 6
+    keep &= Rs > min_start  # step 7
+    if check_fov:
+        keep &= (As - fov_lo > margin) & (fov_hi - Ae > margin)
+    keep &= np.abs(Rs - Re) < edge_ratio * diam  # step 9
+
+    # Step 10: centre range (middle of the compressed run + the radius) and bearing.
+    k = np.flatnonzero(keep)
+    se = s[k] + e[k]
+    d_k = diam[k]
+    out = np.empty((3, k.size))
+    out[0] = (R[se // 2] + R[(se + 1) // 2]) / 2 + d_k / 2
+    out[1] = (As[k] + Ae[k]) / 2
+    out[2] = d_k
+    return out, i_s, i_e, keep, k
+
+
+@njit(cache=True, nogil=True)
+def _kernel_numba(
+    r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie,
+    max_range, min_start, jump, gap, iso, occ, chord, margin, edge_ratio,
+):  # fmt: skip
+    """Steps 1-10 as loops (numba); `_kernel_numpy` is its oracle. Same arguments and results."""
+    n_beams = r.shape[0]
+    idx = np.empty(n_beams, np.int64)
+    n = 0
+    for i in range(n_beams):  # step 1
+        if r[i] < max_range:
+            idx[n] = i
+            n += 1
+    if n == 0:
+        return (np.zeros((3, 0)), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                np.zeros(0, np.bool_), np.zeros(0, np.int64))  # fmt: skip
+    s = np.empty(n, np.int64)
+    e = np.empty(n, np.int64)
+    s[0] = 0
+    K = 0
+    for j in range(n - 1):  # step 2
+        a, b = idx[j], idx[j + 1]
+        if abs(r[b] - r[a]) > jump or ang[b] - ang[a] > gap + tie:
+            e[K] = j
+            K += 1
+            s[K] = j + 1
+    e[K] = n - 1
+    K += 1
+    i_s = np.empty(K, np.int64)
+    i_e = np.empty(K, np.int64)
+    xs = np.empty(K)
+    ys = np.empty(K)
+    xe = np.empty(K)
+    ye = np.empty(K)
+    for k in range(K):
+        a, b = idx[s[k]], idx[e[k]]
+        i_s[k], i_e[k] = a, b
+        xs[k], ys[k] = r[a] * cos_t[a], r[a] * sin_t[a]
+        xe[k], ye[k] = r[b] * cos_t[b], r[b] * sin_t[b]
+    remove = np.zeros(K, np.bool_)
+    for d in range(1, 4):  # step 3
+        for k in range(K - d):
+            dx = xe[k] - xs[k + d]
+            dy = ye[k] - ys[k + d]
+            if dx * dx + dy * dy < iso * iso:
+                remove[k] = True
+                remove[k + d] = True
+    for k in range(K - 1):  # step 4
+        if ang[i_s[k + 1]] - ang[i_e[k]] < occ - tie:
+            if r[i_s[k + 1]] > r[i_e[k]]:
+                remove[k + 1] = True
+            else:
+                remove[k] = True
+    keep = np.zeros(K, np.bool_)
+    diam = np.empty(K)
+    nk = 0
+    for k in range(K):  # steps 5-9
+        a, b = i_s[k], i_e[k]
+        rs, re, as_, ae = r[a], r[b], ang[a], ang[b]
+        diam[k] = (ae - as_ + beam_rad) * (rs + re) / 2
+        dx = xe[k] - xs[k]
+        dy = ye[k] - ys[k]
+        ok = not remove[k] and dx * dx + dy * dy < chord * chord and rs > min_start
+        if ok and check_fov:
+            ok = as_ - fov_lo > margin and fov_hi - ae > margin
+        if ok:
+            ok = abs(rs - re) < edge_ratio * diam[k]
+        keep[k] = ok
+        nk += ok
+    out = np.empty((3, nk))
+    det = np.empty(nk, np.int64)
+    c = 0
+    for k in range(K):  # step 10
+        if keep[k]:
+            se = s[k] + e[k]
+            d_k = diam[k]
+            out[0, c] = (r[idx[se // 2]] + r[idx[(se + 1) // 2]]) / 2 + d_k / 2
+            out[1, c] = (ang[i_s[k]] + ang[i_e[k]]) / 2
+            out[2, c] = d_k
+            det[c] = k
+            c += 1
+    return out, i_s, i_e, keep, det
 
 
 def _seam(r: np.ndarray, p: BaileyParams) -> int:
@@ -248,9 +367,12 @@ def detect_trees(
     """
     r = _check_ranges(ranges_m)
     ang = None if angles_rad is None else _check_angles(angles_rad, r.shape[0])
+    p = params or _DEFAULT
+    if not isinstance(p, BaileyParams):
+        raise ValueError(f"params: expected BaileyParams, got {type(params).__name__}")
     if r.shape[0] == 0:
         return np.zeros((3, 0))
-    return _detect(r, ang, params or _DEFAULT)[0]
+    return _detect(r, ang, p)[0]
 
 
 def extract_bailey(
@@ -305,34 +427,61 @@ def extract_bailey(
             raise ValueError(f"scan: {n_beams} beams of {inc} rad cover more than 360 degrees")
     out, seg_first, seg_last, kept, det_seg = _detect(scan.ranges_m, ang, p)
 
-    rng = out[0]
-    bearing = scan.angle_min_rad + out[1]
-    c, s_ = np.cos(bearing), np.sin(bearing)
-    n = rng.size
-    params_xyr = np.empty((n, 3))
-    params_xyr[:, 0] = rng * c
-    params_xyr[:, 1] = rng * s_
-    params_xyr[:, 2] = out[2] / 2
-
-    var_along = (range_sigma_m + range_sigma_per_m * rng) ** 2
-    var_across = (rng * math.sin(bearing_sigma_rad)) ** 2
-    cov = np.zeros((n, 3, 3))
-    cov[:, 0, 0] = var_along * c * c + var_across * s_ * s_
-    cov[:, 1, 1] = var_along * s_ * s_ + var_across * c * c
-    cov[:, 0, 1] = cov[:, 1, 0] = (var_along - var_across) * c * s_
-    cov[:, 2, 2] = radius_sigma_m**2 + (rng * inc) ** 2 / 24
-
-    seg_beams = np.stack([seg_first, seg_last], axis=1).astype(np.int64)
-    circle_beams = seg_beams[det_seg]
+    circ, cov = _circles(
+        out, scan.angle_min_rad, inc, range_sigma_m, range_sigma_per_m,
+        math.sin(bearing_sigma_rad), radius_sigma_m,
+    )  # fmt: skip
+    seg_beams = np.empty((seg_first.size, 2), np.int64)
+    seg_beams[:, 0] = seg_first
+    seg_beams[:, 1] = seg_last
     kind = np.where(kept, KIND_CIRCLE, KIND_CLUTTER).astype(np.int64)
-    z = np.zeros
     return Features(
         stamp_s=scan.stamp_s,
-        circle_params=params_xyr, circle_cov=cov, circle_beams=circle_beams,
-        circle_rms_m=np.full(n, np.nan),
-        line_params=z((0, 2)), line_cov=z((0, 2, 2)), line_endpoints=z((0, 2, 2)),
-        line_beams=z((0, 2), np.int64), line_rms_m=z(0),
-        edge_xy=z((0, 2)), edge_cov=z((0, 2, 2)), edge_beam=z(0, np.int64),
-        segment_beams=seg_beams, segment_kind=kind, segment_innov=np.full((kind.size, 2), np.nan),
+        circle_params=circ, circle_cov=cov, circle_beams=seg_beams[det_seg],
+        circle_rms_m=np.full(circ.shape[0], np.nan),
+        line_params=_NO_LINES[0], line_cov=_NO_LINES[1], line_endpoints=_NO_LINES[2],
+        line_beams=_NO_LINES[3], line_rms_m=_NO_LINES[4],
+        edge_xy=_NO_EDGES[0], edge_cov=_NO_EDGES[1], edge_beam=_NO_EDGES[2],
+        segment_beams=seg_beams, segment_kind=kind,
+        segment_innov=np.full((kind.size, 2), np.nan),
         method="bailey",
     )  # fmt: skip
+
+
+def _empty(*shape, dtype=np.float64) -> np.ndarray:
+    a = np.zeros(shape, dtype)
+    a.setflags(write=False)
+    return a
+
+
+# Shared read-only empty arrays for the features the detector never produces.
+_NO_LINES = (_empty(0, 2), _empty(0, 2, 2), _empty(0, 2, 2), _empty(0, 2, dtype=np.int64),
+             _empty(0))  # fmt: skip
+_NO_EDGES = (_empty(0, 2), _empty(0, 2, 2), _empty(0, dtype=np.int64))
+
+
+@njit(cache=True, nogil=True)
+def _circles(out, angle_min, inc, sig0, sig_per_m, sin_sig_b, sig_radius):
+    """Detections (3, n) [range; bearing from the first beam; diameter] -> laser-frame circles.
+
+    Returns circle_params (n, 3) [x0, y0, r] and circle_cov (n, 3, 3); see `extract_bailey`.
+    """
+    n = out.shape[1]
+    circ = np.empty((n, 3))
+    cov = np.zeros((n, 3, 3))
+    for j in range(n):
+        rng = out[0, j]
+        bearing = angle_min + out[1, j]
+        c = np.cos(bearing)
+        s = np.sin(bearing)
+        circ[j, 0] = rng * c
+        circ[j, 1] = rng * s
+        circ[j, 2] = out[2, j] / 2
+        var_along = (sig0 + sig_per_m * rng) ** 2  # range noise along the beam
+        var_across = (rng * sin_sig_b) ** 2  # bearing noise across it
+        cov[j, 0, 0] = var_along * c * c + var_across * s * s
+        cov[j, 1, 1] = var_along * s * s + var_across * c * c
+        cov[j, 0, 1] = (var_along - var_across) * c * s
+        cov[j, 1, 0] = cov[j, 0, 1]
+        cov[j, 2, 2] = sig_radius**2 + (rng * inc) ** 2 / 24  # model error + beam quantisation
+    return circ, cov
