@@ -53,14 +53,22 @@ def main(verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False) -> N
 
 
 class _Progress:
-    """A plain progress line on stderr (no extra dependency)."""
+    """A progress bar on stderr: redrawn in place on a terminal, a line per quarter otherwise."""
 
     def __init__(self) -> None:
         self.last = ""
+        self.tty = sys.stderr.isatty()
 
     def __call__(self, desc: str, done: int, total: int) -> None:
         width = 30
-        filled = int(width * done / max(total, 1))
+        frac = done / max(total, 1)
+        if not self.tty:
+            step = f"{desc} {int(4 * frac) * 25}%"
+            if step != self.last:
+                sys.stderr.write(f"{desc}: {done}/{total}\n")
+                self.last = step
+            return
+        filled = int(width * frac)
         line = f"\r{desc:<28} [{'#' * filled}{'.' * (width - filled)}] {done}/{total}"
         if line != self.last:
             sys.stderr.write(line + ("\n" if done >= total else ""))

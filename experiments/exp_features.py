@@ -35,7 +35,7 @@ def _to_laser(xyr: np.ndarray, pose: np.ndarray) -> np.ndarray:
     return np.column_stack([d @ np.array([c, -s]), d @ np.array([s, c]), xyr[:, 2]])
 
 
-def _zoom_box(circles_xyr: np.ndarray, n: int = 3, margin: float = 1.5):
+def _zoom_box(circles_xyr: np.ndarray, n: int = 1, margin: float = 1.5):
     """A box around the n circles nearest the sensor."""
     if len(circles_xyr) == 0:
         return None
