@@ -27,6 +27,33 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
 
 
+_COLD = """
+import time, numpy as np
+t0 = time.perf_counter()
+from features import Scan, extract_features
+t1 = time.perf_counter()
+s = Scan(np.linspace(5.0, 6.0, 361), -np.pi / 2, np.pi / 360)
+for m in ("paper", "bailey"):
+    extract_features(s, m)
+print(time.perf_counter() - t1)
+"""
+
+
+def cold_compile_seconds() -> float:
+    """Numba compilation of every extractor kernel, measured in a fresh process with an empty
+    cache folder (what the very first run on a machine pays; later runs load the cache)."""
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
+        out = subprocess.run([sys.executable, "-c", _COLD], env=env, capture_output=True,
+                             text=True, check=True)  # fmt: skip
+    return float(out.stdout.strip().splitlines()[-1])
+
+
 def bench_extract(
     repeats: int = 3, root: Path | None = None, methods=("paper", "geometric", "bailey")
 ) -> list[dict]:
@@ -73,6 +100,9 @@ def bench_extract(
                 "scan_build_us": scan_build_us,
             }
         )
+    compile_s = cold_compile_seconds()
+    for r in rows:
+        r["cold_compile_s"] = compile_s
     return rows
 
 
@@ -89,6 +119,7 @@ def format_extract(rows: list[dict]) -> str:
         f"\nMachine: {machine()}. One thread, {rows[0]['scans']} Victoria Park scans of 361 beams"
         f" per pass, best and median of the passes. Building one Scan (validation) costs"
         f" {rows[0]['scan_build_us']:.1f} us more, not included. First call = numba compilation"
-        " or loading its cache.\n"
+        " or loading its cache. Compiling all extractor kernels from an empty numba cache (first"
+        f" run on a machine, fresh process): {rows[0]['cold_compile_s']:.1f} s.\n"
     )
     return markdown_table(header, body) + note

@@ -155,7 +155,14 @@ def victoria_park_figure(ctx, rec) -> None:
 
 
 def run(ctx) -> None:
+    from dataclasses import asdict
+
+    from features.bailey import BaileyParams
+    from features.extract import ExtractorParams
+
     ctx.config.setdefault("features", {})
+    ctx.config["features"]["extractor_defaults"] = ExtractorParams().to_dict()
+    ctx.config["features"]["bailey"] = asdict(BaileyParams())
     classification(ctx)
     rec = open_recording(ctx.path("features.rrd"))
     try:
