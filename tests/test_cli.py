@@ -85,3 +85,14 @@ def test_extract_rejects_unknown_method(tmp_path):
     runner.invoke(app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)])
     res = runner.invoke(app, ["extract", str(scan), "--method", "hough"])
     assert res.exit_code == 1 and "method" in res.output
+
+
+def test_convert_victoria_park_round_trip(tmp_path, vp_dir):
+    out = tmp_path / "vp.npz"
+    res = runner.invoke(app, ["convert", "victoria-park", "--data", str(vp_dir), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    seq = load_sequence(out)
+    assert seq.scan_ranges.shape == (2000, 361)
+    assert abs(seq.scan_t[0] - 21.819) < 1e-9 and abs(seq.scan_t[-1] - 448.865) < 1e-9
+    assert seq.vehicle["wheelbase_m"] == 2.83
+    np.testing.assert_allclose(seq.laser_pose, [3.78, 0.50, 0.0])

@@ -335,3 +335,17 @@ def test_all_no_return_and_one_beam_scans():
     for r in ([np.nan] * 361, [5.0], [np.nan]):
         f = extract_features(scan_of(r), "paper")
         assert f.n_circles == 0 and len(f.edges) == 0 and len(f.lines) == 0
+
+
+def test_planar_model_on_a_simulated_wall():
+    """The simulator's exact ray cast of a wall obeys eq. (1) to 1e-9 on every beam triple."""
+    from experiments.sim import scene_from_dict, sensor_preset, simulate_scan
+
+    scene = scene_from_dict({"walls": [{"name": "w", "points_xy": [[7.0, -30.0], [3.0, 30.0]]}]})
+    sensor = sensor_preset("pls200", range_sigma_m=0.0, quantisation_m=0.0)
+    d, labels = simulate_scan(scene, (0.5, -1.0, 0.2), sensor, np.random.default_rng(0))
+    ok = np.flatnonzero(labels == 0)
+    assert len(ok) > 100
+    c = math.cos(sensor.angle_increment_rad)
+    pred = np.array([planar_predict(np.array([d[k], d[k - 1]]), c)[0] for k in ok[1:-1]])
+    np.testing.assert_allclose(pred, d[ok[2:]], rtol=0, atol=1e-9)
