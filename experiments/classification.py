@@ -17,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from experiments.sim import (
-    load_scene,
     make_bush,
     scene_from_dict,
     sensor_preset,
@@ -41,6 +40,17 @@ def _extractor_sigma(sensor) -> float:
     return math.sqrt(sensor.range_sigma_m**2 + sensor.quantisation_m**2 / 12.0)
 
 
+def _extract(scene, rng, sigma_m, method="geometric", line_test="lrt", **params):
+    """Simulate the scene from the origin and extract; returns (features, per-beam labels)."""
+    sensor = _sensor(sigma_m)
+    ranges, labels = simulate_scan(scene, (0.0, 0.0, 0.0), sensor, rng)
+    f = extract_features(
+        sensor.scan(ranges), method, sigma_r_m=_extractor_sigma(sensor), line_test=line_test,
+        **params,
+    )  # fmt: skip
+    return f, labels
+
+
 def _found(features, labels: np.ndarray, label: int) -> bool:
     for a, b in features.circle_beams:
         if np.mean(labels[a : b + 1] == label) > 0.5:
@@ -58,13 +68,7 @@ def trunk_trial(rng, r_m, d_m, sigma_m=0.01, method="geometric", line_test="lrt"
         w = (d_m + rng.uniform(2, 10)) * u
         t = np.array([-u[1], u[0]]) * 15.0
         data["walls"] = [{"name": "w", "points_xy": [(w - t).tolist(), (w + t).tolist()]}]
-    scene = scene_from_dict(data)
-    sensor = _sensor(sigma_m)
-    ranges, labels = simulate_scan(scene, (0.0, 0.0, 0.0), sensor, rng)
-    f = extract_features(
-        sensor.scan(ranges), method, sigma_r_m=_extractor_sigma(sensor), line_test=line_test,
-        **params,
-    )  # fmt: skip
+    f, labels = _extract(scene_from_dict(data), rng, sigma_m, method, line_test, **params)
     return _found(f, labels, 0), int(np.sum(labels == 0))
 
 
@@ -77,12 +81,7 @@ def wall_trial(rng, sigma_m=0.01, line_test="lrt", **params):
     t = np.array([-n[1], n[0]]) * 6.0
     scene = scene_from_dict({"walls": [{"name": "w", "points_xy": [(p - t).tolist(),
                                                                     (p + t).tolist()]}]})
-    sensor = _sensor(sigma_m)
-    ranges, labels = simulate_scan(scene, (0.0, 0.0, 0.0), sensor, rng)
-    f = extract_features(
-        sensor.scan(ranges), "geometric", sigma_r_m=_extractor_sigma(sensor),
-        line_test=line_test, **params,
-    )  # fmt: skip
+    f, labels = _extract(scene, rng, sigma_m, line_test=line_test, **params)
     on_wall = labels == 0
     in_line = np.zeros_like(on_wall)
     for a, b in f.line_beams:
@@ -98,12 +97,7 @@ def bush_trial(rng, sigma_m=0.01, line_test="lrt", **params):
     c = d * np.array([math.cos(bearing), math.sin(bearing)])
     pts = make_bush(c, rng.uniform(0.3, 1.0), rng)
     scene = scene_from_dict({"bushes": [{"name": "b", "points_xy": pts.tolist()}]})
-    sensor = _sensor(sigma_m)
-    ranges, labels = simulate_scan(scene, (0.0, 0.0, 0.0), sensor, rng)
-    f = extract_features(
-        sensor.scan(ranges), "geometric", sigma_r_m=_extractor_sigma(sensor),
-        line_test=line_test, **params,
-    )  # fmt: skip
+    f, labels = _extract(scene, rng, sigma_m, line_test=line_test, **params)
     return _found(f, labels, 0)
 
 
@@ -152,7 +146,3 @@ def classification_study(
         done += 1
         progress("classification", done, total)
     return ClassificationResult(rate, beams, wall_frac, wall_fc, bush, n_trials)
-
-
-def pillar_scene():
-    return load_scene("pillar_court")

@@ -65,52 +65,10 @@ def _solve_sym3(a00, a01, a02, a11, a12, a22, b0, b1, b2):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def fit_circle_kasa(x, y):
-    """Kasa: minimise sum (x^2 + y^2 + B x + C y + D)^2, linear in (B, C, D)."""
+def _centred_moments(x, y):
+    """Mean point and the moments of the centred points u, v (z = u^2 + v^2), averaged:
+    (mx, my, Mxx, Myy, Mxy, Mxz, Myz, Mzz). Both algebraic fits start from these."""
     n = x.shape[0]
-    if n < 3:
-        return 0.0, 0.0, 0.0, False
-    mx = 0.0
-    my = 0.0
-    for i in range(n):
-        mx += x[i]
-        my += y[i]
-    mx /= n
-    my /= n
-    # centred coordinates for conditioning; the sums of u and v vanish
-    suu = 0.0
-    suv = 0.0
-    svv = 0.0
-    b0 = 0.0
-    b1 = 0.0
-    b2 = 0.0
-    for i in range(n):
-        u = x[i] - mx
-        v = y[i] - my
-        w = u * u + v * v
-        suu += u * u
-        suv += u * v
-        svv += v * v
-        b0 -= u * w
-        b1 -= v * w
-        b2 -= w
-    B, C, D, ok = _solve_sym3(suu, suv, 0.0, svv, 0.0, float(n), b0, b1, b2)
-    if not ok:
-        return 0.0, 0.0, 0.0, False
-    uc = -0.5 * B
-    vc = -0.5 * C
-    r2 = uc * uc + vc * vc - D
-    if not (r2 > 0.0) or not math.isfinite(r2):
-        return 0.0, 0.0, 0.0, False
-    return uc + mx, vc + my, math.sqrt(r2), True
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def fit_circle_taubin(x, y):
-    """Taubin's algebraic fit (Newton on the characteristic polynomial, as in Chernov's code)."""
-    n = x.shape[0]
-    if n < 3:
-        return 0.0, 0.0, 0.0, False
     mx = 0.0
     my = 0.0
     for i in range(n):
@@ -134,12 +92,36 @@ def fit_circle_taubin(x, y):
         Mxz += u * z
         Myz += v * z
         Mzz += z * z
-    Mxx /= n
-    Myy /= n
-    Mxy /= n
-    Mxz /= n
-    Myz /= n
-    Mzz /= n
+    return mx, my, Mxx / n, Myy / n, Mxy / n, Mxz / n, Myz / n, Mzz / n
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def fit_circle_kasa(x, y):
+    """Kasa: minimise sum (x^2 + y^2 + B x + C y + D)^2, linear in (B, C, D).
+
+    In centred coordinates (where the sums of u and v vanish) the normal equations are
+    [[Mxx, Mxy, 0], [Mxy, Myy, 0], [0, 0, 1]] [B, C, D] = -[Mxz, Myz, Mz].
+    """
+    if x.shape[0] < 3:
+        return 0.0, 0.0, 0.0, False
+    mx, my, Mxx, Myy, Mxy, Mxz, Myz, _ = _centred_moments(x, y)
+    B, C, D, ok = _solve_sym3(Mxx, Mxy, 0.0, Myy, 0.0, 1.0, -Mxz, -Myz, -(Mxx + Myy))
+    if not ok:
+        return 0.0, 0.0, 0.0, False
+    uc = -0.5 * B
+    vc = -0.5 * C
+    r2 = uc * uc + vc * vc - D
+    if not (r2 > 0.0) or not math.isfinite(r2):
+        return 0.0, 0.0, 0.0, False
+    return uc + mx, vc + my, math.sqrt(r2), True
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def fit_circle_taubin(x, y):
+    """Taubin's algebraic fit (Newton on the characteristic polynomial, as in Chernov's code)."""
+    if x.shape[0] < 3:
+        return 0.0, 0.0, 0.0, False
+    mx, my, Mxx, Myy, Mxy, Mxz, Myz, Mzz = _centred_moments(x, y)
     Mz = Mxx + Myy
     Cov_xy = Mxx * Myy - Mxy * Mxy
     Var_z = Mzz - Mz * Mz
