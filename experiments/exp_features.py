@@ -1,23 +1,21 @@
-"""Experiment `features`: the extractor on simulated and real scans (paper Figs. 2(b), 3, 4).
+"""Experiment `features`: how the extractor classifies, and what it finds in real scans.
 
 Writes
   classification.md/.csv/.png   how trunks, walls and bushes are classified (lrt vs paper eq. 5)
-  fig2b_raw_scan.png            one whole 360 deg scan of the simulated pillar court
-  fig3_position2.png            circles and edges at position 2, with a zoom
-  fig4_position4.png            the same at position 4
   fig_vp_scan.png               a real Victoria Park scan: paper and Bailey circles, edges, zoom
-  features.rrd                  all of it in rerun (timeline `scan`)
+  features.rrd                  the Victoria Park scans in rerun (timeline `scan`)
+The paper's Figs. 2-4 on the simulated pillar court come from experiment `table1`
+(experiments/exp_circles.py).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 
 import numpy as np
 
 from experiments import plots
-from experiments.classification import RADII_M, RANGES_M, _extractor_sigma, classification_study
+from experiments.classification import RADII_M, RANGES_M, classification_study
 from experiments.errors import DataError
 from experiments.export import write_table
 from experiments.viz import open_recording
@@ -25,14 +23,7 @@ from features import extract_features
 
 log = logging.getLogger(__name__)
 
-METHOD_COLORS = {"paper": "tab:green", "geometric": "m", "bailey": "goldenrod"}
-
-
-def _to_laser(xyr: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    """World circles (L, 3) into the frame of a sensor at `pose` [x, y, theta]."""
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    d = xyr[:, :2] - pose[:2]
-    return np.column_stack([d @ np.array([c, -s]), d @ np.array([s, c]), xyr[:, 2]])
+METHOD_COLORS = {"paper": "tab:green", "bailey": "goldenrod"}
 
 
 def _zoom_box(circles_xyr: np.ndarray, n: int = 1, margin: float = 1.5):
@@ -79,43 +70,6 @@ def classification(ctx) -> None:
     ctx.outputs.append(plots.plot_circle_rates(res, ctx.out_dir / "classification.png"))
 
 
-def pillar_figures(ctx, rec) -> None:
-    from experiments.sim import load_scene, sensor_preset, simulate_scan
-
-    scene = load_scene("pillar_court")
-    sensor = sensor_preset("pls200", back_to_back=True)
-    rng = ctx.rng("pillar_figures")
-    sigma = _extractor_sigma(sensor)
-    truth = scene.truth_landmarks
-    ctx.config["features"]["pillar_figures"] = {"scene": "pillar_court", "sensor": "pls200 x2",
-                                                "sigma_r_m": sigma}  # fmt: skip
-    for k, pose in enumerate(scene.scan_positions):
-        ranges, _ = simulate_scan(scene, pose, sensor, rng)
-        scan = sensor.scan(ranges, stamp_s=float(k))
-        feats = {m: extract_features(scan, m, sigma_r_m=sigma) for m in ("paper", "geometric")}
-        feats["bailey"] = extract_features(scan, "bailey")
-        rec.set_scan(k)
-        rec.log_scan(scan, pose=pose)
-        for m, f in feats.items():
-            rec.log_features(scan, f, pose=pose, path=f"world/features/{m}")
-        rec.log_circles("world/truth/pillars", truth, method="truth",
-                        labels=[c.name for c in scene.circles])  # fmt: skip
-        truth_l = _to_laser(truth, pose)
-        if k == 0:
-            ctx.outputs.append(plots.plot_raw_scan(
-                scan.points_xy, "Fig. 2(b): one whole scan (simulated pillar court, position 1)",
-                ctx.out_dir / "fig2b_raw_scan.png"))  # fmt: skip
-        if k in (1, 3):
-            fig = {1: "fig3_position2.png", 3: "fig4_position4.png"}[k]
-            f = feats["paper"]
-            circles = [(m, feats[m].circle_params, METHOD_COLORS[m]) for m in feats]
-            ctx.outputs.append(plots.plot_features(
-                scan.points_xy, _segments(f), circles, f.edge_xy,
-                f"Circles and edges at position {k + 1} (simulated; laser frame)",
-                ctx.out_dir / fig, zoom=_zoom_box(truth_l), truth_xyr=truth_l,
-            ))  # fmt: skip
-
-
 def victoria_park_figure(ctx, rec) -> None:
     from experiments.victoria_park import load_victoria_park
 
@@ -131,7 +85,7 @@ def victoria_park_figure(ctx, rec) -> None:
         scan = seq.scan(k)
         f = extract_features(scan, "paper")
         b = extract_features(scan, "bailey")
-        rec.set_scan(1000 + k)
+        rec.set_scan(k)
         rec.log_scan(scan, path="victoria_park/scan")
         rec.log_features(scan, f, path="victoria_park/features/paper")
         rec.log_circles("victoria_park/features/bailey/circles", b.circle_params, method="bailey")
@@ -143,8 +97,7 @@ def victoria_park_figure(ctx, rec) -> None:
     scan = seq.scan(best_k)
     f = extract_features(scan, "paper")
     b = extract_features(scan, "bailey")
-    ctx.config["features"]["victoria_park"] = {"scan_index": best_k, "scans_logged": n,
-                                               "rerun_scan_offset": 1000}  # fmt: skip
+    ctx.config["features"]["victoria_park"] = {"scan_index": best_k, "scans_logged": n}
     ctx.outputs.append(plots.plot_features(
         scan.points_xy, _segments(f),
         [("paper", f.circle_params, METHOD_COLORS["paper"]),
@@ -166,7 +119,6 @@ def run(ctx) -> None:
     classification(ctx)
     rec = open_recording(ctx.path("features.rrd"))
     try:
-        pillar_figures(ctx, rec)
         victoria_park_figure(ctx, rec)
     finally:
         rec.close()

@@ -54,7 +54,11 @@ def run_experiments(
 ) -> list[Path]:
     """Run the named experiments (all when empty) into out_dir; returns the files written."""
     names = list(names) or list(EXPERIMENTS)
-    funcs = {n: get_experiment(n) for n in names}  # unknown names fail before any work
+    funcs = {}
+    for n in names:  # unknown names fail before any work
+        fn = get_experiment(n)
+        if fn not in funcs.values():  # table1 and table2 share one Monte Carlo
+            funcs[n] = fn
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     ctx = RunContext(out_dir=out_dir, quick=quick, seed=seed)

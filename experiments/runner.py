@@ -46,6 +46,9 @@ class RunContext:
 # name -> "module:function"; the function takes a RunContext. Order is the run order.
 EXPERIMENTS: dict[str, str] = {
     "features": "experiments.exp_features:run",
+    "table1": "experiments.exp_circles:run_tables",
+    "table2": "experiments.exp_circles:run_tables",
+    "circle-sweep": "experiments.exp_circles:run_sweep",
     "association": "experiments.exp_association:run",
 }
 

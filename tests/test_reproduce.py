@@ -19,7 +19,6 @@ def quick_run(tmp_path_factory):
 
 def test_outputs_exist(quick_run):
     for name in ("classification.md", "classification.csv", "classification.png",
-                 "fig2b_raw_scan.png", "fig3_position2.png", "fig4_position4.png",
                  "features.rrd", "manifest.json"):  # fmt: skip
         p = quick_run / name
         assert p.exists() and p.stat().st_size > 500, name
