@@ -399,22 +399,7 @@ def fit_line_tls(x, y, sigma2):
     cov = np.full((2, 2), np.nan)
     if n < 2:
         return 0.0, 0.0, cov, end, 0.0, False
-    mx = 0.0
-    my = 0.0
-    for i in range(n):
-        mx += x[i]
-        my += y[i]
-    mx /= n
-    my /= n
-    sxx = 0.0
-    syy = 0.0
-    sxy = 0.0
-    for i in range(n):
-        u = x[i] - mx
-        v = y[i] - my
-        sxx += u * u
-        syy += v * v
-        sxy += u * v
+    mx, my, sxx, syy, sxy, _, _, _ = _centred_moments(x, y)
     # direction of the normal: minimiser of the scatter along it
     alpha = 0.5 * math.atan2(-2.0 * sxy, syy - sxx)
     ca = math.cos(alpha)

@@ -105,8 +105,19 @@ class Scan:
         return _readonly(np.stack([self.ranges_m * np.cos(a), self.ranges_m * np.sin(a)], axis=1))
 
 
+class _BeamRun:
+    """Mixin for features fitted to the consecutive beams first_beam..last_beam."""
+
+    first_beam: int
+    last_beam: int
+
+    @property
+    def beam_indices(self) -> np.ndarray:
+        return np.arange(self.first_beam, self.last_beam + 1)
+
+
 @dataclass(frozen=True, eq=False)
-class Segment:
+class Segment(_BeamRun):
     """A maximal run of beams the planar EKF kept together.
 
     first_beam, last_beam: inclusive beam indices; the segment's beams are first..last.
@@ -121,16 +132,12 @@ class Segment:
     mean_innovation_var_m2: float
 
     @property
-    def beam_indices(self) -> np.ndarray:
-        return np.arange(self.first_beam, self.last_beam + 1)
-
-    @property
     def n_beams(self) -> int:
         return self.last_beam - self.first_beam + 1
 
 
 @dataclass(frozen=True, eq=False)
-class Circle:
+class Circle(_BeamRun):
     """A circle (tree trunk, pillar) in the laser frame.
 
     center_xy: (2,) metres. radius_m: metres.
@@ -147,10 +154,6 @@ class Circle:
     rms_residual_m: float
 
     @property
-    def beam_indices(self) -> np.ndarray:
-        return np.arange(self.first_beam, self.last_beam + 1)
-
-    @property
     def range_m(self) -> float:
         return float(np.hypot(self.center_xy[0], self.center_xy[1]))
 
@@ -160,7 +163,7 @@ class Circle:
 
 
 @dataclass(frozen=True, eq=False)
-class Line:
+class Line(_BeamRun):
     """An infinite line x cos(alpha) + y sin(alpha) = rho fitted to a segment, in the laser frame.
 
     alpha_rad: direction of the line's normal, in (-pi, pi]. rho_m: distance from the laser, >= 0.
@@ -175,10 +178,6 @@ class Line:
     first_beam: int
     last_beam: int
     rms_residual_m: float
-
-    @property
-    def beam_indices(self) -> np.ndarray:
-        return np.arange(self.first_beam, self.last_beam + 1)
 
     @property
     def length_m(self) -> float:
