@@ -24,6 +24,7 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/trunkslam bench extract
+	$(BIN)/trunkslam bench association
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -179,3 +179,151 @@ def plot_sweep(results: dict, path: Path) -> Path:
     axes[0, 0].legend(fontsize=8)
     fig.suptitle("Circle accuracy: one pillar ahead of a PLS200 (others at 10 m, 0.3 m, 1 cm)")
     return save(fig, path)
+
+
+# ---- EKF-SLAM (experiment 2: the paper's Figs. 7, 10, 11; consistency) -------------------------
+
+
+def _ellipse_xy(center, cov, n_sigma: float = 2.4477, n: int = 40) -> np.ndarray:
+    w, v = np.linalg.eigh(0.5 * (np.asarray(cov) + np.asarray(cov).T))
+    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    c = np.stack([np.cos(t), np.sin(t)], axis=1) * (n_sigma * np.sqrt(np.maximum(w, 0.0)))
+    return np.asarray(center, float) + c @ v.T
+
+
+def plot_slam_path(
+    truth_xy: np.ndarray,
+    est_xy: np.ndarray,
+    trees_xyr: np.ndarray,
+    map_xy: np.ndarray,
+    map_cov: np.ndarray,
+    title: str,
+    path: Path,
+    walls: Sequence[np.ndarray] = (),
+    bushes: Sequence[np.ndarray] = (),
+) -> Path:
+    """Fig. 7: true path (dashed), estimated path (solid), trees (stars), the map's landmarks
+    with 95% ellipses (magnified x10 to be visible), walls and bushes of the scene (grey)."""
+    fig, ax = plt.subplots(figsize=(8, 6))
+    for w in walls:
+        ax.plot(w[:, 0], w[:, 1], "-", color="0.4", lw=2)
+    for b in bushes:
+        q = np.vstack([b, b[:1]])
+        ax.fill(q[:, 0], q[:, 1], color="0.85", zorder=0)
+    ax.plot(truth_xy[:, 0], truth_xy[:, 1], "k--", lw=1.2, label="true path (DGPS truth)")
+    ax.plot(est_xy[:, 0], est_xy[:, 1], "-", color="tab:blue", lw=1.2, label="estimated path")
+    ax.plot(trees_xyr[:, 0], trees_xyr[:, 1], "*", color="tab:green", ms=13, label="trees (truth)")
+    if len(map_xy):
+        ax.plot(map_xy[:, 0], map_xy[:, 1], "+", color="tab:red", ms=10, mew=1.5,
+                label="map landmarks")  # fmt: skip
+        for i, (c, P) in enumerate(zip(map_xy, map_cov)):
+            e = _ellipse_xy(c, 100.0 * np.asarray(P))
+            ax.plot(e[:, 0], e[:, 1], "-", color="tab:red", lw=0.7,
+                    label="95% ellipse x10" if i == 0 else None)  # fmt: skip
+    ax.plot(truth_xy[0, 0], truth_xy[0, 1], "ko", ms=6)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return save(fig, path)
+
+
+def plot_innovations(series: Sequence[dict], title: str, path: Path) -> Path:
+    """Fig. 10: range and bearing innovations with their 3-sigma bounds.
+
+    series: dicts with label, scan (k,), innov (k, 2) [m, rad], sigma (k, 2) and style (a
+    matplotlib line style such as "-." or "-").
+    """
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    colors = ["tab:blue", "tab:orange", "tab:green", "tab:red"]
+    for s, c in zip(series, colors):
+        for i, ax in enumerate(axes):
+            ax.plot(s["scan"], s["innov"][:, i], s.get("style", "-"), color=c, lw=1.0,
+                    label=f"{s['label']} innovation")  # fmt: skip
+            ax.plot(s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0,
+                    label=f"{s['label']} 3 sigma")  # fmt: skip
+            ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)
+    axes[0].set_ylabel("range innovation (m)")
+    axes[1].set_ylabel("bearing innovation (rad)")
+    axes[1].set_xlabel("scan")
+    axes[0].set_title(title)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, ncol=2)
+    return save(fig, path)
+
+
+def plot_pose_errors(series: Sequence[dict], title: str, path: Path) -> Path:
+    """Fig. 11: x, y and heading errors of the vehicle with their 3-sigma bounds.
+
+    series: dicts with label, scan (N,), err (N, 3) [m, m, rad], sigma (N, 3), style.
+    """
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
+    colors = ["tab:blue", "tab:orange", "tab:green", "tab:red"]
+    names = ["x error (m)", "y error (m)", "heading error (rad)"]
+    for s, c in zip(series, colors):
+        for i, ax in enumerate(axes):
+            ax.plot(s["scan"], s["err"][:, i], s.get("style", "-"), color=c, lw=1.0,
+                    label=f"{s['label']} error")  # fmt: skip
+            ax.plot(s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0,
+                    label=f"{s['label']} 3 sigma")  # fmt: skip
+            ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)
+    for ax, n in zip(axes, names):
+        ax.set_ylabel(n)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("scan")
+    axes[0].set_title(title)
+    axes[0].legend(fontsize=7, ncol=2)
+    return save(fig, path)
+
+
+def plot_consistency(series: dict[str, np.ndarray], bounds: tuple[float, float], title: str,
+                     ylabel: str, path: Path, expected: float | None = None) -> Path:  # fmt: skip
+    """Average NEES (or NIS) per scan over Monte Carlo runs, with its 95% chi-square bounds."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for label, v in series.items():
+        ax.plot(np.arange(len(v)), v, "-", lw=1.0, label=label)
+    ax.axhline(bounds[0], color="k", ls="--", lw=0.8, label="95% bounds")
+    ax.axhline(bounds[1], color="k", ls="--", lw=0.8)
+    if expected is not None:
+        ax.axhline(expected, color="0.5", ls=":", lw=0.8)
+    ax.set_xlabel("scan")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return save(fig, path)
+
+
+def plot_association(rows: list[dict], path: Path, method_labels: dict[str, str],
+                     sweep_xlabels: dict[str, str]) -> Path:  # fmt: skip
+    """Correct-association and false-pairing rates against each sweep, one column per sweep.
+
+    rows: dicts with keys sweep, value, method, correct_rate, false_pair_rate (as `rate_study`
+    returns); method_labels: method -> legend label (also the plotting order); sweep_xlabels:
+    sweep -> x-axis label.
+    """
+    sweeps = list(dict.fromkeys(r["sweep"] for r in rows))
+    fig, axes = plt.subplots(2, len(sweeps), figsize=(4.6 * len(sweeps), 7.2), squeeze=False)
+    styles = ["o-", "s--", "^-", "v:", "d-."]
+    colors = ["tab:blue", "tab:cyan", "tab:red", "tab:gray", "tab:green"]
+    for c, sw in enumerate(sweeps):
+        for k, (m, label) in enumerate(method_labels.items()):
+            rs = [r for r in rows if r["sweep"] == sw and r["method"] == m]
+            if not rs:
+                continue
+            x = [r["value"] for r in rs]
+            st, color = styles[k % len(styles)], colors[k % len(colors)]
+            axes[0, c].plot(x, [r["correct_rate"] for r in rs], st, color=color, label=label)
+            axes[1, c].plot(x, [r["false_pair_rate"] for r in rs], st, color=color)
+        axes[1, c].set_xlabel(sweep_xlabels.get(sw, sw))
+        axes[0, c].set_title(f"sweep: {sw}")
+        for ax in axes[:, c]:
+            ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("correct association rate")
+    axes[1, 0].set_ylabel("false pairing rate")
+    axes[0, 0].legend(fontsize=8, loc="lower left")
+    fig.tight_layout()
+    return save(fig, path)

@@ -1,0 +1,300 @@
+"""LP relaxation with iterative heuristic greedy rounding (IHGR) for set-partitioning problems.
+
+The problem (METHOD_NOTES section 1; Storms & Spieksma 2003):
+
+    minimise   c^T x
+    subject to A[r] x  = 1   for every row r with exact[r]       (e.g. a measurement)
+               A[r] x <= 1   for every other row                   (e.g. a map feature)
+               x in {0, 1}^N
+
+Columns are hypotheses (a pairing, a multi-scan tuple, a clutter singleton), rows are the things
+they use; A is a 0/1 (rows x columns) matrix.
+
+IHGR:
+1. Solve the LP relaxation (0 <= x <= 1) with HiGHS (`scipy.optimize.linprog`, dual simplex, so
+   the answer is a vertex and a totally unimodular problem gives an integral x).
+2. If every x is within `eps` of 0 or 1, take the x = 1 columns and stop.
+3. Otherwise fix the largest fractional x_h to 1 (ties: lower cost, then lower column index); with
+   `fix_ones` (off by default) also fix every x >= 1 - eps in the same pass (they cannot conflict
+   with h or with each other): fewer passes, but on random 3-scan problems it lands on the optimum
+   less often (see results/association_optimality.md).
+   Remove every column that shares a row with a fixed one, and the rows they cover.
+4. Re-solve the reduced LP and go to 2.
+
+Two exact speed-ups that do not change the method (up to ties between equally good LP vertices):
+- The problem splits into connected components (columns linked by shared rows); the rounding
+  runs on each independently. All fractional components are handled by the same LP solve (their
+  LPs are independent blocks), so the solve count is the longest per-component count.
+- `presolve`: a component whose columns all cover its only exact row is a choice of one column,
+  whose LP optimum is the cheapest column; it is taken directly without an LP. Single-scan
+  association after gating is mostly such components.
+
+Each pass fixes at least one column, so IHGR ends after at most (number of rows) solves. If a
+reduced LP becomes infeasible (possible only when some exact row has no singleton column), a
+RuntimeError is raised; association problems always give each measurement a singleton.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import Bounds, LinearConstraint, linprog, milp
+from scipy.sparse.csgraph import connected_components
+
+__all__ = ["RoundingResult", "ihgr_round", "solve_set_partition", "check_problem"]
+
+_DENSE_MAX_ENTRIES = 40_000  # below this, a dense A is faster through linprog than a sparse one
+
+
+@dataclass(frozen=True, eq=False)
+class RoundingResult:
+    """The answer of a set-partitioning solve.
+
+    selected: (k,) int, indices of the chosen columns, ascending.
+    cost: c^T x of the chosen columns.
+    lp_bound: optimum of the first LP relaxation (a lower bound on the integer optimum); for
+        method "milp" the integer optimum itself.
+    lp_solves: number of LP solves (linprog calls); 0 when presolve settled everything.
+    fractional: True if the first LP relaxation was fractional in some component.
+    method: "ihgr" or "milp".
+    """
+
+    selected: np.ndarray
+    cost: float
+    lp_bound: float
+    lp_solves: int
+    fractional: bool
+    method: str
+
+
+def check_problem(costs, A, exact) -> tuple[np.ndarray, sp.csc_array, np.ndarray]:
+    """Validate and normalise (costs (N,), A (rows, N) 0/1, exact (rows,) bool)."""
+    c, n_rows, indptr, indices, e = _check(costs, A, exact)
+    Acsc = sp.csc_array((np.ones(indices.size), indices, indptr), shape=(n_rows, c.size))
+    return c, Acsc, e
+
+
+def _check(costs, A, exact):
+    """Validated (costs, n_rows, indptr, indices, exact): the columns of A in CSC index form."""
+    try:
+        c = np.asarray(costs, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"costs: cannot be read as a float array ({exc})") from None
+    if c.ndim != 1:
+        raise ValueError(f"costs: expected shape (N,), got {c.shape}")
+    if not np.isfinite(c).all():
+        raise ValueError("costs: contains NaN or inf")
+    if sp.issparse(A):
+        if A.ndim != 2:
+            raise ValueError(f"A: expected a 2-D (rows, N) matrix, got shape {A.shape}")
+        Acsc = sp.csc_array(A, dtype=np.float64)
+        Acsc.sum_duplicates()
+        Acsc.eliminate_zeros()
+        n_rows, n_cols = Acsc.shape
+        if Acsc.nnz and not np.all(Acsc.data == 1.0):
+            raise ValueError("A: entries must be 0 or 1")
+        indptr = Acsc.indptr.astype(np.int64)
+        indices = Acsc.indices.astype(np.int64)
+    else:
+        try:
+            Ad = np.asarray(A, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"A: cannot be read as a float matrix ({exc})") from None
+        if Ad.ndim != 2:
+            raise ValueError(f"A: expected a 2-D (rows, N) matrix, got shape {Ad.shape}")
+        n_rows, n_cols = Ad.shape
+        if not np.isin(Ad, (0.0, 1.0)).all():
+            raise ValueError("A: entries must be 0 or 1")
+        col, indices = np.nonzero(Ad.T)
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(col, minlength=n_cols))])
+        indices = indices.astype(np.int64)
+    if n_cols != c.shape[0]:
+        raise ValueError(f"A: has {n_cols} columns but costs has {c.shape[0]} entries")
+    counts = np.diff(indptr)
+    if (counts == 0).any():
+        raise ValueError(f"A: column {int(np.flatnonzero(counts == 0)[0])} covers no row")
+    e = np.asarray(exact)
+    if e.shape != (n_rows,) or e.dtype != bool:
+        raise ValueError(f"exact: expected a bool array of shape ({n_rows},), got "
+                         f"{e.dtype} {e.shape}")  # fmt: skip
+    return c, n_rows, indptr, indices, e
+
+
+def _components(n_rows: int, indptr: np.ndarray, indices: np.ndarray):
+    """Connected components of the row-column graph: (count, row labels, column labels)."""
+    n_cols = indptr.size - 1
+    if indices.size > 2000:
+        col = np.repeat(np.arange(n_cols), np.diff(indptr)) + n_rows
+        g = sp.coo_array((np.ones(indices.size), (indices, col)),
+                         shape=(n_rows + n_cols,) * 2)  # fmt: skip
+        k, labels = connected_components(g, directed=False)
+        return k, labels[:n_rows], labels[n_rows:]
+    parent = list(range(n_rows))
+
+    def find(a: int) -> int:
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    ip, ix = indptr.tolist(), indices.tolist()
+    for h in range(n_cols):
+        r0 = find(ix[ip[h]])
+        for t in range(ip[h] + 1, ip[h + 1]):
+            r = find(ix[t])
+            if r != r0:
+                parent[r] = r0
+    roots = np.array([find(r) for r in range(n_rows)], np.int64)
+    uniq, row_lab = np.unique(roots, return_inverse=True)
+    return uniq.size, row_lab, row_lab[indices[indptr[:-1]]]
+
+
+def _solve_lp(c, n_rows, indptr, indices, cols, rows, exact):
+    """LP relaxation over columns `cols` and rows `rows`; <= rows get slack columns so that
+    HiGHS sees only equalities. Returns (x over cols, optimum)."""
+    row_pos = np.full(n_rows, -1, np.int64)
+    row_pos[rows] = np.arange(rows.size)
+    counts = np.diff(indptr)[cols]
+    starts = indptr[cols]
+    entry = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
+    entry += np.arange(counts.sum())
+    r = row_pos[indices[entry]]
+    col = np.repeat(np.arange(cols.size), counts)
+    keep = r >= 0
+    slack = np.flatnonzero(~exact[rows])
+    n_var = cols.size + slack.size
+    r = np.concatenate([r[keep], slack])
+    col = np.concatenate([col[keep], cols.size + np.arange(slack.size)])
+    c_full = np.concatenate([c[cols], np.zeros(slack.size)])
+    if rows.size * n_var <= _DENSE_MAX_ENTRIES:
+        A_eq = np.zeros((rows.size, n_var))
+        A_eq[r, col] = 1.0
+    else:
+        A_eq = sp.csc_array((np.ones(r.size), (r, col)), shape=(rows.size, n_var))
+    res = linprog(c_full, A_eq=A_eq, b_eq=np.ones(rows.size), bounds=(0.0, 1.0),
+                  method="highs-ds")  # fmt: skip
+    if res.status != 0:
+        raise RuntimeError(f"IHGR: LP relaxation failed ({res.message})")
+    return np.asarray(res.x[: cols.size]), float(res.fun)
+
+
+def ihgr_round(costs, A, exact, *, eps: float = 1e-6, fix_ones: bool = False,
+               presolve: bool = True) -> RoundingResult:  # fmt: skip
+    """Solve a set-partitioning problem by LP relaxation + iterative heuristic greedy rounding.
+
+    costs: (N,) column costs; A: (rows, N) 0/1 matrix, dense or scipy.sparse; exact: (rows,) bool,
+    True for "covered exactly once", False for "at most once". See the module docstring.
+    """
+    if not 0.0 < eps < 0.5:
+        raise ValueError(f"eps: must be in (0, 0.5), got {eps!r}")
+    c, n_rows, indptr, indices, exact = _check(costs, A, exact)
+    n_cols = c.size
+    row_has_col = np.bincount(indices, minlength=n_rows) > 0
+    if (exact & ~row_has_col).any():
+        r = int(np.flatnonzero(exact & ~row_has_col)[0])
+        raise RuntimeError(f"IHGR: infeasible, exact row {r} has no column")
+    if n_cols == 0:
+        return RoundingResult(np.zeros(0, np.int64), 0.0, 0.0, 0, False, "ihgr")
+    n_comp, row_lab, col_lab = _components(n_rows, indptr, indices)
+    counts = np.diff(indptr)
+    chosen = np.zeros(n_cols, bool)
+    active = np.ones(n_cols, bool)  # columns still in play
+    bound = 0.0
+
+    # Presolve: a component whose columns all cover its only exact row (or, with no exact row,
+    # all share one row) is a choice of at most one column: take the cheapest.
+    if presolve:
+        col_order = np.argsort(col_lab, kind="stable")
+        starts = np.searchsorted(col_lab[col_order], np.arange(n_comp + 1))
+        n_exact = np.bincount(row_lab[exact], minlength=n_comp)
+        n_rows_k = np.bincount(row_lab, minlength=n_comp)
+        for k in range(n_comp):
+            cols = col_order[starts[k] : starts[k + 1]]
+            if n_exact[k] > 1 or cols.size == 0:
+                continue
+            if cols.size > 1 or n_rows_k[k] > 1:
+                ent = np.concatenate([indices[indptr[h] : indptr[h + 1]] for h in cols])
+                common = np.flatnonzero(np.bincount(ent, minlength=n_rows) == cols.size)
+                if common.size == 0:
+                    continue
+                if n_exact[k] == 1 and not exact[common].any():
+                    continue
+            best = cols[np.lexsort((cols, c[cols]))[0]]
+            if n_exact[k] == 1 or c[best] < 0.0:
+                chosen[best] = True
+                bound += c[best]
+            active[cols] = False
+
+    covered = np.zeros(n_rows, bool)
+    for h in np.flatnonzero(chosen):
+        covered[indices[indptr[h] : indptr[h + 1]]] = True
+    solves = 0
+    fractional = False
+    while active.any():
+        cols = np.flatnonzero(active)
+        in_play = np.bincount(indices[np.repeat(active, counts)], minlength=n_rows) > 0
+        missing = exact & ~covered & ~in_play
+        if missing.any():
+            raise RuntimeError(f"IHGR: infeasible after rounding, exact row "
+                               f"{int(np.flatnonzero(missing)[0])} has no column left")  # fmt: skip
+        rows = np.flatnonzero(in_play & ~covered)
+        x, fun = _solve_lp(c, n_rows, indptr, indices, cols, rows, exact)
+        solves += 1
+        if solves == 1:
+            bound += fun
+        frac = (x > eps) & (x < 1.0 - eps)
+        if solves == 1 and frac.any():
+            fractional = True
+        to_fix: list[int] = []
+        labs = col_lab[cols]
+        for k in np.unique(labs):
+            in_k = labs == k
+            fk = frac & in_k
+            if fk.any():
+                if fix_ones:
+                    to_fix += cols[in_k & (x >= 1.0 - eps)].tolist()
+                cand = np.flatnonzero(fk)
+                # largest fractional value; ties: lower cost, then lower index
+                best = cand[np.lexsort((cols[cand], c[cols[cand]], -x[cand]))[0]]
+                to_fix.append(int(cols[best]))
+            else:
+                # integral component: take it and close it
+                to_fix += cols[in_k & (x >= 1.0 - eps)].tolist()
+                active[cols[in_k]] = False
+        for h in to_fix:
+            chosen[h] = True
+            covered[indices[indptr[h] : indptr[h + 1]]] = True
+        # remove every column that shares a row with a fixed one (the fixed ones included)
+        conflict = np.add.reduceat(covered[indices].astype(np.int64), indptr[:-1]) > 0
+        active &= ~conflict
+    sel = np.flatnonzero(chosen)
+    return RoundingResult(sel, float(c[sel].sum()), float(bound), solves, fractional, "ihgr")
+
+
+def _milp(costs, A, exact) -> RoundingResult:
+    c, A, exact = check_problem(costs, A, exact)
+    n_rows, n_cols = A.shape
+    if n_cols == 0:
+        return RoundingResult(np.zeros(0, np.int64), 0.0, 0.0, 0, False, "milp")
+    lb = np.where(exact, 1.0, 0.0)
+    res = milp(c, constraints=LinearConstraint(sp.csr_array(A), lb, np.ones(n_rows)),
+               integrality=np.ones(n_cols), bounds=Bounds(0.0, 1.0))  # fmt: skip
+    if res.status != 0:
+        raise RuntimeError(f"milp: no optimal solution ({res.message})")
+    sel = np.flatnonzero(res.x > 0.5)
+    cost = float(c[sel].sum())
+    return RoundingResult(sel, cost, cost, 0, False, "milp")
+
+
+def solve_set_partition(costs, A, exact, method: str = "ihgr", **params) -> RoundingResult:
+    """Set partitioning by `method`: "ihgr" (LP + rounding, `ihgr_round`) or "milp" (exact
+    branch and bound, `scipy.optimize.milp`, for reference)."""
+    if method == "ihgr":
+        return ihgr_round(costs, A, exact, **params)
+    if method == "milp":
+        if params:
+            raise ValueError(f"method 'milp' takes no parameters, got {sorted(params)}")
+        return _milp(costs, A, exact)
+    raise ValueError(f"method: expected 'ihgr' or 'milp', got {method!r}")
