@@ -53,7 +53,7 @@ def _extract(scene, rng, sigma_m, method="geometric", line_test="lrt", **params)
 
 def _found(features, labels: np.ndarray, label: int) -> bool:
     for a, b in features.circle_beams:
-        if np.mean(labels[a : b + 1] == label) > 0.5:
+        if np.mean(labels[features.beams(a, b)] == label) > 0.5:
             return True
     return False
 
@@ -85,8 +85,8 @@ def wall_trial(rng, sigma_m=0.01, line_test="lrt", **params):
     on_wall = labels == 0
     in_line = np.zeros_like(on_wall)
     for a, b in f.line_beams:
-        in_line[a : b + 1] = True
-    n_circ = sum(np.mean(labels[a : b + 1] == 0) > 0.5 for a, b in f.circle_beams)
+        in_line[f.beams(a, b)] = True
+    n_circ = sum(np.mean(labels[f.beams(a, b)] == 0) > 0.5 for a, b in f.circle_beams)
     return float(np.mean(in_line[on_wall])) if on_wall.any() else math.nan, int(n_circ)
 
 

@@ -68,9 +68,8 @@ def _extract_all(scan, sigma, methods):
 def _assign(features, labels: np.ndarray, n_circles: int) -> dict[int, np.ndarray]:
     """pillar label (0..n_circles-1) -> [x0, y0, r] of the circle most of whose beams hit it."""
     out = {}
-    n = labels.shape[0]
     for (a, b), p in zip(features.circle_beams, features.circle_params):
-        lab = labels[np.arange(a, b + 1) % n]  # Bailey's seam-crossing segments wrap
+        lab = labels[features.beams(a, b)]  # runs may cross a 360 deg scan's seam
         vals, counts = np.unique(lab, return_counts=True)
         k = int(vals[np.argmax(counts)])
         if 0 <= k < n_circles and counts.max() > 0.5 * lab.size and k not in out:

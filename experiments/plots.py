@@ -45,7 +45,7 @@ def _draw(ax, points_xy, segments, circles, edges, truth, lw=1.0):
     ax.plot(p[:, 0], p[:, 1], ".", ms=2, color="0.55", zorder=1)
     colors = {0: "tab:orange", 1: "tab:blue", 2: "tab:green"}
     for (a, b), k in segments:
-        q = p[a : b + 1]
+        q = p[np.arange(a, b + 1) % len(p)]  # runs may cross a 360 deg scan's seam
         ax.plot(q[:, 0], q[:, 1], "-", color=colors[int(k)], lw=lw, zorder=2)
     for name, circ, color in circles:
         for i, (cx, cy, r) in enumerate(circ):

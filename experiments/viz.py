@@ -8,6 +8,13 @@ The only module that imports rerun. Entities (laser frame unless a pose is given
   world/features/lines       fitted lines (projected endpoints)
   world/features/edges       occluding edges (red crosses)
   world/truth/...            simulated truth when known
+SLAM runs (slam.run's visualiser interface, world frame):
+  world/vehicle              pose arrow and 95% position ellipse (3-sigma heading wedge in the label)
+  world/vehicle/path         estimated path so far
+  world/landmarks            map landmarks: centres, ids, 95% ellipses
+  world/tentative            tentative features (not yet in the map)
+  world/associations         lines from each associated measurement to its landmark
+  world/truth/vehicle        true pose and path (simulated runs)
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ import rerun as rr
 
 from features.types import Features, Scan
 
-__all__ = ["Recorder", "NullRecorder", "open_recording", "circle_polyline"]
+__all__ = ["Recorder", "NullRecorder", "open_recording", "circle_polyline", "ellipse_polyline"]
 
 KIND_COLORS = np.array([[255, 150, 40], [60, 120, 255], [40, 200, 90]], dtype=np.uint8)
 METHOD_COLORS = {
@@ -38,6 +45,14 @@ def circle_polyline(cx: float, cy: float, r: float, n: int = 48) -> np.ndarray:
     return np.stack([cx + r * np.cos(t), cy + r * np.sin(t)], axis=1)
 
 
+def ellipse_polyline(center_xy, cov_2x2, n_sigma: float = 2.4477, n: int = 40) -> np.ndarray:
+    """(n + 1, 2) closed polyline of the n_sigma ellipse of a 2D Gaussian (2.4477: 95%)."""
+    w, v = np.linalg.eigh(0.5 * (np.asarray(cov_2x2) + np.asarray(cov_2x2).T))
+    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=1) * (n_sigma * np.sqrt(np.maximum(w, 0.0)))
+    return np.asarray(center_xy, float) + circle @ v.T
+
+
 def _transform(xy: np.ndarray, pose: np.ndarray | None) -> np.ndarray:
     if pose is None or len(xy) == 0:
         return xy
@@ -52,6 +67,11 @@ class NullRecorder:
     def log_scan(self, scan: Scan, pose=None, path: str = "world/scan") -> None: ...
     def log_features(self, scan, features, pose=None, path="world/features") -> None: ...
     def log_circles(self, path, circles_xyr, pose=None, method="truth", labels=None) -> None: ...
+    def log_vehicle(self, pose, cov) -> None: ...
+    def log_landmarks(self, xy, cov, ids) -> None: ...
+    def log_tentatives(self, xy) -> None: ...
+    def log_associations(self, from_xy, to_xy) -> None: ...
+    def log_truth(self, pose) -> None: ...
     def close(self) -> None: ...
 
 
@@ -76,7 +96,7 @@ class Recorder(NullRecorder):
         pts = scan.points_xy
         strips, colors = [], []
         for (a, b), k in zip(features.segment_beams, features.segment_kind):
-            strips.append(_transform(pts[a : b + 1], pose))
+            strips.append(_transform(pts[features.beams(a, b)], pose))
             colors.append(KIND_COLORS[int(k)])
         self.rec.log(f"{path}/segments", rr.LineStrips2D(strips, colors=colors, radii=0.02))
         self.log_circles(f"{path}/circles", features.circle_params, pose, features.method)
@@ -99,6 +119,55 @@ class Recorder(NullRecorder):
                 radii=0.015,
             ),
         )  # fmt: skip
+
+    # ---- SLAM (the visualiser interface of slam.run; world frame) -------------------------------
+
+    def log_vehicle(self, pose, cov) -> None:
+        """Estimated pose (arrow), 95% position ellipse and the path so far."""
+        pose = np.asarray(pose, float)
+        cov = np.asarray(cov, float)
+        path = self.__dict__.setdefault("_est_path", [])
+        path.append(pose[:2].copy())
+        head = 1.0 * np.array([np.cos(pose[2]), np.sin(pose[2])])
+        sig_th = float(np.sqrt(max(cov[2, 2], 0.0)))
+        self.rec.log("world/vehicle", rr.Arrows2D(
+            origins=[pose[:2]], vectors=[head], colors=[[255, 80, 80]],
+            labels=[f"3 sigma heading +-{np.degrees(3 * sig_th):.2f} deg"]))  # fmt: skip
+        self.rec.log("world/vehicle/ellipse", rr.LineStrips2D(
+            [ellipse_polyline(pose[:2], cov[:2, :2])], colors=[[255, 80, 80]], radii=0.01))  # fmt: skip
+        self.rec.log("world/vehicle/path", rr.LineStrips2D(
+            [np.array(path)], colors=[[255, 80, 80]], radii=0.02))  # fmt: skip
+
+    def log_landmarks(self, xy, cov, ids) -> None:
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        cov = np.asarray(cov, float).reshape(-1, 2, 2)
+        labels = [f"L{int(i)}" for i in ids]
+        self.rec.log("world/landmarks", rr.Points2D(xy, radii=0.08, colors=[[40, 200, 90]],
+                                                    labels=labels))  # fmt: skip
+        self.rec.log("world/landmarks/ellipses", rr.LineStrips2D(
+            [ellipse_polyline(c, P) for c, P in zip(xy, cov)], colors=[[40, 200, 90]],
+            radii=0.01))  # fmt: skip
+
+    def log_tentatives(self, xy) -> None:
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        self.rec.log("world/tentative", rr.Points2D(xy, radii=0.06, colors=[[255, 200, 0]]))
+
+    def log_associations(self, from_xy, to_xy) -> None:
+        a = np.asarray(from_xy, float).reshape(-1, 2)
+        b = np.asarray(to_xy, float).reshape(-1, 2)
+        self.rec.log("world/associations", rr.LineStrips2D(
+            [np.stack([p, q]) for p, q in zip(a, b)], colors=[[0, 200, 255]], radii=0.02))  # fmt: skip
+
+    def log_truth(self, pose) -> None:
+        """True pose (arrow) and path so far."""
+        pose = np.asarray(pose, float)
+        path = self.__dict__.setdefault("_truth_path", [])
+        path.append(pose[:2].copy())
+        self.rec.log("world/truth/vehicle", rr.Arrows2D(
+            origins=[pose[:2]], vectors=[[np.cos(pose[2]), np.sin(pose[2])]],
+            colors=[[255, 255, 255]]))  # fmt: skip
+        self.rec.log("world/truth/vehicle/path", rr.LineStrips2D(
+            [np.array(path)], colors=[[255, 255, 255]], radii=0.015))  # fmt: skip
 
     def close(self) -> None:
         self.rec.flush()

@@ -444,7 +444,7 @@ def extract_bailey(
         edge_xy=_NO_EDGES[0], edge_cov=_NO_EDGES[1], edge_beam=_NO_EDGES[2],
         segment_beams=seg_beams, segment_kind=kind,
         segment_innov=np.full((kind.size, 2), np.nan),
-        method="bailey",
+        method="bailey", n_beams=n_beams,
     )  # fmt: skip
 
 

@@ -181,21 +181,29 @@ def _circle_plausible(x, y, rmin, chi2_circ, sigma2, r_min, r_max):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _continuous(ranges, bounds, k, side, edge_jump):
+def _continuous(ranges, bounds, k, side, edge_jump, cyclic):
     """Does segment k continue, at its start (side 0) or end (side 1), into a neighbouring
     surface at a similar range (no depth jump)? A one-beam neighbouring segment that is itself cut
-    off on its far side is taken for a mixed pixel and looked past."""
+    off on its far side is taken for a mixed pixel and looked past. `cyclic`: the scan covers
+    360 deg and its last beam neighbours its first."""
     n = ranges.shape[0]
+    ns = bounds.shape[0]
     e = bounds[k, 0] if side == 0 else bounds[k, 1]
     step = -1 if side == 0 else 1
     nb = e + step
+    if cyclic:
+        nb %= n
     if nb < 0 or nb >= n or not (ranges[nb] == ranges[nb]):
         return False
     if abs(ranges[nb] - ranges[e]) >= edge_jump:
         return False
     kn = k + step
-    if 0 <= kn < bounds.shape[0] and bounds[kn, 0] == bounds[kn, 1]:
+    if cyclic:
+        kn %= ns
+    if 0 <= kn < ns and bounds[kn, 0] == bounds[kn, 1]:
         far = nb + step  # beyond the singleton
+        if cyclic:
+            far %= n
         if far < 0 or far >= n or not (ranges[far] == ranges[far]):
             return True
         if abs(ranges[far] - ranges[nb]) >= edge_jump and ranges[far] > ranges[e]:
@@ -205,8 +213,8 @@ def _continuous(ranges, bounds, k, side, edge_jump):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _extract_kernel(
-    ranges, angle_min, gamma, sigma_r, q, gate, max_growth, merge, isolate, method, line_test,
-    min_points,
+    ranges, angle_min, gamma, sigma_r, q, gate, max_growth, merge, isolate, cyclic, method,
+    line_test, min_points,
     min_circle_points, chi2_line, chi2_circ, lrt_threshold, sigma2, r_min, r_max, edge_jump,
     lambda0, max_iter, tol,
 ):  # fmt: skip
@@ -285,8 +293,8 @@ def _extract_kernel(
         circle_ok = False
         ssr_c = np.inf
         isolated = not isolate or (
-            not _continuous(ranges, bounds, k, 0, edge_jump)
-            and not _continuous(ranges, bounds, k, 1, edge_jump)
+            not _continuous(ranges, bounds, k, 0, edge_jump, cyclic)
+            and not _continuous(ranges, bounds, k, 1, edge_jump, cyclic)
         )
         if m >= min_circle_points and isolated:
             circle_ok, ssr_c, _, _, _ = _circle_plausible(
@@ -339,6 +347,8 @@ def _extract_kernel(
             is_edge = False
             for j in range(1, 3):  # the neighbour, or the one after a mixed pixel
                 nb = e + step * j
+                if cyclic:
+                    nb %= n_beams
                 if nb < 0 or nb >= n_beams or not (ranges[nb] == ranges[nb]):
                     break
                 if ranges[nb] - ranges[e] > edge_jump:
@@ -399,16 +409,28 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
             f"with max_incidence_deg={p.max_incidence_deg}"
         )
     growth = max_growth_ratio(gamma, math.radians(p.max_incidence_deg))
-    chi2_line, chi2_circ = _chi2_tables(scan.n_beams, p.class_prob)
+    n = scan.n_beams
+    chi2_line, chi2_circ = _chi2_tables(n, p.class_prob)
+    ranges, angle_min, shift = scan.ranges_m, scan.angle_min_rad, 0
+    cyclic = n > 2 and abs(n * gamma - 2.0 * math.pi) < 0.5 * gamma
+    if cyclic:  # 360 deg: start the scan at a break so that no segment crosses the seam
+        shift = _seam(ranges)
+        ranges = np.roll(ranges, -shift)
+        angle_min = angle_min + shift * gamma
     out = _extract_kernel(
-        scan.ranges_m, scan.angle_min_rad, gamma, p.sigma_r_m, p.q_m2, p.gate, growth, p.merge_arcs,
-        p.isolated_circles,
+        ranges, angle_min, gamma, p.sigma_r_m, p.q_m2, p.gate, growth, p.merge_arcs,
+        p.isolated_circles, cyclic,
         _METHOD_CODE[method], _LINE_TESTS[p.line_test], p.min_points, p.min_circle_points,
         chi2_line, chi2_circ, p.lrt_threshold, p.sigma_r_m**2 + p.roughness_m**2, p.r_min_m,
         p.r_max_m, p.edge_min_jump_m, p.lambda0, p.max_iter, p.tol,
     )  # fmt: skip
     (bounds, kind, seg_innov, circ, circ_cov, circ_beams, circ_rms,
      line, line_cov, line_end, line_beams, line_rms, edge_xy, edge_cov, edge_beam) = out  # fmt: skip
+    if shift:  # back to the scan's own beam numbers; a run across the seam keeps last >= n
+        for runs in (bounds, circ_beams, line_beams):
+            runs += shift
+            runs -= n * (runs[:, :1] >= n)
+        edge_beam = (edge_beam + shift) % n
     return Features(
         stamp_s=scan.stamp_s,
         circle_params=circ, circle_cov=circ_cov, circle_beams=circ_beams, circle_rms_m=circ_rms,
@@ -416,5 +438,13 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
         line_rms_m=line_rms,
         edge_xy=edge_xy, edge_cov=edge_cov, edge_beam=edge_beam,
         segment_beams=bounds, segment_kind=kind, segment_innov=seg_innov,
-        method=method,
+        method=method, n_beams=n,
     )  # fmt: skip
+
+
+def _seam(ranges: np.ndarray) -> int:
+    """Where to cut a 360 deg scan: at its first no-return beam, else before its largest jump."""
+    nan = np.flatnonzero(np.isnan(ranges))
+    if nan.size:
+        return int(nan[0])
+    return int(np.argmax(np.abs(ranges - np.roll(ranges, 1))))

@@ -106,14 +106,20 @@ class Scan:
 
 
 class _BeamRun:
-    """Mixin for features fitted to the consecutive beams first_beam..last_beam."""
+    """Mixin for features fitted to the consecutive beams first_beam..last_beam.
+
+    On a full 360 deg scan a run may cross the scan's seam: then last_beam >= n_beams and the
+    beams are first_beam..last_beam modulo n_beams (`beam_indices` does the modulo).
+    """
 
     first_beam: int
     last_beam: int
+    n_beams: int
 
     @property
     def beam_indices(self) -> np.ndarray:
-        return np.arange(self.first_beam, self.last_beam + 1)
+        idx = np.arange(self.first_beam, self.last_beam + 1)
+        return idx % self.n_beams if self.n_beams > 0 else idx
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,9 +136,11 @@ class Segment(_BeamRun):
     kind: SegmentKind
     mean_innovation_m: float
     mean_innovation_var_m2: float
+    n_beams: int = 0
 
     @property
-    def n_beams(self) -> int:
+    def size(self) -> int:
+        """Number of beams in the segment."""
         return self.last_beam - self.first_beam + 1
 
 
@@ -152,6 +160,7 @@ class Circle(_BeamRun):
     first_beam: int
     last_beam: int
     rms_residual_m: float
+    n_beams: int = 0
 
     @property
     def range_m(self) -> float:
@@ -178,6 +187,7 @@ class Line(_BeamRun):
     first_beam: int
     last_beam: int
     rms_residual_m: float
+    n_beams: int = 0
 
     @property
     def length_m(self) -> float:
@@ -219,6 +229,9 @@ class Features:
     segment_beams: (S, 2) inclusive [first, last]. segment_kind: (S,) 0 clutter, 1 line,
         2 circle. segment_innov: (S, 2) eq. (5)'s [v-bar, s-bar].
     method: the circle-fitting method that produced it.
+    n_beams: beams in the scan. Beam runs ([first, last] above) have 0 <= first < n_beams; on a
+        full 360 deg scan a run that crosses the seam has last >= n_beams and means the beams
+        first..last modulo n_beams (`Features.beams(first, last)`).
     """
 
     stamp_s: float
@@ -238,9 +251,15 @@ class Features:
     segment_kind: np.ndarray
     segment_innov: np.ndarray
     method: str
+    n_beams: int = 0
+
+    def beams(self, first: int, last: int) -> np.ndarray:
+        """Beam indices of the run first..last (modulo n_beams across a 360 deg scan's seam)."""
+        idx = np.arange(first, last + 1)
+        return idx % self.n_beams if self.n_beams > 0 else idx
 
     @classmethod
-    def empty(cls, stamp_s: float = 0.0, method: str = "") -> Features:
+    def empty(cls, stamp_s: float = 0.0, method: str = "", n_beams: int = 0) -> Features:
         z = np.zeros
         return cls(
             stamp_s=stamp_s,
@@ -250,7 +269,7 @@ class Features:
             line_beams=z((0, 2), np.int64), line_rms_m=z(0),
             edge_xy=z((0, 2)), edge_cov=z((0, 2, 2)), edge_beam=z(0, np.int64),
             segment_beams=z((0, 2), np.int64), segment_kind=z(0, np.int64),
-            segment_innov=z((0, 2)), method=method,
+            segment_innov=z((0, 2)), method=method, n_beams=n_beams,
         )  # fmt: skip
 
     @property
@@ -260,7 +279,7 @@ class Features:
     @cached_property
     def circles(self) -> tuple[Circle, ...]:
         return tuple(
-            Circle(p[:2].copy(), float(p[2]), c, int(b[0]), int(b[1]), float(s))
+            Circle(p[:2].copy(), float(p[2]), c, int(b[0]), int(b[1]), float(s), self.n_beams)
             for p, c, b, s in zip(
                 self.circle_params, self.circle_cov, self.circle_beams, self.circle_rms_m
             )
@@ -269,7 +288,7 @@ class Features:
     @cached_property
     def lines(self) -> tuple[Line, ...]:
         return tuple(
-            Line(float(p[0]), float(p[1]), c, e, int(b[0]), int(b[1]), float(s))
+            Line(float(p[0]), float(p[1]), c, e, int(b[0]), int(b[1]), float(s), self.n_beams)
             for p, c, e, b, s in zip(
                 self.line_params, self.line_cov, self.line_endpoints, self.line_beams,
                 self.line_rms_m,
@@ -285,7 +304,8 @@ class Features:
     @cached_property
     def segments(self) -> tuple[Segment, ...]:
         return tuple(
-            Segment(int(b[0]), int(b[1]), KIND_NAMES[int(k)], float(v[0]), float(v[1]))
+            Segment(int(b[0]), int(b[1]), KIND_NAMES[int(k)], float(v[0]), float(v[1]),
+                    self.n_beams)
             for b, k, v in zip(self.segment_beams, self.segment_kind, self.segment_innov)
         )
 

@@ -247,7 +247,7 @@ def test_trunk_in_front_of_wall_gives_circle_two_edges_and_lines():
         for e in f.edges:
             assert 5.6 < np.hypot(*e.point_xy) < 6.0
         assert {s.kind for s in f.segments} >= {"line", "circle"}
-        assert all(s.n_beams >= 1 for s in f.segments)
+        assert all(s.size >= 1 and s.n_beams == 361 for s in f.segments)
 
 
 def test_paper_line_test_is_available_and_differs():
@@ -324,7 +324,7 @@ def test_hostile_scans_never_crash(ranges, method, line_test):
     assert np.all((f.segment_beams >= 0) & (f.segment_beams < scan.n_beams))
     # segments never contain a no-return beam
     for a, b in f.segment_beams:
-        assert np.all(scan.valid[a : b + 1])
+        assert np.all(scan.valid[f.beams(a, b)])
     # covariances stay symmetric positive semi-definite
     for c in f.circle_cov:
         np.testing.assert_allclose(c, c.T, atol=1e-12)
@@ -349,3 +349,36 @@ def test_planar_model_on_a_simulated_wall():
     c = math.cos(sensor.angle_increment_rad)
     pred = np.array([planar_predict(np.array([d[k], d[k - 1]]), c)[0] for k in ok[1:-1]])
     np.testing.assert_allclose(pred, d[ok[2:]], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("bearing_deg", [180.0, -179.8, 179.6, 90.0])
+def test_360_scan_keeps_a_trunk_on_the_seam_whole(bearing_deg):
+    """Two sensors back to back: a pillar behind the sensor, across the beam 719 / beam 0 seam,
+    is one circle (not two halves), with beam runs that wrap modulo the scan."""
+    from experiments.sim import scene_from_dict, sensor_preset, simulate_scan
+
+    b = math.radians(bearing_deg)
+    c = 6.0 * np.array([math.cos(b), math.sin(b)])
+    scene = scene_from_dict({
+        "circles": [{"name": "p", "center_xy": c.tolist(), "radius_m": 0.3}],
+        "walls": [{"name": "w", "points_xy": [[-12.0, -30.0], [-12.0, 30.0]]}],
+    })  # fmt: skip
+    sensor = sensor_preset("pls200", back_to_back=True)
+    ranges, labels = simulate_scan(scene, (0, 0, 0), sensor, np.random.default_rng(1))
+    scan = sensor.scan(ranges)
+    for method in ("geometric", "bailey"):
+        kw = {} if method == "bailey" else {"sigma_r_m": 0.0104}
+        f = extract_features(scan, method, **kw)
+        on_pillar = [k for k, (a, e) in enumerate(f.circle_beams)
+                     if np.mean(labels[f.beams(a, e)] == 0) > 0.5]  # fmt: skip
+        assert len(on_pillar) == 1, method
+        (k,) = on_pillar
+        assert np.hypot(*(f.circle_params[k, :2] - c)) < 0.08
+        assert 0 <= f.circle_beams[k, 0] < 720
+        idx = f.circles[k].beam_indices
+        assert np.all(labels[idx] == 0) and idx.size == np.sum(labels == 0)
+    # with the wall behind it, the pillar's two occluding edges, even across the seam; with
+    # nothing behind it (90 deg), none (the far side is unknown)
+    f = extract_features(scan, "geometric", sigma_r_m=0.0104)
+    n_edges = sum(labels[e] == 0 for e in f.edge_beam)
+    assert n_edges == (2 if abs(bearing_deg) > 150 else 0)
