@@ -35,7 +35,7 @@ def _sensor(sigma_m: float):
     return sensor_preset("pls200", range_sigma_m=sigma_m)
 
 
-def _extractor_sigma(sensor) -> float:
+def extractor_sigma(sensor) -> float:
     """Noise the extractor should assume: range noise plus uniform quantisation."""
     return math.sqrt(sensor.range_sigma_m**2 + sensor.quantisation_m**2 / 12.0)
 
@@ -45,7 +45,7 @@ def _extract(scene, rng, sigma_m, method="geometric", line_test="lrt", **params)
     sensor = _sensor(sigma_m)
     ranges, labels = simulate_scan(scene, (0.0, 0.0, 0.0), sensor, rng)
     f = extract_features(
-        sensor.scan(ranges), method, sigma_r_m=_extractor_sigma(sensor), line_test=line_test,
+        sensor.scan(ranges), method, sigma_r_m=extractor_sigma(sensor), line_test=line_test,
         **params,
     )  # fmt: skip
     return f, labels

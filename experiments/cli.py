@@ -39,7 +39,7 @@ def handle_errors(fn):
 
         try:
             return fn(*args, **kwargs)
-        except (TrunkslamError, ValueError, FileNotFoundError) as exc:
+        except (TrunkslamError, ValueError, OSError) as exc:
             _fail(str(exc))
 
     return wrapper
@@ -87,7 +87,9 @@ def extract(
     sigma_r: Annotated[
         float | None, typer.Option(help="range noise sigma (m) for paper/geometric")
     ] = None,
-    line_test: Annotated[str, typer.Option(help="lrt (default) | paper (eq. 5)")] = "lrt",
+    line_test: Annotated[
+        str | None, typer.Option(help="lrt (default) | paper (eq. 5); paper/geometric only")
+    ] = None,
     rerun: Annotated[Path | None, typer.Option(help="also write a rerun recording")] = None,
 ) -> None:
     """Extract circles, lines, edges and clutter from every scan of a sequence file."""
@@ -96,12 +98,25 @@ def extract(
     from experiments.viz import open_recording
     from features import extract_features
 
-    seq = load_sequence(input)
+    from dataclasses import asdict
+
+    from features.bailey import BaileyParams
+    from features.extract import ExtractorParams
+
     params: dict = {}
-    if method != "bailey":
+    if line_test is not None:
         params["line_test"] = line_test
-        if sigma_r is not None:
-            params["sigma_r_m"] = sigma_r
+    if sigma_r is not None:
+        params["sigma_r_m"] = sigma_r
+    if method == "bailey":
+        if params:
+            raise ValueError("--sigma-r and --line-test do not apply to --method bailey")
+        resolved = asdict(BaileyParams())
+    else:
+        resolved = ExtractorParams.from_kwargs(**params).to_dict()
+    if out.parent and not out.parent.is_dir():
+        raise ValueError(f"--out: folder {out.parent} does not exist")
+    seq = load_sequence(input)
     rec = open_recording(rerun)
     progress = _Progress()
     scans = []
@@ -119,7 +134,7 @@ def extract(
         "schema": FEATURES_SCHEMA,
         "input": str(input),
         "method": method,
-        "params": params,
+        "params": resolved,
         "frame": "laser",
         "scans": scans,
     }
@@ -154,7 +169,7 @@ def simulate(
     sensor: Annotated[str, typer.Option(help="pls200 | lms200")] = "pls200",
     back_to_back: Annotated[bool, typer.Option(help="two sensors back to back (360 deg)")] = False,
     noise: Annotated[float | None, typer.Option(help="range noise sigma (m)")] = None,
-    seed: Annotated[int, typer.Option()] = 0,
+    seed: Annotated[int, typer.Option(min=0)] = 0,
 ) -> None:
     """Simulate one scan of a scene from a pose and write it as a sequence file."""
     import numpy as np
@@ -182,7 +197,7 @@ def reproduce(
     names: Annotated[list[str] | None, typer.Argument(help="experiments to run (default: all)")] = None,
     quick: Annotated[bool, typer.Option(help="small-sample version")] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("results"),
-    seed: Annotated[int, typer.Option(help="root random seed")] = 0,
+    seed: Annotated[int, typer.Option(help="root random seed", min=0)] = 0,
 ) -> None:
     """Run the paper's experiments: tables (.md/.csv), figures (.png), recordings (.rrd)."""
     from experiments.reproduce import run_experiments
@@ -207,7 +222,7 @@ def bench_extract(
 @handle_errors
 def bench_association(
     repeats: Annotated[int, typer.Option(help="scans timed per method")] = 200,
-    seed: Annotated[int, typer.Option()] = 0,
+    seed: Annotated[int, typer.Option(min=0)] = 0,
 ) -> None:
     """Median time per scan of each association method at Victoria Park scale."""
     from experiments.bench_association import bench, format_table

@@ -23,7 +23,6 @@ from features import extract_features
 
 log = logging.getLogger(__name__)
 
-METHOD_COLORS = {"paper": "tab:green", "bailey": "goldenrod"}
 
 
 def _zoom_box(circles_xyr: np.ndarray, n: int = 1, margin: float = 1.5):
@@ -100,8 +99,8 @@ def victoria_park_figure(ctx, rec) -> None:
     ctx.config["features"]["victoria_park"] = {"scan_index": best_k, "scans_logged": n}
     ctx.outputs.append(plots.plot_features(
         scan.points_xy, _segments(f),
-        [("paper", f.circle_params, METHOD_COLORS["paper"]),
-         ("bailey", b.circle_params, METHOD_COLORS["bailey"])],
+        [("paper", f.circle_params, plots.METHOD_COLORS["paper"]),
+         ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"])],
         f.edge_xy, f"Victoria Park scan {best_k + 1} (t = {scan.stamp_s:.2f} s; laser frame)",
         ctx.out_dir / "fig_vp_scan.png", zoom=_zoom_box(f.circle_params),
     ))  # fmt: skip

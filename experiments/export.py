@@ -8,11 +8,13 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
+from experiments.errors import DataError
 from features.types import Features
 
 __all__ = ["features_to_dict", "write_atomic", "write_table", "markdown_table", "FEATURES_SCHEMA"]
@@ -67,15 +69,24 @@ def features_to_dict(f: Features, scan_index: int) -> dict:
     }
 
 
-def write_atomic(path: Path | str, data: str | bytes) -> Path:
-    """Write to a temporary file in the same folder, then rename over `path`."""
+def write_atomic(path: Path | str, data: str | bytes | Callable[[BinaryIO], object]) -> Path:
+    """Write `data` (text, bytes, or a function writing to a binary file) to `path` atomically:
+    into a temporary file in the same folder, flushed to disk, made readable by all (0644), then
+    renamed over `path`; a crash never leaves a half-written file. The folder must exist."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    mode = "wb" if isinstance(data, bytes) else "w"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    folder = path.parent
+    if not folder.is_dir():
+        raise DataError(f"cannot write {path}: folder {folder} does not exist")
+    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, mode) as fh:
-            fh.write(data)
+        with os.fdopen(fd, "wb") as fh:
+            if callable(data):
+                data(fh)
+            else:
+                fh.write(data.encode() if isinstance(data, str) else data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o644)  # mkstemp makes files owner-only
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -13,17 +13,22 @@ import numpy as np  # noqa: E402
 from matplotlib.patches import Circle as CirclePatch  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
-__all__ = ["plot_raw_scan", "plot_features", "save"]
+from experiments.export import write_atomic  # noqa: E402
+
+__all__ = ["plot_raw_scan", "plot_features", "save", "METHOD_COLORS"]
+
+# one colour per circle-fitting method, in every figure
+METHOD_COLORS = {"paper": "tab:green", "geometric": "m", "bailey": "goldenrod", "taubin": "c",
+                 "kasa": "tab:cyan"}  # fmt: skip
 
 
 def save(fig, path: Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=130, bbox_inches="tight")
-    plt.close(fig)
-    tmp.replace(path)
-    return path
+    """Write the figure as PNG atomically (see `write_atomic`) and close it."""
+    try:
+        return write_atomic(path, lambda fh: fig.savefig(fh, format="png", dpi=130,
+                                                         bbox_inches="tight"))  # fmt: skip
+    finally:
+        plt.close(fig)
 
 
 def plot_raw_scan(points_xy: np.ndarray, title: str, path: Path) -> Path:

@@ -10,7 +10,6 @@ import json
 import logging
 import math
 import os
-import tempfile
 import zipfile
 import zlib
 from dataclasses import dataclass, fields
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import DataError
+from experiments.export import write_atomic
 from features.types import Scan
 
 __all__ = [
@@ -350,24 +350,7 @@ def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
             arrays["name"] = np.array(v)
         else:
             arrays[f.name] = np.asarray(v)
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise DataError(f"cannot write {path}: folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)  # mkstemp makes it owner-only; a data file is readable by all
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
+    return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays))
 
 
 def load_sequence(path: str | os.PathLike) -> Sequence:

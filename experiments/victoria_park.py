@@ -1,7 +1,8 @@
 """The Victoria Park dataset (ACFR, Guivant & Nebot) as a `Sequence`, plus the reference detections.
 
 Conventions (see `../shared/datasets/victoria_park/README.md`):
-- all clocks are milliseconds in the files; everything here is seconds;
+- the original clocks are milliseconds (the reference file's TLsr is already seconds);
+  everything here is seconds;
 - raw laser words keep the range in cm in their low 13 bits (mask 8191); ranges >= 80 m
   (8000 cm) mean "no reflection";
 - beam i (0..360) of the SICK points at i*pi/360 from the vehicle's right, i.e. at

@@ -419,6 +419,11 @@ def extract_bailey(
 
     inc = scan.angle_increment_rad
     n_beams = scan.n_beams
+    if inc >= p.break_gap_rad:
+        raise ValueError(
+            f"scan.angle_increment_rad: {inc:.4g} rad is not below the detector's break gap "
+            f"({p.break_gap_rad:.4g} rad): every beam would be a segment of its own"
+        )
     if n_beams == 361 and inc == BAILEY_BEAM_RAD:
         ang = None  # the original's angle table
     else:

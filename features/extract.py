@@ -31,6 +31,7 @@ Pipeline (paper section 2, details in the README's "Feature extraction" section)
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, fields
 from functools import lru_cache
 
@@ -90,8 +91,14 @@ class ExtractorParams:
                 if v not in _LINE_TESTS:
                     raise ValueError(f"line_test: must be one of {sorted(_LINE_TESTS)}, got {v!r}")
                 continue
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v):
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
                 raise ValueError(f"{f.name}: must be a finite number, got {v!r}")
+            if f.type == "int":
+                if v != int(v):
+                    raise ValueError(f"{f.name}: must be a whole number, got {v!r}")
+                object.__setattr__(self, f.name, int(v))
+            else:
+                object.__setattr__(self, f.name, float(v))
         positive = ("sigma_r_m", "gate", "lrt_threshold", "r_max_m", "lambda0", "max_iter")
         for name in positive:
             if getattr(self, name) <= 0:
@@ -381,8 +388,18 @@ def _extract_kernel(
 
 
 @lru_cache(maxsize=32)
-def _params(items: tuple) -> ExtractorParams:
+def _cached_params(items: tuple) -> ExtractorParams:
     return ExtractorParams.from_kwargs(**dict(items))
+
+
+def _params(params: dict) -> ExtractorParams:
+    """ExtractorParams from keyword arguments, cached (building one costs ~10 us per scan)."""
+    items = tuple(sorted(params.items()))
+    try:
+        hash(items)
+    except TypeError:
+        return ExtractorParams.from_kwargs(**params)  # an unhashable value: validation says why
+    return _cached_params(items)
 
 
 def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
@@ -401,7 +418,7 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
         return extract_bailey(scan, **params)
     if method not in _METHOD_CODE:
         raise ValueError(f"method: must be one of {list(METHODS)}, got {method!r}")
-    p = _params(tuple(sorted(params.items())))
+    p = _params(params)
     gamma = scan.angle_increment_rad
     if gamma >= math.pi / 2 - math.radians(p.max_incidence_deg):
         raise ValueError(

@@ -59,9 +59,13 @@ def test_extract_bailey_method(tmp_path):
     res = runner.invoke(app, ["extract", str(scan), "--method", "bailey", "--out", str(out)])
     assert res.exit_code == 0, res.output
     doc = json.loads(out.read_text())
-    assert doc["method"] == "bailey" and all(
-        math.isfinite(c["radius_m"]) for c in doc["scans"][0]["circles"]
-    )
+    circles = doc["scans"][0]["circles"]
+    seq = load_sequence(scan)
+    truth = seq.truth_landmarks
+    assert doc["method"] == "bailey" and len(circles) >= 5
+    near = [np.min(np.hypot(*(truth[:, :2] - c["center_xy"]).T)) for c in circles]
+    assert np.median(near) < 0.15  # Bailey's centres land on the true trunks
+    assert all(math.isfinite(c["radius_m"]) for c in circles)
 
 
 def test_errors_are_one_line_and_exit_1(tmp_path):
@@ -96,3 +100,29 @@ def test_convert_victoria_park_round_trip(tmp_path, vp_dir):
     assert abs(seq.scan_t[0] - 21.819) < 1e-9 and abs(seq.scan_t[-1] - 448.865) < 1e-9
     assert seq.vehicle["wheelbase_m"] == 2.83
     np.testing.assert_allclose(seq.laser_pose, [3.78, 0.50, 0.0])
+
+
+def test_output_errors_and_option_checks(tmp_path):
+    scan = tmp_path / "scan.npz"
+    assert runner.invoke(app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)]
+                         ).exit_code == 0  # fmt: skip
+    for out in (tmp_path, tmp_path / "missing_dir" / "f.json"):
+        res = runner.invoke(app, ["extract", str(scan), "--out", str(out)])
+        assert res.exit_code == 1 and "error:" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "missing_dir").exists()
+    res = runner.invoke(app, ["extract", str(scan), "--method", "bailey", "--sigma-r", "0.5"])
+    assert res.exit_code == 1 and "bailey" in res.output
+    res = runner.invoke(app, ["reproduce", "--seed", "-1", "--out", str(tmp_path / "r")])
+    assert res.exit_code != 0 and "seed" in res.output
+
+
+def test_features_json_records_resolved_parameters_and_files_are_readable(tmp_path):
+    scan = tmp_path / "scan.npz"
+    runner.invoke(app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)])
+    out = tmp_path / "f.json"
+    res = runner.invoke(app, ["extract", str(scan), "--sigma-r", "0.015", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    params = json.loads(out.read_text())["params"]
+    assert params["sigma_r_m"] == 0.015 and params["gate"] == 6.63 and params["q_m2"] == 1e-4
+    assert out.stat().st_mode & 0o777 == 0o644
+    assert scan.stat().st_mode & 0o777 == 0o644

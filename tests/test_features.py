@@ -258,8 +258,10 @@ def test_paper_line_test_is_available_and_differs():
     lrt = extract_features(scan_of(r), "geometric", sigma_r_m=0.02)
     paper = extract_features(scan_of(r), "geometric", sigma_r_m=0.02, line_test="paper")
     assert lrt.n_circles == 1
-    assert paper.segment_innov.shape == lrt.segment_innov.shape
-    assert np.all(np.isfinite(paper.segment_innov[paper.segment_kind > 0]))
+    # eq. (5) as printed: the trunk's mean innovation stays inside 3 sqrt(s_bar) -> a line
+    assert paper.n_circles == 0 and len(paper.lines) == 1
+    v_bar, s_bar = paper.segment_innov[paper.segment_kind == 1][0]
+    assert abs(v_bar) <= 3 * math.sqrt(s_bar)
 
 
 def test_unknown_parameter_and_method_raise():
