@@ -25,6 +25,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/trunkslam bench extract
 	$(BIN)/trunkslam bench association
+	$(BIN)/trunkslam bench slam
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -230,5 +230,37 @@ def bench_association(
     typer.echo(format_table(bench(repeats=repeats, seed=seed)))
 
 
+@app.command("slam")
+@handle_errors
+def slam_cmd(
+    input: Annotated[Path, typer.Argument(help="sequence file (.npz), see datasets/FORMAT.md")],
+    features: Annotated[str, typer.Option(help="paper | geometric | bailey")] = "paper",
+    association: Annotated[str, typer.Option(help="ihgr | jcbb | nn")] = "ihgr",
+    out: Annotated[Path, typer.Option(help="output folder")] = Path("slam_out"),
+    rerun: Annotated[Path | None, typer.Option(help="also write a rerun recording")] = None,
+    initial_heading: Annotated[
+        float | None, typer.Option(help="start heading (rad) when starting from GPS")
+    ] = None,
+) -> None:
+    """EKF-SLAM over a sequence: trajectory (TUM and CSV with covariance), map, summary."""
+    from experiments.exp_slam import slam_command
+
+    s = slam_command(input, features, association, out, rerun, initial_heading)
+    typer.echo(f"{s['n_scans']} scans, {s['landmarks']} landmarks, {s['seconds']:.1f} s -> {out}/")
+
+
+@bench_app.command("slam")
+@handle_errors
+def bench_slam(
+    trees: Annotated[int, typer.Option(help="trees along the avenue (the final map size)")] = 800,
+    association: Annotated[str, typer.Option(help="ihgr | jcbb | nn")] = "ihgr",
+    seed: Annotated[int, typer.Option(min=0)] = 0,
+) -> None:
+    """EKF-SLAM time per scan against the size of the map."""
+    from experiments.bench_slam import bench, format_table
+
+    typer.echo(format_table(bench(n_trees=trees, association=association, seed=seed)))
+
+
 if __name__ == "__main__":  # pragma: no cover
     app()

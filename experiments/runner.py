@@ -49,6 +49,8 @@ EXPERIMENTS: dict[str, str] = {
     "table1": "experiments.exp_circles:run_tables",
     "table2": "experiments.exp_circles:run_tables",
     "circle-sweep": "experiments.exp_circles:run_sweep",
+    "table3": "experiments.exp_slam:run_table3",
+    "table4": "experiments.exp_slam:run_table4",
     "association": "experiments.exp_association:run",
 }
 

@@ -1,0 +1,335 @@
+"""EKF-SLAM state and steps: vehicle pose plus 2D landmarks (tree centres).
+
+State x = [x_m, y_m, theta_rad, l0_x, l0_y, l1_x, l1_y, ...] in the world frame: the rear-axle
+centre's pose followed by the landmarks' positions; P its covariance. Landmark i occupies
+columns 3 + 2 i and 4 + 2 i and carries a stable integer id.
+
+Observation (one circle centre seen by the laser): the laser sits at `laser_pose` [lx, ly, lth]
+in the vehicle frame, so at p_L = p + R(theta) [lx, ly] with heading theta + lth. A landmark m
+is measured as
+
+    range_m = |m - p_L|,   bearing_rad = atan2((m - p_L)_y, (m - p_L)_x) - theta - lth
+
+(laser frame, wrapped to (-pi, pi]). `observe` returns the prediction and its analytic Jacobian
+with respect to the five state entries it touches, [x, y, theta, m_x, m_y] (tested against
+numerical derivatives in tests/test_slam_ekf.py).
+
+Steps, each returning a new `EkfState` (the input is never modified):
+- `predict`: the vehicle rows and columns only: P_vv <- F P_vv F^T + Q, P_vm <- F P_vm; the
+  landmark block is untouched, so the arithmetic is linear in the map size (the functional
+  style copies P, a memory copy of d^2 numbers, measured in `trunkslam bench slam`).
+- `update`: all of a scan's associated measurements at once, gain from np.linalg.solve, Joseph
+  form (I - K H) P (I - K H)^T + K R K^T, evaluated in O(q d^2) because H has few non-zero
+  columns, then symmetrised.
+- `add_landmark`: initialisation from one measurement with its cross covariances:
+  m = g(pose, z), P_mm = Gx P_vv Gx^T + Gz R Gz^T, P_m* = Gx P_v*.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from slam.vehicle import wrap_angle
+
+__all__ = [
+    "EkfState",
+    "add_landmark",
+    "initial_state",
+    "inverse_observation",
+    "laser_position",
+    "observe",
+    "observe_jacobian_full",
+    "polar_cov_from_xy",
+    "predict",
+    "update",
+]
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class EkfState:
+    """The filter's estimate.
+
+    x: (3 + 2 n,) [x_m, y_m, theta_rad, then n landmark positions x_m, y_m], world frame.
+    P: (3 + 2 n, 3 + 2 n) covariance, symmetric positive semi-definite.
+    landmark_ids: (n,) int64 stable ids of the landmarks, in state order.
+    Arrays are stored read-only; the constructor validates and copies them (the steps below
+    build their results with `EkfState._own`, which skips both: they own fresh arrays).
+    """
+
+    x: np.ndarray
+    P: np.ndarray
+    landmark_ids: np.ndarray
+
+    def __post_init__(self) -> None:
+        x = np.array(self.x, dtype=np.float64)
+        P = np.array(self.P, dtype=np.float64)
+        ids = np.array(self.landmark_ids, dtype=np.int64).reshape(-1)
+        if x.ndim != 1 or x.shape[0] < 3 or (x.shape[0] - 3) % 2:
+            raise ValueError(f"EkfState.x: expected shape (3 + 2 n,), got {x.shape}")
+        d = x.shape[0]
+        if P.shape != (d, d):
+            raise ValueError(f"EkfState.P: expected shape ({d}, {d}), got {P.shape}")
+        if ids.shape[0] != (d - 3) // 2:
+            raise ValueError(
+                f"EkfState.landmark_ids: expected {(d - 3) // 2} ids, got {ids.shape[0]}"
+            )
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+            raise ValueError("EkfState.x, P: must be finite")
+        object.__setattr__(self, "x", _readonly(x))
+        object.__setattr__(self, "P", _readonly(P))
+        object.__setattr__(self, "landmark_ids", _readonly(ids))
+
+    @classmethod
+    def _own(cls, x: np.ndarray, P: np.ndarray, landmark_ids: np.ndarray) -> EkfState:
+        """A state from freshly computed arrays (no copy, no validation)."""
+        obj = object.__new__(cls)
+        object.__setattr__(obj, "x", _readonly(x))
+        object.__setattr__(obj, "P", _readonly(P))
+        object.__setattr__(obj, "landmark_ids", landmark_ids)
+        return obj
+
+    @property
+    def dim(self) -> int:
+        return int(self.x.shape[0])
+
+    @property
+    def n_landmarks(self) -> int:
+        return (self.dim - 3) // 2
+
+    @property
+    def pose(self) -> np.ndarray:
+        """(3,) [x_m, y_m, theta_rad] of the rear-axle centre."""
+        return self.x[:3]
+
+    @property
+    def pose_cov(self) -> np.ndarray:
+        return self.P[:3, :3]
+
+    @property
+    def landmarks_xy(self) -> np.ndarray:
+        """(n, 2) landmark positions, world frame, m."""
+        return self.x[3:].reshape(-1, 2)
+
+    @property
+    def landmark_covs(self) -> np.ndarray:
+        """(n, 2, 2) marginal covariances of the landmarks."""
+        n = self.n_landmarks
+        i = 3 + 2 * np.arange(n)
+        out = np.empty((n, 2, 2))
+        out[:, 0, 0] = self.P[i, i]
+        out[:, 0, 1] = self.P[i, i + 1]
+        out[:, 1, 0] = self.P[i + 1, i]
+        out[:, 1, 1] = self.P[i + 1, i + 1]
+        return out
+
+    def index_of(self, landmark_id: int) -> int:
+        """Position (0..n-1) of a landmark id in the state."""
+        hits = np.flatnonzero(self.landmark_ids == landmark_id)
+        if hits.size == 0:
+            raise KeyError(f"landmark id {landmark_id} is not in the state")
+        return int(hits[0])
+
+
+def initial_state(pose: np.ndarray, pose_cov: np.ndarray | None = None) -> EkfState:
+    """A state with no landmarks at `pose` with covariance `pose_cov` (zeros when None)."""
+    pose = np.asarray(pose, dtype=np.float64)
+    if pose.shape != (3,):
+        raise ValueError(f"initial_state.pose: expected shape (3,), got {pose.shape}")
+    P = np.zeros((3, 3)) if pose_cov is None else np.asarray(pose_cov, dtype=np.float64)
+    return EkfState(pose.copy(), P, np.zeros(0, np.int64))
+
+
+def predict(state: EkfState, pose1: np.ndarray, F: np.ndarray, Q: np.ndarray) -> EkfState:
+    """Prediction with the motion's result `pose1`, Jacobian F (3, 3) and noise Q (3, 3).
+
+    Only the vehicle rows and columns change (the landmarks are static): cost O(n).
+    """
+    x = state.x.copy()
+    x[:3] = pose1
+    x[2] = float(wrap_angle(x[2]))
+    P = state.P.copy()
+    P[:3, :3] = F @ state.P[:3, :3] @ F.T + Q
+    P[:3, :3] = 0.5 * (P[:3, :3] + P[:3, :3].T)
+    if state.dim > 3:
+        P[:3, 3:] = F @ state.P[:3, 3:]
+        P[3:, :3] = P[:3, 3:].T
+    return EkfState._own(x, P, state.landmark_ids)
+
+
+def laser_position(pose: np.ndarray, laser_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The laser's world position p_L (2,) and d p_L / d theta (2,)."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    lx, ly = float(laser_pose[0]), float(laser_pose[1])
+    p = np.array([pose[0] + c * lx - s * ly, pose[1] + s * lx + c * ly])
+    return p, np.array([-s * lx - c * ly, c * lx - s * ly])
+
+
+def observe(pose: np.ndarray, landmarks_xy: np.ndarray, laser_pose: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Predicted measurements of landmarks (k, 2) from `pose`, and their Jacobians.
+
+    Returns z_hat (k, 2) [range_m, bearing_rad] (laser frame) and H5 (k, 2, 5), the Jacobian of
+    each prediction with respect to [x, y, theta, m_x, m_y].
+    """
+    m = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
+    pL, dpL = laser_position(pose, laser_pose)
+    dx = m[:, 0] - pL[0]
+    dy = m[:, 1] - pL[1]
+    q = dx * dx + dy * dy
+    r = np.sqrt(q)
+    z = np.empty((m.shape[0], 2))
+    z[:, 0] = r
+    z[:, 1] = wrap_angle(np.arctan2(dy, dx) - pose[2] - laser_pose[2])
+    H = np.zeros((m.shape[0], 2, 5))
+    dr_dm = np.stack([dx / r, dy / r], axis=1)  # (k, 2)
+    db_dm = np.stack([-dy / q, dx / q], axis=1)
+    H[:, 0, 0:2] = -dr_dm
+    H[:, 0, 2] = -(dr_dm @ dpL)
+    H[:, 0, 3:5] = dr_dm
+    H[:, 1, 0:2] = -db_dm
+    H[:, 1, 2] = -(db_dm @ dpL) - 1.0
+    H[:, 1, 3:5] = db_dm
+    return z, H
+
+
+def _columns(idx: np.ndarray) -> np.ndarray:
+    """(k, 5) state columns [0, 1, 2, 3 + 2 i, 4 + 2 i] of landmarks at positions idx."""
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+    cols = np.empty((idx.size, 5), np.int64)
+    cols[:, :3] = [0, 1, 2]
+    cols[:, 3] = 3 + 2 * idx
+    cols[:, 4] = 4 + 2 * idx
+    return cols
+
+
+def observe_jacobian_full(state: EkfState, idx: np.ndarray, laser_pose: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """z_hat (k, 2) and the dense Jacobians H (k, 2, d) of landmarks at positions idx."""
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+    z, H5 = observe(state.pose, state.landmarks_xy[idx], laser_pose)
+    H = np.zeros((idx.size, 2, state.dim))
+    cols = _columns(idx)
+    for j in range(idx.size):
+        H[j][:, cols[j]] = H5[j]
+    return z, H
+
+
+@dataclass(frozen=True, eq=False)
+class UpdateResult:
+    """What `update` returns besides the new state.
+
+    innovation: (k, 2) z - z_hat (bearing wrapped). S: (2 k, 2 k) joint innovation covariance.
+    nis: nu^T S^-1 nu of the whole batch (chi-square with 2 k dof when consistent).
+    """
+
+    innovation: np.ndarray
+    S: np.ndarray
+    nis: float
+
+
+def update(
+    state: EkfState, idx: np.ndarray, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray
+) -> tuple[EkfState, UpdateResult]:
+    """Batch update with measurements z (k, 2) of the landmarks at state positions idx (k,).
+
+    R: (k, 2, 2) measurement covariances (independent measurements). Joseph form, evaluated
+    without forming I - K H: with M = P - K (H P), (I - K H) P (I - K H)^T = M - (M H^T) K^T,
+    and H touches only the pose and the observed landmarks' columns.
+    """
+    idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+    k = idx.size
+    if k == 0:
+        return state, UpdateResult(np.zeros((0, 2)), np.zeros((0, 0)), math.nan)
+    z = np.asarray(z, dtype=np.float64).reshape(k, 2)
+    R = np.asarray(R, dtype=np.float64).reshape(k, 2, 2)
+    if np.unique(idx).size != k:
+        raise ValueError("update.idx: a landmark appears twice in one batch")
+    z_hat, H5 = observe(state.pose, state.landmarks_xy[idx], laser_pose)
+    nu = z - z_hat
+    nu[:, 1] = wrap_angle(nu[:, 1])
+    # The columns the batch touches, [x, y, theta, then each landmark's pair], and H on them.
+    cols = np.concatenate([[0, 1, 2], np.stack([3 + 2 * idx, 4 + 2 * idx], 1).reshape(-1)])
+    q = 2 * k
+    j = np.arange(k)
+    Hc = np.zeros((q, 3 + q))
+    Hc[:, :3] = H5[:, :, :3].reshape(q, 3)
+    H_lm = np.zeros((k, 2, k, 2))  # block diagonal: landmark j's 2 x 2 block in row pair j
+    H_lm[j, :, j, :] = H5[:, :, 3:5]
+    Hc[:, 3:] = H_lm.reshape(q, q)
+    R_blk = np.zeros((k, 2, k, 2))
+    R_blk[j, :, j, :] = R
+    Rb = R_blk.reshape(q, q)
+    P = state.P
+    PHt = P[:, cols] @ Hc.T  # (d, q)
+    S = Hc @ PHt[cols, :] + Rb
+    S = 0.5 * (S + S.T)
+    K = np.linalg.solve(S, PHt.T).T  # (d, q): K = P H^T S^-1
+    nu_flat = nu.reshape(-1)
+    nis = float(nu_flat @ np.linalg.solve(S, nu_flat))
+    x = state.x + K @ nu_flat
+    x[2] = float(wrap_angle(x[2]))
+    M = P - K @ PHt.T  # (I - K H) P
+    P_new = M - (M[:, cols] @ Hc.T) @ K.T + K @ Rb @ K.T  # Joseph form
+    P_new = 0.5 * (P_new + P_new.T)
+    return EkfState._own(x, P_new, state.landmark_ids), UpdateResult(nu, S, nis)
+
+
+def inverse_observation(pose: np.ndarray, z: np.ndarray, laser_pose: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    """Landmark position from one measurement: m (2,), Gx = dm/dpose (2, 3), Gz = dm/dz (2, 2)."""
+    pL, dpL = laser_position(pose, laser_pose)
+    r, b = float(z[0]), float(z[1])
+    phi = pose[2] + laser_pose[2] + b
+    c, s = math.cos(phi), math.sin(phi)
+    m = pL + r * np.array([c, s])
+    Gx = np.array([[1.0, 0.0, dpL[0] - r * s], [0.0, 1.0, dpL[1] + r * c]])
+    Gz = np.array([[c, -r * s], [s, r * c]])
+    return m, Gx, Gz
+
+
+def add_landmark(state: EkfState, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray,
+                 landmark_id: int) -> EkfState:  # fmt: skip
+    """Append a landmark initialised from measurement z (2,) with covariance R (2, 2).
+
+    Its cross covariances with the vehicle and every other landmark are Gx P_v*, its own
+    covariance Gx P_vv Gx^T + Gz R Gz^T (cost O(d^2) for the copy, O(d) for the new rows).
+    """
+    if np.any(state.landmark_ids == landmark_id):
+        raise ValueError(f"add_landmark.landmark_id: {landmark_id} is already in the state")
+    m, Gx, Gz = inverse_observation(state.pose, z, laser_pose)
+    d = state.dim
+    P = np.zeros((d + 2, d + 2))
+    P[:d, :d] = state.P
+    cross = Gx @ state.P[:3, :]  # (2, d)
+    P[d:, :d] = cross
+    P[:d, d:] = cross.T
+    Pmm = Gx @ state.P[:3, :3] @ Gx.T + Gz @ np.asarray(R) @ Gz.T
+    P[d:, d:] = 0.5 * (Pmm + Pmm.T)
+    x = np.concatenate([state.x, m])
+    ids = np.concatenate([state.landmark_ids, np.array([landmark_id], np.int64)])
+    ids.setflags(write=False)
+    return EkfState._own(x, P, ids)
+
+
+def polar_cov_from_xy(center_xy: np.ndarray, cov_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A laser-frame point (k, 2) with covariance (k, 2, 2) as [range, bearing] and its cov."""
+    c = np.asarray(center_xy, dtype=np.float64).reshape(-1, 2)
+    C = np.asarray(cov_xy, dtype=np.float64).reshape(-1, 2, 2)
+    r2 = c[:, 0] ** 2 + c[:, 1] ** 2
+    r = np.sqrt(r2)
+    z = np.stack([r, np.arctan2(c[:, 1], c[:, 0])], axis=1)
+    J = np.empty((c.shape[0], 2, 2))
+    J[:, 0, 0] = c[:, 0] / r
+    J[:, 0, 1] = c[:, 1] / r
+    J[:, 1, 0] = -c[:, 1] / r2
+    J[:, 1, 1] = c[:, 0] / r2
+    Rz = J @ C @ np.transpose(J, (0, 2, 1))
+    return z, 0.5 * (Rz + np.transpose(Rz, (0, 2, 1)))

@@ -1,0 +1,118 @@
+"""Map management as the paper describes it (section 3, second experiment).
+
+"A new feature is tentative until it has been associated in at least three scans, then joins
+the map; tentative features not seen again are dropped" (the paper: features "not used for the
+SLAM more than 3 times" are not drawn in the map).
+
+Tentative features live outside the filter state, so a false feature (a bush that looked like a
+trunk once) never moves the vehicle estimate: each keeps its world position and covariance from
+its latest sighting (computed as a landmark initialisation would, `inverse_observation`), the
+number of scans it was associated in, and the number of consecutive scans it was missed in.
+For association they are offered alongside the map's landmarks with a covariance that ignores
+their correlation with the vehicle (their first-sighting covariance already contains the
+vehicle's uncertainty, so the gate is, if anything, too wide).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from slam.ekf import inverse_observation
+
+__all__ = ["MapPolicy", "Tentatives", "sighting"]
+
+
+@dataclass(frozen=True)
+class MapPolicy:
+    """When tentative features join the map or are dropped.
+
+    confirm_scans: a tentative feature joins the map when it has been associated in this many
+        scans (its first sighting included): the paper's 3.
+    drop_after_missed: a tentative feature is dropped when it has gone this many consecutive
+        scans without being associated (1: "not seen again" in the next scan drops it).
+    """
+
+    confirm_scans: int = 3
+    drop_after_missed: int = 1
+
+    def __post_init__(self) -> None:
+        for name in ("confirm_scans", "drop_after_missed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise ValueError(f"MapPolicy.{name}: must be an integer >= 1, got {v!r}")
+
+
+def sighting(pose: np.ndarray, pose_cov: np.ndarray, z: np.ndarray, R: np.ndarray,
+             laser_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """World position (2,) and covariance (2, 2) of a feature seen as z (2,) with noise R."""
+    m, Gx, Gz = inverse_observation(pose, z, laser_pose)
+    C = Gx @ pose_cov @ Gx.T + Gz @ R @ Gz.T
+    return m, 0.5 * (C + C.T)
+
+
+@dataclass(frozen=True, eq=False)
+class Tentatives:
+    """The tentative features.
+
+    xy: (t, 2) world position of each, m (latest sighting). cov: (t, 2, 2) its covariance.
+    hits: (t,) scans it has been associated in. missed: (t,) consecutive scans without a hit.
+    first_scan: (t,) scan index of the first sighting. ids: (t,) stable ids (the landmark id
+    it keeps if it joins the map).
+    """
+
+    xy: np.ndarray
+    cov: np.ndarray
+    hits: np.ndarray
+    missed: np.ndarray
+    first_scan: np.ndarray
+    ids: np.ndarray
+
+    @classmethod
+    def empty(cls) -> Tentatives:
+        z = np.zeros
+        return cls(z((0, 2)), z((0, 2, 2)), z(0, np.int64), z(0, np.int64), z(0, np.int64),
+                   z(0, np.int64))  # fmt: skip
+
+    def __len__(self) -> int:
+        return int(self.xy.shape[0])
+
+    def step(
+        self,
+        matched: dict[int, tuple[np.ndarray, np.ndarray]],
+        new: list[tuple[np.ndarray, np.ndarray, int]],
+        scan_index: int,
+        policy: MapPolicy,
+    ) -> tuple[Tentatives, list[int]]:
+        """One scan of bookkeeping.
+
+        matched: tentative position -> (xy, cov) of this scan's sighting of it.
+        new: [(xy, cov, id)] first sightings to add.
+        Returns the new set and the positions (in `self`) of the tentatives that reached
+        `policy.confirm_scans` and must join the map (they are removed from the set).
+        """
+        t = len(self)
+        hits = self.hits.copy()
+        missed = self.missed.copy() + 1
+        xy = self.xy.copy()
+        cov = self.cov.copy()
+        for i, (m, C) in matched.items():
+            hits[i] += 1
+            missed[i] = 0
+            xy[i] = m
+            cov[i] = C
+        confirm = [i for i in range(t) if hits[i] >= policy.confirm_scans]
+        keep = np.ones(t, bool)
+        keep[confirm] = False
+        keep &= missed < policy.drop_after_missed
+        n_new = len(new)
+        out = Tentatives(
+            xy=np.concatenate([xy[keep], np.array([m for m, _, _ in new]).reshape(n_new, 2)]),
+            cov=np.concatenate([cov[keep], np.array([C for _, C, _ in new]).reshape(n_new, 2, 2)]),
+            hits=np.concatenate([hits[keep], np.ones(n_new, np.int64)]),
+            missed=np.concatenate([missed[keep], np.zeros(n_new, np.int64)]),
+            first_scan=np.concatenate([self.first_scan[keep], np.full(n_new, scan_index)]),
+            ids=np.concatenate([self.ids[keep], np.array([i for _, _, i in new], np.int64)]),
+        )
+        return out, confirm

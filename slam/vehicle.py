@@ -1,0 +1,350 @@
+"""The car-like (Ackermann) vehicle: odometry integration with noise propagation.
+
+Vehicle frame: origin at the centre of the rear axle, x forward, y left (datasets/FORMAT.md).
+World frame: the run's fixed frame; a pose is [x_m, y_m, theta_rad] of the vehicle frame.
+
+Model (`"ackermann"` of the sequence format, the Guivant-Nebot model of the Victoria Park ute,
+and the rear-axle bicycle model proposed for the Cycab in METHOD_NOTES section 3):
+- the speed encoder sits H = `encoder_offset_m` to the left of the centre line on the rear axle;
+  the rear-axle-centre speed is v_c = v_e / (1 - (H / L) tan(alpha)),
+- the rear-axle centre moves as x' = v_c cos(theta), y' = v_c sin(theta),
+  theta' = v_c tan(alpha) / L, with L = `wheelbase_m` and alpha the front steering angle.
+
+Odometry samples are a zero-order hold: sample i's (speed, steer) applies from odo_t[i] to
+odo_t[i + 1]. For constant controls the motion is an exact circular arc, integrated in closed
+form (no Euler error), so exact odometry reproduces a path built by the same hold exactly:
+
+    dtheta = v_c tan(alpha) dt / L,  h = dtheta / 2,  d = v_c dt,
+    x1 = x + d cos(theta + h) sinc(h),  y1 = y + d sin(theta + h) sinc(h),  theta1 = theta + 2 h
+
+with sinc(h) = sin(h) / h (1 at h = 0). Noise: each odometry sample's speed and steering
+readings carry independent zero-mean errors of covariance Q_u = diag(sigma_v^2, sigma_alpha^2)
+(`OdometryNoise`); they enter the pose through the analytic Jacobian G = d pose1 / d(v_e, alpha),
+and the pose's own uncertainty through F = d pose1 / d pose.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "AckermannModel",
+    "Odometry",
+    "OdometryNoise",
+    "arc_step",
+    "arc_step_jacobians",
+    "integrate",
+    "integrate_numpy",
+    "wrap_angle",
+]
+
+
+def wrap_angle(a):
+    """Angles (rad) wrapped to (-pi, pi]; scalars or arrays."""
+    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
+
+
+def _sinc_and_derivative(h: float) -> tuple[float, float]:
+    """sin(h)/h and its derivative (h cos h - sin h)/h^2, by series near 0."""
+    if abs(h) < 1e-4:
+        h2 = h * h
+        return 1.0 - h2 / 6.0 + h2 * h2 / 120.0, -h / 3.0 + h * h2 / 30.0
+    s, c = math.sin(h), math.cos(h)
+    return s / h, (h * c - s) / (h * h)
+
+
+@dataclass(frozen=True)
+class AckermannModel:
+    """A front-steered car whose pose is that of the centre of its rear axle.
+
+    wheelbase_m: L, rear axle to front axle, > 0.
+    encoder_offset_m: H, lateral position of the speed encoder on the rear axle, to the left of
+        the centre line (0: the speed is already the rear-axle-centre speed, the Cycab case).
+    """
+
+    wheelbase_m: float
+    encoder_offset_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("wheelbase_m", "encoder_offset_m"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise ValueError(f"AckermannModel.{name}: must be a number, got {v!r}")
+            if not math.isfinite(v):
+                raise ValueError(f"AckermannModel.{name}: must be finite, got {v!r}")
+            object.__setattr__(self, name, float(v))
+        if self.wheelbase_m <= 0:
+            raise ValueError(f"AckermannModel.wheelbase_m: must be > 0, got {self.wheelbase_m!r}")
+
+    @classmethod
+    def from_vehicle(cls, vehicle: Mapping | None) -> AckermannModel:
+        """From a sequence's `vehicle` dict ({"model": "ackermann", "wheelbase_m": ..., ...})."""
+        if vehicle is None:
+            raise ValueError("vehicle: the sequence has no vehicle model (needed for odometry)")
+        if not isinstance(vehicle, Mapping):
+            raise ValueError(f"vehicle: expected a dict, got {type(vehicle).__name__}")
+        if vehicle.get("model") != "ackermann":
+            raise ValueError(f"vehicle.model: only 'ackermann' is known, got {vehicle.get('model')!r}")
+        if "wheelbase_m" not in vehicle:
+            raise ValueError("vehicle.wheelbase_m: missing")
+        return cls(vehicle["wheelbase_m"], vehicle.get("encoder_offset_m", 0.0))
+
+    def axle_speed(self, v_enc_mps: float, steer_rad: float) -> float:
+        """v_c = v_e / (1 - (H / L) tan(alpha)): encoder speed to rear-axle-centre speed."""
+        return v_enc_mps / (1.0 - self.encoder_offset_m / self.wheelbase_m * math.tan(steer_rad))
+
+    def axle_speed_jacobian(self, v_enc_mps: float, steer_rad: float) -> tuple[float, float]:
+        """(d v_c / d v_e, d v_c / d alpha)."""
+        k = self.encoder_offset_m / self.wheelbase_m
+        den = 1.0 - k * math.tan(steer_rad)
+        sec2 = 1.0 / math.cos(steer_rad) ** 2
+        return 1.0 / den, v_enc_mps * k * sec2 / (den * den)
+
+
+def arc_step(pose: np.ndarray, v_axle_mps: float, steer_rad: float, dt_s: float,
+             wheelbase_m: float) -> np.ndarray:  # fmt: skip
+    """Exact motion of the rear-axle centre for constant (v_c, alpha) over dt_s; (3,) pose."""
+    x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
+    d = v_axle_mps * dt_s
+    h = 0.5 * d * math.tan(steer_rad) / wheelbase_m
+    s, _ = _sinc_and_derivative(h)
+    return np.array([x + d * math.cos(th + h) * s, y + d * math.sin(th + h) * s, th + 2.0 * h])
+
+
+def arc_step_jacobians(
+    model: AckermannModel, pose: np.ndarray, v_enc_mps: float, steer_rad: float, dt_s: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One zero-order-hold step from encoder readings: (pose1 (3,), F (3, 3), G (3, 2)).
+
+    F = d pose1 / d pose, G = d pose1 / d (v_e, alpha); heading not wrapped (continuous).
+    """
+    x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
+    L = model.wheelbase_m
+    v = model.axle_speed(v_enc_mps, steer_rad)
+    dv_dve, dv_da = model.axle_speed_jacobian(v_enc_mps, steer_rad)
+    t = math.tan(steer_rad)
+    sec2 = 1.0 + t * t
+    d = v * dt_s
+    h = 0.5 * d * t / L
+    s, ds = _sinc_and_derivative(h)
+    c_, s_ = math.cos(th + h), math.sin(th + h)
+    pose1 = np.array([x + d * c_ * s, y + d * s_ * s, th + 2.0 * h])
+    F = np.array([[1.0, 0.0, -d * s_ * s], [0.0, 1.0, d * c_ * s], [0.0, 0.0, 1.0]])
+    # pose1 as a function of (d, h)
+    J_dh = np.array([
+        [c_ * s, d * (-s_ * s + c_ * ds)],
+        [s_ * s, d * (c_ * s + s_ * ds)],
+        [0.0, 2.0],
+    ])  # fmt: skip
+    # (d, h) as a function of (v_c, alpha): d = v dt, h = v dt tan(alpha) / (2 L)
+    J_va = np.array([[dt_s, 0.0], [0.5 * dt_s * t / L, 0.5 * v * dt_s * sec2 / L]])
+    # (v_c, alpha) as a function of (v_e, alpha)
+    J_u = np.array([[dv_dve, dv_da], [0.0, 1.0]])
+    return pose1, F, J_dh @ J_va @ J_u
+
+
+@dataclass(frozen=True)
+class OdometryNoise:
+    """Independent errors of each odometry sample's readings (zero-order hold values).
+
+    speed_sigma_mps: standard deviation of the encoder speed reading, m/s.
+    steer_sigma_rad: standard deviation of the steering angle reading, rad.
+    The defaults are those of the simulated Cycab (`experiments.sim.trajectory.CycabParams`).
+    floor_xy_m_per_sqrt_s, floor_theta_rad_per_sqrt_s: a small white process noise on the pose
+        itself (variance per second). It keeps the covariance from being singular when the car
+        is at or near rest: the linearised model then puts no noise on y and theta, while the
+        neglected second-order terms (speed error x steering error, heading error x distance
+        actually driven) do move the car; without it the first scans' NEES reached 2000 in
+        some runs of the tree park. While driving it is negligible (1 mm and 0.1 mrad per
+        square-root second against about 2 cm and 8 mrad per second of odometry noise).
+    """
+
+    speed_sigma_mps: float = 0.1
+    steer_sigma_rad: float = math.radians(2.0)
+    floor_xy_m_per_sqrt_s: float = 0.001
+    floor_theta_rad_per_sqrt_s: float = 0.0001
+
+    def __post_init__(self) -> None:
+        for name in ("speed_sigma_mps", "steer_sigma_rad", "floor_xy_m_per_sqrt_s",
+                     "floor_theta_rad_per_sqrt_s"):  # fmt: skip
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
+                raise ValueError(f"OdometryNoise.{name}: must be a finite number >= 0, got {v!r}")
+
+    @property
+    def Q_u(self) -> np.ndarray:
+        """(2, 2) covariance of (v_e, alpha)."""
+        return np.diag([self.speed_sigma_mps**2, self.steer_sigma_rad**2])
+
+    @property
+    def Q_floor(self) -> np.ndarray:
+        """(3, 3) pose noise per second (world frame)."""
+        a, b = self.floor_xy_m_per_sqrt_s**2, self.floor_theta_rad_per_sqrt_s**2
+        return np.diag([a, a, b])
+
+
+@dataclass(frozen=True, eq=False)
+class Odometry:
+    """Odometry samples (zero-order hold).
+
+    t_s: (M,) strictly increasing sample times, s. speed_mps: (M,) encoder speed, m/s.
+    steer_rad: (M,) front steering angle, rad, positive = turning left.
+    """
+
+    t_s: np.ndarray
+    speed_mps: np.ndarray
+    steer_rad: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("t_s", "speed_mps", "steer_rad"):
+            a = np.asarray(getattr(self, name), dtype=np.float64)
+            if a.ndim != 1:
+                raise ValueError(f"Odometry.{name}: expected shape (M,), got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"Odometry.{name}: values must be finite")
+            object.__setattr__(self, name, a)
+        m = self.t_s.shape[0]
+        if m == 0:
+            raise ValueError("Odometry.t_s: no odometry samples")
+        if self.speed_mps.shape != (m,) or self.steer_rad.shape != (m,):
+            raise ValueError(
+                f"Odometry.speed_mps, steer_rad: expected shape ({m},) like t_s, got "
+                f"{self.speed_mps.shape} and {self.steer_rad.shape}"
+            )
+        bad = np.flatnonzero(np.diff(self.t_s) <= 0)
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(
+                f"Odometry.t_s: times must be strictly increasing; t_s[{i + 1}] = "
+                f"{self.t_s[i + 1]!r} follows t_s[{i}] = {self.t_s[i]!r}"
+            )
+
+    def pieces(self, t0_s: float, t1_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The hold pieces covering [t0_s, t1_s]: (dt (k,), speed (k,), steer (k,)).
+
+        Before the first sample the first sample's values hold, after the last the last's.
+        """
+        if not t1_s >= t0_s:
+            raise ValueError(f"Odometry.pieces: t1_s = {t1_s!r} is before t0_s = {t0_s!r}")
+        t = self.t_s
+        a = int(np.searchsorted(t, t0_s, side="right"))  # first sample after t0
+        b = max(int(np.searchsorted(t, t1_s, side="left")), a)  # first sample at or after t1
+        edges = np.concatenate([[t0_s], t[a:b], [t1_s]])
+        # the sample holding at the start of each piece (sample 0 before the first sample)
+        idx = np.maximum(np.arange(a - 1, b), 0)
+        dt = np.diff(edges)
+        keep = dt > 0
+        return dt[keep], self.speed_mps[idx[keep]], self.steer_rad[idx[keep]]
+
+
+def integrate(
+    model: AckermannModel,
+    pose: np.ndarray,
+    odometry: Odometry,
+    t0_s: float,
+    t1_s: float,
+    noise: OdometryNoise | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Integrate the odometry from t0_s to t1_s: (pose1 (3,), F (3, 3), Q (3, 3)).
+
+    F = d pose1 / d pose over the whole interval (the product of the steps' Jacobians) and Q
+    the covariance the readings' noise adds, propagated step by step:
+    Q <- F_k Q F_k^T + G_k Q_u G_k^T + Q_floor dt_k. The heading of pose1 is wrapped to
+    (-pi, pi]. The loop is a numba kernel; `integrate_numpy` is its plain twin (test oracle).
+    """
+    noise = noise or OdometryNoise(0.0, 0.0, 0.0, 0.0)
+    dts, vs, alphas = odometry.pieces(float(t0_s), float(t1_s))
+    p, F, Q = _integrate_kernel(
+        np.asarray(pose, dtype=np.float64), dts, vs, alphas, model.wheelbase_m,
+        model.encoder_offset_m, noise.speed_sigma_mps**2, noise.steer_sigma_rad**2,
+        noise.floor_xy_m_per_sqrt_s**2, noise.floor_theta_rad_per_sqrt_s**2,
+    )  # fmt: skip
+    p[2] = float(wrap_angle(p[2]))
+    return p, F, Q
+
+
+def integrate_numpy(
+    model: AckermannModel,
+    pose: np.ndarray,
+    odometry: Odometry,
+    t0_s: float,
+    t1_s: float,
+    noise: OdometryNoise | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`integrate` step by step with `arc_step_jacobians` (the test oracle of the kernel)."""
+    p = np.asarray(pose, dtype=np.float64).copy()
+    F = np.eye(3)
+    Q = np.zeros((3, 3))
+    Qu = noise.Q_u if noise is not None else np.zeros((2, 2))
+    Qf = noise.Q_floor if noise is not None else np.zeros((3, 3))
+    dts, vs, alphas = odometry.pieces(float(t0_s), float(t1_s))
+    for dt, v, a in zip(dts, vs, alphas):
+        p, Fk, Gk = arc_step_jacobians(model, p, float(v), float(a), float(dt))
+        F = Fk @ F
+        Q = Fk @ Q @ Fk.T + Gk @ Qu @ Gk.T + Qf * dt
+    p[2] = float(wrap_angle(p[2]))
+    return p, F, 0.5 * (Q + Q.T)
+
+
+@njit(cache=True)
+def _integrate_kernel(pose, dts, vs, alphas, L, H, var_v, var_a, var_xy, var_th):
+    x, y, th = pose[0], pose[1], pose[2]
+    F = np.eye(3)
+    Q = np.zeros((3, 3))
+    Fk = np.eye(3)
+    G = np.zeros((3, 2))
+    k = H / L
+    for i in range(dts.shape[0]):
+        dt, ve, a = dts[i], vs[i], alphas[i]
+        t = math.tan(a)
+        den = 1.0 - k * t
+        v = ve / den
+        dv_dve = 1.0 / den
+        dv_da = ve * k * (1.0 + t * t) / (den * den)
+        d = v * dt
+        h = 0.5 * d * t / L
+        if abs(h) < 1e-4:
+            h2 = h * h
+            s = 1.0 - h2 / 6.0 + h2 * h2 / 120.0
+            ds = -h / 3.0 + h * h2 / 30.0
+        else:
+            s = math.sin(h) / h
+            ds = (h * math.cos(h) - math.sin(h)) / (h * h)
+        c_ = math.cos(th + h)
+        s_ = math.sin(th + h)
+        Fk[0, 2] = -d * s_ * s
+        Fk[1, 2] = d * c_ * s
+        # d pose1 / d(d, h), then (d, h) / (v_c, alpha), then (v_c, alpha) / (v_e, alpha)
+        j00, j01 = c_ * s, d * (-s_ * s + c_ * ds)
+        j10, j11 = s_ * s, d * (c_ * s + s_ * ds)
+        j20, j21 = 0.0, 2.0
+        m00, m01 = dt, 0.0
+        m10, m11 = 0.5 * dt * t / L, 0.5 * v * dt * (1.0 + t * t) / L
+        # J_va @ J_u with J_u = [[dv_dve, dv_da], [0, 1]]
+        n00, n01 = m00 * dv_dve, m00 * dv_da + m01
+        n10, n11 = m10 * dv_dve, m10 * dv_da + m11
+        G[0, 0] = j00 * n00 + j01 * n10
+        G[0, 1] = j00 * n01 + j01 * n11
+        G[1, 0] = j10 * n00 + j11 * n10
+        G[1, 1] = j10 * n01 + j11 * n11
+        G[2, 0] = j20 * n00 + j21 * n10
+        G[2, 1] = j20 * n01 + j21 * n11
+        x = x + d * c_ * s
+        y = y + d * s_ * s
+        th = th + 2.0 * h
+        F = Fk @ F
+        Q = Fk @ Q @ Fk.T
+        for r in range(3):
+            for c in range(3):
+                Q[r, c] += G[r, 0] * var_v * G[c, 0] + G[r, 1] * var_a * G[c, 1]
+        Q[0, 0] += var_xy * dt
+        Q[1, 1] += var_xy * dt
+        Q[2, 2] += var_th * dt
+    out = np.empty(3)
+    out[0], out[1], out[2] = x, y, th
+    return out, F, 0.5 * (Q + Q.T)
