@@ -22,10 +22,11 @@ Pipeline (paper section 2, details in the README's "Feature extraction" section)
    is, so that all fitting methods see the same circles.
 4. Circle parameters from `method` ("paper": the modified Gauss-Newton of eq. (6)-(9);
    "geometric": orthogonal-distance LM; "kasa", "taubin": algebraic fits for context; "bailey":
-   the Victoria Park detector, which replaces steps 1-4). The covariance of (x0, y0, r) is
-   s^2 (J^T J)^-1 with the orthogonal-distance Jacobian at the reported circle and
-   s^2 = max(sigma^2, SSR/(n-3)): exact to first order for the geometric fit, a first-order
-   approximation that ignores the algebraic fits' bias for the others.
+   the Victoria Park detector, which replaces steps 1-4). The covariance of (x0, y0, r) is the
+   first-order covariance of an orthogonal-distance fit under range noise sigma^2 at the reported
+   circle (`features.fitting.circle_covariance`): right for the geometric fit, an approximation
+   that ignores the algebraic fits' bias for the others. (The residual test above bounds how far
+   the points may stray from that noise model.)
 """
 
 from __future__ import annotations
@@ -323,10 +324,7 @@ def _extract_kernel(
             cov_ok = False
             if cok:
                 ssr = circle_ssr(x, y, cx, cy, cr)
-                s2 = sigma2
-                if m > 3 and ssr / (m - 3) > s2:
-                    s2 = ssr / (m - 3)
-                cov, cov_ok = circle_covariance(x, y, cx, cy, cr, s2)
+                cov, cov_ok = circle_covariance(x, y, cx, cy, cr, sigma2)
             if not cov_ok:
                 kind[k] = 0
             else:

@@ -345,9 +345,15 @@ def fit_circle_geometric(x, y, max_iter=50, tol=1e-12):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def circle_covariance(x, y, x0, y0, r, sigma2):
-    """(3, 3) covariance of (x0, y0, r): sigma2 (J^T J)^-1 with J the orthogonal-distance Jacobian.
+    """(3, 3) first-order covariance of an orthogonal-distance fit (x0, y0, r) when the points are
+    laser returns seen from the origin with range noise of variance sigma2.
 
-    Returns (cov, ok).
+    A range error e along beam u moves point i off the circle by e cos(inc_i), with
+    cos(inc_i) = u_i . n_i (n_i the circle's normal there), so the orthogonal residuals have
+    variances sigma2 cos^2(inc_i) and the fit's covariance is the sandwich
+    sigma2 (J^T J)^-1 (J^T W J) (J^T J)^-1, W = diag(cos^2 inc_i), J the orthogonal-distance
+    Jacobian. (Assuming isotropic point noise instead, sigma2 (J^T J)^-1, overstates the
+    variance about twice on the short arcs a laser sees.) Returns (cov, ok).
     """
     h00 = 0.0
     h01 = 0.0
@@ -355,31 +361,56 @@ def circle_covariance(x, y, x0, y0, r, sigma2):
     h11 = 0.0
     h12 = 0.0
     h22 = 0.0
+    m00 = 0.0
+    m01 = 0.0
+    m02 = 0.0
+    m11 = 0.0
+    m12 = 0.0
+    m22 = 0.0
     for i in range(x.shape[0]):
         dx = x[i] - x0
         dy = y[i] - y0
         d = math.sqrt(dx * dx + dy * dy)
-        if d == 0.0:
+        rng = math.sqrt(x[i] * x[i] + y[i] * y[i])
+        if d == 0.0 or rng == 0.0:
             continue
         j0 = -dx / d
         j1 = -dy / d
+        cos_inc = (x[i] * dx + y[i] * dy) / (rng * d)
+        w = cos_inc * cos_inc
         h00 += j0 * j0
         h01 += j0 * j1
         h02 -= j0
         h11 += j1 * j1
         h12 -= j1
         h22 += 1.0
-    cov = np.empty((3, 3))
+        m00 += w * j0 * j0
+        m01 += w * j0 * j1
+        m02 -= w * j0
+        m11 += w * j1 * j1
+        m12 -= w * j1
+        m22 += w
+    # A = (J^T J)^-1 column by column, then cov = sigma2 A M A
+    A = np.empty((3, 3))
     for c in range(3):
         c0, c1, c2, ok = _solve_sym3(
             h00, h01, h02, h11, h12, h22,
-            sigma2 if c == 0 else 0.0, sigma2 if c == 1 else 0.0, sigma2 if c == 2 else 0.0,
+            1.0 if c == 0 else 0.0, 1.0 if c == 1 else 0.0, 1.0 if c == 2 else 0.0,
         )  # fmt: skip
         if not ok:
             return np.full((3, 3), np.nan), False
-        cov[0, c] = c0
-        cov[1, c] = c1
-        cov[2, c] = c2
+        A[0, c] = c0
+        A[1, c] = c1
+        A[2, c] = c2
+    M = np.array([[m00, m01, m02], [m01, m11, m12], [m02, m12, m22]])
+    cov = np.empty((3, 3))
+    for a in range(3):
+        for b in range(3):
+            acc = 0.0
+            for k in range(3):
+                for l in range(3):
+                    acc += A[a, k] * M[k, l] * A[l, b]
+            cov[a, b] = sigma2 * acc
     for a in range(3):
         for b in range(a + 1, 3):
             m = 0.5 * (cov[a, b] + cov[b, a])
