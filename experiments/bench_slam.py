@@ -5,7 +5,8 @@ drives the filter down a long avenue: trees every `spacing_m` on both sides of a
 the car at `speed_mps` with 5 Hz scans and 20 Hz odometry (the Cycab noise), and every tree
 within `view_m` ahead measured as a circle centre with the `paper` noise model (the extractor
 itself is timed by `trunkslam bench extract`). `slam.run` times its phases per scan; the rows
-give their medians over the scans whose map size falls in each bin. Single thread.
+give their medians over the scans whose map size falls in each bin. One process; numpy's
+BLAS may use more than one thread for the larger matrices.
 """
 
 from __future__ import annotations

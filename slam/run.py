@@ -333,6 +333,16 @@ def _check_sequence(seq, n_features: int | None, cfg: SlamConfig) -> None:
     odo_t = np.asarray(seq.odo_t, dtype=np.float64)
     if odo_t.ndim != 1 or np.any(np.diff(odo_t) <= 0):
         raise ValueError("sequence.odo_t: odometry times must be strictly increasing")
+    veh = seq.vehicle
+    k = float(veh.get("encoder_offset_m", 0.0)) / float(veh["wheelbase_m"])
+    den = 1.0 - k * np.tan(np.asarray(seq.odo_steer, dtype=np.float64))
+    if np.any(den <= 0):  # v_c = v_e / (1 - (H/L) tan(alpha)) would be infinite or negative
+        i = int(np.flatnonzero(den <= 0)[0])
+        raise ValueError(
+            f"sequence.vehicle: encoder_offset_m / wheelbase_m = {k:.3g} with odo_steer[{i}] = "
+            f"{float(seq.odo_steer[i]):.3g} rad makes the encoder-to-axle speed correction "
+            "infinite or negative; check the vehicle parameters and the steering units"
+        )
     # The longest stretch of the run [scan_t[0], scan_t[-1]] on stale (held) odometry.
     lead = max(0.0, float(odo_t[0] - scan_t[0]))
     tail = max(0.0, float(scan_t[-1] - odo_t[-1]))
@@ -360,10 +370,15 @@ def _check_sequence(seq, n_features: int | None, cfg: SlamConfig) -> None:
 def _start(seq, cfg: SlamConfig, initial_heading_rad: float | None
            ) -> tuple[np.ndarray, np.ndarray, str]:  # fmt: skip
     t0 = float(seq.scan_t[0])
-    if getattr(seq, "truth_t", None) is not None and len(seq.truth_t):
+    truth_t = getattr(seq, "truth_t", None)
+    if truth_t is not None and len(truth_t) and not truth_t[0] <= t0 <= truth_t[-1]:
+        log.warning("the truth (%.3f .. %.3f s) does not cover the first scan (%.3f s); "
+                    "not starting from it", truth_t[0], truth_t[-1], t0)  # fmt: skip
+        truth_t = None
+    if truth_t is not None and len(truth_t):
         pose = interpolate_poses(t0, seq.truth_t, seq.truth_pose)[0]
         if initial_heading_rad is not None:
-            pose[2] = initial_heading_rad
+            log.warning("initial_heading_rad ignored: the run starts from the truth")
         return pose, np.diag(np.square(cfg.initial_pose_sigma)), "truth"
     if getattr(seq, "gps_t", None) is not None and len(seq.gps_t):
         xy = np.asarray(seq.gps_xy, dtype=np.float64)

@@ -248,3 +248,25 @@ def test_config_validation():
     assert kind == "fit"
     kind, model = SlamConfig(range_sigma_m=0.5).noise_for("bailey")
     assert kind == "constant" and model[0] == 0.5
+
+
+def test_truth_that_starts_after_the_first_scan_is_not_the_start():
+    seq = drive_sequence(1.5, 0.1)
+    late = dataclasses.replace(seq, truth_t=seq.truth_t[20:], truth_pose=seq.truth_pose[20:])
+    log = run(late, features="paper")
+    assert log.start == "origin"
+    np.testing.assert_allclose(log.pose[0], [0.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_initial_heading_does_not_override_the_truth_start():
+    seq = drive_sequence(1.5, 0.0)
+    log = run(seq, features="paper", initial_heading_rad=2.0)
+    assert log.start == "truth" and log.pose[0, 2] == pytest.approx(0.3, abs=1e-12)
+
+
+def test_impossible_encoder_offset_is_a_clear_error():
+    seq = drive_sequence(1.0, 0.6)
+    bad = dataclasses.replace(seq, vehicle={"model": "ackermann", "wheelbase_m": 1.0,
+                                            "encoder_offset_m": 2.0})  # fmt: skip
+    with pytest.raises(ValueError, match="encoder_offset_m"):
+        run(bad, features="paper")
