@@ -242,14 +242,7 @@ def plot_innovations(series: Sequence[dict], title: str, path: Path) -> Path:
     matplotlib line style such as "-." or "-").
     """
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    colors = ["tab:blue", "tab:orange", "tab:green", "tab:red"]
-    for s, c in zip(series, colors):
-        for i, ax in enumerate(axes):
-            ax.plot(s["scan"], s["innov"][:, i], s.get("style", "-"), color=c, lw=1.0,
-                    label=f"{s['label']} innovation")  # fmt: skip
-            ax.plot(s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0,
-                    label=f"{s['label']} 3 sigma")  # fmt: skip
-            ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)
+    _plot_with_bounds(axes, series, "innov", "innovation")
     axes[0].set_ylabel("range innovation (m)")
     axes[1].set_ylabel("bearing innovation (rad)")
     axes[1].set_xlabel("scan")
@@ -266,15 +259,8 @@ def plot_pose_errors(series: Sequence[dict], title: str, path: Path) -> Path:
     series: dicts with label, scan (N,), err (N, 3) [m, m, rad], sigma (N, 3), style.
     """
     fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
-    colors = ["tab:blue", "tab:orange", "tab:green", "tab:red"]
     names = ["x error (m)", "y error (m)", "heading error (rad)"]
-    for s, c in zip(series, colors):
-        for i, ax in enumerate(axes):
-            ax.plot(s["scan"], s["err"][:, i], s.get("style", "-"), color=c, lw=1.0,
-                    label=f"{s['label']} error")  # fmt: skip
-            ax.plot(s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0,
-                    label=f"{s['label']} 3 sigma")  # fmt: skip
-            ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)
+    _plot_with_bounds(axes, series, "err", "error")
     for ax, n in zip(axes, names):
         ax.set_ylabel(n)
         ax.grid(alpha=0.3)
@@ -332,3 +318,15 @@ def plot_association(rows: list[dict], path: Path, method_labels: dict[str, str]
     axes[0, 0].legend(fontsize=8, loc="lower left")
     fig.tight_layout()
     return save(fig, path)
+
+
+def _plot_with_bounds(axes, series, key: str, what: str) -> None:
+    """Each series' column i of s[key] on axes[i], with its +-3 sigma bounds dotted."""
+    colors = ["tab:blue", "tab:orange", "tab:green", "tab:red"]
+    for s, c in zip(series, colors):
+        for i, ax in enumerate(axes):
+            ax.plot(s["scan"], s[key][:, i], s.get("style", "-"), color=c, lw=1.0,
+                    label=f"{s['label']} {what}")  # fmt: skip
+            ax.plot(s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0,
+                    label=f"{s['label']} 3 sigma")  # fmt: skip
+            ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)
