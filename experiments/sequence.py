@@ -77,6 +77,27 @@ def _times(name: str, value) -> np.ndarray:
     return t
 
 
+def _timed_pair(t_name: str, t, v_name: str, v, width: int) -> list[tuple[str, np.ndarray]]:
+    """Validate optional times t (N,) with values v (N, width) that must come together;
+    returns [(t_name, t), (v_name, v)] checked and converted, or [] when both are absent."""
+    if (t is None) != (v is None):
+        missing = v_name if v is None else t_name
+        raise DataError(
+            f"Sequence.{missing}: {t_name} and {v_name} go together; {missing} missing"
+        )
+    if t is None:
+        return []
+    times = _times(t_name, t)
+    vals = _float_array(v_name, v, 2, width=width)
+    if vals.shape[0] != times.shape[0]:
+        raise DataError(
+            f"Sequence.{v_name}: expected shape ({times.shape[0]}, {width}) like {t_name}, "
+            f"got {vals.shape}"
+        )
+    _finite(v_name, vals)
+    return [(t_name, times), (v_name, vals)]
+
+
 def _finite(name: str, a: np.ndarray) -> None:
     if not np.all(np.isfinite(a)):
         raise DataError(f"Sequence.{name}: values must be finite (NaN or inf found)")
@@ -249,40 +270,14 @@ class Sequence:
             put("vehicle", _vehicle(self.vehicle))
 
         # GPS.
-        if (self.gps_t is None) != (self.gps_xy is None):
-            missing = "gps_xy" if self.gps_xy is None else "gps_t"
-            raise DataError(f"Sequence.{missing}: gps_t and gps_xy go together; {missing} missing")
-        if self.gps_t is not None:
-            gps_t = _times("gps_t", self.gps_t)
-            xy = _float_array("gps_xy", self.gps_xy, 2, width=2)
-            if xy.shape[0] != gps_t.shape[0]:
-                raise DataError(
-                    f"Sequence.gps_xy: expected shape ({gps_t.shape[0]}, 2) like gps_t, "
-                    f"got {xy.shape}"
-                )
-            _finite("gps_xy", xy)
-            put("gps_t", gps_t)
-            put("gps_xy", xy)
+        for name, v in _timed_pair("gps_t", self.gps_t, "gps_xy", self.gps_xy, 2):
+            put(name, v)
         if self.gps_pose is not None:
             put("gps_pose", _pose("gps_pose", self.gps_pose))
 
         # Truth.
-        if (self.truth_t is None) != (self.truth_pose is None):
-            missing = "truth_pose" if self.truth_pose is None else "truth_t"
-            raise DataError(
-                f"Sequence.{missing}: truth_t and truth_pose go together; {missing} missing"
-            )
-        if self.truth_t is not None:
-            truth_t = _times("truth_t", self.truth_t)
-            pose = _float_array("truth_pose", self.truth_pose, 2, width=3)
-            if pose.shape[0] != truth_t.shape[0]:
-                raise DataError(
-                    f"Sequence.truth_pose: expected shape ({truth_t.shape[0]}, 3) like truth_t, "
-                    f"got {pose.shape}"
-                )
-            _finite("truth_pose", pose)
-            put("truth_t", truth_t)
-            put("truth_pose", pose)
+        for name, v in _timed_pair("truth_t", self.truth_t, "truth_pose", self.truth_pose, 3):
+            put(name, v)
         if self.truth_landmarks is not None:
             lm = _float_array("truth_landmarks", self.truth_landmarks, 2, width=3)
             _finite("truth_landmarks", lm)
