@@ -353,8 +353,10 @@ def prepare(z, R, z_hat, H, P, gate_prob: float) -> Prepared:
         S_feat, asym, psd_ok = np.zeros((0, 2, 2)), np.zeros(0), np.ones(0, bool)
     if (asym > _SYM_RTOL).any():
         k = int(np.argmax(asym))
-        raise ValueError(f"P: not symmetric on the state block used by feature {k} "
-                         f"(relative asymmetry {asym[k]:.2e})")  # fmt: skip
+        raise ValueError(
+            f"P: not symmetric on the state block used by feature {k} "
+            f"(relative asymmetry {asym[k]:.2e})"
+        )
     if not psd_ok.all():
         k = int(np.flatnonzero(~psd_ok)[0])
         raise ValueError(f"P: not positive semi-definite on the state block used by feature {k}")
@@ -362,8 +364,10 @@ def prepare(z, R, z_hat, H, P, gate_prob: float) -> Prepared:
         # Projected check (covers dense Jacobians whose blocks are too big for the exact check).
         tr = np.maximum(S_feat[:, 0, 0] + S_feat[:, 1, 1], 1e-300)
         det = S_feat[:, 0, 0] * S_feat[:, 1, 1] - S_feat[:, 0, 1] ** 2
-        bad = (S_feat[:, 0, 0] < -_PSD_RTOL * tr) | (S_feat[:, 1, 1] < -_PSD_RTOL * tr) | (
-            det < -_PSD_RTOL * tr * tr
+        bad = (
+            (S_feat[:, 0, 0] < -_PSD_RTOL * tr)
+            | (S_feat[:, 1, 1] < -_PSD_RTOL * tr)
+            | (det < -_PSD_RTOL * tr * tr)
         )
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
@@ -387,11 +391,41 @@ def prepare(z, R, z_hat, H, P, gate_prob: float) -> Prepared:
         ii, jj = np.nonzero(d2 <= gate)  # eq. individual compatibility gate
         order = np.lexsort((rank_feat[jj], rank_meas[ii]))
         ii, jj = ii[order], jj[order]
-        return Prepared(z, R, z_hat, S_feat, H, P, gate, rank_meas, rank_feat, ii, jj,
-                        nu[ii, jj], S[ii, jj], d2[ii, jj], logdet[ii, jj])  # fmt: skip
+        return Prepared(
+            z,
+            R,
+            z_hat,
+            S_feat,
+            H,
+            P,
+            gate,
+            rank_meas,
+            rank_feat,
+            ii,
+            jj,
+            nu[ii, jj],
+            S[ii, jj],
+            d2[ii, jj],
+            logdet[ii, jj],
+        )
     e = np.zeros(0, np.int64)
-    return Prepared(z, R, z_hat, S_feat, H, P, gate, rank_meas, rank_feat, e, e,
-                    np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0))  # fmt: skip
+    return Prepared(
+        z,
+        R,
+        z_hat,
+        S_feat,
+        H,
+        P,
+        gate,
+        rank_meas,
+        rank_feat,
+        e,
+        e,
+        np.zeros((0, 2)),
+        np.zeros((0, 2, 2)),
+        np.zeros(0),
+        np.zeros(0),
+    )
 
 
 def _ranks(keys: np.ndarray) -> np.ndarray:

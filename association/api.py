@@ -46,16 +46,18 @@ class Association:
     budget_exhausted: bool = False
 
 
-def associate_detailed(z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float = 0.99,
-                       **params) -> Association:  # fmt: skip
+def associate_detailed(
+    z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float = 0.99, **params
+) -> Association:
     """`associate` with the method's statistics; see `associate` for the arguments."""
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
     unknown = set(params) - set(_PARAMS[method])
     if unknown:
         allowed = ", ".join(_PARAMS[method]) or "none"
-        raise ValueError(f"{sorted(unknown)}: not parameters of method {method!r} "
-                         f"(allowed: {allowed})")  # fmt: skip
+        raise ValueError(
+            f"{sorted(unknown)}: not parameters of method {method!r} (allowed: {allowed})"
+        )
     prep = prepare(z, R, z_hat, H, P, gate_prob)
     extra: dict = {}
     if method == "ihgr":
@@ -65,8 +67,7 @@ def associate_detailed(z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float
         cost = res.cost
         extra = {"lp_solves": res.lp_solves, "fractional": res.fractional}
     elif method == "jcbb":
-        out, stats = jcbb_assign(prep, float(gate_prob),
-                                 params.get("max_nodes", DEFAULT_MAX_NODES))
+        out, stats = jcbb_assign(prep, float(gate_prob), params.get("max_nodes", DEFAULT_MAX_NODES))
         cost = stats.joint_d2
         extra = {"nodes": stats.nodes, "budget_exhausted": stats.budget_exhausted}
     else:
@@ -82,8 +83,9 @@ def associate_detailed(z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float
     return Association(out, method, d2, float(cost), int(prep.pair_i.size), **extra)
 
 
-def associate(z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float = 0.99,
-              **params) -> np.ndarray:  # fmt: skip
+def associate(
+    z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float = 0.99, **params
+) -> np.ndarray:
     """Associate the m measurements of one scan with the n map features.
 
     z: (m, 2) measurements [range_m, bearing_rad].

@@ -117,8 +117,9 @@ def _check(costs, A, exact):
         raise ValueError(f"A: column {int(np.flatnonzero(counts == 0)[0])} covers no row")
     e = np.asarray(exact)
     if e.shape != (n_rows,) or e.dtype != bool:
-        raise ValueError(f"exact: expected a bool array of shape ({n_rows},), got "
-                         f"{e.dtype} {e.shape}")  # fmt: skip
+        raise ValueError(
+            f"exact: expected a bool array of shape ({n_rows},), got {e.dtype} {e.shape}"
+        )
     return c, n_rows, indptr, indices, e
 
 
@@ -127,8 +128,7 @@ def _components(n_rows: int, indptr: np.ndarray, indices: np.ndarray):
     n_cols = indptr.size - 1
     if indices.size > 2000:
         col = np.repeat(np.arange(n_cols), np.diff(indptr)) + n_rows
-        g = sp.coo_array((np.ones(indices.size), (indices, col)),
-                         shape=(n_rows + n_cols,) * 2)  # fmt: skip
+        g = sp.coo_array((np.ones(indices.size), (indices, col)), shape=(n_rows + n_cols,) * 2)
         k, labels = connected_components(g, directed=False)
         return k, labels[:n_rows], labels[n_rows:]
     parent = list(range(n_rows))
@@ -173,15 +173,15 @@ def _solve_lp(c, n_rows, indptr, indices, cols, rows, exact):
         A_eq[r, col] = 1.0
     else:
         A_eq = sp.csc_array((np.ones(r.size), (r, col)), shape=(rows.size, n_var))
-    res = linprog(c_full, A_eq=A_eq, b_eq=np.ones(rows.size), bounds=(0.0, 1.0),
-                  method="highs-ds")  # fmt: skip
+    res = linprog(c_full, A_eq=A_eq, b_eq=np.ones(rows.size), bounds=(0.0, 1.0), method="highs-ds")
     if res.status != 0:
         raise RuntimeError(f"IHGR: LP relaxation failed ({res.message})")
     return np.asarray(res.x[: cols.size]), float(res.fun)
 
 
-def ihgr_round(costs, A, exact, *, eps: float = 1e-6, fix_ones: bool = False,
-               presolve: bool = True) -> RoundingResult:  # fmt: skip
+def ihgr_round(
+    costs, A, exact, *, eps: float = 1e-6, fix_ones: bool = False, presolve: bool = True
+) -> RoundingResult:
     """Solve a set-partitioning problem by LP relaxation + iterative heuristic greedy rounding.
 
     costs: (N,) column costs; A: (rows, N) 0/1 matrix, dense or scipy.sparse; exact: (rows,) bool,
@@ -237,8 +237,10 @@ def ihgr_round(costs, A, exact, *, eps: float = 1e-6, fix_ones: bool = False,
         in_play = np.bincount(indices[np.repeat(active, counts)], minlength=n_rows) > 0
         missing = exact & ~covered & ~in_play
         if missing.any():
-            raise RuntimeError(f"IHGR: infeasible after rounding, exact row "
-                               f"{int(np.flatnonzero(missing)[0])} has no column left")  # fmt: skip
+            raise RuntimeError(
+                f"IHGR: infeasible after rounding, exact row "
+                f"{int(np.flatnonzero(missing)[0])} has no column left"
+            )
         rows = np.flatnonzero(in_play & ~covered)
         x, fun = _solve_lp(c, n_rows, indptr, indices, cols, rows, exact)
         solves += 1
@@ -279,8 +281,12 @@ def _milp(costs, A, exact) -> RoundingResult:
     if n_cols == 0:
         return RoundingResult(np.zeros(0, np.int64), 0.0, 0.0, 0, False, "milp")
     lb = np.where(exact, 1.0, 0.0)
-    res = milp(c, constraints=LinearConstraint(sp.csr_array(A), lb, np.ones(n_rows)),
-               integrality=np.ones(n_cols), bounds=Bounds(0.0, 1.0))  # fmt: skip
+    res = milp(
+        c,
+        constraints=LinearConstraint(sp.csr_array(A), lb, np.ones(n_rows)),
+        integrality=np.ones(n_cols),
+        bounds=Bounds(0.0, 1.0),
+    )
     if res.status != 0:
         raise RuntimeError(f"milp: no optimal solution ({res.message})")
     sel = np.flatnonzero(res.x > 0.5)

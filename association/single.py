@@ -109,10 +109,12 @@ def single_scan_problem(prep: Prepared, model: CostModel):
     meas_order = np.argsort(prep.rank_meas)
     col_meas = np.concatenate([prep.pair_i, meas_order])
     col_feat = np.concatenate([prep.pair_j, np.full(m, -1, np.int64)])
-    costs = np.concatenate([
-        model.pair_cost(prep.d2, prep.logdet_S),
-        np.full(m, model.unexplained_cost()),
-    ])  # fmt: skip
+    costs = np.concatenate(
+        [
+            model.pair_cost(prep.d2, prep.logdet_S),
+            np.full(m, model.unexplained_cost()),
+        ]
+    )
     n_cols = k + m
     rows = np.concatenate([prep.pair_i, row_of_feat[prep.pair_j], meas_order])
     cols = np.concatenate([np.arange(k), np.arange(k), k + np.arange(m)])

@@ -176,8 +176,14 @@ class SlidingWindowAssociator:
     rounding: options of `ihgr_round` (eps, fix_ones, presolve).
     """
 
-    def __init__(self, K: int = 3, gate_prob: float = 0.99, model: CostModel | None = None,
-                 max_tracks: int = 20_000, **rounding) -> None:  # fmt: skip
+    def __init__(
+        self,
+        K: int = 3,
+        gate_prob: float = 0.99,
+        model: CostModel | None = None,
+        max_tracks: int = 20_000,
+        **rounding,
+    ) -> None:
         if not isinstance(K, (int, np.integer)) or not 1 <= K <= 8:
             raise ValueError(f"K: must be an integer in 1..8, got {K!r}")
         if not 0.0 < float(gate_prob) < 1.0:
@@ -205,8 +211,9 @@ class SlidingWindowAssociator:
         self.last = None
         self._last_track_members = {}
 
-    def step(self, z, R, z_hat, H, P, *, sensor_pose=None, sensor_pose_cov=None,
-             feature_ids=None) -> np.ndarray:  # fmt: skip
+    def step(
+        self, z, R, z_hat, H, P, *, sensor_pose=None, sensor_pose_cov=None, feature_ids=None
+    ) -> np.ndarray:
         """Associate the newest scan; returns its committed assignment (m,) int64.
 
         z, R, z_hat, H, P: as for `association.associate` (this scan's measurements and the map
@@ -225,7 +232,7 @@ class SlidingWindowAssociator:
         costs0, A0, exact0, col_meas, col_feat = single_scan_problem(prep, self.model)
         n_rows0 = A0.shape[0]
 
-        past = self._past[-(self.K - 1):] if self.K > 1 else []
+        past = self._past[-(self.K - 1) :] if self.K > 1 else []
         open_nodes: list[tuple[int, int]] = []  # (window index w, measurement index)
         if pose is not None:
             for w, ps in enumerate(past):
@@ -290,8 +297,9 @@ class SlidingWindowAssociator:
                     self._last_track_members[i_cur] = members
                     chosen_tracks.append(tuple((W - 1 - w, i) for w, i in members))
         sightings[out >= 0] = 0
-        self.last = WindowDecision(out, sightings, tuple(chosen_tracks), res, len(tracks),
-                                   (costs, A, exact))  # fmt: skip
+        self.last = WindowDecision(
+            out, sightings, tuple(chosen_tracks), res, len(tracks), (costs, A, exact)
+        )
         if self.K > 1:
             # Remember this scan: its -1s stay open; their gated pairings with map features
             # that this scan left free can still explain them later.
@@ -300,8 +308,9 @@ class SlidingWindowAssociator:
             used[out[out >= 0]] = True
             keep = is_open[prep.pair_i] & ~used[prep.pair_j]
             pc = self.model.pair_cost(prep.d2[keep], prep.logdet_S[keep])
-            this = _PastScan(pose, Q, prep.z, prep.R, is_open, prep.pair_i[keep],
-                             fids[prep.pair_j[keep]], pc)  # fmt: skip
+            this = _PastScan(
+                pose, Q, prep.z, prep.R, is_open, prep.pair_i[keep], fids[prep.pair_j[keep]], pc
+            )
             self._past = (past + [this])[-(self.K - 1) :]
         self._last_drop = W - len(self._past)
         return out
@@ -342,8 +351,9 @@ class SlidingWindowAssociator:
             return None, np.zeros((3, 3))
         pose = _as_float_array("sensor_pose", pose, "(3,)")
         if pose.shape != (3,):
-            raise ValueError(f"sensor_pose: expected shape (3,) [x_m, y_m, heading_rad], got "
-                             f"{pose.shape}")  # fmt: skip
+            raise ValueError(
+                f"sensor_pose: expected shape (3,) [x_m, y_m, heading_rad], got {pose.shape}"
+            )
         _check_finite("sensor_pose", pose)
         if Q is None:
             Q = np.zeros((3, 3))
@@ -414,8 +424,11 @@ class SlidingWindowAssociator:
             p, cov = init[w0]
             dfs(w0 + 1, p[i0], cov[i0], mdl.birth_cost, [(w0, i0)])
         if budget[0] <= 0 or len(out) > self.max_tracks:
-            log.warning("window association: %d track hypotheses, keeping the %d cheapest",
-                        len(out), self.max_tracks)  # fmt: skip
+            log.warning(
+                "window association: %d track hypotheses, keeping the %d cheapest",
+                len(out),
+                self.max_tracks,
+            )
             out.sort(key=lambda t: t[0])
             out = out[: self.max_tracks]
         return out

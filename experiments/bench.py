@@ -49,8 +49,9 @@ def cold_compile_seconds() -> float:
 
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ, NUMBA_CACHE_DIR=tmp)
-        out = subprocess.run([sys.executable, "-c", _COLD], env=env, capture_output=True,
-                             text=True, check=True)  # fmt: skip
+        out = subprocess.run(
+            [sys.executable, "-c", _COLD], env=env, capture_output=True, text=True, check=True
+        )
     return float(out.stdout.strip().splitlines()[-1])
 
 
@@ -107,14 +108,25 @@ def bench_extract(
 
 
 def format_extract(rows: list[dict]) -> str:
-    header = ["method", "scans/s", "us/scan (best)", "us/scan (median)", "first call (s)",
-              "circles/scan"]  # fmt: skip
+    header = [
+        "method",
+        "scans/s",
+        "us/scan (best)",
+        "us/scan (median)",
+        "first call (s)",
+        "circles/scan",
+    ]
     body = [
-        [r["method"], round(r["scans_per_s"]), round(r["us_per_scan"], 1),
-         round(r["median_us_per_scan"], 1), round(r["first_call_s"], 2),
-         round(r["circles_per_scan"], 2)]
+        [
+            r["method"],
+            round(r["scans_per_s"]),
+            round(r["us_per_scan"], 1),
+            round(r["median_us_per_scan"], 1),
+            round(r["first_call_s"], 2),
+            round(r["circles_per_scan"], 2),
+        ]
         for r in rows
-    ]  # fmt: skip
+    ]
     note = (
         f"\nMachine: {machine()}. One thread, {rows[0]['scans']} Victoria Park scans of 361 beams"
         f" per pass, best and median of the passes. Building one Scan (validation) costs"

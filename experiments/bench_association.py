@@ -4,9 +4,10 @@ The scene: 200 mapped trunks and 20 trunks not yet in the map (min. 1.5 m apart)
 160 m x 160 m park, so that about 10 are within the 20 m detection range; a 403-dimensional
 EKF-SLAM state [pose, 200 landmarks] with a dense covariance (landmark errors correlated with
 the pose, as after SLAM); all 200 features are passed to the association each scan (gating does
-the culling); 2 clutter returns per scan; P_D 0.9. The vehicle drives 1 m between scans. Each method sees the same scans, taken in turn scan by
-scan (so that background load hits every method alike); the time is the wall time of one call
-(input checks, gating and the method), after 5 untimed warm-up scans.
+the culling); 2 clutter returns per scan; P_D 0.9. The vehicle drives 1 m between scans.
+Each method sees the same scans, taken in turn scan by scan (so that background load hits
+every method alike); the time is the wall time of one call (input checks, gating and the
+method), after 5 untimed warm-up scans.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ def vp_scale_scans(n_scans: int, seed: int = 0) -> list[dict]:
     sig_pose = np.array([0.3, 0.3, math.radians(1.0)])
     out = []
     pose = np.array([-60.0, -60.0, math.pi / 4])
-    for k in range(n_scans):
+    for _ in range(n_scans):
         pose = pose + np.array([math.cos(pose[2]), math.sin(pose[2]), rng.normal(0, 0.03)])
         if np.abs(pose[:2]).max() > HALF_M - 20:  # stay inside the park: turn around
             pose[2] += math.pi
@@ -92,12 +93,11 @@ def bench(repeats: int = 200, seed: int = 0) -> list[dict]:
     methods = {
         "checks": lambda s: prepare(*(s[a] for a in args), 0.99),
         "ihgr": lambda s: associate_detailed(*(s[a] for a in args), "ihgr"),
-        "ihgr_nopre": lambda s: associate_detailed(*(s[a] for a in args), "ihgr",
-                                                   presolve=False),
+        "ihgr_nopre": lambda s: associate_detailed(*(s[a] for a in args), "ihgr", presolve=False),
         "window": window,
         "jcbb": lambda s: associate_detailed(*(s[a] for a in args), "jcbb"),
         "nn": lambda s: associate_detailed(*(s[a] for a in args), "nn"),
-    }  # fmt: skip
+    }
     times: dict[str, list[float]] = {k: [] for k in methods}
     infos: dict[str, list] = {k: [] for k in methods}
     for k, s in enumerate(scans):  # round robin: every method on this scan, then the next scan
@@ -111,27 +111,57 @@ def bench(repeats: int = 200, seed: int = 0) -> list[dict]:
 
     rows = [("input checks + gating only", *_stats(times["checks"]), "common to every method")]
     lp = np.array([i.lp_solves for i in infos["ihgr"]])
-    rows.append(("IHGR single scan", *_stats(times["ihgr"]),
-                 f"{(lp > 0).mean():.1%} of scans needed an LP (max {lp.max()} solves); "
-                 "the rest were settled by presolve"))  # fmt: skip
+    rows.append(
+        (
+            "IHGR single scan",
+            *_stats(times["ihgr"]),
+            f"{(lp > 0).mean():.1%} of scans needed an LP (max {lp.max()} solves); "
+            "the rest were settled by presolve",
+        )
+    )
     lp = np.array([i.lp_solves for i in infos["ihgr_nopre"]])
-    rows.append(("IHGR single scan, presolve off", *_stats(times["ihgr_nopre"]),
-                 f"every scan through linprog (HiGHS), mean {lp.mean():.2f} solves"))  # fmt: skip
+    rows.append(
+        (
+            "IHGR single scan, presolve off",
+            *_stats(times["ihgr_nopre"]),
+            f"every scan through linprog (HiGHS), mean {lp.mean():.2f} solves",
+        )
+    )
     info = infos["window"]
-    rows.append(("IHGR K = 3 window", *_stats(times["window"]),
-                 f"mean {np.mean([i.n_tracks for i in info]):.1f} track hypotheses, "
-                 f"{np.mean([i.rounding.lp_solves > 0 for i in info]):.1%} of scans needed an LP "
-                 f"(max {max(i.rounding.lp_solves for i in info)} solves)"))  # fmt: skip
+    rows.append(
+        (
+            "IHGR K = 3 window",
+            *_stats(times["window"]),
+            f"mean {np.mean([i.n_tracks for i in info]):.1f} track hypotheses, "
+            f"{np.mean([i.rounding.lp_solves > 0 for i in info]):.1%} of scans needed an LP "
+            f"(max {max(i.rounding.lp_solves for i in info)} solves)",
+        )
+    )
     nodes = np.array([i.nodes for i in infos["jcbb"]])
     hits = sum(i.budget_exhausted for i in infos["jcbb"])
-    rows.append(("JCBB (node budget 20000)", *_stats(times["jcbb"]),
-                 f"nodes: median {np.median(nodes):.0f}, max {nodes.max()}; budget exhausted "
-                 f"in {hits} scans"))  # fmt: skip
+    rows.append(
+        (
+            "JCBB (node budget 20000)",
+            *_stats(times["jcbb"]),
+            f"nodes: median {np.median(nodes):.0f}, max {nodes.max()}; budget exhausted "
+            f"in {hits} scans",
+        )
+    )
     rows.append(("NN (gated, greedy)", *_stats(times["nn"]), ""))
-    return [{"method": r[0], "median_ms": round(r[1], 3), "p90_ms": round(r[2], 3),
-             "notes": r[3] + (f" [{m_mean:.1f} measurements, {N_LANDMARKS} features, "
-                              f"state {3 + 2 * N_LANDMARKS}]" if r[0].startswith("input") else "")}
-            for r in rows]  # fmt: skip
+    return [
+        {
+            "method": r[0],
+            "median_ms": round(r[1], 3),
+            "p90_ms": round(r[2], 3),
+            "notes": r[3]
+            + (
+                f" [{m_mean:.1f} measurements, {N_LANDMARKS} features, state {3 + 2 * N_LANDMARKS}]"
+                if r[0].startswith("input")
+                else ""
+            ),
+        }
+        for r in rows
+    ]
 
 
 def format_table(rows: list[dict]) -> str:

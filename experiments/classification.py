@@ -24,8 +24,13 @@ from experiments.sim import (
 )
 from features import extract_features
 
-__all__ = ["ClassificationResult", "classification_study", "trunk_trial", "wall_trial",
-           "bush_trial"]  # fmt: skip
+__all__ = [
+    "ClassificationResult",
+    "classification_study",
+    "trunk_trial",
+    "wall_trial",
+    "bush_trial",
+]
 
 RADII_M = (0.1, 0.2, 0.3, 0.45, 0.6)
 RANGES_M = (2.0, 5.0, 10.0, 15.0, 20.0)
@@ -45,9 +50,12 @@ def _extract(scene, rng, sigma_m, method="geometric", line_test="lrt", **params)
     sensor = _sensor(sigma_m)
     ranges, labels = simulate_scan(scene, (0.0, 0.0, 0.0), sensor, rng)
     f = extract_features(
-        sensor.scan(ranges), method, sigma_r_m=extractor_sigma(sensor), line_test=line_test,
+        sensor.scan(ranges),
+        method,
+        sigma_r_m=extractor_sigma(sensor),
+        line_test=line_test,
         **params,
-    )  # fmt: skip
+    )
     return f, labels
 
 
@@ -79,8 +87,9 @@ def wall_trial(rng, sigma_m=0.01, line_test="lrt", **params):
     n = np.array([math.cos(inc), math.sin(inc)])
     p = d * np.array([1.0, 0.0])  # the wall passes through (d, 0) with normal at `inc`
     t = np.array([-n[1], n[0]]) * 6.0
-    scene = scene_from_dict({"walls": [{"name": "w", "points_xy": [(p - t).tolist(),
-                                                                    (p + t).tolist()]}]})
+    scene = scene_from_dict(
+        {"walls": [{"name": "w", "points_xy": [(p - t).tolist(), (p + t).tolist()]}]}
+    )
     f, labels = _extract(scene, rng, sigma_m, line_test=line_test, **params)
     on_wall = labels == 0
     in_line = np.zeros_like(on_wall)

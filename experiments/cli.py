@@ -93,13 +93,12 @@ def extract(
     rerun: Annotated[Path | None, typer.Option(help="also write a rerun recording")] = None,
 ) -> None:
     """Extract circles, lines, edges and clutter from every scan of a sequence file."""
+    from dataclasses import asdict
+
     from experiments.export import FEATURES_SCHEMA, dumps_json, features_to_dict, write_atomic
     from experiments.sequence import load_sequence
     from experiments.viz import open_recording
     from features import extract_features
-
-    from dataclasses import asdict
-
     from features.bailey import BaileyParams
     from features.extract import ExtractorParams
 
@@ -184,9 +183,13 @@ def simulate(
     if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
         raise ValueError(f"--pose: expected three numbers x,y,theta, got {pose!r}")
     seq = simulate_to_sequence(
-        scene, xyz[None, :], sensor_name=sensor, back_to_back=back_to_back, noise_m=noise,
+        scene,
+        xyz[None, :],
+        sensor_name=sensor,
+        back_to_back=back_to_back,
+        noise_m=noise,
         seed=seed,
-    )  # fmt: skip
+    )
     save_sequence(seq, out)
     typer.echo(f"1 scan of {scene} -> {out}")
 
@@ -194,7 +197,9 @@ def simulate(
 @app.command()
 @handle_errors
 def reproduce(
-    names: Annotated[list[str] | None, typer.Argument(help="experiments to run (default: all)")] = None,
+    names: Annotated[
+        list[str] | None, typer.Argument(help="experiments to run (default: all)")
+    ] = None,
     quick: Annotated[bool, typer.Option(help="small-sample version")] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("results"),
     seed: Annotated[int, typer.Option(help="root random seed", min=0)] = 0,
@@ -213,7 +218,8 @@ def bench_extract(
     data: Annotated[Path | None, typer.Option(help="victoria_park folder")] = None,
 ) -> None:
     """Scans per second of each extractor on the 2000 real Victoria Park scans."""
-    from experiments.bench import bench_extract as run, format_extract
+    from experiments.bench import bench_extract as run
+    from experiments.bench import format_extract
 
     typer.echo(format_extract(run(repeats=repeats, root=data)))
 

@@ -34,15 +34,22 @@ from association import (
     solve_set_partition,
     wrap_angle,
 )
-from experiments import plots
 from association._inputs import prepare
 from association.single import single_scan_problem
+from experiments import plots
 from experiments.export import markdown_table, write_atomic, write_table
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SimConfig", "SimScan", "simulate_sequence", "cost_model_for", "run",
-           "rate_study", "optimality_study"]  # fmt: skip
+__all__ = [
+    "SimConfig",
+    "SimScan",
+    "simulate_sequence",
+    "cost_model_for",
+    "run",
+    "rate_study",
+    "optimality_study",
+]
 
 METHOD_LABELS = {
     "ihgr": "IHGR (single scan)",
@@ -167,8 +174,9 @@ def _hard_core_points(rng: np.random.Generator, n: int, half: float, d_min: floa
     return cand[keep]
 
 
-def simulate_sequence(cfg: SimConfig, rng: np.random.Generator,
-                      n_landmarks: int | None = None) -> list[SimScan]:  # fmt: skip
+def simulate_sequence(
+    cfg: SimConfig, rng: np.random.Generator, n_landmarks: int | None = None
+) -> list[SimScan]:
     """A sequence of `cfg.n_scans` scans; see the module docstring."""
     path_len = cfg.step_m * cfg.n_scans
     half = cfg.max_range_m + 5.0 + path_len
@@ -185,8 +193,13 @@ def simulate_sequence(cfg: SimConfig, rng: np.random.Generator,
     scans = []
     for t in range(cfg.n_scans):
         if t:
-            pose = pose + np.array([cfg.step_m * math.cos(pose[2]), cfg.step_m * math.sin(pose[2]),
-                                    rng.normal(0.0, 0.05)])  # fmt: skip
+            pose = pose + np.array(
+                [
+                    cfg.step_m * math.cos(pose[2]),
+                    cfg.step_m * math.sin(pose[2]),
+                    rng.normal(0.0, 0.05),
+                ]
+            )
             err = err + rng.multivariate_normal(np.zeros(3), cfg.Q_drift)
         est = pose + err
         est[2] = math.remainder(est[2], 2 * math.pi)
@@ -203,27 +216,37 @@ def simulate_sequence(cfg: SimConfig, rng: np.random.Generator,
         z_lm = np.column_stack([rng_true[seen], np.arctan2(dy[seen], dx[seen]) - pose[2]])
         z_lm = z_lm + rng.multivariate_normal(np.zeros(2), R, seen.size).reshape(-1, 2)
         n_cl = rng.poisson(cfg.clutter_per_scan)
-        z_cl = np.column_stack([rng.uniform(0.5, cfg.max_range_m, n_cl),
-                                rng.uniform(-np.pi, np.pi, n_cl)])  # fmt: skip
+        z_cl = np.column_stack(
+            [rng.uniform(0.5, cfg.max_range_m, n_cl), rng.uniform(-np.pi, np.pi, n_cl)]
+        )
         z = np.vstack([z_lm, z_cl])
         z[:, 0] = np.abs(z[:, 0])
         z[:, 1] = wrap_angle(z[:, 1])
         truth = np.concatenate([feat_of_lm[seen], np.full(n_cl, -1, np.int64)])
         truth_lm = np.concatenate([seen, np.full(n_cl, -1, np.int64)])
         perm = rng.permutation(z.shape[0])
-        scans.append(SimScan(z[perm], R, z_hat, H, P, truth[perm], est, 2 * cfg.Q_drift, idx,
-                             truth_lm[perm]))
+        scans.append(
+            SimScan(z[perm], R, z_hat, H, P, truth[perm], est, 2 * cfg.Q_drift, idx, truth_lm[perm])
+        )
     return scans
 
 
 def cost_model_for(cfg: SimConfig) -> CostModel:
     """IHGR's densities set to the simulator's rates (measurement space: max range x 2 pi)."""
     vol = cfg.max_range_m * 2 * np.pi
-    unmapped_per_scan = (cfg.density_per_100m2 / 100.0 * np.pi * cfg.max_range_m**2
-                         * cfg.unmapped_fraction * cfg.p_detect)  # fmt: skip
-    return CostModel(p_detect=cfg.p_detect,
-                     clutter_density=max(cfg.clutter_per_scan, 0.01) / vol,
-                     birth_density=max(unmapped_per_scan, 0.01) / vol)  # fmt: skip
+    unmapped_per_scan = (
+        cfg.density_per_100m2
+        / 100.0
+        * np.pi
+        * cfg.max_range_m**2
+        * cfg.unmapped_fraction
+        * cfg.p_detect
+    )
+    return CostModel(
+        p_detect=cfg.p_detect,
+        clutter_density=max(cfg.clutter_per_scan, 0.01) / vol,
+        birth_density=max(unmapped_per_scan, 0.01) / vol,
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -233,21 +256,46 @@ def cost_model_for(cfg: SimConfig) -> CostModel:
 EVAL_FROM_SCAN = 2  # scans before this only warm up the window (K = 3) and are not scored
 
 
-def run_methods(seq: list[SimScan], cfg: SimConfig, methods=tuple(METHOD_LABELS),
-                gate_prob: float = 0.99, max_nodes: int = 20_000) -> dict:  # fmt: skip
+def run_methods(
+    seq: list[SimScan],
+    cfg: SimConfig,
+    methods=tuple(METHOD_LABELS),
+    gate_prob: float = 0.99,
+    max_nodes: int = 20_000,
+) -> dict:
     """Counts per method over the scored scans of one sequence."""
     model = cost_model_for(cfg)
     win = SlidingWindowAssociator(K=3, gate_prob=gate_prob, model=model)
-    stats = {m: {"n": 0, "correct": 0, "false_pair": 0, "missed_pair": 0, "seconds": 0.0,
-                 "budget_hits": 0, "unmapped": 0, "unmapped_confirmed": 0, "clutter": 0,
-                 "clutter_confirmed": 0} for m in methods}  # fmt: skip
+    stats = {
+        m: {
+            "n": 0,
+            "correct": 0,
+            "false_pair": 0,
+            "missed_pair": 0,
+            "seconds": 0.0,
+            "budget_hits": 0,
+            "unmapped": 0,
+            "unmapped_confirmed": 0,
+            "clutter": 0,
+            "clutter_confirmed": 0,
+        }
+        for m in methods
+    }
     cm = asdict(model)
     for t, s in enumerate(seq):
         for m in methods:
             t0 = time.perf_counter()
             if m == "ihgr_k3":
-                a = win.step(s.z, s.R, s.z_hat, s.H, s.P, sensor_pose=s.pose_est,
-                             sensor_pose_cov=s.pose_cov_rel, feature_ids=s.feature_ids)
+                a = win.step(
+                    s.z,
+                    s.R,
+                    s.z_hat,
+                    s.H,
+                    s.P,
+                    sensor_pose=s.pose_est,
+                    sensor_pose_cov=s.pose_cov_rel,
+                    feature_ids=s.feature_ids,
+                )
             else:
                 params = cm if m == "ihgr" else ({"max_nodes": max_nodes} if m == "jcbb" else {})
                 res = associate_detailed(s.z, s.R, s.z_hat, s.H, s.P, m, gate_prob, **params)
@@ -277,9 +325,8 @@ def run_methods(seq: list[SimScan], cfg: SimConfig, methods=tuple(METHOD_LABELS)
 SWEEPS = {
     "clutter": ("clutter_per_scan", "clutter returns per scan", [0.0, 3.0, 10.0, 20.0, 40.0]),
     "density": ("density_per_100m2", "landmarks per 100 m^2", [0.5, 1.0, 2.0, 4.0, 6.0]),
-    "pose": ("sigma_xy_m", "pose std (m; heading std = 3.33 deg per m)",
-             [0.1, 0.3, 0.6, 1.0, 1.5]),
-}  # fmt: skip
+    "pose": ("sigma_xy_m", "pose std (m; heading std = 3.33 deg per m)", [0.1, 0.3, 0.6, 1.0, 1.5]),
+}
 
 
 def _sweep_config(base: SimConfig, field: str, value: float) -> SimConfig:
@@ -288,8 +335,13 @@ def _sweep_config(base: SimConfig, field: str, value: float) -> SimConfig:
     return replace(base, **{field: value})
 
 
-def rate_study(rng: np.random.Generator, n_seq: int, base: SimConfig = SimConfig(),
-               sweeps: dict = SWEEPS, progress=lambda d, i, n: None) -> list[dict]:  # fmt: skip
+def rate_study(
+    rng: np.random.Generator,
+    n_seq: int,
+    base: SimConfig = SimConfig(),
+    sweeps: dict = SWEEPS,
+    progress=lambda d, i, n: None,
+) -> list[dict]:
     """Rows: sweep, value, method, measurements, correct/false/missed rates, ms per scan.
 
     Common random numbers: sequence q of every sweep point draws from the same seed, so the
@@ -314,15 +366,21 @@ def rate_study(rng: np.random.Generator, n_seq: int, base: SimConfig = SimConfig
             n_scored = n_seq * (cfg.n_scans - EVAL_FROM_SCAN)
             for m, a in agg.items():
                 n = max(a["n"], 1)
-                rows.append({"sweep": name, "value": v, "method": m, "measurements": a["n"],
-                             "correct_rate": a["correct"] / n,
-                             "false_pair_rate": a["false_pair"] / n,
-                             "missed_pair_rate": a["missed_pair"] / n,
-                             "ms_per_scan": 1e3 * a["seconds"] / n_scored,
-                             "jcbb_budget_hits": a["budget_hits"],
-                             "new_confirmed_rate": a["unmapped_confirmed"] / max(a["unmapped"], 1),
-                             "clutter_confirmed_rate": (a["clutter_confirmed"]
-                                                        / max(a["clutter"], 1))})  # fmt: skip
+                rows.append(
+                    {
+                        "sweep": name,
+                        "value": v,
+                        "method": m,
+                        "measurements": a["n"],
+                        "correct_rate": a["correct"] / n,
+                        "false_pair_rate": a["false_pair"] / n,
+                        "missed_pair_rate": a["missed_pair"] / n,
+                        "ms_per_scan": 1e3 * a["seconds"] / n_scored,
+                        "jcbb_budget_hits": a["budget_hits"],
+                        "new_confirmed_rate": a["unmapped_confirmed"] / max(a["unmapped"], 1),
+                        "clutter_confirmed_rate": (a["clutter_confirmed"] / max(a["clutter"], 1)),
+                    }
+                )
     return rows
 
 
@@ -342,8 +400,9 @@ def _random_multiscan_instance(rng: np.random.Generator, K: int = 3):
     cols, costs = [], []
     seen = set()
     for _ in range(n_tuples):
-        members = tuple(int(offs[k] + rng.integers(m[k])) if rng.random() < 0.8 else -1
-                        for k in range(K))  # fmt: skip
+        members = tuple(
+            int(offs[k] + rng.integers(m[k])) if rng.random() < 0.8 else -1 for k in range(K)
+        )
         members = tuple(x for x in members if x >= 0)
         if len(members) < 2 or members in seen:
             continue
@@ -363,10 +422,13 @@ def _random_multiscan_instance(rng: np.random.Generator, K: int = 3):
 def _single_scan_instances(rng, n):
     out = []
     while len(out) < n:
-        cfg = SimConfig(density_per_100m2=rng.uniform(1.0, 6.0),
-                        clutter_per_scan=rng.uniform(0, 30), sigma_xy_m=rng.uniform(0.3, 1.5),
-                        n_scans=1,
-                        sigma_heading_rad=math.radians(rng.uniform(1.0, 5.0)))  # fmt: skip
+        cfg = SimConfig(
+            density_per_100m2=rng.uniform(1.0, 6.0),
+            clutter_per_scan=rng.uniform(0, 30),
+            sigma_xy_m=rng.uniform(0.3, 1.5),
+            n_scans=1,
+            sigma_heading_rad=math.radians(rng.uniform(1.0, 5.0)),
+        )
         s = simulate_sequence(cfg, rng)[0]
         prep = prepare(s.z, s.R, s.z_hat, s.H, s.P, 0.99)
         c, A, e, _, _ = single_scan_problem(prep, cost_model_for(cfg))
@@ -381,30 +443,43 @@ def _window_instances(rng, n, empty_map: bool):
     SLAM-like case (map + 30% unmapped landmarks + heavy clutter, K = 3)."""
     out = []
     while len(out) < n:
-        cfg = SimConfig(density_per_100m2=rng.uniform(1.0, 4.0),
-                        clutter_per_scan=rng.uniform(5, 30),
-                        unmapped_fraction=1.0 if empty_map else 0.3,
-                        sigma_xy_m=rng.uniform(0.2, 1.0), n_scans=6)  # fmt: skip
+        cfg = SimConfig(
+            density_per_100m2=rng.uniform(1.0, 4.0),
+            clutter_per_scan=rng.uniform(5, 30),
+            unmapped_fraction=1.0 if empty_map else 0.3,
+            sigma_xy_m=rng.uniform(0.2, 1.0),
+            n_scans=6,
+        )
         K = 4 if empty_map else 3
         win = SlidingWindowAssociator(K=K, model=cost_model_for(cfg))
         for s in simulate_sequence(cfg, rng):
-            win.step(s.z, s.R, s.z_hat, s.H, s.P, sensor_pose=s.pose_est,
-                     sensor_pose_cov=s.pose_cov_rel, feature_ids=s.feature_ids)
+            win.step(
+                s.z,
+                s.R,
+                s.z_hat,
+                s.H,
+                s.P,
+                sensor_pose=s.pose_est,
+                sensor_pose_cov=s.pose_cov_rel,
+                feature_ids=s.feature_ids,
+            )
             if win.last.n_tracks > 0 and len(out) < n:
                 out.append(win.last.problem)
     return out
 
 
-def optimality_study(rng: np.random.Generator, n_per_family: dict[str, int],
-                     progress=lambda d, i, n: None) -> list[dict]:  # fmt: skip
+def optimality_study(
+    rng: np.random.Generator, n_per_family: dict[str, int], progress=lambda d, i, n: None
+) -> list[dict]:
     """Rows per instance: family, variant, ihgr cost, optimum, lp bound, fractional, solves."""
     families = {
         "single-scan (simulated)": lambda n: _single_scan_instances(rng, n),
         "K=3 window (simulated SLAM)": lambda n: _window_instances(rng, n, empty_map=False),
         "K=4 window, empty map (track formation)": lambda n: _window_instances(rng, n, True),
-        "random 3-scan set partitioning": lambda n: [_random_multiscan_instance(rng)
-                                                     for _ in range(n)],
-    }  # fmt: skip
+        "random 3-scan set partitioning": lambda n: [
+            _random_multiscan_instance(rng) for _ in range(n)
+        ],
+    }
     variants = {"IHGR": {"fix_ones": False}, "IHGR, also fixing every x = 1": {"fix_ones": True}}
     rows = []
     total = sum(n_per_family.values())
@@ -420,12 +495,23 @@ def optimality_study(rng: np.random.Generator, n_per_family: dict[str, int],
                 t0 = time.perf_counter()
                 res = solve_set_partition(c, A, e, method="ihgr", presolve=False, **opts)
                 t_ihgr = time.perf_counter() - t0
-                rows.append({"family": fam, "variant": vname, "instance": k,
-                             "columns": int(len(c)), "rows": int(A.shape[0]),
-                             "ihgr_cost": res.cost, "optimum": opt.cost, "lp_bound": res.lp_bound,
-                             "gap": res.cost - opt.cost, "fractional": res.fractional,
-                             "lp_solves": res.lp_solves, "ms_ihgr": 1e3 * t_ihgr,
-                             "ms_milp": 1e3 * t_milp})  # fmt: skip
+                rows.append(
+                    {
+                        "family": fam,
+                        "variant": vname,
+                        "instance": k,
+                        "columns": int(len(c)),
+                        "rows": int(A.shape[0]),
+                        "ihgr_cost": res.cost,
+                        "optimum": opt.cost,
+                        "lp_bound": res.lp_bound,
+                        "gap": res.cost - opt.cost,
+                        "fractional": res.fractional,
+                        "lp_solves": res.lp_solves,
+                        "ms_ihgr": 1e3 * t_ihgr,
+                        "ms_milp": 1e3 * t_milp,
+                    }
+                )
             done += 1
             progress("association optimality", done, total)
     return rows
@@ -444,21 +530,43 @@ def summarise_optimality(rows: list[dict]) -> list[list]:
         tol = 1e-6 * np.maximum(1.0, np.abs(opt))
         frac = np.array([r["fractional"] for r in rs])
         rel = gap / np.maximum(np.abs(opt), 1e-9)
-        out.append([fam, var, len(rs), round(float(np.mean([r["columns"] for r in rs])), 1),
-                    float(frac.mean()), float((gap <= tol).mean()),
-                    float((gap <= tol)[frac].mean()) if frac.any() else math.nan,
-                    float(gap.mean()), float(gap.max()), float(rel.max()),
-                    float(np.mean([r["lp_solves"] for r in rs])),
-                    int(max(r["lp_solves"] for r in rs)),
-                    float(np.median([r["ms_ihgr"] for r in rs])),
-                    float(np.median([r["ms_milp"] for r in rs]))])  # fmt: skip
+        out.append(
+            [
+                fam,
+                var,
+                len(rs),
+                round(float(np.mean([r["columns"] for r in rs])), 1),
+                float(frac.mean()),
+                float((gap <= tol).mean()),
+                float((gap <= tol)[frac].mean()) if frac.any() else math.nan,
+                float(gap.mean()),
+                float(gap.max()),
+                float(rel.max()),
+                float(np.mean([r["lp_solves"] for r in rs])),
+                int(max(r["lp_solves"] for r in rs)),
+                float(np.median([r["ms_ihgr"] for r in rs])),
+                float(np.median([r["ms_milp"] for r in rs])),
+            ]
+        )
     return out
 
 
-OPT_HEADER = ["family", "variant", "instances", "mean columns", "fractional LP fraction",
-              "IHGR optimal fraction", "optimal when LP fractional", "mean gap (nats)",
-              "max gap (nats)", "max relative gap", "mean LP solves", "max LP solves",
-              "median ms IHGR", "median ms milp"]  # fmt: skip
+OPT_HEADER = [
+    "family",
+    "variant",
+    "instances",
+    "mean columns",
+    "fractional LP fraction",
+    "IHGR optimal fraction",
+    "optimal when LP fractional",
+    "mean gap (nats)",
+    "max gap (nats)",
+    "max relative gap",
+    "mean LP solves",
+    "max LP solves",
+    "median ms IHGR",
+    "median ms milp",
+]
 
 
 def odd_cycle() -> dict:
@@ -467,8 +575,12 @@ def odd_cycle() -> dict:
     c = np.array([-1.0, -1.0, -1.0, 0.0, 0.0, 0.0])
     e = np.ones(3, bool)
     r = solve_set_partition(c, A, e, method="ihgr")
-    return {"lp_bound": r.lp_bound, "ihgr_cost": r.cost, "lp_solves": r.lp_solves,
-            "optimum": solve_set_partition(c, A, e, method="milp").cost}  # fmt: skip
+    return {
+        "lp_bound": r.lp_bound,
+        "ihgr_cost": r.cost,
+        "lp_solves": r.lp_solves,
+        "optimum": solve_set_partition(c, A, e, method="milp").cost,
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -476,52 +588,96 @@ def odd_cycle() -> dict:
 # --------------------------------------------------------------------------------------------
 
 
-RATE_HEADER = ["sweep", "value", "method", "measurements", "correct rate", "false pairing rate",
-               "missed pairing rate", "ms per scan", "JCBB budget hits",
-               "unmapped confirmed (K=3)", "clutter confirmed (K=3)"]  # fmt: skip
+RATE_HEADER = [
+    "sweep",
+    "value",
+    "method",
+    "measurements",
+    "correct rate",
+    "false pairing rate",
+    "missed pairing rate",
+    "ms per scan",
+    "JCBB budget hits",
+    "unmapped confirmed (K=3)",
+    "clutter confirmed (K=3)",
+]
 
 
 def _rate_rows(rows):
     k3 = {"ihgr_k3"}
-    return [[r["sweep"], r["value"], METHOD_LABELS[r["method"]], r["measurements"],
-             round(r["correct_rate"], 4), round(r["false_pair_rate"], 4),
-             round(r["missed_pair_rate"], 4), round(r["ms_per_scan"], 2),
-             r["jcbb_budget_hits"] if r["method"] == "jcbb" else "",
-             round(r["new_confirmed_rate"], 3) if r["method"] in k3 else "",
-             round(r["clutter_confirmed_rate"], 3) if r["method"] in k3 else ""]
-            for r in rows]  # fmt: skip
+    return [
+        [
+            r["sweep"],
+            r["value"],
+            METHOD_LABELS[r["method"]],
+            r["measurements"],
+            round(r["correct_rate"], 4),
+            round(r["false_pair_rate"], 4),
+            round(r["missed_pair_rate"], 4),
+            round(r["ms_per_scan"], 2),
+            r["jcbb_budget_hits"] if r["method"] == "jcbb" else "",
+            round(r["new_confirmed_rate"], 3) if r["method"] in k3 else "",
+            round(r["clutter_confirmed_rate"], 3) if r["method"] in k3 else "",
+        ]
+        for r in rows
+    ]
 
 
 def run(ctx) -> None:
     cfg_out = ctx.config.setdefault("association", {})
     base = SimConfig()
     n_seq = 2 if ctx.quick else 40
-    sweeps = ({k: (f, lab, [vals[0], vals[2], vals[-1]]) for k, (f, lab, vals) in SWEEPS.items()}
-              if ctx.quick else SWEEPS)  # fmt: skip
-    n_opt = ({"single-scan (simulated)": 12, "K=3 window (simulated SLAM)": 8,
-              "K=4 window, empty map (track formation)": 8, "random 3-scan set partitioning": 12}
-             if ctx.quick else
-             {"single-scan (simulated)": 250, "K=3 window (simulated SLAM)": 150,
-              "K=4 window, empty map (track formation)": 150,
-              "random 3-scan set partitioning": 200})  # fmt: skip
-    cfg_out.update({
-        "sim_defaults": {k: (round(v, 6) if isinstance(v, float) else v)
-                         for k, v in asdict(base).items()},
-        "sequences_per_point": n_seq, "scored_scans_per_sequence": base.n_scans - EVAL_FROM_SCAN,
-        "sweeps": {k: {"field": f, "values": vals} for k, (f, _, vals) in sweeps.items()},
-        "gate_prob": 0.99, "jcbb_max_nodes": 20_000, "window_K": 3,
-        "cost_model": "CostModel with the simulator's clutter and unmapped-landmark densities",
-        "optimality_instances": n_opt,
-    })  # fmt: skip
+    sweeps = (
+        {k: (f, lab, [vals[0], vals[2], vals[-1]]) for k, (f, lab, vals) in SWEEPS.items()}
+        if ctx.quick
+        else SWEEPS
+    )
+    n_opt = (
+        {
+            "single-scan (simulated)": 12,
+            "K=3 window (simulated SLAM)": 8,
+            "K=4 window, empty map (track formation)": 8,
+            "random 3-scan set partitioning": 12,
+        }
+        if ctx.quick
+        else {
+            "single-scan (simulated)": 250,
+            "K=3 window (simulated SLAM)": 150,
+            "K=4 window, empty map (track formation)": 150,
+            "random 3-scan set partitioning": 200,
+        }
+    )
+    cfg_out.update(
+        {
+            "sim_defaults": {
+                k: (round(v, 6) if isinstance(v, float) else v) for k, v in asdict(base).items()
+            },
+            "sequences_per_point": n_seq,
+            "scored_scans_per_sequence": base.n_scans - EVAL_FROM_SCAN,
+            "sweeps": {k: {"field": f, "values": vals} for k, (f, _, vals) in sweeps.items()},
+            "gate_prob": 0.99,
+            "jcbb_max_nodes": 20_000,
+            "window_K": 3,
+            "cost_model": "CostModel with the simulator's clutter and unmapped-landmark densities",
+            "optimality_instances": n_opt,
+        }
+    )
 
     rows = rate_study(ctx.rng("association_rates"), n_seq, base, sweeps, ctx.progress)
     notes = _rate_notes(base, n_seq, rows)
     ctx.outputs += write_table(
-        ctx.out_dir / "association", RATE_HEADER, _rate_rows(rows),
-        title="Correct-association rate on simulated maps", notes=notes,
-    )  # fmt: skip
-    plots.plot_association(rows, ctx.path("association.png"), METHOD_LABELS,
-                     {k: lab for k, (_, lab, _) in SWEEPS.items()})  # fmt: skip
+        ctx.out_dir / "association",
+        RATE_HEADER,
+        _rate_rows(rows),
+        title="Correct-association rate on simulated maps",
+        notes=notes,
+    )
+    plots.plot_association(
+        rows,
+        ctx.path("association.png"),
+        METHOD_LABELS,
+        {k: lab for k, (_, lab, _) in SWEEPS.items()},
+    )
 
     orows = optimality_study(ctx.rng("association_optimality"), n_opt, ctx.progress)
     summary = summarise_optimality(orows)

@@ -1,4 +1,4 @@
-"""Experiment 1: circle-centre and radius accuracy on the simulated pillar court (paper Tables 1, 2).
+"""Experiment 1: circle-centre and radius accuracy, simulated pillar court (paper Tables 1, 2).
 
 `trunkslam reproduce table1 table2` (one Monte Carlo serves both) writes
   table1_ce.md/.csv, table2_re.md/.csv        pillars d, e, f, g, with the paper's numbers
@@ -53,11 +53,11 @@ def _sensor(noise_m: float = 0.01):
     return sensor_preset("pls200", back_to_back=True, range_sigma_m=noise_m)
 
 
-
-
 def _extract_all(scan, sigma, methods):
     return {
-        m: extract_features(scan, m) if m == "bailey" else extract_features(scan, m, sigma_r_m=sigma)
+        m: extract_features(scan, m)
+        if m == "bailey"
+        else extract_features(scan, m, sigma_r_m=sigma)
         for m in methods
     }
 
@@ -105,8 +105,13 @@ def pillar_monte_carlo(n_trials, rng, methods=METHODS, noise_m=0.01, progress=No
     exact = sensor_preset("pls200", back_to_back=True, range_sigma_m=0.0, quantisation_m=0.0)
     sigma = _sigma(sensor)
     truth = scene.truth_landmarks
-    mc = MonteCarlo([c.name for c in scene.circles], truth, n_trials, sigma,
-                    n_positions=len(scene.scan_positions))  # fmt: skip
+    mc = MonteCarlo(
+        [c.name for c in scene.circles],
+        truth,
+        n_trials,
+        sigma,
+        n_positions=len(scene.scan_positions),
+    )
     mc.est = {m: {k: [] for k in range(len(truth))} for m in methods}
     angles = sensor.angles_rad
     total = len(scene.scan_positions) * n_trials
@@ -153,14 +158,16 @@ def summarise(mc: MonteCarlo, methods=METHODS) -> dict:
                 re = radius_error(mc.truth_xyr[k, 2], rec[:, 3])
                 rng_err = np.linalg.norm(rec[:, 1:3], axis=1) - np.linalg.norm(true_c, axis=1)
                 row.update(
-                    ce_mean=float(ce.mean()), ce_median=float(np.median(ce)),
+                    ce_mean=float(ce.mean()),
+                    ce_median=float(np.median(ce)),
                     ce_rms=float(np.sqrt(np.mean(ce**2))),
-                    re_mean=float(re.mean()), re_median=float(np.median(re)),
+                    re_mean=float(re.mean()),
+                    re_median=float(np.median(re)),
                     re_rms=float(np.sqrt(np.mean(re**2))),
                     r_bias_m=float(np.mean(rec[:, 3] - mc.truth_xyr[k, 2])),
                     range_bias_m=float(np.mean(rng_err)),
                     rms_center_m=float(np.sqrt(np.mean(np.sum((rec[:, 1:3] - true_c) ** 2, 1)))),
-                )  # fmt: skip
+                )
             out[m][name] = row
     # the bound, as RMS CE and RE averaged over the positions where the pillar spans >= 4 beams
     # (where the fitting methods can extract it)
@@ -168,8 +175,10 @@ def summarise(mc: MonteCarlo, methods=METHODS) -> dict:
     for k, name in enumerate(mc.names):
         cells = [(p, C) for (p, kk), C in mc.crlb.items() if kk == k and mc.beams[(p, kk)] >= 4]
         if cells:
-            ce = [math.sqrt(C[0, 0] + C[1, 1]) / np.linalg.norm(mc.true_sensor[(p, k)])
-                  for p, C in cells]  # fmt: skip
+            ce = [
+                math.sqrt(C[0, 0] + C[1, 1]) / np.linalg.norm(mc.true_sensor[(p, k)])
+                for p, C in cells
+            ]
             re = [math.sqrt(C[2, 2]) / mc.truth_xyr[k, 2] for _, C in cells]
             out["crlb"][name] = {"ce_rms": float(np.mean(ce)), "re_rms": float(np.mean(re))}
     return out
@@ -207,11 +216,16 @@ def paired(mc: MonteCarlo, a: str = "paper", b: str = "bailey") -> list[list]:
         xa = np.array([ea[c] for c in common])
         xb = np.array([eb[c] for c in common])
         r_true = mc.truth_xyr[k, 2]
-        rows.append([name, len(common),
-                     float(center_error(true_c, xa[:, :2]).mean()),
-                     float(center_error(true_c, xb[:, :2]).mean()),
-                     float(radius_error(r_true, xa[:, 2]).mean()),
-                     float(radius_error(r_true, xb[:, 2]).mean())])  # fmt: skip
+        rows.append(
+            [
+                name,
+                len(common),
+                float(center_error(true_c, xa[:, :2]).mean()),
+                float(center_error(true_c, xb[:, :2]).mean()),
+                float(radius_error(r_true, xa[:, 2]).mean()),
+                float(radius_error(r_true, xb[:, 2]).mean()),
+            ]
+        )
     return rows
 
 
@@ -222,11 +236,21 @@ def _table(summary, pillars, key, methods, published: dict | None):
     rows = []
     for m in methods:
         for label, field_ in stat_names.items():
-            rows.append([m, f"{label} {key.upper()}",
-                         *[summary[m][p].get(field_, math.nan) for p in pillars]])  # fmt: skip
+            rows.append(
+                [
+                    m,
+                    f"{label} {key.upper()}",
+                    *[summary[m][p].get(field_, math.nan) for p in pillars],
+                ]
+            )
         rows.append([m, "miss rate", *[summary[m][p]["miss"] for p in pillars]])
-    rows.append(["Cramer-Rao bound", f"RMS {key.upper()}",
-                 *[summary["crlb"].get(p, {}).get(f"{key}_rms", math.nan) for p in pillars]])  # fmt: skip
+    rows.append(
+        [
+            "Cramer-Rao bound",
+            f"RMS {key.upper()}",
+            *[summary["crlb"].get(p, {}).get(f"{key}_rms", math.nan) for p in pillars],
+        ]
+    )
     for name, vals in (published or {}).items():
         rows.append([name, key.upper(), *[vals.get(p, math.nan) for p in pillars]])
     return header, rows
@@ -238,8 +262,16 @@ def run_tables(ctx) -> None:
 
     n = 20 if ctx.quick else 200
     cfg = ctx.config.setdefault("table1", {})
-    cfg.update({"n_trials": n, "scene": "pillar_court", "sensor": "2 x PLS200 back to back",
-                "range_noise_m": 0.01, "quantisation_m": 0.01, "methods": list(METHODS)})  # fmt: skip
+    cfg.update(
+        {
+            "n_trials": n,
+            "scene": "pillar_court",
+            "sensor": "2 x PLS200 back to back",
+            "range_noise_m": 0.01,
+            "quantisation_m": 0.01,
+            "methods": list(METHODS),
+        }
+    )
     rec = open_recording(ctx.path("circles.rrd"))
     try:
         mc = pillar_monte_carlo(n, ctx.rng("table1"), progress=ctx.progress, rec=rec)
@@ -248,42 +280,76 @@ def run_tables(ctx) -> None:
         rec.close()
     s = summarise(mc)
     cfg["extractor_sigma_r_m"] = mc.sigma_m
-    note = (f"{n} noise draws at each of the six positions; CE eq. (10), RE eq. (11), relative to "
-            "the pillar's distance and radius; mean (the paper's statistic), median and RMS over "
-            "the scans in which the method extracted the pillar. Compare the Cramer-Rao bound "
-            "(an RMS) with the RMS rows: a mean of 2-D Gaussian errors is about 0.89 of their RMS.")  # fmt: skip
+    note = (
+        f"{n} noise draws at each of the six positions; CE eq. (10), RE eq. (11), relative to "
+        "the pillar's distance and radius; mean (the paper's statistic), median and RMS over "
+        "the scans in which the method extracted the pillar. Compare the Cramer-Rao bound "
+        "(an RMS) with the RMS rows: a mean of 2-D Gaussian errors is about 0.89 of their RMS."
+    )
     for stem, key, pillars, pub, extra in (
         ("table1_ce", "ce", TABLE_PILLARS, PAPER_TABLE1, ""),
-        ("table2_re", "re", TABLE_PILLARS, None,
-         " The paper's Table 2 (RE) values did not survive in our copy of the paper."),
+        (
+            "table2_re",
+            "re",
+            TABLE_PILLARS,
+            None,
+            " The paper's Table 2 (RE) values did not survive in our copy of the paper.",
+        ),
         ("table1_ce_all", "ce", tuple(mc.names), PAPER_TABLE1, ""),
         ("table2_re_all", "re", tuple(mc.names), None, ""),
-    ):  # fmt: skip
+    ):
         header, rows = _table(s, pillars, key, METHODS, pub)
         ctx.outputs += write_table(
-            ctx.out_dir / stem, header, rows,
+            ctx.out_dir / stem,
+            header,
+            rows,
             title=f"{'Table 1' if key == 'ce' else 'Table 2'}: {key.upper()} of pillars "
-                  f"{', '.join(pillars)} (simulated pillar court)",
+            f"{', '.join(pillars)} (simulated pillar court)",
             notes=note + extra,
-        )  # fmt: skip
-    header = ["method", "pillar", "radius bias (m)", "centre-range bias (m)", "RMS centre error (m)",
-              "extracted scans"]  # fmt: skip
-    rows = [[m, p, s[m][p].get("r_bias_m", math.nan), s[m][p].get("range_bias_m", math.nan),
-             s[m][p].get("rms_center_m", math.nan), s[m][p]["n"]]
-            for m in METHODS for p in mc.names]  # fmt: skip
+        )
+    header = [
+        "method",
+        "pillar",
+        "radius bias (m)",
+        "centre-range bias (m)",
+        "RMS centre error (m)",
+        "extracted scans",
+    ]
+    rows = [
+        [
+            m,
+            p,
+            s[m][p].get("r_bias_m", math.nan),
+            s[m][p].get("range_bias_m", math.nan),
+            s[m][p].get("rms_center_m", math.nan),
+            s[m][p]["n"],
+        ]
+        for m in METHODS
+        for p in mc.names
+    ]
     ctx.outputs += write_table(
-        ctx.out_dir / "circle_bias", header, rows, title="Signed errors (bias) per method",
+        ctx.out_dir / "circle_bias",
+        header,
+        rows,
+        title="Signed errors (bias) per method",
         notes="Negative radius bias = circle too small; negative centre-range bias = centre too "
-              "near the sensor (the Kasa bias of the paper's fit on short arcs).",
-    )  # fmt: skip
+        "near the sensor (the Kasa bias of the paper's fit on short arcs).",
+    )
     pr = paired(mc)
     ctx.outputs += write_table(
         ctx.out_dir / "paper_vs_bailey",
-        ["pillar", "scans extracted by both", "mean CE paper", "mean CE bailey", "mean RE paper",
-         "mean RE bailey"], pr,
+        [
+            "pillar",
+            "scans extracted by both",
+            "mean CE paper",
+            "mean CE bailey",
+            "mean RE paper",
+            "mean RE bailey",
+        ],
+        pr,
         title="The paper's fit against the Bailey detector on the same scans",
         notes="Only the scans in which both methods extracted the pillar.",
-    )  # fmt: skip
+    )
     both = [r for r in pr if r[1] > 0]
     cfg["paper_beats_bailey_ce"] = [r[0] for r in both if r[2] < r[3]]
     cfg["paper_beats_bailey_re"] = [r[0] for r in both if r[4] < r[5]]
@@ -294,13 +360,21 @@ def run_tables(ctx) -> None:
     cfg["crlb_within_1p5"] = float(np.mean(ratios <= 1.5)) if len(ratios) else None
     ctx.outputs += write_table(
         ctx.out_dir / "crlb_efficiency",
-        ["position", "pillar", "beams", "CRLB RMS centre (m)", "geometric RMS centre (m)",
-         "ratio", "scans"], eff,
+        [
+            "position",
+            "pillar",
+            "beams",
+            "CRLB RMS centre (m)",
+            "geometric RMS centre (m)",
+            "ratio",
+            "scans",
+        ],
+        eff,
         title="Geometric fit against the Cramer-Rao bound (positions with >= 5 beams)",
         notes=f"Ratio median {cfg['crlb_ratio_median']:.3f}, max {cfg['crlb_ratio_max']:.3f}; "
-              f"{100 * cfg['crlb_within_1p5']:.0f}% of cells within 1.5x. The bound assumes "
-              "Gaussian range noise of the stated sigma (noise and quantisation combined).",
-    )  # fmt: skip
+        f"{100 * cfg['crlb_within_1p5']:.0f}% of cells within 1.5x. The bound assumes "
+        "Gaussian range noise of the stated sigma (noise and quantisation combined).",
+    )
 
 
 def pillar_figures(ctx, rec) -> None:
@@ -324,18 +398,29 @@ def pillar_figures(ctx, rec) -> None:
             rec.log_features(scan, f, pose=pose, path=f"figures/features/{m}")
         truth_l = np.column_stack([_to_sensor(truth, pose), truth[:, 2]])
         if k == 0:
-            ctx.outputs.append(plots.plot_raw_scan(
-                scan.points_xy, "Fig. 2(b): one whole scan (simulated pillar court, position 1)",
-                ctx.out_dir / "fig2b_raw_scan.png"))  # fmt: skip
+            ctx.outputs.append(
+                plots.plot_raw_scan(
+                    scan.points_xy,
+                    "Fig. 2(b): one whole scan (simulated pillar court, position 1)",
+                    ctx.out_dir / "fig2b_raw_scan.png",
+                )
+            )
         if k in (1, 3):
             fig = {1: "fig3_position2.png", 3: "fig4_position4.png"}[k]
             f = feats["paper"]
             circles = [(m, feats[m].circle_params, plots.METHOD_COLORS[m]) for m in feats]
-            ctx.outputs.append(plots.plot_features(
-                scan.points_xy, _segments(f), circles, f.edge_xy,
-                f"Circles and edges at position {k + 1} (simulated; laser frame)",
-                ctx.out_dir / fig, zoom=_zoom_box(truth_l), truth_xyr=truth_l,
-            ))  # fmt: skip
+            ctx.outputs.append(
+                plots.plot_features(
+                    scan.points_xy,
+                    _segments(f),
+                    circles,
+                    f.edge_xy,
+                    f"Circles and edges at position {k + 1} (simulated; laser frame)",
+                    ctx.out_dir / fig,
+                    zoom=_zoom_box(truth_l),
+                    truth_xyr=truth_l,
+                )
+            )
 
 
 SWEEPS = {
@@ -361,8 +446,13 @@ def sweep_point(rng, range_m, radius_m, noise_m, n_trials, methods=METHODS):
     for _ in range(n_trials):
         b = rng.uniform(-0.5, 0.5) * sensor.angle_increment_rad
         c = np.array([range_m * math.cos(b), range_m * math.sin(b)])
-        scene = scene_from_dict({"circles": [{"name": "p", "kind": "pillar",
-                                              "center_xy": c.tolist(), "radius_m": radius_m}]})  # fmt: skip
+        scene = scene_from_dict(
+            {
+                "circles": [
+                    {"name": "p", "kind": "pillar", "center_xy": c.tolist(), "radius_m": radius_m}
+                ]
+            }
+        )
         _, lab0 = simulate_scan(scene, (0, 0, 0), exact, rng)
         if np.sum(lab0 == 0) >= 3:
             C = circle_crlb(c, radius_m, exact.angles_rad[lab0 == 0], sigma)
@@ -373,6 +463,7 @@ def sweep_point(rng, range_m, radius_m, noise_m, n_trials, methods=METHODS):
             if got is not None:
                 ce[m].append(float(center_error(c, got[:2])))
                 re[m].append(float(radius_error(radius_m, got[2])))
+
     def rms(v):
         return math.sqrt(np.mean(np.square(v))) if v else math.nan
 
@@ -406,12 +497,13 @@ def run_sweep(ctx) -> None:
             done += 1
             ctx.progress("circle sweep", done, total)
     ctx.outputs += write_table(
-        ctx.out_dir / "circle_sweep", ["varied", "value", "method", "RMS CE", "RMS RE",
-                                       "extracted fraction"], rows,
+        ctx.out_dir / "circle_sweep",
+        ["varied", "value", "method", "RMS CE", "RMS RE", "extracted fraction"],
+        rows,
         title="Circle accuracy against range, radius and range noise",
         notes=f"One pillar straight ahead of a PLS200, {n} scans per point; the others held at "
-              f"{SWEEP_DEFAULT}. The crlb rows are the Cramer-Rao bound (RMS, relative).",
-    )  # fmt: skip
+        f"{SWEEP_DEFAULT}. The crlb rows are the Cramer-Rao bound (RMS, relative).",
+    )
     ctx.outputs.append(plots.plot_sweep(results, ctx.out_dir / "circle_sweep.png"))
 
 
@@ -422,8 +514,10 @@ def write_golden() -> Path:
     ctx = RunContext(out_dir=Path("/tmp"), quick=True, seed=0)
     mc = pillar_monte_carlo(20, ctx.rng("table1"))
     s = summarise(mc)
-    gold = {m: {p: {k: s[m][p].get(k) for k in ("ce_mean", "re_mean", "miss")}
-                for p in TABLE_PILLARS} for m in METHODS}  # fmt: skip
+    gold = {
+        m: {p: {k: s[m][p].get(k) for k in ("ce_mean", "re_mean", "miss")} for p in TABLE_PILLARS}
+        for m in METHODS
+    }
     GOLDEN.parent.mkdir(parents=True, exist_ok=True)
     GOLDEN.write_text(json.dumps(gold, indent=1, sort_keys=True) + "\n")
     return GOLDEN

@@ -24,7 +24,6 @@ from features import extract_features
 log = logging.getLogger(__name__)
 
 
-
 def _zoom_box(circles_xyr: np.ndarray, n: int = 1, margin: float = 1.5):
     """A box around the n circles nearest the sensor."""
     if len(circles_xyr) == 0:
@@ -42,16 +41,31 @@ def _segments(f):
 def classification(ctx) -> None:
     n = 8 if ctx.quick else 60
     sigma = 0.01
-    ctx.config["features"]["classification"] = {"n_trials": n, "sigma_m": sigma,
-                                                "radii_m": RADII_M, "ranges_m": RANGES_M}  # fmt: skip
+    ctx.config["features"]["classification"] = {
+        "n_trials": n,
+        "sigma_m": sigma,
+        "radii_m": RADII_M,
+        "ranges_m": RANGES_M,
+    }
     res = classification_study(ctx.rng("classification"), n, sigma, progress=ctx.progress)
-    header = ["radius (m)", "range (m)", "beams on trunk", "circle rate (lrt)",
-              "circle rate (paper eq. 5)"]  # fmt: skip
+    header = [
+        "radius (m)",
+        "range (m)",
+        "beams on trunk",
+        "circle rate (lrt)",
+        "circle rate (paper eq. 5)",
+    ]
     rows = [
-        [r, d, round(res.beams[(r, d)], 1), res.circle_rate["lrt"][(r, d)],
-         res.circle_rate["paper"][(r, d)]]
-        for r in RADII_M for d in RANGES_M
-    ]  # fmt: skip
+        [
+            r,
+            d,
+            round(res.beams[(r, d)], 1),
+            res.circle_rate["lrt"][(r, d)],
+            res.circle_rate["paper"][(r, d)],
+        ]
+        for r in RADII_M
+        for d in RANGES_M
+    ]
     notes = (
         f"{n} trials per cell, PLS200 with {sigma} m range noise and 1 cm quantisation.\n\n"
         "| object | lrt | paper eq. 5 |\n|---|---|---|\n"
@@ -63,9 +77,12 @@ def classification(ctx) -> None:
         f"{res.bush_circle_rate['paper']:.3f} |\n"
     )
     ctx.outputs += write_table(
-        ctx.out_dir / "classification", header, rows,
-        title="Classification of simulated trunks, walls and bushes", notes=notes,
-    )  # fmt: skip
+        ctx.out_dir / "classification",
+        header,
+        rows,
+        title="Classification of simulated trunks, walls and bushes",
+        notes=notes,
+    )
     ctx.outputs.append(plots.plot_circle_rates(res, ctx.out_dir / "classification.png"))
 
 
@@ -97,13 +114,20 @@ def victoria_park_figure(ctx, rec) -> None:
     f = extract_features(scan, "paper")
     b = extract_features(scan, "bailey")
     ctx.config["features"]["victoria_park"] = {"scan_index": best_k, "scans_logged": n}
-    ctx.outputs.append(plots.plot_features(
-        scan.points_xy, _segments(f),
-        [("paper", f.circle_params, plots.METHOD_COLORS["paper"]),
-         ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"])],
-        f.edge_xy, f"Victoria Park scan {best_k + 1} (t = {scan.stamp_s:.2f} s; laser frame)",
-        ctx.out_dir / "fig_vp_scan.png", zoom=_zoom_box(f.circle_params),
-    ))  # fmt: skip
+    ctx.outputs.append(
+        plots.plot_features(
+            scan.points_xy,
+            _segments(f),
+            [
+                ("paper", f.circle_params, plots.METHOD_COLORS["paper"]),
+                ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"]),
+            ],
+            f.edge_xy,
+            f"Victoria Park scan {best_k + 1} (t = {scan.stamp_s:.2f} s; laser frame)",
+            ctx.out_dir / "fig_vp_scan.png",
+            zoom=_zoom_box(f.circle_params),
+        )
+    )
 
 
 def run(ctx) -> None:

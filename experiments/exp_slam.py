@@ -122,10 +122,14 @@ KASA_RANGE_BIAS_M = -0.0043  # mean range error of the paper's centres (calibrat
 SENSITIVITY = (
     ("paper detections, synthetic centres", "paper", {}, "synthetic"),
     ("paper, Kasa's mean range bias (4.3 mm) removed", "paper", {}, "debias"),
-    ("geometric, constant noise instead of the fit's", "geometric",
-     {"measurement_noise": "constant"}, ""),
+    (
+        "geometric, constant noise instead of the fit's",
+        "geometric",
+        {"measurement_noise": "constant"},
+        "",
+    ),
     ("bailey, circles beyond 12 m ignored", "bailey", {"max_feature_range_m": 12.0}, ""),
-)  # fmt: skip
+)
 
 
 def extractor_params(method: str, cycab: CycabParams) -> dict:
@@ -139,9 +143,13 @@ def extractor_params(method: str, cycab: CycabParams) -> dict:
     return {"sigma_r_m": math.sqrt(s.range_sigma_m**2 + s.quantisation_m**2 / 12.0)}
 
 
-def false_detections(features, labels: np.ndarray, laser_world_pose: np.ndarray,
-                     truth_landmarks: np.ndarray, false_match_m: float = 0.5
-                     ) -> tuple[int, int]:  # fmt: skip
+def false_detections(
+    features,
+    labels: np.ndarray,
+    laser_world_pose: np.ndarray,
+    truth_landmarks: np.ndarray,
+    false_match_m: float = 0.5,
+) -> tuple[int, int]:
     """(detected, false) circles of one scan; see the module docstring for "false"."""
     n = int(features.n_circles)
     if n == 0:
@@ -168,8 +176,14 @@ def false_detections(features, labels: np.ndarray, laser_world_pose: np.ndarray,
     return n, false
 
 
-def synthetic_features(feats: list, seq, laser_w: np.ndarray, model, rng: np.random.Generator,
-                       false_match_m: float = 0.5) -> list:  # fmt: skip
+def synthetic_features(
+    feats: list,
+    seq,
+    laser_w: np.ndarray,
+    model,
+    rng: np.random.Generator,
+    false_match_m: float = 0.5,
+) -> list:
     """The circles of `feats` that are true trunk detections, with their centres replaced by the
     true centre plus noise from the constant noise model `model` (s_r, s_r_per_m, s_b, s_t)."""
     s_r, s_rm, s_b, s_t = model
@@ -180,8 +194,15 @@ def synthetic_features(feats: list, seq, laser_w: np.ndarray, model, rng: np.ran
         params = []
         nb = seq.scan_labels.shape[1]
         for (a, b), p in zip(f.circle_beams, f.circle_params):
-            one = type("One", (), {"n_circles": 1, "circle_beams": np.array([[a, b]]),
-                                   "circle_params": np.array([p])})()  # fmt: skip
+            one = type(
+                "One",
+                (),
+                {
+                    "n_circles": 1,
+                    "circle_beams": np.array([[a, b]]),
+                    "circle_params": np.array([p]),
+                },
+            )()
             if false_detections(one, seq.scan_labels[k], lw, lm, false_match_m)[1]:
                 continue
             lab = seq.scan_labels[k][np.arange(int(a), int(b) + 1) % nb]
@@ -193,10 +214,15 @@ def synthetic_features(feats: list, seq, laser_w: np.ndarray, model, rng: np.ran
             bearing += math.sqrt(s_b**2 + (s_t / r) ** 2) * rng.standard_normal()
             params.append([r * math.cos(bearing), r * math.sin(bearing), p[2]])
         n = len(params)
-        out.append(replace(f, circle_params=np.array(params).reshape(n, 3),
-                           circle_cov=np.zeros((n, 3, 3)),
-                           circle_beams=np.zeros((n, 2), np.int64),
-                           circle_rms_m=np.zeros(n)))  # fmt: skip
+        out.append(
+            replace(
+                f,
+                circle_params=np.array(params).reshape(n, 3),
+                circle_cov=np.zeros((n, 3, 3)),
+                circle_beams=np.zeros((n, 2), np.int64),
+                circle_rms_m=np.zeros(n),
+            )
+        )
     return out
 
 
@@ -211,8 +237,13 @@ def _push_out(f, dr_m: float):
 
 def _laser_world(pose: np.ndarray, laser: np.ndarray) -> np.ndarray:
     c, s = math.cos(pose[2]), math.sin(pose[2])
-    return np.array([pose[0] + c * laser[0] - s * laser[1], pose[1] + s * laser[0] + c * laser[1],
-                     pose[2] + laser[2]])  # fmt: skip
+    return np.array(
+        [
+            pose[0] + c * laser[0] - s * laser[1],
+            pose[1] + s * laser[0] + c * laser[1],
+            pose[2] + laser[2],
+        ]
+    )
 
 
 @dataclass
@@ -284,8 +315,9 @@ def monte_carlo(cfg: Exp2Config, rng: np.random.Generator, progress=None) -> Exp
             scfg = replace(cfg.slam, **overrides)
             fs = feats[m]
             if kind == "synthetic":
-                fs = synthetic_features(fs, seq, laser_w, scfg.noise_for(m)[1], noise_rng,
-                                        cfg.false_match_m)  # fmt: skip
+                fs = synthetic_features(
+                    fs, seq, laser_w, scfg.noise_for(m)[1], noise_rng, cfg.false_match_m
+                )
             elif kind == "debias":
                 fs = [_push_out(f, -KASA_RANGE_BIAS_M) for f in fs]
             t0 = time.perf_counter()
@@ -302,11 +334,14 @@ def monte_carlo(cfg: Exp2Config, rng: np.random.Generator, progress=None) -> Exp
             if name == m:
                 for k, f in enumerate(feats[m]):
                     res.detected[name][r, k], res.false[name][r, k] = false_detections(
-                        f, seq.scan_labels[k], laser_w[k], lm, cfg.false_match_m)  # fmt: skip
+                        f, seq.scan_labels[k], laser_w[k], lm, cfg.false_match_m
+                    )
             res.map_size[name][r] = lg.landmark_xy.shape[0]
             if lg.landmark_xy.shape[0]:
-                d = np.hypot(lg.landmark_xy[:, None, 0] - lm[None, :, 0],
-                             lg.landmark_xy[:, None, 1] - lm[None, :, 1])  # fmt: skip
+                d = np.hypot(
+                    lg.landmark_xy[:, None, 0] - lm[None, :, 0],
+                    lg.landmark_xy[:, None, 1] - lm[None, :, 1],
+                )
                 res.map_on_trees[name][r] = int(np.sum(d.min(axis=1) <= cfg.false_match_m))
             if r == 0 and name == m:
                 res.logs0[m] = lg
@@ -394,58 +429,93 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
     for i, (q, unit) in enumerate((("dx", "m"), ("dy", "m"), ("dtheta", "rad"))):
         row: list = [q, unit]
         for m in methods:
-            row += [round(float(res.abs_err[m][:, i].mean()), 4),
-                    round(float(res.abs_err[m][:, i].std(ddof=1)) if R > 1 else math.nan, 4)]  # fmt: skip
+            row += [
+                round(float(res.abs_err[m][:, i].mean()), 4),
+                round(float(res.abs_err[m][:, i].std(ddof=1)) if R > 1 else math.nan, 4),
+            ]
         row += [PAPER_TABLE3["paper"][i], PAPER_TABLE3["bailey"][i]]
         rows.append(row)
     mean = {m: res.abs_err[m].mean(axis=0) for m in methods}
     notes = [
-        (f"{R} Monte Carlo runs of {cfg.cycab.n_scans} scans (scene {cfg.scene}, association "
-         f"{cfg.association}); per run the mean over the scans after the first of |dx|, |dy|, "
-         "|dtheta| (the paper's formula, pose after each scan's update), then the mean and the "
-         "standard deviation over the runs. The reference is the simulated EXACT pose, not the "
-         "simulated 2 cm DGPS: scoring x, y against a 2 cm DGPS would add its own noise (mean "
-         "|error| of 2 cm Gaussian noise: 0.016 m per axis), as large as the errors here. The "
-         "paper's numbers are one real run against a real DGPS."),
-    ]  # fmt: skip
+        (
+            f"{R} Monte Carlo runs of {cfg.cycab.n_scans} scans (scene {cfg.scene}, association "
+            f"{cfg.association}); per run the mean over the scans after the first of |dx|, |dy|, "
+            "|dtheta| (the paper's formula, pose after each scan's update), then the mean and the "
+            "standard deviation over the runs. The reference is the simulated EXACT pose, not the "
+            "simulated 2 cm DGPS: scoring x, y against a 2 cm DGPS would add its own noise (mean "
+            "|error| of 2 cm Gaussian noise: 0.016 m per axis), as large as the errors here. The "
+            "paper's numbers are one real run against a real DGPS."
+        ),
+    ]
     if "paper" in mean and "bailey" in mean:
         lower = [bool(mean["paper"][i] < mean["bailey"][i]) for i in range(3)]
         notes.append(f"Direction as the paper (paper < bailey in dx, dy, dtheta): {lower}.")
     if "paper" in mean and "geometric" in mean:
         geo = [bool(mean["geometric"][i] <= mean["paper"][i]) for i in range(3)]
         notes.append(f"geometric <= paper in dx, dy, dtheta: {geo}.")
-    paths += write_table(out_dir / "table3", header, rows,
-                         title="Table 3: average absolute pose error", notes="\n\n".join(notes))  # fmt: skip
+    paths += write_table(
+        out_dir / "table3",
+        header,
+        rows,
+        title="Table 3: average absolute pose error",
+        notes="\n\n".join(notes),
+    )
     # Table 4
     header = ["method"] + [f"scans {a}-{b}" for a, b in SCAN_SETS] + ["circles per scan"]
     rows = []
     for m in methods:
-        rows.append([f"{m} (ours)"] + [round(v, 4) for v in table4_rates(res, m)]
-                    + [round(float(res.detected[m].mean()), 2)])  # fmt: skip
+        rows.append(
+            [f"{m} (ours)"]
+            + [round(v, 4) for v in table4_rates(res, m)]
+            + [round(float(res.detected[m].mean()), 2)]
+        )
     rows.append(["proposed (paper)", *PAPER_TABLE4["paper"], "n/a"])
     rows.append(["Bailey (paper)", *PAPER_TABLE4["bailey"], "n/a"])
     notes4 = (
         f"The paper's rate: false features / detected features in a scan, averaged over the "
         f"scans of each set that have a detection (scan indices from 0, the sets inclusive) "
-        f"and the {R} runs. A circle is false when the beams it was fitted to do not mostly hit one "
-        f"trunk (per-beam truth labels: bushes, walls, mixed returns) or its centre lies more "
+        f"and the {R} runs. A circle is false when the beams it was fitted to do not mostly hit "
+        f"one trunk (per-beam truth labels: bushes, walls, mixed returns) or its centre lies more "
         f"than {cfg.false_match_m} m from that trunk's. The paper and geometric extractors find "
         "the same circles (they differ only in the fit), so their rates are equal."
     )
-    paths += write_table(out_dir / "table4", header, rows,
-                         title="Table 4: false-detection rate", notes=notes4)  # fmt: skip
+    paths += write_table(
+        out_dir / "table4", header, rows, title="Table 4: false-detection rate", notes=notes4
+    )
     # Consistency
-    header = ["method", "runs", "NEES mean", "NEES in 95% bounds", "below", "above", "bounds",
-              "NIS per dof", "NIS in 95% bounds", "landmarks", "on trees", "ms per scan"]  # fmt: skip
+    header = [
+        "method",
+        "runs",
+        "NEES mean",
+        "NEES in 95% bounds",
+        "below",
+        "above",
+        "bounds",
+        "NIS per dof",
+        "NIS in 95% bounds",
+        "landmarks",
+        "on trees",
+        "ms per scan",
+    ]
     rows = []
     for name in res.nees:
         c = consistency(res, name)
-        rows.append([name, res.nees[name].shape[0], round(c["nees_mean"], 3), round(c["nees_in"], 3),
-                     round(c["nees_below"], 3), round(c["nees_above"], 3),
-                     f"[{c['nees_lo']:.2f}, {c['nees_hi']:.2f}]", round(c["nis_per_dof"], 3),
-                     round(c["nis_in"], 3), round(float(res.map_size[name].mean()), 2),
-                     round(float(res.map_on_trees[name].mean()), 2),
-                     round(1e3 * float(res.time_slam[name].mean()), 3)])  # fmt: skip
+        rows.append(
+            [
+                name,
+                res.nees[name].shape[0],
+                round(c["nees_mean"], 3),
+                round(c["nees_in"], 3),
+                round(c["nees_below"], 3),
+                round(c["nees_above"], 3),
+                f"[{c['nees_lo']:.2f}, {c['nees_hi']:.2f}]",
+                round(c["nis_per_dof"], 3),
+                round(c["nis_in"], 3),
+                round(float(res.map_size[name].mean()), 2),
+                round(float(res.map_on_trees[name].mean()), 2),
+                round(1e3 * float(res.time_slam[name].mean()), 3),
+            ]
+        )
     notes_c = (
         "Vehicle-pose NEES (3 dof) averaged over the runs at each scan after the first; the "
         "fraction of scans where it lies inside its 95% chi-square bounds (target: at least "
@@ -457,8 +527,13 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
         "three methods are variants that explain the figures (see the README), on the first "
         f"{cfg.sensitivity_runs} runs."
     )
-    paths += write_table(out_dir / "consistency", header, rows,
-                         title="Consistency of the EKF (NEES, NIS)", notes=notes_c)  # fmt: skip
+    paths += write_table(
+        out_dir / "consistency",
+        header,
+        rows,
+        title="Consistency of the EKF (NEES, NIS)",
+        notes=notes_c,
+    )
     return paths
 
 
@@ -485,15 +560,24 @@ def _write_figures(res: Exp2Results, out_dir: Path) -> list[Path]:
     paths = []
     main = "paper" if "paper" in res.logs0 else next(iter(res.logs0))
     lg = res.logs0[main]
-    paths.append(plots.plot_slam_path(
-        truth[:, :2], lg.pose[:, :2], seq.truth_landmarks, lg.landmark_xy, lg.landmark_cov,
-        f"Fig. 7: true (dashed) and estimated path, {main} features, IHGR (run 0)",
-        out_dir / "fig7_slam_path.png", walls=[w.points_xy for w in scene.walls],
-        bushes=[b.points_xy for b in scene.bushes]))  # fmt: skip
+    paths.append(
+        plots.plot_slam_path(
+            truth[:, :2],
+            lg.pose[:, :2],
+            seq.truth_landmarks,
+            lg.landmark_xy,
+            lg.landmark_cov,
+            f"Fig. 7: true (dashed) and estimated path, {main} features, IHGR (run 0)",
+            out_dir / "fig7_slam_path.png",
+            walls=[w.points_xy for w in scene.walls],
+            bushes=[b.points_xy for b in scene.bushes],
+        )
+    )
     pair = [m for m in ("paper", "bailey") if m in res.logs0] or list(res.logs0)
     # Fig. 10: innovations of the tree observed most often by both methods
-    trees = {m: _tree_of_landmarks(res.logs0[m], seq.truth_landmarks, cfg.false_match_m)
-             for m in pair}  # fmt: skip
+    trees = {
+        m: _tree_of_landmarks(res.logs0[m], seq.truth_landmarks, cfg.false_match_m) for m in pair
+    }
     counts = {}
     for m in pair:
         lgm = res.logs0[m]
@@ -506,12 +590,23 @@ def _write_figures(res: Exp2Results, out_dir: Path) -> list[Path]:
         lids = [lid for lid, j in trees[m].items() if j == best]
         sel = np.isin(lgm.obs_landmark, lids)
         sig = np.sqrt(np.stack([lgm.obs_innov_cov[sel, 0, 0], lgm.obs_innov_cov[sel, 1, 1]], 1))
-        series.append({"label": m, "scan": lgm.obs_scan[sel], "innov": lgm.obs_innov[sel],
-                       "sigma": sig, "style": STYLE.get(m, "-")})  # fmt: skip
+        series.append(
+            {
+                "label": m,
+                "scan": lgm.obs_scan[sel],
+                "innov": lgm.obs_innov[sel],
+                "sigma": sig,
+                "style": STYLE.get(m, "-"),
+            }
+        )
     name = scene.circles[best].name if best is not None else "-"
-    paths.append(plots.plot_innovations(
-        series, f"Fig. 10: innovations of tree {name} with 3 sigma bounds (run 0)",
-        out_dir / "fig10_innovations.png"))  # fmt: skip
+    paths.append(
+        plots.plot_innovations(
+            series,
+            f"Fig. 10: innovations of tree {name} with 3 sigma bounds (run 0)",
+            out_dir / "fig10_innovations.png",
+        )
+    )
     # Fig. 11: errors of the prediction with 3 sigma
     series = []
     for m in pair:
@@ -519,16 +614,33 @@ def _write_figures(res: Exp2Results, out_dir: Path) -> list[Path]:
         e = lgm.pred_pose - truth
         e[:, 2] = wrap_angle(e[:, 2])
         sig = np.sqrt(np.maximum(np.diagonal(lgm.pred_pose_cov, axis1=1, axis2=2), 0.0))
-        series.append({"label": m, "scan": np.arange(seq.n_scans), "err": e, "sigma": sig,
-                       "style": STYLE.get(m, "-")})  # fmt: skip
-    paths.append(plots.plot_pose_errors(
-        series, "Fig. 11: predicted pose errors with 3 sigma bounds (run 0)",
-        out_dir / "fig11_pose_errors.png"))  # fmt: skip
+        series.append(
+            {
+                "label": m,
+                "scan": np.arange(seq.n_scans),
+                "err": e,
+                "sigma": sig,
+                "style": STYLE.get(m, "-"),
+            }
+        )
+    paths.append(
+        plots.plot_pose_errors(
+            series,
+            "Fig. 11: predicted pose errors with 3 sigma bounds (run 0)",
+            out_dir / "fig11_pose_errors.png",
+        )
+    )
     lo, hi = nees_bounds(cfg.n_runs)
-    paths.append(plots.plot_consistency(
-        {n: consistency(res, n)["nees_avg"] for n in cfg.methods}, (lo, hi),
-        f"Average vehicle-pose NEES over {cfg.n_runs} runs", "NEES (3 dof)",
-        out_dir / "nees.png", expected=3.0))  # fmt: skip
+    paths.append(
+        plots.plot_consistency(
+            {n: consistency(res, n)["nees_avg"] for n in cfg.methods},
+            (lo, hi),
+            f"Average vehicle-pose NEES over {cfg.n_runs} runs",
+            "NEES (3 dof)",
+            out_dir / "nees.png",
+            expected=3.0,
+        )
+    )
     return paths
 
 
@@ -542,8 +654,14 @@ def _write_recording(res: Exp2Results, path: Path) -> Path:
     rec.log_circles("world/truth/trees", seq.truth_landmarks, method="truth")
     m = "paper" if "paper" in cfg.methods else cfg.methods[0]
     params = extractor_params(m, cfg.cycab)
-    slam_run(seq, features=m, feature_params=params, association=cfg.association,
-             config=cfg.slam, visualiser=rec)  # fmt: skip
+    slam_run(
+        seq,
+        features=m,
+        feature_params=params,
+        association=cfg.association,
+        config=cfg.slam,
+        visualiser=rec,
+    )
     rec.close()
     return path
 
@@ -563,11 +681,17 @@ def run_table34(ctx, cfg: Exp2Config | None = None) -> Exp2Results:
                 ctx.config[name] = resolved
         return res
     cfg = cfg or (Exp2Config.quick() if ctx.quick else Exp2Config())
-    resolved = {"n_runs": cfg.n_runs, "methods": list(cfg.methods), "scene": cfg.scene,
-                "association": cfg.association, "cycab": cfg.cycab.to_dict(),
-                "slam": _plain(cfg.slam.to_dict()), "false_match_m": cfg.false_match_m,
-                "extractor_params": {m: extractor_params(m, cfg.cycab) for m in cfg.methods},
-                "sensitivity": [v[0] for v in SENSITIVITY] if cfg.sensitivity else []}  # fmt: skip
+    resolved = {
+        "n_runs": cfg.n_runs,
+        "methods": list(cfg.methods),
+        "scene": cfg.scene,
+        "association": cfg.association,
+        "cycab": cfg.cycab.to_dict(),
+        "slam": _plain(cfg.slam.to_dict()),
+        "false_match_m": cfg.false_match_m,
+        "extractor_params": {m: extractor_params(m, cfg.cycab) for m in cfg.methods},
+        "sensitivity": [v[0] for v in SENSITIVITY] if cfg.sensitivity else [],
+    }
     names = [n for n in ("table3", "table4") if n in ctx.config] or ["table3_4"]
     for name in names:
         ctx.config[name] = resolved
@@ -576,8 +700,9 @@ def run_table34(ctx, cfg: Exp2Config | None = None) -> Exp2Results:
     out.mkdir(parents=True, exist_ok=True)
     written = _write_tables(res, out) + _write_figures(res, out)
     written.append(_write_recording(res, out / "slam.rrd"))
-    written.append(write_atomic(out / "slam_key_figures.json",
-                                dumps_json(_plain(key_figures(res)))))  # fmt: skip
+    written.append(
+        write_atomic(out / "slam_key_figures.json", dumps_json(_plain(key_figures(res))))
+    )
     ctx.outputs += written
     log.info("experiment 2: %d runs in %.1f s", cfg.n_runs, res.seconds)
     _DONE.clear()
@@ -642,8 +767,14 @@ def slam_command(
     out.mkdir(parents=True, exist_ok=True)
     rec = open_recording(rerun_path)
     t0 = time.perf_counter()
-    lg = slam_run(seq, features=features, association=association, config=config,
-                  visualiser=rec, initial_heading_rad=initial_heading)  # fmt: skip
+    lg = slam_run(
+        seq,
+        features=features,
+        association=association,
+        config=config,
+        visualiser=rec,
+        initial_heading_rad=initial_heading,
+    )
     seconds = time.perf_counter() - t0
     rec.close()
     th = lg.pose[:, 2]
@@ -654,20 +785,29 @@ def slam_command(
     write_atomic(out / "trajectory.tum", tum + "\n")
     lines = ["t_s,x_m,y_m,theta_rad,cov_xx,cov_xy,cov_xtheta,cov_yy,cov_ytheta,cov_thetatheta"]
     for t, p, C in zip(lg.scan_t, lg.pose, lg.pose_cov):
-        lines.append(",".join(f"{v:.9g}" for v in (t, *p, C[0, 0], C[0, 1], C[0, 2], C[1, 1],
-                                                   C[1, 2], C[2, 2])))  # fmt: skip
+        lines.append(
+            ",".join(
+                f"{v:.9g}" for v in (t, *p, C[0, 0], C[0, 1], C[0, 2], C[1, 1], C[1, 2], C[2, 2])
+            )
+        )
     write_atomic(out / "trajectory.csv", "\n".join(lines) + "\n")
     lines = ["id,x_m,y_m,cov_xx,cov_xy,cov_yy,first_scan,n_obs"]
-    for i, xy, C, f, n in zip(lg.landmark_id, lg.landmark_xy, lg.landmark_cov,
-                              lg.landmark_first_scan, lg.landmark_n_obs):  # fmt: skip
-        lines.append(f"{i},{xy[0]:.6f},{xy[1]:.6f},{C[0, 0]:.9g},{C[0, 1]:.9g},{C[1, 1]:.9g},"
-                     f"{f},{n}")  # fmt: skip
+    for i, xy, C, f, n in zip(
+        lg.landmark_id, lg.landmark_xy, lg.landmark_cov, lg.landmark_first_scan, lg.landmark_n_obs
+    ):
+        lines.append(
+            f"{i},{xy[0]:.6f},{xy[1]:.6f},{C[0, 0]:.9g},{C[0, 1]:.9g},{C[1, 1]:.9g},{f},{n}"
+        )
     write_atomic(out / "map.csv", "\n".join(lines) + "\n")
     timing = {}
     for k, v in lg.timing_s.items():
-        timing[k] = {"mean_ms": 1e3 * float(np.mean(v)), "median_ms": 1e3 * float(np.median(v)),
-                     "p95_ms": 1e3 * float(np.percentile(v, 95)), "max_ms": 1e3 * float(np.max(v)),
-                     "total_s": float(np.sum(v))}  # fmt: skip
+        timing[k] = {
+            "mean_ms": 1e3 * float(np.mean(v)),
+            "median_ms": 1e3 * float(np.median(v)),
+            "p95_ms": 1e3 * float(np.percentile(v, 95)),
+            "max_ms": 1e3 * float(np.max(v)),
+            "total_s": float(np.sum(v)),
+        }
     summary = {
         "input": str(input_path),
         "features": lg.features_method,
@@ -681,20 +821,27 @@ def slam_command(
         "timing": timing,
         "config": _plain(lg.config),
     }
-    inside = (np.zeros(seq.n_scans, bool) if seq.truth_t is None else
-              (seq.scan_t >= seq.truth_t[0]) & (seq.scan_t <= seq.truth_t[-1]))  # fmt: skip
+    inside = (
+        np.zeros(seq.n_scans, bool)
+        if seq.truth_t is None
+        else (seq.scan_t >= seq.truth_t[0]) & (seq.scan_t <= seq.truth_t[-1])
+    )
     inside[0] = False  # the run may start at the truth
     if inside.any():  # score only the scans the truth covers
         truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
         e = (lg.pose - truth)[inside]
         e[:, 2] = wrap_angle(e[:, 2])
         covs = lg.pose_cov[inside]
-        nees = [float(ek @ np.linalg.solve(ck, ek)) for ek, ck in zip(e, covs)
-                if np.linalg.det(ck) > 0]  # fmt: skip
-        summary["truth"] = {"mean_abs_error": dict(zip(("dx_m", "dy_m", "dtheta_rad"),
-                                                       np.mean(np.abs(e), 0).tolist())),
-                            "nees_mean": float(np.mean(nees)) if nees else None,
-                            "scans_scored": int(inside.sum())}  # fmt: skip
+        nees = [
+            float(ek @ np.linalg.solve(ck, ek)) for ek, ck in zip(e, covs) if np.linalg.det(ck) > 0
+        ]
+        summary["truth"] = {
+            "mean_abs_error": dict(
+                zip(("dx_m", "dy_m", "dtheta_rad"), np.mean(np.abs(e), 0).tolist())
+            ),
+            "nees_mean": float(np.mean(nees)) if nees else None,
+            "scans_scored": int(inside.sum()),
+        }
     write_atomic(out / "summary.json", dumps_json(summary))
     return summary
 
@@ -702,8 +849,9 @@ def slam_command(
 # ---- calibration of the constant measurement noise ----------------------------------------------
 
 
-def calibrate_measurement_noise(seeds=(1000, 1001, 1002, 1003), cycab: CycabParams | None = None,
-                                scene: str = "tree_park") -> dict:  # fmt: skip
+def calibrate_measurement_noise(
+    seeds=(1000, 1001, 1002, 1003), cycab: CycabParams | None = None, scene: str = "tree_park"
+) -> dict:
     """Fit the constant noise model of `slam.run.DEFAULT_CONSTANT_NOISE` to the extractors' centre
     errors on circles found on trunks (majority of beams on one trunk), by maximum likelihood of
     zero-mean Gaussian errors: range error ~ N(0, (a + b r)^2), bearing error ~ N(0, c^2 +
@@ -746,34 +894,59 @@ def calibrate_measurement_noise(seeds=(1000, 1001, 1002, 1003), cycab: CycabPara
             s2 = q[0] ** 2 + (q[1] / r) ** 2
             return float(np.sum(0.5 * np.log(s2) + 0.5 * eb**2 / s2))
 
-        qa = np.abs(minimize(nll_range, [0.01, 0.001], method="Nelder-Mead",
-                             options={"xatol": 1e-7, "fatol": 1e-6, "maxiter": 4000}).x)  # fmt: skip
-        qb = np.abs(minimize(nll_bearing, [0.001, 0.005], method="Nelder-Mead",
-                             options={"xatol": 1e-8, "fatol": 1e-6, "maxiter": 4000}).x)  # fmt: skip
+        qa = np.abs(
+            minimize(
+                nll_range,
+                [0.01, 0.001],
+                method="Nelder-Mead",
+                options={"xatol": 1e-7, "fatol": 1e-6, "maxiter": 4000},
+            ).x
+        )
+        qb = np.abs(
+            minimize(
+                nll_bearing,
+                [0.001, 0.005],
+                method="Nelder-Mead",
+                options={"xatol": 1e-8, "fatol": 1e-6, "maxiter": 4000},
+            ).x
+        )
         sr = qa[0] + qa[1] * r
         sb2 = qb[0] ** 2 + (qb[1] / r) ** 2
-        out[m] = {"n": len(v), "range_rms_m": float(np.sqrt(np.mean(er**2))),
-                  "range_mean_m": float(np.mean(er)),
-                  "bearing_rms_rad": float(np.sqrt(np.mean(eb**2))),
-                  "range_sigma_m": float(qa[0]), "range_sigma_per_m": float(qa[1]),
-                  "bearing_sigma_rad": float(qb[0]), "cross_range_sigma_m": float(qb[1]),
-                  "normalised_var_range": float(np.mean((er / sr) ** 2)),
-                  "normalised_var_bearing": float(np.mean(eb**2 / sb2))}  # fmt: skip
+        out[m] = {
+            "n": len(v),
+            "range_rms_m": float(np.sqrt(np.mean(er**2))),
+            "range_mean_m": float(np.mean(er)),
+            "bearing_rms_rad": float(np.sqrt(np.mean(eb**2))),
+            "range_sigma_m": float(qa[0]),
+            "range_sigma_per_m": float(qa[1]),
+            "bearing_sigma_rad": float(qb[0]),
+            "cross_range_sigma_m": float(qb[1]),
+            "normalised_var_range": float(np.mean((er / sr) ** 2)),
+            "normalised_var_bearing": float(np.mean(eb**2 / sb2)),
+        }
     return out
 
 
 def main(argv=None) -> None:  # pragma: no cover - a script
     ap = argparse.ArgumentParser(description="experiment 2 helpers")
-    ap.add_argument("--write-golden", action="store_true",
-                    help=f"run the quick experiment (seed 0) and write {GOLDEN_PATH}")
-    ap.add_argument("--calibrate", action="store_true",
-                    help="fit the constant measurement-noise model (seeds 1000-1003)")
+    ap.add_argument(
+        "--write-golden",
+        action="store_true",
+        help=f"run the quick experiment (seed 0) and write {GOLDEN_PATH}",
+    )
+    ap.add_argument(
+        "--calibrate",
+        action="store_true",
+        help="fit the constant measurement-noise model (seeds 1000-1003)",
+    )
     args = ap.parse_args(argv)
     if args.write_golden:
         res = monte_carlo(Exp2Config.quick(), golden_rng())
         figs = key_figures(res)
-        figs["_note"] = ("written by `python -m experiments.exp_slam --write-golden`: "
-                         "Exp2Config.quick(), golden_rng(); compared by tests/test_slam_experiment.py")  # fmt: skip
+        figs["_note"] = (
+            "written by `python -m experiments.exp_slam --write-golden`: "
+            "Exp2Config.quick(), golden_rng(); compared by tests/test_slam_experiment.py"
+        )
         GOLDEN_PATH.parent.mkdir(parents=True, exist_ok=True)
         write_atomic(GOLDEN_PATH, json.dumps(figs, indent=1, sort_keys=True) + "\n")
         print(json.dumps(figs, indent=1))

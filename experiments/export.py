@@ -57,10 +57,13 @@ def features_to_dict(f: Features, scan_index: int) -> dict:
             )
         ],
         "edges": [
-            {"point_xy": [_f(p[0]), _f(p[1])], "cov": np.asarray(c).round(12).tolist(),
-             "beam": int(b)}
+            {
+                "point_xy": [_f(p[0]), _f(p[1])],
+                "cov": np.asarray(c).round(12).tolist(),
+                "beam": int(b),
+            }
             for p, c, b in zip(f.edge_xy, f.edge_cov, f.edge_beam)
-        ],  # fmt: skip
+        ],
         "clutter": [
             {"beams": [int(b[0]), int(b[1])]}
             for b, k in zip(f.segment_beams, f.segment_kind)

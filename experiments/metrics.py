@@ -21,7 +21,9 @@ def center_error(true_xy, est_xy) -> np.ndarray:
     true_xy = np.asarray(true_xy, float)
     est_xy = np.asarray(est_xy, float)
     if true_xy.shape[-1] != 2 or est_xy.shape[-1] != 2:
-        raise ValueError(f"center_error: expected (..., 2) arrays, got {true_xy.shape}, {est_xy.shape}")
+        raise ValueError(
+            f"center_error: expected (..., 2) arrays, got {true_xy.shape}, {est_xy.shape}"
+        )
     dist = np.linalg.norm(true_xy, axis=-1)
     if np.any(dist == 0):
         raise ValueError("center_error: a true centre at the sensor has no relative error")

@@ -18,15 +18,21 @@ from experiments.export import write_atomic  # noqa: E402
 __all__ = ["plot_raw_scan", "plot_features", "save", "METHOD_COLORS"]
 
 # one colour per circle-fitting method, in every figure
-METHOD_COLORS = {"paper": "tab:green", "geometric": "m", "bailey": "goldenrod", "taubin": "c",
-                 "kasa": "tab:cyan"}  # fmt: skip
+METHOD_COLORS = {
+    "paper": "tab:green",
+    "geometric": "m",
+    "bailey": "goldenrod",
+    "taubin": "c",
+    "kasa": "tab:cyan",
+}
 
 
 def save(fig, path: Path) -> Path:
     """Write the figure as PNG atomically (see `write_atomic`) and close it."""
     try:
-        return write_atomic(path, lambda fh: fig.savefig(fh, format="png", dpi=130,
-                                                         bbox_inches="tight"))  # fmt: skip
+        return write_atomic(
+            path, lambda fh: fig.savefig(fh, format="png", dpi=130, bbox_inches="tight")
+        )
     finally:
         plt.close(fig)
 
@@ -54,15 +60,33 @@ def _draw(ax, points_xy, segments, circles, edges, truth, lw=1.0):
         ax.plot(q[:, 0], q[:, 1], "-", color=colors[int(k)], lw=lw, zorder=2)
     for name, circ, color in circles:
         for i, (cx, cy, r) in enumerate(circ):
-            ax.add_patch(CirclePatch((cx, cy), r, fill=False, color=color, lw=1.3, zorder=3,
-                                     label=name if i == 0 else None))  # fmt: skip
+            ax.add_patch(
+                CirclePatch(
+                    (cx, cy),
+                    r,
+                    fill=False,
+                    color=color,
+                    lw=1.3,
+                    zorder=3,
+                    label=name if i == 0 else None,
+                )
+            )
     if truth is not None and len(truth):
         for i, (cx, cy, r) in enumerate(truth):
-            ax.add_patch(CirclePatch((cx, cy), r, fill=False, ls="--", color="k", lw=0.8,
-                                     zorder=2, label="truth" if i == 0 else None))  # fmt: skip
+            ax.add_patch(
+                CirclePatch(
+                    (cx, cy),
+                    r,
+                    fill=False,
+                    ls="--",
+                    color="k",
+                    lw=0.8,
+                    zorder=2,
+                    label="truth" if i == 0 else None,
+                )
+            )
     if len(edges):
-        ax.plot(edges[:, 0], edges[:, 1], "x", color="red", ms=7, mew=1.5, zorder=4,
-                label="edges")  # fmt: skip
+        ax.plot(edges[:, 0], edges[:, 1], "x", color="red", ms=7, mew=1.5, zorder=4, label="edges")
     ax.plot([0], [0], "k^", ms=7)
     ax.set_aspect("equal")
     ax.grid(alpha=0.3)
@@ -110,8 +134,9 @@ def plot_rates(table: dict[str, dict[str, float]], title: str, ylabel: str, path
     fig, ax = plt.subplots(figsize=(7, 4))
     w = 0.8 / max(len(series), 1)
     for i, s in enumerate(series):
-        ax.bar(np.arange(len(groups)) + i * w, [table[g].get(s, np.nan) for g in groups], w,
-               label=s)  # fmt: skip
+        ax.bar(
+            np.arange(len(groups)) + i * w, [table[g].get(s, np.nan) for g in groups], w, label=s
+        )
     ax.set_xticks(np.arange(len(groups)) + 0.4 - w / 2, groups)
     ax.set_ylabel(ylabel)
     ax.set_title(title)
@@ -130,8 +155,9 @@ def plot_circle_rates(res, path: Path) -> Path:
         for r in sorted({r for r, _ in cells}):
             ds = sorted(d for rr, d in cells if rr == r)
             ax.plot(ds, [cells[(r, d)] for d in ds], "o-", label=f"r = {r} m")
-        ax.set_title({"lrt": "likelihood-ratio test (default)",
-                      "paper": "paper's eq. (5) test"}.get(t, t))  # fmt: skip
+        ax.set_title(
+            {"lrt": "likelihood-ratio test (default)", "paper": "paper's eq. (5) test"}.get(t, t)
+        )
         ax.set_xlabel("range (m)")
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("fraction of trunks extracted as circles")
@@ -175,8 +201,13 @@ def plot_sweep(results: dict, path: Path) -> Path:
             ax = axes[i, j]
             for m in methods:
                 ys = [results[var][x][m][i] for x in xs]
-                ax.plot(xs, ys, styles.get(m, "o-"), label="Cramer-Rao (RMS)" if m == "crlb" else m,
-                        ms=4)  # fmt: skip
+                ax.plot(
+                    xs,
+                    ys,
+                    styles.get(m, "o-"),
+                    label="Cramer-Rao (RMS)" if m == "crlb" else m,
+                    ms=4,
+                )
             ax.set_yscale("log")
             ax.set_xlabel(var.replace("_m", " (m)"))
             ax.set_ylabel(label)
@@ -219,12 +250,19 @@ def plot_slam_path(
     ax.plot(est_xy[:, 0], est_xy[:, 1], "-", color="tab:blue", lw=1.2, label="estimated path")
     ax.plot(trees_xyr[:, 0], trees_xyr[:, 1], "*", color="tab:green", ms=13, label="trees (truth)")
     if len(map_xy):
-        ax.plot(map_xy[:, 0], map_xy[:, 1], "+", color="tab:red", ms=10, mew=1.5,
-                label="map landmarks")  # fmt: skip
+        ax.plot(
+            map_xy[:, 0], map_xy[:, 1], "+", color="tab:red", ms=10, mew=1.5, label="map landmarks"
+        )
         for i, (c, P) in enumerate(zip(map_xy, map_cov)):
             e = _ellipse_xy(c, 100.0 * np.asarray(P))
-            ax.plot(e[:, 0], e[:, 1], "-", color="tab:red", lw=0.7,
-                    label="95% ellipse x10" if i == 0 else None)  # fmt: skip
+            ax.plot(
+                e[:, 0],
+                e[:, 1],
+                "-",
+                color="tab:red",
+                lw=0.7,
+                label="95% ellipse x10" if i == 0 else None,
+            )
     ax.plot(truth_xy[0, 0], truth_xy[0, 1], "ko", ms=6)
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
@@ -270,8 +308,14 @@ def plot_pose_errors(series: Sequence[dict], title: str, path: Path) -> Path:
     return save(fig, path)
 
 
-def plot_consistency(series: dict[str, np.ndarray], bounds: tuple[float, float], title: str,
-                     ylabel: str, path: Path, expected: float | None = None) -> Path:  # fmt: skip
+def plot_consistency(
+    series: dict[str, np.ndarray],
+    bounds: tuple[float, float],
+    title: str,
+    ylabel: str,
+    path: Path,
+    expected: float | None = None,
+) -> Path:
     """Average NEES (or NIS) per scan over Monte Carlo runs, with its 95% chi-square bounds."""
     fig, ax = plt.subplots(figsize=(8, 4))
     for label, v in series.items():
@@ -288,8 +332,9 @@ def plot_consistency(series: dict[str, np.ndarray], bounds: tuple[float, float],
     return save(fig, path)
 
 
-def plot_association(rows: list[dict], path: Path, method_labels: dict[str, str],
-                     sweep_xlabels: dict[str, str]) -> Path:  # fmt: skip
+def plot_association(
+    rows: list[dict], path: Path, method_labels: dict[str, str], sweep_xlabels: dict[str, str]
+) -> Path:
     """Correct-association and false-pairing rates against each sweep, one column per sweep.
 
     rows: dicts with keys sweep, value, method, correct_rate, false_pair_rate (as `rate_study`
@@ -325,8 +370,15 @@ def _plot_with_bounds(axes, series, key: str, what: str) -> None:
     colors = ["tab:blue", "tab:orange", "tab:green", "tab:red"]
     for s, c in zip(series, colors):
         for i, ax in enumerate(axes):
-            ax.plot(s["scan"], s[key][:, i], s.get("style", "-"), color=c, lw=1.0,
-                    label=f"{s['label']} {what}")  # fmt: skip
-            ax.plot(s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0,
-                    label=f"{s['label']} 3 sigma")  # fmt: skip
+            ax.plot(
+                s["scan"],
+                s[key][:, i],
+                s.get("style", "-"),
+                color=c,
+                lw=1.0,
+                label=f"{s['label']} {what}",
+            )
+            ax.plot(
+                s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0, label=f"{s['label']} 3 sigma"
+            )
             ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)

@@ -22,9 +22,15 @@ from experiments.export import write_atomic
 from features.types import Scan
 
 __all__ = [
-    "Sequence", "save_sequence", "load_sequence", "VEHICLE_MODELS", "REQUIRED", "OPTIONAL",
-    "NO_RETURN_LABEL", "MIXED_LABEL",
-]  # fmt: skip
+    "Sequence",
+    "save_sequence",
+    "load_sequence",
+    "VEHICLE_MODELS",
+    "REQUIRED",
+    "OPTIONAL",
+    "NO_RETURN_LABEL",
+    "MIXED_LABEL",
+]
 
 log = logging.getLogger(__name__)
 
@@ -35,9 +41,20 @@ VEHICLE_MODELS: dict[str, tuple[tuple[str, ...], dict[str, float]]] = {
 
 REQUIRED = ("scan_t", "scan_ranges", "scan_angle_min", "scan_angle_increment", "laser_pose")
 OPTIONAL = (
-    "scan_max_range", "odo_t", "odo_speed", "odo_steer", "vehicle", "gps_t", "gps_xy",
-    "gps_pose", "truth_t", "truth_pose", "truth_landmarks", "scan_labels", "name",
-)  # fmt: skip
+    "scan_max_range",
+    "odo_t",
+    "odo_speed",
+    "odo_steer",
+    "vehicle",
+    "gps_t",
+    "gps_xy",
+    "gps_pose",
+    "truth_t",
+    "truth_pose",
+    "truth_landmarks",
+    "scan_labels",
+    "name",
+)
 _SCALARS = ("scan_angle_min", "scan_angle_increment", "scan_max_range")
 NO_RETURN_LABEL = -1  # scan_labels: the beam hit nothing (or nothing within range)
 MIXED_LABEL = -2  # scan_labels: a mixed return between two objects at a depth jump
@@ -65,8 +82,10 @@ def _float_array(name: str, value, ndim: int, width: int | None = None) -> np.nd
 def _times(name: str, value) -> np.ndarray:
     t = _float_array(name, value, 1)
     if not np.all(np.isfinite(t)):
-        raise DataError(f"Sequence.{name}: times must be finite (first bad index "
-                        f"{int(np.flatnonzero(~np.isfinite(t))[0])})")  # fmt: skip
+        raise DataError(
+            f"Sequence.{name}: times must be finite (first bad index "
+            f"{int(np.flatnonzero(~np.isfinite(t))[0])})"
+        )
     bad = np.flatnonzero(np.diff(t) <= 0)
     if bad.size:
         i = int(bad[0])
@@ -82,9 +101,7 @@ def _timed_pair(t_name: str, t, v_name: str, v, width: int) -> list[tuple[str, n
     returns [(t_name, t), (v_name, v)] checked and converted, or [] when both are absent."""
     if (t is None) != (v is None):
         missing = v_name if v is None else t_name
-        raise DataError(
-            f"Sequence.{missing}: {t_name} and {v_name} go together; {missing} missing"
-        )
+        raise DataError(f"Sequence.{missing}: {t_name} and {v_name} go together; {missing} missing")
     if t is None:
         return []
     times = _times(t_name, t)

@@ -26,10 +26,16 @@ from experiments.errors import DataError
 from experiments.sequence import Sequence
 
 __all__ = [
-    "VP_LASER_POSE", "VP_VEHICLE", "VP_MAX_RANGE_M", "VP_N_RAW_SCANS", "VP_FILES",
-    "load_victoria_park", "load_reference_detections", "load_raw_sick_ranges",
+    "VP_LASER_POSE",
+    "VP_VEHICLE",
+    "VP_MAX_RANGE_M",
+    "VP_N_RAW_SCANS",
+    "VP_FILES",
+    "load_victoria_park",
+    "load_reference_detections",
+    "load_raw_sick_ranges",
     "load_raw_sick_words",
-]  # fmt: skip
+]
 
 VP_LASER_POSE = (3.78, 0.50, 0.0)  # (L + a, b, 0) in the vehicle frame, m, m, rad
 VP_VEHICLE = {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}

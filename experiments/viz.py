@@ -9,7 +9,7 @@ The only module that imports rerun. Entities (laser frame unless a pose is given
   world/features/edges       occluding edges (red crosses)
   world/truth/...            simulated truth when known
 SLAM runs (slam.run's visualiser interface, world frame):
-  world/vehicle              pose arrow and 95% position ellipse (3-sigma heading wedge in the label)
+  world/vehicle              pose arrow, 95% position ellipse (3-sigma heading in the label)
   world/vehicle/path         estimated path so far
   world/landmarks            map landmarks: centres, ids, 95% ellipses
   world/tentative            tentative features (not yet in the map)
@@ -115,10 +115,12 @@ class Recorder(NullRecorder):
         self.rec.log(
             path,
             rr.LineStrips2D(
-                strips, colors=METHOD_COLORS.get(method, [255, 255, 255]), labels=labels,
+                strips,
+                colors=METHOD_COLORS.get(method, [255, 255, 255]),
+                labels=labels,
                 radii=0.015,
             ),
-        )  # fmt: skip
+        )
 
     # ---- SLAM (the visualiser interface of slam.run; world frame) -------------------------------
 
@@ -130,23 +132,41 @@ class Recorder(NullRecorder):
         path.append(pose[:2].copy())
         head = 1.0 * np.array([np.cos(pose[2]), np.sin(pose[2])])
         sig_th = float(np.sqrt(max(cov[2, 2], 0.0)))
-        self.rec.log("world/vehicle", rr.Arrows2D(
-            origins=[pose[:2]], vectors=[head], colors=[[255, 80, 80]],
-            labels=[f"3 sigma heading +-{np.degrees(3 * sig_th):.2f} deg"]))  # fmt: skip
-        self.rec.log("world/vehicle/ellipse", rr.LineStrips2D(
-            [ellipse_polyline(pose[:2], cov[:2, :2])], colors=[[255, 80, 80]], radii=0.01))  # fmt: skip
-        self.rec.log("world/vehicle/path", rr.LineStrips2D(
-            [np.array(path)], colors=[[255, 80, 80]], radii=0.02))  # fmt: skip
+        self.rec.log(
+            "world/vehicle",
+            rr.Arrows2D(
+                origins=[pose[:2]],
+                vectors=[head],
+                colors=[[255, 80, 80]],
+                labels=[f"3 sigma heading +-{np.degrees(3 * sig_th):.2f} deg"],
+            ),
+        )
+        self.rec.log(
+            "world/vehicle/ellipse",
+            rr.LineStrips2D(
+                [ellipse_polyline(pose[:2], cov[:2, :2])], colors=[[255, 80, 80]], radii=0.01
+            ),
+        )
+        self.rec.log(
+            "world/vehicle/path",
+            rr.LineStrips2D([np.array(path)], colors=[[255, 80, 80]], radii=0.02),
+        )
 
     def log_landmarks(self, xy, cov, ids) -> None:
         xy = np.asarray(xy, float).reshape(-1, 2)
         cov = np.asarray(cov, float).reshape(-1, 2, 2)
         labels = [f"L{int(i)}" for i in ids]
-        self.rec.log("world/landmarks", rr.Points2D(xy, radii=0.08, colors=[[40, 200, 90]],
-                                                    labels=labels))  # fmt: skip
-        self.rec.log("world/landmarks/ellipses", rr.LineStrips2D(
-            [ellipse_polyline(c, P) for c, P in zip(xy, cov)], colors=[[40, 200, 90]],
-            radii=0.01))  # fmt: skip
+        self.rec.log(
+            "world/landmarks", rr.Points2D(xy, radii=0.08, colors=[[40, 200, 90]], labels=labels)
+        )
+        self.rec.log(
+            "world/landmarks/ellipses",
+            rr.LineStrips2D(
+                [ellipse_polyline(c, P) for c, P in zip(xy, cov)],
+                colors=[[40, 200, 90]],
+                radii=0.01,
+            ),
+        )
 
     def log_tentatives(self, xy) -> None:
         xy = np.asarray(xy, float).reshape(-1, 2)
@@ -155,19 +175,30 @@ class Recorder(NullRecorder):
     def log_associations(self, from_xy, to_xy) -> None:
         a = np.asarray(from_xy, float).reshape(-1, 2)
         b = np.asarray(to_xy, float).reshape(-1, 2)
-        self.rec.log("world/associations", rr.LineStrips2D(
-            [np.stack([p, q]) for p, q in zip(a, b)], colors=[[0, 200, 255]], radii=0.02))  # fmt: skip
+        self.rec.log(
+            "world/associations",
+            rr.LineStrips2D(
+                [np.stack([p, q]) for p, q in zip(a, b)], colors=[[0, 200, 255]], radii=0.02
+            ),
+        )
 
     def log_truth(self, pose) -> None:
         """True pose (arrow) and path so far."""
         pose = np.asarray(pose, float)
         path = self.__dict__.setdefault("_truth_path", [])
         path.append(pose[:2].copy())
-        self.rec.log("world/truth/vehicle", rr.Arrows2D(
-            origins=[pose[:2]], vectors=[[np.cos(pose[2]), np.sin(pose[2])]],
-            colors=[[255, 255, 255]]))  # fmt: skip
-        self.rec.log("world/truth/vehicle/path", rr.LineStrips2D(
-            [np.array(path)], colors=[[255, 255, 255]], radii=0.015))  # fmt: skip
+        self.rec.log(
+            "world/truth/vehicle",
+            rr.Arrows2D(
+                origins=[pose[:2]],
+                vectors=[[np.cos(pose[2]), np.sin(pose[2])]],
+                colors=[[255, 255, 255]],
+            ),
+        )
+        self.rec.log(
+            "world/truth/vehicle/path",
+            rr.LineStrips2D([np.array(path)], colors=[[255, 255, 255]], radii=0.015),
+        )
 
     def close(self) -> None:
         self.rec.flush()

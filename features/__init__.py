@@ -7,6 +7,13 @@ from features.extract import METHODS, ExtractorParams, extract_features
 from features.types import Circle, Edge, Features, Line, Scan, Segment
 
 __all__ = [
-    "Scan", "Segment", "Circle", "Line", "Edge", "Features",
-    "ExtractorParams", "extract_features", "METHODS",
-]  # fmt: skip
+    "Scan",
+    "Segment",
+    "Circle",
+    "Line",
+    "Edge",
+    "Features",
+    "ExtractorParams",
+    "extract_features",
+    "METHODS",
+]

@@ -115,8 +115,18 @@ def _prepare(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
                 "pass angles_rad for other scans"
             )
         # The original: strict floating-point comparisons on the i*pi/360 table, no tie rule.
-        return (r, _DEFAULT_ANGLES, _DEFAULT_COS, _DEFAULT_SIN, BAILEY_BEAM_RAD, True, 0.0,
-                math.pi, 0.0, 0)  # fmt: skip
+        return (
+            r,
+            _DEFAULT_ANGLES,
+            _DEFAULT_COS,
+            _DEFAULT_SIN,
+            BAILEY_BEAM_RAD,
+            True,
+            0.0,
+            math.pi,
+            0.0,
+            0,
+        )
     beam_rad = (ang[-1] - ang[0]) / (n_beams - 1) if n_beams > 1 else BAILEY_BEAM_RAD
     full_circle = n_beams > 1 and (ang[-1] - ang[0]) + beam_rad >= _TWO_PI - 1e-6
     cos_t, sin_t = np.cos(ang), np.sin(ang)
@@ -127,8 +137,7 @@ def _prepare(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
         ang = np.concatenate((ang[rot:], ang[:rot] + _TWO_PI))
         cos_t = np.concatenate((cos_t[rot:], cos_t[:rot]))
         sin_t = np.concatenate((sin_t[rot:], sin_t[:rot]))
-    return (r, ang, cos_t, sin_t, beam_rad, not full_circle, fov_lo, fov_hi, _ANGLE_TIE_RAD,
-            rot)  # fmt: skip
+    return (r, ang, cos_t, sin_t, beam_rad, not full_circle, fov_lo, fov_hi, _ANGLE_TIE_RAD, rot)
 
 
 def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams, kernel=None):
@@ -148,10 +157,25 @@ def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams, kernel=None)
     ang = np.array(ang, dtype=np.float64)
     kernel = kernel or _kernel_numba
     out, seg_first, seg_last, keep, det_seg = kernel(
-        r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie,
-        p.max_range_m, p.min_start_range_m, p.break_jump_m, p.break_gap_rad, p.isolation_m,
-        p.occlusion_gap_rad, p.max_chord_m, p.fov_margin_rad, p.edge_ratio,
-    )  # fmt: skip
+        r,
+        ang,
+        cos_t,
+        sin_t,
+        beam_rad,
+        check_fov,
+        fov_lo,
+        fov_hi,
+        tie,
+        p.max_range_m,
+        p.min_start_range_m,
+        p.break_jump_m,
+        p.break_gap_rad,
+        p.isolation_m,
+        p.occlusion_gap_rad,
+        p.max_chord_m,
+        p.fov_margin_rad,
+        p.edge_ratio,
+    )
     if rot:  # back to the caller's beam numbering and angle range
         K = seg_first.size
         seg_first = seg_first + rot
@@ -171,9 +195,25 @@ def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams, kernel=None)
 
 
 def _kernel_numpy(
-    r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie,
-    max_range, min_start, jump, gap, iso, occ, chord, margin, edge_ratio,
-):  # fmt: skip
+    r,
+    ang,
+    cos_t,
+    sin_t,
+    beam_rad,
+    check_fov,
+    fov_lo,
+    fov_hi,
+    tie,
+    max_range,
+    min_start,
+    jump,
+    gap,
+    iso,
+    occ,
+    chord,
+    margin,
+    edge_ratio,
+):
     """Steps 1-10 vectorised with numpy: the test oracle of `_kernel_numba` (same arithmetic).
 
     r, ang, cos_t, sin_t: (B,) ranges, beam angles and their cos/sin. beam_rad: the width added
@@ -245,9 +285,25 @@ def _kernel_numpy(
 
 @njit(cache=True, nogil=True)
 def _kernel_numba(
-    r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie,
-    max_range, min_start, jump, gap, iso, occ, chord, margin, edge_ratio,
-):  # fmt: skip
+    r,
+    ang,
+    cos_t,
+    sin_t,
+    beam_rad,
+    check_fov,
+    fov_lo,
+    fov_hi,
+    tie,
+    max_range,
+    min_start,
+    jump,
+    gap,
+    iso,
+    occ,
+    chord,
+    margin,
+    edge_ratio,
+):
     """Steps 1-10 as loops (numba); `_kernel_numpy` is its oracle. Same arguments and results."""
     n_beams = r.shape[0]
     idx = np.empty(n_beams, np.int64)
@@ -257,8 +313,13 @@ def _kernel_numba(
             idx[n] = i
             n += 1
     if n == 0:
-        return (np.zeros((3, 0)), np.zeros(0, np.int64), np.zeros(0, np.int64),
-                np.zeros(0, np.bool_), np.zeros(0, np.int64))  # fmt: skip
+        return (
+            np.zeros((3, 0)),
+            np.zeros(0, np.int64),
+            np.zeros(0, np.int64),
+            np.zeros(0, np.bool_),
+            np.zeros(0, np.int64),
+        )
     s = np.empty(n, np.int64)
     e = np.empty(n, np.int64)
     s[0] = 0
@@ -351,9 +412,7 @@ def _seam(r: np.ndarray, p: BaileyParams) -> int:
     return int(np.argmax(jump))
 
 
-def detect_trees(
-    ranges_m, angles_rad=None, params: BaileyParams | None = None
-) -> np.ndarray:
+def detect_trees(ranges_m, angles_rad=None, params: BaileyParams | None = None) -> np.ndarray:
     """The Victoria Park tree detector: trunks in one scan, exactly as `detectTreesI16.m`.
 
     ranges_m: (B,) ranges, metres (the 13-bit-masked raw words / 100; NaN, or anything not below
@@ -433,24 +492,38 @@ def extract_bailey(
     out, seg_first, seg_last, kept, det_seg = _detect(scan.ranges_m, ang, p)
 
     circ, cov = _circles(
-        out, scan.angle_min_rad, inc, range_sigma_m, range_sigma_per_m,
-        math.sin(bearing_sigma_rad), radius_sigma_m,
-    )  # fmt: skip
+        out,
+        scan.angle_min_rad,
+        inc,
+        range_sigma_m,
+        range_sigma_per_m,
+        math.sin(bearing_sigma_rad),
+        radius_sigma_m,
+    )
     seg_beams = np.empty((seg_first.size, 2), np.int64)
     seg_beams[:, 0] = seg_first
     seg_beams[:, 1] = seg_last
     kind = np.where(kept, KIND_CIRCLE, KIND_CLUTTER).astype(np.int64)
     return Features(
         stamp_s=scan.stamp_s,
-        circle_params=circ, circle_cov=cov, circle_beams=seg_beams[det_seg],
+        circle_params=circ,
+        circle_cov=cov,
+        circle_beams=seg_beams[det_seg],
         circle_rms_m=np.full(circ.shape[0], np.nan),
-        line_params=_NO_LINES[0], line_cov=_NO_LINES[1], line_endpoints=_NO_LINES[2],
-        line_beams=_NO_LINES[3], line_rms_m=_NO_LINES[4],
-        edge_xy=_NO_EDGES[0], edge_cov=_NO_EDGES[1], edge_beam=_NO_EDGES[2],
-        segment_beams=seg_beams, segment_kind=kind,
+        line_params=_NO_LINES[0],
+        line_cov=_NO_LINES[1],
+        line_endpoints=_NO_LINES[2],
+        line_beams=_NO_LINES[3],
+        line_rms_m=_NO_LINES[4],
+        edge_xy=_NO_EDGES[0],
+        edge_cov=_NO_EDGES[1],
+        edge_beam=_NO_EDGES[2],
+        segment_beams=seg_beams,
+        segment_kind=kind,
         segment_innov=np.full((kind.size, 2), np.nan),
-        method="bailey", n_beams=n_beams,
-    )  # fmt: skip
+        method="bailey",
+        n_beams=n_beams,
+    )
 
 
 def _empty(*shape, dtype=np.float64) -> np.ndarray:
@@ -460,8 +533,13 @@ def _empty(*shape, dtype=np.float64) -> np.ndarray:
 
 
 # Shared read-only empty arrays for the features the detector never produces.
-_NO_LINES = (_empty(0, 2), _empty(0, 2, 2), _empty(0, 2, 2), _empty(0, 2, dtype=np.int64),
-             _empty(0))  # fmt: skip
+_NO_LINES = (
+    _empty(0, 2),
+    _empty(0, 2, 2),
+    _empty(0, 2, 2),
+    _empty(0, 2, dtype=np.int64),
+    _empty(0),
+)
 _NO_EDGES = (_empty(0, 2), _empty(0, 2, 2), _empty(0, dtype=np.int64))
 
 

@@ -221,11 +221,31 @@ def _continuous(ranges, bounds, k, side, edge_jump, cyclic):
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _extract_kernel(
-    ranges, angle_min, gamma, sigma_r, q, gate, max_growth, merge, isolate, cyclic, method,
-    line_test, min_points,
-    min_circle_points, chi2_line, chi2_circ, lrt_threshold, sigma2, r_min, r_max, edge_jump,
-    lambda0, max_iter, tol,
-):  # fmt: skip
+    ranges,
+    angle_min,
+    gamma,
+    sigma_r,
+    q,
+    gate,
+    max_growth,
+    merge,
+    isolate,
+    cyclic,
+    method,
+    line_test,
+    min_points,
+    min_circle_points,
+    chi2_line,
+    chi2_circ,
+    lrt_threshold,
+    sigma2,
+    r_min,
+    r_max,
+    edge_jump,
+    lambda0,
+    max_iter,
+    tol,
+):
     bounds0, reason, innov, svar = _segment_kernel(
         ranges, math.cos(gamma), sigma_r, q, gate, max_growth
     )
@@ -378,11 +398,22 @@ def _extract_kernel(
                 edge_beam[ne] = e
                 ne += 1
     return (
-        bounds, kind, seg_innov,
-        circ[:nc], circ_cov[:nc], circ_beams[:nc], circ_rms[:nc],
-        line[:nl], line_cov[:nl], line_end[:nl], line_beams[:nl], line_rms[:nl],
-        edge_xy[:ne], edge_cov[:ne], edge_beam[:ne],
-    )  # fmt: skip
+        bounds,
+        kind,
+        seg_innov,
+        circ[:nc],
+        circ_cov[:nc],
+        circ_beams[:nc],
+        circ_rms[:nc],
+        line[:nl],
+        line_cov[:nl],
+        line_end[:nl],
+        line_beams[:nl],
+        line_rms[:nl],
+        edge_xy[:ne],
+        edge_cov[:ne],
+        edge_beam[:ne],
+    )
 
 
 @lru_cache(maxsize=32)
@@ -433,14 +464,48 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
         ranges = np.roll(ranges, -shift)
         angle_min = angle_min + shift * gamma
     out = _extract_kernel(
-        ranges, angle_min, gamma, p.sigma_r_m, p.q_m2, p.gate, growth, p.merge_arcs,
-        p.isolated_circles, cyclic,
-        _METHOD_CODE[method], _LINE_TESTS[p.line_test], p.min_points, p.min_circle_points,
-        chi2_line, chi2_circ, p.lrt_threshold, p.sigma_r_m**2 + p.roughness_m**2, p.r_min_m,
-        p.r_max_m, p.edge_min_jump_m, p.lambda0, p.max_iter, p.tol,
-    )  # fmt: skip
-    (bounds, kind, seg_innov, circ, circ_cov, circ_beams, circ_rms,
-     line, line_cov, line_end, line_beams, line_rms, edge_xy, edge_cov, edge_beam) = out  # fmt: skip
+        ranges,
+        angle_min,
+        gamma,
+        p.sigma_r_m,
+        p.q_m2,
+        p.gate,
+        growth,
+        p.merge_arcs,
+        p.isolated_circles,
+        cyclic,
+        _METHOD_CODE[method],
+        _LINE_TESTS[p.line_test],
+        p.min_points,
+        p.min_circle_points,
+        chi2_line,
+        chi2_circ,
+        p.lrt_threshold,
+        p.sigma_r_m**2 + p.roughness_m**2,
+        p.r_min_m,
+        p.r_max_m,
+        p.edge_min_jump_m,
+        p.lambda0,
+        p.max_iter,
+        p.tol,
+    )
+    (
+        bounds,
+        kind,
+        seg_innov,
+        circ,
+        circ_cov,
+        circ_beams,
+        circ_rms,
+        line,
+        line_cov,
+        line_end,
+        line_beams,
+        line_rms,
+        edge_xy,
+        edge_cov,
+        edge_beam,
+    ) = out
     if shift:  # back to the scan's own beam numbers; a run across the seam keeps last >= n
         for runs in (bounds, circ_beams, line_beams):
             runs += shift
@@ -448,13 +513,24 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
         edge_beam = (edge_beam + shift) % n
     return Features(
         stamp_s=scan.stamp_s,
-        circle_params=circ, circle_cov=circ_cov, circle_beams=circ_beams, circle_rms_m=circ_rms,
-        line_params=line, line_cov=line_cov, line_endpoints=line_end, line_beams=line_beams,
+        circle_params=circ,
+        circle_cov=circ_cov,
+        circle_beams=circ_beams,
+        circle_rms_m=circ_rms,
+        line_params=line,
+        line_cov=line_cov,
+        line_endpoints=line_end,
+        line_beams=line_beams,
         line_rms_m=line_rms,
-        edge_xy=edge_xy, edge_cov=edge_cov, edge_beam=edge_beam,
-        segment_beams=bounds, segment_kind=kind, segment_innov=seg_innov,
-        method=method, n_beams=n,
-    )  # fmt: skip
+        edge_xy=edge_xy,
+        edge_cov=edge_cov,
+        edge_beam=edge_beam,
+        segment_beams=bounds,
+        segment_kind=kind,
+        segment_innov=seg_innov,
+        method=method,
+        n_beams=n,
+    )
 
 
 def _seam(ranges: np.ndarray) -> int:

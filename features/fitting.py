@@ -394,9 +394,16 @@ def circle_covariance(x, y, x0, y0, r, sigma2):
     A = np.empty((3, 3))
     for c in range(3):
         c0, c1, c2, ok = _solve_sym3(
-            h00, h01, h02, h11, h12, h22,
-            1.0 if c == 0 else 0.0, 1.0 if c == 1 else 0.0, 1.0 if c == 2 else 0.0,
-        )  # fmt: skip
+            h00,
+            h01,
+            h02,
+            h11,
+            h12,
+            h22,
+            1.0 if c == 0 else 0.0,
+            1.0 if c == 1 else 0.0,
+            1.0 if c == 2 else 0.0,
+        )
         if not ok:
             return np.full((3, 3), np.nan), False
         A[0, c] = c0
@@ -408,8 +415,8 @@ def circle_covariance(x, y, x0, y0, r, sigma2):
         for b in range(3):
             acc = 0.0
             for k in range(3):
-                for l in range(3):
-                    acc += A[a, k] * M[k, l] * A[l, b]
+                for j in range(3):
+                    acc += A[a, k] * M[k, j] * A[j, b]
             cov[a, b] = sigma2 * acc
     for a in range(3):
         for b in range(a + 1, 3):

@@ -263,14 +263,24 @@ class Features:
         z = np.zeros
         return cls(
             stamp_s=stamp_s,
-            circle_params=z((0, 3)), circle_cov=z((0, 3, 3)), circle_beams=z((0, 2), np.int64),
+            circle_params=z((0, 3)),
+            circle_cov=z((0, 3, 3)),
+            circle_beams=z((0, 2), np.int64),
             circle_rms_m=z(0),
-            line_params=z((0, 2)), line_cov=z((0, 2, 2)), line_endpoints=z((0, 2, 2)),
-            line_beams=z((0, 2), np.int64), line_rms_m=z(0),
-            edge_xy=z((0, 2)), edge_cov=z((0, 2, 2)), edge_beam=z(0, np.int64),
-            segment_beams=z((0, 2), np.int64), segment_kind=z(0, np.int64),
-            segment_innov=z((0, 2)), method=method, n_beams=n_beams,
-        )  # fmt: skip
+            line_params=z((0, 2)),
+            line_cov=z((0, 2, 2)),
+            line_endpoints=z((0, 2, 2)),
+            line_beams=z((0, 2), np.int64),
+            line_rms_m=z(0),
+            edge_xy=z((0, 2)),
+            edge_cov=z((0, 2, 2)),
+            edge_beam=z(0, np.int64),
+            segment_beams=z((0, 2), np.int64),
+            segment_kind=z(0, np.int64),
+            segment_innov=z((0, 2)),
+            method=method,
+            n_beams=n_beams,
+        )
 
     @property
     def n_circles(self) -> int:
@@ -290,22 +300,27 @@ class Features:
         return tuple(
             Line(float(p[0]), float(p[1]), c, e, int(b[0]), int(b[1]), float(s), self.n_beams)
             for p, c, e, b, s in zip(
-                self.line_params, self.line_cov, self.line_endpoints, self.line_beams,
+                self.line_params,
+                self.line_cov,
+                self.line_endpoints,
+                self.line_beams,
                 self.line_rms_m,
             )
-        )  # fmt: skip
+        )
 
     @cached_property
     def edges(self) -> tuple[Edge, ...]:
         return tuple(
-            Edge(p.copy(), c, int(b)) for p, c, b in zip(self.edge_xy, self.edge_cov, self.edge_beam)
+            Edge(p.copy(), c, int(b))
+            for p, c, b in zip(self.edge_xy, self.edge_cov, self.edge_beam)
         )
 
     @cached_property
     def segments(self) -> tuple[Segment, ...]:
         return tuple(
-            Segment(int(b[0]), int(b[1]), KIND_NAMES[int(k)], float(v[0]), float(v[1]),
-                    self.n_beams)
+            Segment(
+                int(b[0]), int(b[1]), KIND_NAMES[int(k)], float(v[0]), float(v[1]), self.n_beams
+            )
             for b, k, v in zip(self.segment_beams, self.segment_kind, self.segment_innov)
         )
 

@@ -40,4 +40,4 @@ __all__ = [
     "run",
     "update",
     "wrap_angle",
-]  # fmt: skip
+]

@@ -172,8 +172,9 @@ def laser_position(pose: np.ndarray, laser_pose: np.ndarray) -> tuple[np.ndarray
     return p, np.array([-s * lx - c * ly, c * lx - s * ly])
 
 
-def observe(pose: np.ndarray, landmarks_xy: np.ndarray, laser_pose: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def observe(
+    pose: np.ndarray, landmarks_xy: np.ndarray, laser_pose: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Predicted measurements of landmarks (k, 2) from `pose`, and their Jacobians.
 
     Returns z_hat (k, 2) [range_m, bearing_rad] (laser frame) and H5 (k, 2, 5), the Jacobian of
@@ -210,8 +211,9 @@ def _columns(idx: np.ndarray) -> np.ndarray:
     return cols
 
 
-def observe_jacobian_full(state: EkfState, idx: np.ndarray, laser_pose: np.ndarray
-                          ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def observe_jacobian_full(
+    state: EkfState, idx: np.ndarray, laser_pose: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """z_hat (k, 2) and the dense Jacobians H (k, 2, d) of landmarks at positions idx."""
     idx = np.asarray(idx, dtype=np.int64).reshape(-1)
     z, H5 = observe(state.pose, state.landmarks_xy[idx], laser_pose)
@@ -282,8 +284,9 @@ def update(
     return EkfState._own(x, P_new, state.landmark_ids), UpdateResult(nu, S, nis)
 
 
-def inverse_observation(pose: np.ndarray, z: np.ndarray, laser_pose: np.ndarray
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+def inverse_observation(
+    pose: np.ndarray, z: np.ndarray, laser_pose: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Landmark position from one measurement: m (2,), Gx = dm/dpose (2, 3), Gz = dm/dz (2, 2)."""
     pL, dpL = laser_position(pose, laser_pose)
     r, b = float(z[0]), float(z[1])
@@ -295,8 +298,9 @@ def inverse_observation(pose: np.ndarray, z: np.ndarray, laser_pose: np.ndarray
     return m, Gx, Gz
 
 
-def add_landmark(state: EkfState, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray,
-                 landmark_id: int) -> EkfState:  # fmt: skip
+def add_landmark(
+    state: EkfState, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray, landmark_id: int
+) -> EkfState:
     """Append a landmark initialised from measurement z (2,) with covariance R (2, 2).
 
     Its cross covariances with the vehicle and every other landmark are Gx P_v*, its own

@@ -44,8 +44,9 @@ class MapPolicy:
                 raise ValueError(f"MapPolicy.{name}: must be an integer >= 1, got {v!r}")
 
 
-def sighting(pose: np.ndarray, pose_cov: np.ndarray, z: np.ndarray, R: np.ndarray,
-             laser_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def sighting(
+    pose: np.ndarray, pose_cov: np.ndarray, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """World position (2,) and covariance (2, 2) of a feature seen as z (2,) with noise R."""
     m, Gx, Gz = inverse_observation(pose, z, laser_pose)
     C = Gx @ pose_cov @ Gx.T + Gz @ R @ Gz.T
@@ -72,8 +73,9 @@ class Tentatives:
     @classmethod
     def empty(cls) -> Tentatives:
         z = np.zeros
-        return cls(z((0, 2)), z((0, 2, 2)), z(0, np.int64), z(0, np.int64), z(0, np.int64),
-                   z(0, np.int64))  # fmt: skip
+        return cls(
+            z((0, 2)), z((0, 2, 2)), z(0, np.int64), z(0, np.int64), z(0, np.int64), z(0, np.int64)
+        )
 
     def __len__(self) -> int:
         return int(self.xy.shape[0])

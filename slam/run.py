@@ -150,13 +150,23 @@ class SlamConfig:
             v = getattr(self, name)
             if not 0.0 < v < 1.0:
                 raise ValueError(f"SlamConfig.{name}: must be in (0, 1), got {v!r}")
-        for name in ("range_sigma_m", "range_sigma_per_m", "bearing_sigma_rad",
-                     "cross_range_sigma_m"):  # fmt: skip
+        for name in (
+            "range_sigma_m",
+            "range_sigma_per_m",
+            "bearing_sigma_rad",
+            "cross_range_sigma_m",
+        ):
             v = getattr(self, name)
             if v is not None and not (0 <= v < math.inf):
                 raise ValueError(f"SlamConfig.{name}: must be finite and >= 0, got {v!r}")
-        for name in ("fit_floor_range_m", "fit_floor_bearing_rad", "gps_sigma_m",
-                     "initial_heading_sigma_rad", "view_margin_m", "view_margin_rad"):  # fmt: skip
+        for name in (
+            "fit_floor_range_m",
+            "fit_floor_bearing_rad",
+            "gps_sigma_m",
+            "initial_heading_sigma_rad",
+            "view_margin_m",
+            "view_margin_rad",
+        ):
             v = getattr(self, name)
             if not (0 <= v < math.inf):
                 raise ValueError(f"SlamConfig.{name}: must be finite and >= 0, got {v!r}")
@@ -172,8 +182,12 @@ class SlamConfig:
         if kind == "auto":
             kind = "fit" if method == "geometric" else "constant"
         base = DEFAULT_CONSTANT_NOISE.get(method, DEFAULT_CONSTANT_NOISE["other"])
-        given = (self.range_sigma_m, self.range_sigma_per_m, self.bearing_sigma_rad,
-                 self.cross_range_sigma_m)  # fmt: skip
+        given = (
+            self.range_sigma_m,
+            self.range_sigma_per_m,
+            self.bearing_sigma_rad,
+            self.cross_range_sigma_m,
+        )
         model = tuple(float(b if g is None else g) for b, g in zip(base, given))
         if kind == "constant" and (model[0] + model[1] <= 0 or model[2] + model[3] <= 0):
             raise ValueError(f"SlamConfig: the constant noise model {model} is zero")
@@ -274,14 +288,22 @@ def interpolate_poses(t_query, t_s, poses) -> np.ndarray:
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     tq = np.atleast_1d(np.asarray(t_query, dtype=np.float64))
     th = np.unwrap(poses[:, 2])
-    out = np.stack([np.interp(tq, t_s, poses[:, 0]), np.interp(tq, t_s, poses[:, 1]),
-                    wrap_angle(np.interp(tq, t_s, th))], axis=1)  # fmt: skip
+    out = np.stack(
+        [
+            np.interp(tq, t_s, poses[:, 0]),
+            np.interp(tq, t_s, poses[:, 1]),
+            wrap_angle(np.interp(tq, t_s, th)),
+        ],
+        axis=1,
+    )
     return out
 
 
-def measurements_from_features(features, noise: tuple[str, tuple[float, float, float, float]],
-                               floor: tuple[float, float] = (0.0, 0.0)
-                               ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+def measurements_from_features(
+    features,
+    noise: tuple[str, tuple[float, float, float, float]],
+    floor: tuple[float, float] = (0.0, 0.0),
+) -> tuple[np.ndarray, np.ndarray]:
     """Range-bearing measurements (C, 2) of the circle centres and their covariances (C, 2, 2).
 
     noise: ("fit", _) uses the centre's fit covariance, plus `floor` (range, bearing) sigmas in
@@ -367,13 +389,19 @@ def _check_sequence(seq, n_features: int | None, cfg: SlamConfig) -> None:
         )
 
 
-def _start(seq, cfg: SlamConfig, initial_heading_rad: float | None
-           ) -> tuple[np.ndarray, np.ndarray, str]:  # fmt: skip
+def _start(
+    seq, cfg: SlamConfig, initial_heading_rad: float | None
+) -> tuple[np.ndarray, np.ndarray, str]:
     t0 = float(seq.scan_t[0])
     truth_t = getattr(seq, "truth_t", None)
     if truth_t is not None and len(truth_t) and not truth_t[0] <= t0 <= truth_t[-1]:
-        log.warning("the truth (%.3f .. %.3f s) does not cover the first scan (%.3f s); "
-                    "not starting from it", truth_t[0], truth_t[-1], t0)  # fmt: skip
+        log.warning(
+            "the truth (%.3f .. %.3f s) does not cover the first scan (%.3f s); "
+            "not starting from it",
+            truth_t[0],
+            truth_t[-1],
+            t0,
+        )
         truth_t = None
     if truth_t is not None and len(truth_t):
         pose = interpolate_poses(t0, seq.truth_t, seq.truth_pose)[0]
@@ -397,8 +425,11 @@ def _start(seq, cfg: SlamConfig, initial_heading_rad: float | None
         c, s = math.cos(th), math.sin(th)
         p = xy[0] - np.array([c * ant[0] - s * ant[1], s * ant[0] + c * ant[1]])
         if abs(float(seq.gps_t[0]) - t0) > 1.0:
-            log.warning("first GPS fix at %.3f s is %.3f s from the first scan",
-                        float(seq.gps_t[0]), float(seq.gps_t[0]) - t0)  # fmt: skip
+            log.warning(
+                "first GPS fix at %.3f s is %.3f s from the first scan",
+                float(seq.gps_t[0]),
+                float(seq.gps_t[0]) - t0,
+            )
         cov = np.diag([cfg.gps_sigma_m**2, cfg.gps_sigma_m**2, cfg.initial_heading_sigma_rad**2])
         return np.array([p[0], p[1], th]), cov, "gps"
     th = 0.0 if initial_heading_rad is None else float(initial_heading_rad)
@@ -501,8 +532,9 @@ def run(
     pred_cov_log = np.empty((N, 3, 3))
     nis = np.full(N, np.nan)
     nis_dof = np.zeros(N, np.int64)
-    counts = {k: np.zeros(N, np.int64) for k in ("n_features", "n_associated", "n_tentative",
-                                                  "n_map")}  # fmt: skip
+    counts = {
+        k: np.zeros(N, np.int64) for k in ("n_features", "n_associated", "n_tentative", "n_map")
+    }
     timing = {k: np.zeros(N) for k in TIMING_KEYS}
     obs: dict[str, list] = {k: [] for k in ("scan", "feature", "landmark", "z", "innov", "S")}
     meas: dict[str, list] = {k: [] for k in ("scan", "feature", "z", "R", "status")}
@@ -511,8 +543,9 @@ def run(
         t_start = time.perf_counter()
         # 1. predict
         if k > 0:
-            p1, F, Q = integrate(model, state.pose, odo, scan_t[k - 1], scan_t[k],
-                                 cfg.odometry_noise)  # fmt: skip
+            p1, F, Q = integrate(
+                model, state.pose, odo, scan_t[k - 1], scan_t[k], cfg.odometry_noise
+            )
             state = predict(state, p1, F, Q)
         pred_log[k] = state.pose
         pred_cov_log[k] = state.pose_cov
@@ -547,19 +580,20 @@ def run(
             H[:, :, :3] = Hv[:, :, :3]
             for j in range(n_l + n_t):
                 H[j, :, 3 + 2 * j : 5 + 2 * j] = Hv[j, :, 3:5]
-            cols = np.concatenate([[0, 1, 2], np.stack([3 + 2 * lm_idx, 4 + 2 * lm_idx], 1)
-                                   .reshape(-1)]).astype(np.int64)  # fmt: skip
+            cols = np.concatenate(
+                [[0, 1, 2], np.stack([3 + 2 * lm_idx, 4 + 2 * lm_idx], 1).reshape(-1)]
+            ).astype(np.int64)
             P_sub = np.zeros((d_sub, d_sub))
             nc = cols.size
             P_sub[:nc, :nc] = state.P[np.ix_(cols, cols)]
             for j, ti in enumerate(t_idx):
                 a = nc + 2 * j
                 P_sub[a : a + 2, a : a + 2] = tent.cov[ti]
-            a_use = assoc_fn(z[use], R[use], zh, H, P_sub, gate_prob=cfg.gate_prob,
-                             **cfg.association_params)  # fmt: skip
+            a_use = assoc_fn(
+                z[use], R[use], zh, H, P_sub, gate_prob=cfg.gate_prob, **cfg.association_params
+            )
             assign[use] = np.asarray(a_use, dtype=np.int64)
-            ambiguous[use] = (assign[use] < 0) & _gated_any(z[use], R[use], zh, H, P_sub,
-                                                                   gate_new)
+            ambiguous[use] = (assign[use] < 0) & _gated_any(z[use], R[use], zh, H, P_sub, gate_new)
         t3 = time.perf_counter()
         # 4. update with the map measurements
         to_map = np.flatnonzero(assign >= 0)
@@ -642,30 +676,42 @@ def run(
     ids = state.landmark_ids
     return SlamLog(
         scan_t=scan_t,
-        pose=pose_log, pose_cov=cov_log, pred_pose=pred_log, pred_pose_cov=pred_cov_log,
-        landmark_xy=state.landmarks_xy.copy(), landmark_cov=state.landmark_covs,
+        pose=pose_log,
+        pose_cov=cov_log,
+        pred_pose=pred_log,
+        pred_pose_cov=pred_cov_log,
+        landmark_xy=state.landmarks_xy.copy(),
+        landmark_cov=state.landmark_covs,
         landmark_id=ids.copy(),
         landmark_first_scan=np.array([first_scan.get(int(i), -1) for i in ids], np.int64),
         landmark_n_obs=np.array([n_obs.get(int(i), 0) for i in ids], np.int64),
-        obs_scan=np.array(obs["scan"], np.int64), obs_feature=np.array(obs["feature"], np.int64),
+        obs_scan=np.array(obs["scan"], np.int64),
+        obs_feature=np.array(obs["feature"], np.int64),
         obs_landmark=np.array(obs["landmark"], np.int64),
-        obs_z=np.array(obs["z"]).reshape(-1, 2), obs_innov=np.array(obs["innov"]).reshape(-1, 2),
+        obs_z=np.array(obs["z"]).reshape(-1, 2),
+        obs_innov=np.array(obs["innov"]).reshape(-1, 2),
         obs_innov_cov=np.array(obs["S"]).reshape(-1, 2, 2),
         meas_scan=np.array(meas["scan"], np.int64),
         meas_feature=np.array(meas["feature"], np.int64),
-        meas_z=np.array(meas["z"]).reshape(-1, 2), meas_R=np.array(meas["R"]).reshape(-1, 2, 2),
+        meas_z=np.array(meas["z"]).reshape(-1, 2),
+        meas_R=np.array(meas["R"]).reshape(-1, 2, 2),
         meas_status=np.array(meas["status"], np.int64),
-        scan_nis=nis, scan_nis_dof=nis_dof,
+        scan_nis=nis,
+        scan_nis_dof=nis_dof,
         **counts,
         timing_s=timing,
-        final_x=state.x.copy(), final_P=state.P.copy(),
-        start=start, features_method=method, association_method=assoc_name,
+        final_x=state.x.copy(),
+        final_P=state.P.copy(),
+        start=start,
+        features_method=method,
+        association_method=assoc_name,
         config=cfg.to_dict(),
-    )  # fmt: skip
+    )
 
 
-def _in_view(z_hat: np.ndarray, max_range: float, fov0: float, fov1: float,
-             cfg: SlamConfig) -> np.ndarray:  # fmt: skip
+def _in_view(
+    z_hat: np.ndarray, max_range: float, fov0: float, fov1: float, cfg: SlamConfig
+) -> np.ndarray:
     """(n,) bool: predictions within range and field of view, plus margins."""
     if z_hat.shape[0] == 0:
         return np.zeros(0, bool)
@@ -686,15 +732,21 @@ def _gated_any(z, R, z_hat, H, P, gate: float) -> np.ndarray:
     return np.any(d2 <= gate, axis=1)
 
 
-def _visualise(vis, k, seq, scan, f, state: EkfState, tent: Tentatives, laser, z, status,
-               has_truth) -> None:  # fmt: skip
+def _visualise(
+    vis, k, seq, scan, f, state: EkfState, tent: Tentatives, laser, z, status, has_truth
+) -> None:
     if isinstance(vis, NullVisualiser) and type(vis) is NullVisualiser:
         return
     vis.set_scan(k)
     pose = state.pose
     c, s = math.cos(pose[2]), math.sin(pose[2])
-    lpose = np.array([pose[0] + c * laser[0] - s * laser[1], pose[1] + s * laser[0] + c * laser[1],
-                      pose[2] + laser[2]])  # fmt: skip
+    lpose = np.array(
+        [
+            pose[0] + c * laser[0] - s * laser[1],
+            pose[1] + s * laser[0] + c * laser[1],
+            pose[2] + laser[2],
+        ]
+    )
     vis.log_scan(scan, lpose)
     vis.log_features(scan, f, lpose)
     vis.log_vehicle(pose, state.pose_cov)

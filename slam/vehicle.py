@@ -89,7 +89,9 @@ class AckermannModel:
         if not isinstance(vehicle, Mapping):
             raise ValueError(f"vehicle: expected a dict, got {type(vehicle).__name__}")
         if vehicle.get("model") != "ackermann":
-            raise ValueError(f"vehicle.model: only 'ackermann' is known, got {vehicle.get('model')!r}")
+            raise ValueError(
+                f"vehicle.model: only 'ackermann' is known, got {vehicle.get('model')!r}"
+            )
         if "wheelbase_m" not in vehicle:
             raise ValueError("vehicle.wheelbase_m: missing")
         return cls(vehicle["wheelbase_m"], vehicle.get("encoder_offset_m", 0.0))
@@ -106,8 +108,9 @@ class AckermannModel:
         return 1.0 / den, v_enc_mps * k * sec2 / (den * den)
 
 
-def arc_step(pose: np.ndarray, v_axle_mps: float, steer_rad: float, dt_s: float,
-             wheelbase_m: float) -> np.ndarray:  # fmt: skip
+def arc_step(
+    pose: np.ndarray, v_axle_mps: float, steer_rad: float, dt_s: float, wheelbase_m: float
+) -> np.ndarray:
     """Exact motion of the rear-axle centre for constant (v_c, alpha) over dt_s; (3,) pose."""
     x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
     d = v_axle_mps * dt_s
@@ -136,11 +139,13 @@ def arc_step_jacobians(
     pose1 = np.array([x + d * c_ * s, y + d * s_ * s, th + 2.0 * h])
     F = np.array([[1.0, 0.0, -d * s_ * s], [0.0, 1.0, d * c_ * s], [0.0, 0.0, 1.0]])
     # pose1 as a function of (d, h)
-    J_dh = np.array([
-        [c_ * s, d * (-s_ * s + c_ * ds)],
-        [s_ * s, d * (c_ * s + s_ * ds)],
-        [0.0, 2.0],
-    ])  # fmt: skip
+    J_dh = np.array(
+        [
+            [c_ * s, d * (-s_ * s + c_ * ds)],
+            [s_ * s, d * (c_ * s + s_ * ds)],
+            [0.0, 2.0],
+        ]
+    )
     # (d, h) as a function of (v_c, alpha): d = v dt, h = v dt tan(alpha) / (2 L)
     J_va = np.array([[dt_s, 0.0], [0.5 * dt_s * t / L, 0.5 * v * dt_s * sec2 / L]])
     # (v_c, alpha) as a function of (v_e, alpha)
@@ -170,8 +175,12 @@ class OdometryNoise:
     floor_theta_rad_per_sqrt_s: float = 0.0001
 
     def __post_init__(self) -> None:
-        for name in ("speed_sigma_mps", "steer_sigma_rad", "floor_xy_m_per_sqrt_s",
-                     "floor_theta_rad_per_sqrt_s"):  # fmt: skip
+        for name in (
+            "speed_sigma_mps",
+            "steer_sigma_rad",
+            "floor_xy_m_per_sqrt_s",
+            "floor_theta_rad_per_sqrt_s",
+        ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
                 raise ValueError(f"OdometryNoise.{name}: must be a finite number >= 0, got {v!r}")
@@ -260,10 +269,17 @@ def integrate(
     noise = noise or OdometryNoise(0.0, 0.0, 0.0, 0.0)
     dts, vs, alphas = odometry.pieces(float(t0_s), float(t1_s))
     p, F, Q = _integrate_kernel(
-        np.asarray(pose, dtype=np.float64), dts, vs, alphas, model.wheelbase_m,
-        model.encoder_offset_m, noise.speed_sigma_mps**2, noise.steer_sigma_rad**2,
-        noise.floor_xy_m_per_sqrt_s**2, noise.floor_theta_rad_per_sqrt_s**2,
-    )  # fmt: skip
+        np.asarray(pose, dtype=np.float64),
+        dts,
+        vs,
+        alphas,
+        model.wheelbase_m,
+        model.encoder_offset_m,
+        noise.speed_sigma_mps**2,
+        noise.steer_sigma_rad**2,
+        noise.floor_xy_m_per_sqrt_s**2,
+        noise.floor_theta_rad_per_sqrt_s**2,
+    )
     p[2] = float(wrap_angle(p[2]))
     return p, F, Q
 

@@ -16,8 +16,11 @@ ALLOWED = {
     "experiments": OURS,
 }
 # third-party packages confined to one module
-CONFINED = {"gtsam": "slam/smoother.py", "rerun": "experiments/viz.py",
-            "matplotlib": "experiments/plots.py"}  # fmt: skip
+CONFINED = {
+    "gtsam": "slam/smoother.py",
+    "rerun": "experiments/viz.py",
+    "matplotlib": "experiments/plots.py",
+}
 
 
 def imports(path: Path) -> set[str]:

@@ -48,8 +48,23 @@ def predict(pose, lm):
     return z_hat, H
 
 
-def scene(rng, lm, sigma_xy=0.05, sigma_th=math.radians(0.3), sigma_lm=0.03, R=R0,
-          n_clutter=0, pose=np.zeros(3), p_detect=1.0, err_scale=1.0):  # fmt: skip
+SIGMA_TH0 = math.radians(0.3)
+ORIGIN = np.zeros(3)
+ORIGIN.setflags(write=False)
+
+
+def scene(
+    rng,
+    lm,
+    sigma_xy=0.05,
+    sigma_th=SIGMA_TH0,
+    sigma_lm=0.03,
+    R=R0,
+    n_clutter=0,
+    pose=ORIGIN,
+    p_detect=1.0,
+    err_scale=1.0,
+):
     """Measurements of the true landmarks `lm` from `pose`, predictions from estimates drawn
     from P; returns (z, R, z_hat, H, P, truth). err_scale < 1 draws the actual errors smaller
     than P and R say (a conservative filter), so that none falls outside the gates."""
@@ -127,16 +142,22 @@ def test_wrap_angle_range():
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(seed=st.integers(0, 2**32 - 1), n_lm=st.integers(1, 12), n_clutter=st.integers(0, 6),
-       sigma_xy=st.sampled_from([0.05, 0.5, 1.5]), data=st.data())  # fmt: skip
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_lm=st.integers(1, 12),
+    n_clutter=st.integers(0, 6),
+    sigma_xy=st.sampled_from([0.05, 0.5, 1.5]),
+    data=st.data(),
+)
 def test_result_does_not_depend_on_order(seed, n_lm, n_clutter, sigma_xy, data):
     rng = np.random.default_rng(seed)
     lm = rng.uniform(-15, 15, (n_lm, 2))
     lm = lm[np.hypot(*lm.T) > 1.0]
     if lm.shape[0] == 0:
         return
-    z, R, z_hat, H, P, _ = scene(rng, lm, sigma_xy=sigma_xy, sigma_th=sigma_xy / 20,
-                                 n_clutter=n_clutter, p_detect=0.8)  # fmt: skip
+    z, R, z_hat, H, P, _ = scene(
+        rng, lm, sigma_xy=sigma_xy, sigma_th=sigma_xy / 20, n_clutter=n_clutter, p_detect=0.8
+    )
     m, n = z.shape[0], z_hat.shape[0]
     pm = np.array(data.draw(st.permutations(range(m)), label="measurement order"), dtype=int)
     pf = np.array(data.draw(st.permutations(range(n)), label="feature order"), dtype=int)
@@ -162,8 +183,9 @@ def test_window_does_not_depend_on_order(seed, n_clutter, data):
     n = lm.shape[0]
     for t in range(4):
         pose = np.array([0.4 * t, 0.1 * t, 0.02 * t])
-        z, R, z_hat, H, P, _ = scene(rng, lm, sigma_xy=0.3, sigma_th=0.01, pose=pose,
-                                     n_clutter=n_clutter, p_detect=0.9)  # fmt: skip
+        z, R, z_hat, H, P, _ = scene(
+            rng, lm, sigma_xy=0.3, sigma_th=0.01, pose=pose, n_clutter=n_clutter, p_detect=0.9
+        )
         zn, _ = predict(pose, new)
         z = np.vstack([z, zn + rng.multivariate_normal(np.zeros(2), R0, len(new))])
         m = z.shape[0]
@@ -197,7 +219,7 @@ def joint_d2(z, R, z_hat, H, P, pairs):
     if not pairs:
         return 0.0
     ii, jj = zip(*pairs)
-    nu = (z[list(ii)] - z_hat[list(jj)])
+    nu = z[list(ii)] - z_hat[list(jj)]
     nu[:, 1] = wrap_angle(nu[:, 1])
     Hs = H[list(jj)].reshape(-1, P.shape[0])
     S = Hs @ P @ Hs.T + np.kron(np.eye(len(pairs)), R)
@@ -258,8 +280,9 @@ def test_sparse_kernels_match_dense_twins():
     np.testing.assert_allclose(S, project_cov_numpy(H, P), rtol=1e-10, atol=1e-10)
     assert ok.all() and asym.max() < 1e-12
     feats = np.array([4, 0, 7])
-    np.testing.assert_allclose(cross_cov(H, P, feats), cross_cov_numpy(H, P, feats),
-                               rtol=1e-10, atol=1e-10)  # fmt: skip
+    np.testing.assert_allclose(
+        cross_cov(H, P, feats), cross_cov_numpy(H, P, feats), rtol=1e-10, atol=1e-10
+    )
     Hd = rng.normal(size=H.shape)  # dense Jacobians
     S, _, _ = _project_cov_kernel(Hd, P, 1e-8, 1e-9, 16)
     np.testing.assert_allclose(S, project_cov_numpy(Hd, P), rtol=1e-9)
@@ -270,8 +293,9 @@ def test_empty_inputs():
     P = np.eye(5) * 0.01
     for method in METHODS:
         assert associate(np.zeros((0, 2)), R0, np.array([[5.0, 0.0]]), H, P, method).shape == (0,)
-        out = associate(np.array([[5.0, 0.0]]), R0, np.zeros((0, 2)), np.zeros((0, 2, 5)), P,
-                        method)  # fmt: skip
+        out = associate(
+            np.array([[5.0, 0.0]]), R0, np.zeros((0, 2)), np.zeros((0, 2, 5)), P, method
+        )
         np.testing.assert_array_equal(out, [-1])
 
 

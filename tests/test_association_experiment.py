@@ -54,8 +54,13 @@ def quick_run(tmp_path_factory):
 
 
 def test_quick_run_writes_tables_plot_and_optimality(quick_run):
-    for name in ("association.md", "association.csv", "association.png",
-                 "association_optimality.md", "association_optimality.csv"):  # fmt: skip
+    for name in (
+        "association.md",
+        "association.csv",
+        "association.png",
+        "association_optimality.md",
+        "association_optimality.csv",
+    ):
         assert (quick_run / name).stat().st_size > 500, name
     rows = list(csv.DictReader((quick_run / "association.csv").open()))
     methods = {r["method"] for r in rows}
@@ -84,8 +89,11 @@ def test_bench_rows():
 
     rows = bench(repeats=3, seed=1)
     assert [r["method"] for r in rows][1:] == [
-        "IHGR single scan", "IHGR single scan, presolve off", "IHGR K = 3 window",
-        "JCBB (node budget 20000)", "NN (gated, greedy)",
-    ]  # fmt: skip
+        "IHGR single scan",
+        "IHGR single scan, presolve off",
+        "IHGR K = 3 window",
+        "JCBB (node budget 20000)",
+        "NN (gated, greedy)",
+    ]
     assert all(0 < r["median_ms"] <= r["p90_ms"] for r in rows)
     assert "median ms/scan" in format_table(rows)

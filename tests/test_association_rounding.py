@@ -71,8 +71,9 @@ def random_assignment(rng, m, n, density):
 def test_single_scan_like_problems_are_solved_exactly_in_one_lp():
     rng = np.random.default_rng(3)
     for _ in range(120):
-        c, A, e = random_assignment(rng, int(rng.integers(1, 9)), int(rng.integers(1, 9)),
-                                    rng.uniform(0.1, 0.7))  # fmt: skip
+        c, A, e = random_assignment(
+            rng, int(rng.integers(1, 9)), int(rng.integers(1, 9)), rng.uniform(0.1, 0.7)
+        )
         r = ihgr_round(c, A, e, presolve=False)
         opt = solve_set_partition(c, A, e, method="milp")
         assert r.cost == pytest.approx(opt.cost, abs=1e-9)
@@ -86,9 +87,13 @@ def test_single_scan_like_problems_are_solved_exactly_in_one_lp():
 def random_multiscan(rng, K=3):
     m = rng.integers(2, 6, K)
     offs = np.concatenate([[0], np.cumsum(m)])
-    cols = {tuple(int(offs[k] + rng.integers(m[k])) for k in rng.choice(K, rng.integers(2, K + 1),
-                                                                       replace=False))
-            for _ in range(int(3 * offs[-1]))}  # fmt: skip
+    cols = {
+        tuple(
+            int(offs[k] + rng.integers(m[k]))
+            for k in rng.choice(K, rng.integers(2, K + 1), replace=False)
+        )
+        for _ in range(int(3 * offs[-1]))
+    }
     cols = [tuple(sorted(t)) for t in cols] + [(r,) for r in range(int(offs[-1]))]
     A = np.zeros((int(offs[-1]), len(cols)))
     for k, t in enumerate(cols):

@@ -65,7 +65,7 @@ def test_crlb_against_monte_carlo_of_an_efficient_estimator():
     est = []
     for _ in range(3000):
         z = z0 + rng.normal(0, sigma, z0.size)
-        est.append(least_squares(lambda p: model(p) - z, truth, xtol=1e-12).x)
+        est.append(least_squares(lambda p, z=z: model(p) - z, truth, xtol=1e-12).x)
     emp = np.cov(np.array(est).T)
     bound = circle_crlb(c, r, ang, sigma)
     np.testing.assert_allclose(np.sqrt(np.diag(emp)), np.sqrt(np.diag(bound)), rtol=0.06)
@@ -93,7 +93,11 @@ def test_quick_run_matches_golden_numbers(quick_mc):
     for m in METHODS:
         for p in TABLE_PILLARS:
             for k in ("ce_mean", "re_mean", "miss"):
-                assert s[m][p].get(k) == pytest.approx(gold[m][p][k], rel=1e-6, abs=1e-12), (m, p, k)
+                assert s[m][p].get(k) == pytest.approx(gold[m][p][k], rel=1e-6, abs=1e-12), (
+                    m,
+                    p,
+                    k,
+                )
 
 
 def test_geometric_fit_is_near_the_bound(quick_mc):

@@ -17,18 +17,28 @@ runner = CliRunner()
 def test_simulate_then_extract_finds_the_pillars(tmp_path):
     scan = tmp_path / "scan.npz"
     res = runner.invoke(
-        app, ["simulate", "pillar_court", "--pose", "0,0,0", "--back-to-back", "--out", str(scan),
-              "--seed", "3"],
-    )  # fmt: skip
+        app,
+        [
+            "simulate",
+            "pillar_court",
+            "--pose",
+            "0,0,0",
+            "--back-to-back",
+            "--out",
+            str(scan),
+            "--seed",
+            "3",
+        ],
+    )
     assert res.exit_code == 0, res.output
     seq = load_sequence(scan)
     assert seq.n_scans == 1 and seq.scan_ranges.shape[1] == 720
     out = tmp_path / "features.json"
     rrd = tmp_path / "run.rrd"
     res = runner.invoke(
-        app, ["extract", str(scan), "--method", "geometric", "--out", str(out),
-              "--rerun", str(rrd)],
-    )  # fmt: skip
+        app,
+        ["extract", str(scan), "--method", "geometric", "--out", str(out), "--rerun", str(rrd)],
+    )
     assert res.exit_code == 0, res.output
     doc = json.loads(out.read_text())
     assert doc["schema"] == "trunkslam.features/1" and doc["frame"] == "laser"
@@ -53,8 +63,12 @@ def test_simulate_then_extract_finds_the_pillars(tmp_path):
 
 def test_extract_bailey_method(tmp_path):
     scan = tmp_path / "scan.npz"
-    assert runner.invoke(app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)]
-                         ).exit_code == 0  # fmt: skip
+    assert (
+        runner.invoke(
+            app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)]
+        ).exit_code
+        == 0
+    )
     out = tmp_path / "f.json"
     res = runner.invoke(app, ["extract", str(scan), "--method", "bailey", "--out", str(out)])
     assert res.exit_code == 0, res.output
@@ -75,8 +89,9 @@ def test_errors_are_one_line_and_exit_1(tmp_path):
     bad.write_bytes(b"not a zip file")
     res = runner.invoke(app, ["extract", str(bad)])
     assert res.exit_code == 1 and "Traceback" not in res.output
-    res = runner.invoke(app, ["simulate", "pillar_court", "--pose", "1,2", "--out",
-                              str(tmp_path / "x.npz")])  # fmt: skip
+    res = runner.invoke(
+        app, ["simulate", "pillar_court", "--pose", "1,2", "--out", str(tmp_path / "x.npz")]
+    )
     assert res.exit_code == 1 and "--pose" in res.output
     res = runner.invoke(app, ["simulate", "no_such_scene", "--pose", "0,0,0"])
     assert res.exit_code == 1 and "no_such_scene" in res.output
@@ -104,8 +119,12 @@ def test_convert_victoria_park_round_trip(tmp_path, vp_dir):
 
 def test_output_errors_and_option_checks(tmp_path):
     scan = tmp_path / "scan.npz"
-    assert runner.invoke(app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)]
-                         ).exit_code == 0  # fmt: skip
+    assert (
+        runner.invoke(
+            app, ["simulate", "test_yard", "--pose", "0,0,0", "--out", str(scan)]
+        ).exit_code
+        == 0
+    )
     for out in (tmp_path, tmp_path / "missing_dir" / "f.json"):
         res = runner.invoke(app, ["extract", str(scan), "--out", str(out)])
         assert res.exit_code == 1 and "error:" in res.output and "Traceback" not in res.output

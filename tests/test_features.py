@@ -116,8 +116,12 @@ def test_segmentation_breaks_at_jumps_and_no_returns():
     r[200] = np.nan  # a missing return
     bounds, reason, innov, _ = segment_ranges(r, GAMMA, sigma_r_m=0.01)
     ends = {(int(a), int(b)): int(k) for (a, b), k in zip(bounds, reason)}
-    assert ends == {(0, 149): END_GATE, (150, 169): END_GATE, (170, 199): END_NO_RETURN,
-                    (201, 240): END_SCAN}
+    assert ends == {
+        (0, 149): END_GATE,
+        (150, 169): END_GATE,
+        (170, 199): END_NO_RETURN,
+        (201, 240): END_SCAN,
+    }
     # noiseless wall: every validated innovation is ~0
     assert np.nanmax(np.abs(innov)) < 1e-9
 
@@ -145,8 +149,10 @@ def test_geometric_fit_matches_scipy_least_squares(seed):
     ref = least_squares(
         lambda p: np.hypot(x - p[0], y - p[1]) - p[2],
         x0=[gx + 0.05, gy - 0.05, gr * 1.1],
-        xtol=1e-15, ftol=1e-15, gtol=1e-15,
-    )  # fmt: skip
+        xtol=1e-15,
+        ftol=1e-15,
+        gtol=1e-15,
+    )
     np.testing.assert_allclose([gx, gy, gr], ref.x, atol=1e-7)
 
 
@@ -365,18 +371,23 @@ def test_360_scan_keeps_a_trunk_on_the_seam_whole(bearing_deg):
 
     b = math.radians(bearing_deg)
     c = 6.0 * np.array([math.cos(b), math.sin(b)])
-    scene = scene_from_dict({
-        "circles": [{"name": "p", "center_xy": c.tolist(), "radius_m": 0.3}],
-        "walls": [{"name": "w", "points_xy": [[-12.0, -30.0], [-12.0, 30.0]]}],
-    })  # fmt: skip
+    scene = scene_from_dict(
+        {
+            "circles": [{"name": "p", "center_xy": c.tolist(), "radius_m": 0.3}],
+            "walls": [{"name": "w", "points_xy": [[-12.0, -30.0], [-12.0, 30.0]]}],
+        }
+    )
     sensor = sensor_preset("pls200", back_to_back=True)
     ranges, labels = simulate_scan(scene, (0, 0, 0), sensor, np.random.default_rng(1))
     scan = sensor.scan(ranges)
     for method in ("geometric", "bailey"):
         kw = {} if method == "bailey" else {"sigma_r_m": 0.0104}
         f = extract_features(scan, method, **kw)
-        on_pillar = [k for k, (a, e) in enumerate(f.circle_beams)
-                     if np.mean(labels[f.beams(a, e)] == 0) > 0.5]  # fmt: skip
+        on_pillar = [
+            k
+            for k, (a, e) in enumerate(f.circle_beams)
+            if np.mean(labels[f.beams(a, e)] == 0) > 0.5
+        ]
         assert len(on_pillar) == 1, method
         (k,) = on_pillar
         assert np.hypot(*(f.circle_params[k, :2] - c)) < 0.08

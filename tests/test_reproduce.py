@@ -18,8 +18,13 @@ def quick_run(tmp_path_factory):
 
 
 def test_outputs_exist(quick_run):
-    for name in ("classification.md", "classification.csv", "classification.png",
-                 "features.rrd", "manifest.json"):  # fmt: skip
+    for name in (
+        "classification.md",
+        "classification.csv",
+        "classification.png",
+        "features.rrd",
+        "manifest.json",
+    ):
         p = quick_run / name
         assert p.exists() and p.stat().st_size > 500, name
 

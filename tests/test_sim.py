@@ -152,8 +152,12 @@ def test_sparse_raycast_equals_dense_oracle_on_random_scenes():
             for i in range(4)
         )
         scene = Scene(circles=circles, walls=walls, bushes=bushes)
-        origins = [rng.uniform(-20, 20, 2), circles[0].center_xy, walls[0].points_xy[0],
-                   0.5 * (walls[1].points_xy[0] + walls[1].points_xy[1])]  # fmt: skip
+        origins = [
+            rng.uniform(-20, 20, 2),
+            circles[0].center_xy,
+            walls[0].points_xy[0],
+            0.5 * (walls[1].points_xy[0] + walls[1].points_xy[1]),
+        ]
         for o in origins:  # incl. inside a circle, at a wall's end and on a wall's line
             a = np.concatenate([rng.uniform(-7, 7, 400), np.linspace(-np.pi, np.pi, 721)])
             r1, l1 = raycast(scene, o, a)
@@ -175,8 +179,12 @@ def test_labels_name_the_surface_each_beam_hit():
     assert {"circle", "wall", "bush", "none"} <= set(groups)
     assert set(scene.label_kind(lab)) <= {"trunk", "wall", "bush", "none"}
     assert scene.label_kind(np.array([0, 9, 13, -1, -2])).tolist() == [
-        "trunk", "wall", "bush", "none", "mixed"
-    ]  # fmt: skip
+        "trunk",
+        "wall",
+        "bush",
+        "none",
+        "mixed",
+    ]
     assert scene.label_name(np.array([scene.label_of("t05")])).tolist() == ["t05"]
     with pytest.raises(ValueError, match="labels"):
         scene.label_kind(np.array([scene.n_objects]))
@@ -443,12 +451,17 @@ C0 = {"name": "a", "center_xy": [0, 0]}
         ({"walls": "nope"}, r"walls: must be a list"),
         ({"wall": []}, r"top level: unknown key"),
         ({"circles": [], "scan_positions": [[0, 0]]}, r"scan_positions\[0\]"),
-        ({"circles": [{"name": "a", "center_xy": [0, 0], "radius_m": 1}],
-          "walls": [{"name": "a", "points_xy": [[0, 0], [1, 0]]}]}, r"unique"),
+        (
+            {
+                "circles": [{"name": "a", "center_xy": [0, 0], "radius_m": 1}],
+                "walls": [{"name": "a", "points_xy": [[0, 0], [1, 0]]}],
+            },
+            r"unique",
+        ),
         ({"description": "empty"}, r"needs at least one of"),
         ("{not json", r"not valid JSON"),
     ],
-)  # fmt: skip
+)
 def test_scene_loading_errors_name_the_key(tmp_path, data, message):
     path = _write(tmp_path, data)
     with pytest.raises(DataError, match=message) as info:
@@ -471,7 +484,7 @@ def test_scene_from_dict_round_trip_and_object_validation():
                 {"name": "p", "kind": "pillar", "center_xy": [1, 2], "radius_m": 0.3, "height_m": 3}
             ],
             "scan_positions": [[0, 0, 0.5]],
-        }  # fmt: skip
+        }
     )
     np.testing.assert_array_equal(scene.truth_landmarks, [[1, 2, 0.3]])
     assert scene.circles[0].height_m == 3.0 and scene.scan_position_names == ("1",)

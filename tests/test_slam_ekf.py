@@ -62,10 +62,12 @@ def test_inverse_observation_inverts_and_its_jacobians_match():
     z = np.array([7.5, -0.4])
     m, Gx, Gz = inverse_observation(pose, z, LASER)
     np.testing.assert_allclose(observe(pose, m[None], LASER)[0][0], z, atol=1e-12)
-    np.testing.assert_allclose(Gx, num_jac(lambda p: inverse_observation(p, z, LASER)[0], pose),
-                               atol=1e-8)  # fmt: skip
-    np.testing.assert_allclose(Gz, num_jac(lambda q: inverse_observation(pose, q, LASER)[0], z),
-                               atol=1e-8)  # fmt: skip
+    np.testing.assert_allclose(
+        Gx, num_jac(lambda p: inverse_observation(p, z, LASER)[0], pose), atol=1e-8
+    )
+    np.testing.assert_allclose(
+        Gz, num_jac(lambda q: inverse_observation(pose, q, LASER)[0], z), atol=1e-8
+    )
 
 
 def test_polar_covariance_matches_numerical_jacobian():
@@ -185,10 +187,14 @@ def _known_association_run(seed: int, n_scans: int = 100):
     # truth by exact arcs, readings with noise
     truth = np.zeros((t.size, 3))
     for i in range(1, t.size):
-        truth[i] = integrate(car, truth[i - 1], Odometry(t[:2], np.full(2, v_true),
-                                                         np.full(2, a_true)), 0.0, dt)[0]  # fmt: skip
-    odo = Odometry(t, v_true + 0.1 * rng.standard_normal(t.size),
-                   a_true + math.radians(2.0) * rng.standard_normal(t.size))  # fmt: skip
+        truth[i] = integrate(
+            car, truth[i - 1], Odometry(t[:2], np.full(2, v_true), np.full(2, a_true)), 0.0, dt
+        )[0]
+    odo = Odometry(
+        t,
+        v_true + 0.1 * rng.standard_normal(t.size),
+        a_true + math.radians(2.0) * rng.standard_normal(t.size),
+    )
     ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
     R_turn = 1.2 / math.tan(a_true)
     rad = np.where(np.arange(12) % 2, R_turn - 4.0, R_turn + 4.0)

@@ -57,12 +57,17 @@ def test_tree_park_route_and_noise_statistics():
     scene = load_scene("tree_park")
     assert len(scene.circles) == 8 and len(scene.walls) >= 1 and len(scene.bushes) >= 1
     assert seq.n_scans >= 170  # Table 4 counts scans 10-160
-    d = np.hypot(*(seq.truth_pose[:, None, :2] - seq.truth_landmarks[None, :, :2]).transpose(2, 0, 1))
+    d = np.hypot(
+        *(seq.truth_pose[:, None, :2] - seq.truth_landmarks[None, :, :2]).transpose(2, 0, 1)
+    )
     assert d.min() > 2.0  # the car never brushes a trunk
     # odometry noise: readings minus the hold the truth was built with
     p = CycabParams()
-    noiseless = simulate_cycab_run(np.random.default_rng(1), "tree_park",
-                                   dataclasses.replace(p, speed_sigma_mps=0.0, steer_sigma_rad=0.0))  # fmt: skip
+    noiseless = simulate_cycab_run(
+        np.random.default_rng(1),
+        "tree_park",
+        dataclasses.replace(p, speed_sigma_mps=0.0, steer_sigma_rad=0.0),
+    )
     dv = seq.odo_speed - noiseless.odo_speed
     assert np.std(dv) == pytest.approx(p.speed_sigma_mps, rel=0.05)  # 957 samples
     np.testing.assert_array_equal(seq.truth_pose, noiseless.truth_pose)
@@ -70,9 +75,13 @@ def test_tree_park_route_and_noise_statistics():
 
 def _one_circle(beams, xy):
     f = Features.empty(0.0, "paper")
-    return dataclasses.replace(f, circle_params=np.array([[xy[0], xy[1], 0.3]]),
-                               circle_cov=np.zeros((1, 3, 3)), circle_beams=np.array([beams]),
-                               circle_rms_m=np.zeros(1))  # fmt: skip
+    return dataclasses.replace(
+        f,
+        circle_params=np.array([[xy[0], xy[1], 0.3]]),
+        circle_cov=np.zeros((1, 3, 3)),
+        circle_beams=np.array([beams]),
+        circle_rms_m=np.zeros(1),
+    )
 
 
 def test_false_detection_rule():
@@ -117,9 +126,19 @@ def test_run_table34_writes_every_output_once(tmp_path):
     cfg = Exp2Config(n_runs=2, cycab=CycabParams(n_scans=40), sensitivity=False)
     res = run_table34(ctx, cfg)
     names = sorted(p.name for p in ctx.outputs)
-    for n in ("table3.md", "table3.csv", "table4.md", "table4.csv", "consistency.md",
-              "fig7_slam_path.png", "fig10_innovations.png", "fig11_pose_errors.png", "nees.png",
-              "slam.rrd", "slam_key_figures.json"):  # fmt: skip
+    for n in (
+        "table3.md",
+        "table3.csv",
+        "table4.md",
+        "table4.csv",
+        "consistency.md",
+        "fig7_slam_path.png",
+        "fig10_innovations.png",
+        "fig11_pose_errors.png",
+        "nees.png",
+        "slam.rrd",
+        "slam_key_figures.json",
+    ):
         assert n in names and (tmp_path / n).stat().st_size > 0, n
     assert ctx.config["table3"]["n_runs"] == 2
     n_out = len(ctx.outputs)
@@ -146,7 +165,9 @@ def test_slam_command_writes_trajectory_map_and_summary(tmp_path):
     yaw = 2 * np.arctan2(tum[:, 6], tum[:, 7])
     rows = list(csv.DictReader((out / "trajectory.csv").open()))
     assert len(rows) == 50 and float(rows[0]["cov_xx"]) == 0.0
-    np.testing.assert_allclose(np.cos(yaw), np.cos([float(r["theta_rad"]) for r in rows]), atol=1e-6)
+    np.testing.assert_allclose(
+        np.cos(yaw), np.cos([float(r["theta_rad"]) for r in rows]), atol=1e-6
+    )
     lm = list(csv.DictReader((out / "map.csv").open()))
     assert len(lm) == summary["landmarks"] >= 3
     s = json.loads((out / "summary.json").read_text())

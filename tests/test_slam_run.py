@@ -28,8 +28,9 @@ LASER = (1.55, 0.0, 0.0)
 EXACT = SlamConfig(measurement_noise="constant")
 
 
-def drive_sequence(v: float, steer: float, n_scans: int = 40, with_truth: bool = True,
-                   **extra) -> Sequence:  # fmt: skip
+def drive_sequence(
+    v: float, steer: float, n_scans: int = 40, with_truth: bool = True, **extra
+) -> Sequence:
     """Constant (v, steer) at 20 Hz, scans at 5 Hz with no returns; truth by exact arcs."""
     t = np.arange((n_scans - 1) * 4 + 1) * 0.05
     odo = Odometry(t, np.full(t.size, v), np.full(t.size, steer))
@@ -41,10 +42,18 @@ def drive_sequence(v: float, steer: float, n_scans: int = 40, with_truth: bool =
     kw = {"truth_t": t, "truth_pose": truth} if with_truth else {}
     kw.update(extra)
     return Sequence(
-        scan_t=t[::4], scan_ranges=np.full((n_scans, 361), np.nan), scan_angle_min=-math.pi / 2,
-        scan_angle_increment=math.pi / 360, laser_pose=np.array(LASER), scan_max_range=80.0,
-        odo_t=t, odo_speed=odo.speed_mps, odo_steer=odo.steer_rad, vehicle=CAR, **kw,
-    )  # fmt: skip
+        scan_t=t[::4],
+        scan_ranges=np.full((n_scans, 361), np.nan),
+        scan_angle_min=-math.pi / 2,
+        scan_angle_increment=math.pi / 360,
+        laser_pose=np.array(LASER),
+        scan_max_range=80.0,
+        odo_t=t,
+        odo_speed=odo.speed_mps,
+        odo_steer=odo.steer_rad,
+        vehicle=CAR,
+        **kw,
+    )
 
 
 @pytest.mark.parametrize("steer", [0.0, 0.3], ids=["straight", "circle"])
@@ -64,8 +73,9 @@ def test_exact_odometry_without_features_reproduces_the_truth(steer):
     assert np.all(log.timing_s["total"] >= log.timing_s["predict"])
 
 
-def point_features(seq: Sequence, landmarks: np.ndarray, rng, sigma=(0.01, 0.001),
-                   extra: dict | None = None) -> list:  # fmt: skip
+def point_features(
+    seq: Sequence, landmarks: np.ndarray, rng, sigma=(0.01, 0.001), extra: dict | None = None
+) -> list:
     """Circles at the true landmark positions (laser frame) plus noise, from the truth poses;
     `extra`: scan -> list of extra (x, y) laser-frame circles (false features)."""
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
@@ -82,9 +92,15 @@ def point_features(seq: Sequence, landmarks: np.ndarray, rng, sigma=(0.01, 0.001
             xy = np.vstack([xy, np.asarray(extra[k], float).reshape(-1, 2)])
         n = len(xy)
         f = Features.empty(float(seq.scan_t[k]), "paper")
-        out.append(dataclasses.replace(
-            f, circle_params=np.column_stack([xy, np.full(n, 0.3)]), circle_cov=np.zeros((n, 3, 3)),
-            circle_beams=np.zeros((n, 2), np.int64), circle_rms_m=np.zeros(n)))  # fmt: skip
+        out.append(
+            dataclasses.replace(
+                f,
+                circle_params=np.column_stack([xy, np.full(n, 0.3)]),
+                circle_cov=np.zeros((n, 3, 3)),
+                circle_beams=np.zeros((n, 2), np.int64),
+                circle_rms_m=np.zeros(n),
+            )
+        )
     return out
 
 
@@ -95,9 +111,17 @@ LANDMARKS = np.array([[10.0, 3.0], [14.0, -4.0], [20.0, 6.0], [26.0, -2.0]])
 def test_landmarks_join_the_map_after_three_scans_and_stay_unique(method):
     seq = drive_sequence(1.5, 0.0, n_scans=30)
     feats = point_features(seq, LANDMARKS, np.random.default_rng(0))
-    log = run(seq, features=feats, association=method,
-              config=SlamConfig(range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001,
-                                cross_range_sigma_m=0.0))  # fmt: skip
+    log = run(
+        seq,
+        features=feats,
+        association=method,
+        config=SlamConfig(
+            range_sigma_m=0.01,
+            range_sigma_per_m=0.0,
+            bearing_sigma_rad=0.001,
+            cross_range_sigma_m=0.0,
+        ),
+    )
     assert log.association_method == method
     # every landmark seen from scan 0 is a tentative at 0, seen again at 1, confirmed at 2
     first = log.meas_scan == 0
@@ -149,8 +173,14 @@ def test_ambiguous_measurement_is_not_a_new_landmark():
     p = f.circle_params.copy()
     p[0, :2] *= 1.0 + 0.05 / np.hypot(*p[0, :2])
     feats[8] = dataclasses.replace(f, circle_params=p)
-    cfg = SlamConfig(range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001,
-                     cross_range_sigma_m=0.0, gate_prob=0.99, new_feature_gate_prob=0.99999999)  # fmt: skip
+    cfg = SlamConfig(
+        range_sigma_m=0.01,
+        range_sigma_per_m=0.0,
+        bearing_sigma_rad=0.001,
+        cross_range_sigma_m=0.0,
+        gate_prob=0.99,
+        new_feature_gate_prob=0.99999999,
+    )
     log = run(seq, features=feats, config=cfg)
     assert log.meas_status[log.meas_scan == 8][0] == AMBIGUOUS
     assert log.landmark_xy.shape[0] == 1
@@ -194,8 +224,16 @@ def test_visualiser_receives_every_scan():
     seq = drive_sequence(1.5, 0.0, n_scans=10)
     vis = Recording()
     run(seq, features=point_features(seq, LANDMARKS, np.random.default_rng(3)), visualiser=vis)
-    for name in ("set_scan", "log_scan", "log_features", "log_vehicle", "log_landmarks",
-                 "log_associations", "log_truth", "log_tentatives"):  # fmt: skip
+    for name in (
+        "set_scan",
+        "log_scan",
+        "log_features",
+        "log_vehicle",
+        "log_landmarks",
+        "log_associations",
+        "log_truth",
+        "log_tentatives",
+    ):
         assert vis.calls.get(name) == 10, name
 
 
@@ -225,11 +263,15 @@ def test_bad_sequences_give_clear_errors():
     t = np.arange(17) * 0.05
     gap = np.concatenate([t[:3], t[12:]])  # no odometry from 0.10 s to 0.60 s
     with pytest.raises(ValueError, match=r"no odometry from 0.100 s to 0.600 s"):
-        run(duck(odo_t=gap, odo_speed=np.ones(gap.size), odo_steer=np.zeros(gap.size)),
-            config=SlamConfig(max_odometry_gap_s=0.3))  # fmt: skip
+        run(
+            duck(odo_t=gap, odo_speed=np.ones(gap.size), odo_steer=np.zeros(gap.size)),
+            config=SlamConfig(max_odometry_gap_s=0.3),
+        )
     with pytest.raises(ValueError, match="ends at"):
-        run(duck(odo_t=t[:4], odo_speed=np.ones(4), odo_steer=np.zeros(4)),
-            config=SlamConfig(max_odometry_gap_s=0.3))  # fmt: skip
+        run(
+            duck(odo_t=t[:4], odo_speed=np.ones(4), odo_steer=np.zeros(4)),
+            config=SlamConfig(max_odometry_gap_s=0.3),
+        )
     with pytest.raises(ValueError, match="3 precomputed feature sets for 5 scans"):
         run(duck(), features=[Features.empty()] * 3)
     with pytest.raises(ValueError, match="method"):
@@ -266,7 +308,8 @@ def test_initial_heading_does_not_override_the_truth_start():
 
 def test_impossible_encoder_offset_is_a_clear_error():
     seq = drive_sequence(1.0, 0.6)
-    bad = dataclasses.replace(seq, vehicle={"model": "ackermann", "wheelbase_m": 1.0,
-                                            "encoder_offset_m": 2.0})  # fmt: skip
+    bad = dataclasses.replace(
+        seq, vehicle={"model": "ackermann", "wheelbase_m": 1.0, "encoder_offset_m": 2.0}
+    )
     with pytest.raises(ValueError, match="encoder_offset_m"):
         run(bad, features="paper")

@@ -30,20 +30,30 @@ def numerical_jacobians(model, pose, v, a, dt, eps=1e-6):
     for i in range(3):
         d = np.zeros(3)
         d[i] = eps
-        F[:, i] = (arc_step_jacobians(model, pose + d, v, a, dt)[0]
-                   - arc_step_jacobians(model, pose - d, v, a, dt)[0]) / (2 * eps)  # fmt: skip
+        F[:, i] = (
+            arc_step_jacobians(model, pose + d, v, a, dt)[0]
+            - arc_step_jacobians(model, pose - d, v, a, dt)[0]
+        ) / (2 * eps)
     for i, (dv, da) in enumerate(((eps, 0.0), (0.0, eps))):
-        G[:, i] = (arc_step_jacobians(model, pose, v + dv, a + da, dt)[0]
-                   - arc_step_jacobians(model, pose, v - dv, a - da, dt)[0]) / (2 * eps)  # fmt: skip
+        G[:, i] = (
+            arc_step_jacobians(model, pose, v + dv, a + da, dt)[0]
+            - arc_step_jacobians(model, pose, v - dv, a - da, dt)[0]
+        ) / (2 * eps)
     return F, G
 
 
 @pytest.mark.parametrize("model", [VP, CYCAB], ids=["vp", "cycab"])
 @pytest.mark.parametrize(
     "v, a, dt",
-    [(3.0, 0.3, 0.2), (1.2, -0.4, 0.05), (2.0, 0.0, 0.1), (1.0, 1e-6, 0.05), (-0.5, 0.2, 0.1),
-     (0.0, 0.3, 0.05)],
-)  # fmt: skip
+    [
+        (3.0, 0.3, 0.2),
+        (1.2, -0.4, 0.05),
+        (2.0, 0.0, 0.1),
+        (1.0, 1e-6, 0.05),
+        (-0.5, 0.2, 0.1),
+        (0.0, 0.3, 0.05),
+    ],
+)
 def test_step_jacobians_match_numerical_derivatives(model, v, a, dt):
     pose = np.array([1.0, -2.0, 0.7])
     _, F, G = arc_step_jacobians(model, pose, v, a, dt)
@@ -54,9 +64,13 @@ def test_step_jacobians_match_numerical_derivatives(model, v, a, dt):
 
 @settings(max_examples=60, deadline=None)
 @given(
-    st.floats(-3, 3), st.floats(-3, 3), st.floats(-math.pi, math.pi), st.floats(-2, 8),
-    st.floats(-0.6, 0.6), st.floats(0.001, 0.5),
-)  # fmt: skip
+    st.floats(-3, 3),
+    st.floats(-3, 3),
+    st.floats(-math.pi, math.pi),
+    st.floats(-2, 8),
+    st.floats(-0.6, 0.6),
+    st.floats(0.001, 0.5),
+)
 def test_step_jacobians_property(x, y, th, v, a, dt):
     pose = np.array([x, y, th])
     _, F, G = arc_step_jacobians(VP, pose, v, a, dt)
@@ -149,7 +163,10 @@ def test_integrated_jacobian_matches_numerical():
     for i in range(3):
         d = np.zeros(3)
         d[i] = eps
-        num = (integrate(VP, pose + d, odo, 0.01, 1.73)[0] - integrate(VP, pose - d, odo, 0.01, 1.73)[0]) / (2 * eps)
+        num = (
+            integrate(VP, pose + d, odo, 0.01, 1.73)[0]
+            - integrate(VP, pose - d, odo, 0.01, 1.73)[0]
+        ) / (2 * eps)
         np.testing.assert_allclose(F[:, i], num, atol=1e-7)
 
 
@@ -162,8 +179,11 @@ def test_odometry_noise_covariance_matches_monte_carlo():
     _, _, Q = integrate(CYCAB, np.zeros(3), odometry(t, v, a), 0.0, 1.0, noise)
     ends = []
     for _ in range(4000):
-        odo = Odometry(t, v + 0.1 * rng.standard_normal(t.size),
-                       a + math.radians(2.0) * rng.standard_normal(t.size))  # fmt: skip
+        odo = Odometry(
+            t,
+            v + 0.1 * rng.standard_normal(t.size),
+            a + math.radians(2.0) * rng.standard_normal(t.size),
+        )
         ends.append(integrate(CYCAB, np.zeros(3), odo, 0.0, 1.0)[0])
     C = np.cov(np.array(ends).T)
     # sampling error of a variance with 4000 samples is about 2.2%; linearisation adds little

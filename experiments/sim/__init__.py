@@ -37,10 +37,26 @@ from experiments.sim.simulate import (
 )
 
 __all__ = [
-    "Scene", "CircleObject", "WallObject", "BushObject",
-    "load_scene", "scene_from_dict", "list_scenes", "scenes_dir", "make_bush",
-    "NO_RETURN_LABEL", "MIXED_LABEL", "CIRCLE_KINDS", "WALL_KINDS",
-    "raycast", "raycast_dense",
-    "SensorModel", "SENSOR_PRESETS", "sensor_preset", "laser_world_pose",
-    "simulate_scan", "simulate_sequence", "simulate_to_sequence",
-]  # fmt: skip
+    "Scene",
+    "CircleObject",
+    "WallObject",
+    "BushObject",
+    "load_scene",
+    "scene_from_dict",
+    "list_scenes",
+    "scenes_dir",
+    "make_bush",
+    "NO_RETURN_LABEL",
+    "MIXED_LABEL",
+    "CIRCLE_KINDS",
+    "WALL_KINDS",
+    "raycast",
+    "raycast_dense",
+    "SensorModel",
+    "SENSOR_PRESETS",
+    "sensor_preset",
+    "laser_world_pose",
+    "simulate_scan",
+    "simulate_sequence",
+    "simulate_to_sequence",
+]

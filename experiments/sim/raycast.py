@@ -40,9 +40,14 @@ def _check(origin_xy: Any, angles_world_rad: Any) -> tuple[float, float, np.ndar
 
 
 def _circle_t(
-    ox: float, oy: float, dx: np.ndarray, dy: np.ndarray, cx: np.ndarray, cy: np.ndarray,
+    ox: float,
+    oy: float,
+    dx: np.ndarray,
+    dy: np.ndarray,
+    cx: np.ndarray,
+    cy: np.ndarray,
     r: np.ndarray,
-) -> np.ndarray:  # fmt: skip
+) -> np.ndarray:
     """Distance along beams d = (dx, dy) to their first crossing of circles (cx, cy, r).
 
     All arrays broadcast together (pairs, or (B, 1) against (L,)); inf where the beam misses.
@@ -62,9 +67,15 @@ def _circle_t(
 
 
 def _segment_t(
-    ox: float, oy: float, dx: np.ndarray, dy: np.ndarray, px: np.ndarray, py: np.ndarray,
-    ex: np.ndarray, ey: np.ndarray,
-) -> np.ndarray:  # fmt: skip
+    ox: float,
+    oy: float,
+    dx: np.ndarray,
+    dy: np.ndarray,
+    px: np.ndarray,
+    py: np.ndarray,
+    ex: np.ndarray,
+    ey: np.ndarray,
+) -> np.ndarray:
     """Distance along beams to segments p + s e, s in [0, 1]; inf where missed. Broadcasts.
 
     o + t d = p + s e  =>  t = (w x e) / (d x e), s = (w x d) / (d x e), w = p - o.

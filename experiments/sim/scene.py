@@ -387,9 +387,17 @@ class Scene:
 # ---- scene files ---------------------------------------------------------------------------
 
 _TOP_KEYS = {
-    "description", "schema", "name", "frame", "notes",
-    "circles", "walls", "bushes", "scan_positions", "scan_position_names",
-}  # fmt: skip
+    "description",
+    "schema",
+    "name",
+    "frame",
+    "notes",
+    "circles",
+    "walls",
+    "bushes",
+    "scan_positions",
+    "scan_position_names",
+}
 _CIRCLE_KEYS = {"name", "kind", "center_xy", "radius_m", "height_m", "note"}
 _WALL_KEYS = {"name", "kind", "points_xy", "closed", "height_m", "note"}
 _BUSH_KEYS = {"name", "points_xy", "height_m", "note"}
@@ -563,10 +571,14 @@ def scene_from_dict(data: Mapping, source: str = "<dict>", default_name: str = "
         if isinstance(description, list):  # long descriptions may be a list of lines
             description = "\n".join(str(s) for s in description)
         return Scene(
-            circles=tuple(circles), walls=tuple(walls), bushes=tuple(bushes),
-            scan_positions=sp, scan_position_names=tuple(spn), name=str(name),
+            circles=tuple(circles),
+            walls=tuple(walls),
+            bushes=tuple(bushes),
+            scan_positions=sp,
+            scan_position_names=tuple(spn),
+            name=str(name),
             description=str(description),
-        )  # fmt: skip
+        )
     except DataError:
         raise
     except ValueError as exc:  # an object's own validation (names, zero-length segments, ...)

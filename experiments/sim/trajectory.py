@@ -77,16 +77,32 @@ class CycabParams:
     mixed_prob: float = 0.1
 
     def __post_init__(self) -> None:
-        for name in ("wheelbase_m", "speed_mps", "lookahead_m", "max_steer_rad",
-                     "max_steer_rate_rad_s", "odo_rate_hz", "dgps_rate_hz"):  # fmt: skip
+        for name in (
+            "wheelbase_m",
+            "speed_mps",
+            "lookahead_m",
+            "max_steer_rad",
+            "max_steer_rate_rad_s",
+            "odo_rate_hz",
+            "dgps_rate_hz",
+        ):
             if not getattr(self, name) > 0:
                 raise ValueError(f"CycabParams.{name}: must be > 0, got {getattr(self, name)!r}")
-        for name in ("accel_time_s", "speed_sigma_mps", "steer_sigma_rad", "dgps_sigma_m",
-                     "dgps_offset_s", "range_sigma_m", "mixed_prob"):  # fmt: skip
+        for name in (
+            "accel_time_s",
+            "speed_sigma_mps",
+            "steer_sigma_rad",
+            "dgps_sigma_m",
+            "dgps_offset_s",
+            "range_sigma_m",
+            "mixed_prob",
+        ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"CycabParams.{name}: must be >= 0, got {getattr(self, name)!r}")
         if not (isinstance(self.scan_every, int) and self.scan_every >= 1):
-            raise ValueError(f"CycabParams.scan_every: must be an integer >= 1, got {self.scan_every!r}")
+            raise ValueError(
+                f"CycabParams.scan_every: must be an integer >= 1, got {self.scan_every!r}"
+            )
         if not (isinstance(self.n_scans, int) and self.n_scans >= 1):
             raise ValueError(f"CycabParams.n_scans: must be an integer >= 1, got {self.n_scans!r}")
         if len(self.laser_pose) != 3:
@@ -94,8 +110,11 @@ class CycabParams:
 
     @property
     def vehicle(self) -> dict:
-        return {"model": "ackermann", "wheelbase_m": self.wheelbase_m,
-                "encoder_offset_m": self.encoder_offset_m}  # fmt: skip
+        return {
+            "model": "ackermann",
+            "wheelbase_m": self.wheelbase_m,
+            "encoder_offset_m": self.encoder_offset_m,
+        }
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -202,7 +221,9 @@ def simulate_cycab_run(
     ranges = np.empty((p.n_scans, sensor.n_beams))
     labels = np.empty((p.n_scans, sensor.n_beams), dtype=np.int64)
     for k, i in enumerate(scan_idx):
-        ranges[k], labels[k] = simulate_scan(sc, d.pose[i], sensor, rng_scan, laser_pose=p.laser_pose)
+        ranges[k], labels[k] = simulate_scan(
+            sc, d.pose[i], sensor, rng_scan, laser_pose=p.laser_pose
+        )
     # DGPS at its own rate and clock
     t_end = float(d.t_s[-1])
     gps_t = np.arange(p.dgps_offset_s, t_end, 1.0 / p.dgps_rate_hz)
