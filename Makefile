@@ -32,6 +32,7 @@ bench: $(STAMP)
 	$(BIN)/trunkslam bench extract
 	$(BIN)/trunkslam bench association
 	$(BIN)/trunkslam bench slam
+	$(BIN)/trunkslam bench raycast
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

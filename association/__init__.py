@@ -11,8 +11,9 @@
 Standalone: imports numpy, scipy and numba only.
 """
 
-from association._inputs import wrap_angle
 from association.api import METHODS, Association, associate, associate_detailed
+from association.errors import AssociationError
+from association.inputs import wrap_angle
 from association.rounding import RoundingResult, ihgr_round, solve_set_partition
 from association.single import CostModel
 from association.window import SlidingWindowAssociator, WindowDecision
@@ -29,4 +30,5 @@ __all__ = [
     "RoundingResult",
     "CostModel",
     "wrap_angle",
+    "AssociationError",
 ]

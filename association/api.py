@@ -7,7 +7,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from association._inputs import prepare
+from association.errors import AssociationError
+from association.inputs import prepare
 from association.jcbb import DEFAULT_MAX_NODES, jcbb_assign
 from association.nn import nn_assign
 from association.single import CostModel, ihgr_single
@@ -51,11 +52,11 @@ def associate_detailed(
 ) -> Association:
     """`associate` with the method's statistics; see `associate` for the arguments."""
     if method not in METHODS:
-        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
+        raise AssociationError(f"method: expected one of {METHODS}, got {method!r}")
     unknown = set(params) - set(_PARAMS[method])
     if unknown:
         allowed = ", ".join(_PARAMS[method]) or "none"
-        raise ValueError(
+        raise AssociationError(
             f"{sorted(unknown)}: not parameters of method {method!r} (allowed: {allowed})"
         )
     prep = prepare(z, R, z_hat, H, P, gate_prob)
@@ -101,8 +102,8 @@ def associate(
 
     Returns (m,) int64: for each measurement the index of its map feature in 0..n-1, or -1 for
     a new feature or clutter. Every feature is used at most once. Bearing differences are
-    wrapped to (-pi, pi]. Raises ValueError naming the argument for malformed input (shapes,
-    NaN or inf, negative ranges, R not positive definite, P not symmetric positive
-    semi-definite on the blocks used).
+    wrapped to (-pi, pi]. Raises AssociationError (a ValueError) naming the argument for
+    malformed input (shapes, NaN or inf, negative ranges, R not positive definite, P not
+    symmetric positive semi-definite on the blocks used).
     """
     return associate_detailed(z, R, z_hat, H, P, method, gate_prob, **params).assignment

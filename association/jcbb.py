@@ -7,7 +7,7 @@ of the search order).
 
 - Joint covariance of the pairings {(i_1, j_1), ..., (i_k, j_k)}: block (a, b) is
   H_ja P H_jb^T, plus R_ia on the diagonal blocks; computed for the individually compatible
-  features only, by the sparse kernel in `association._inputs`.
+  features only, by the sparse kernel in `association.inputs`.
 - Joint Mahalanobis distance D2 = nu^T S^-1 nu is kept incrementally: the Cholesky factor L of
   S and the whitened innovation y = L^-1 nu are extended by one 2x2 block per pairing
   (Schur complement), so each node costs O(k^2) instead of a fresh O(k^3) solve.
@@ -31,7 +31,8 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from association._inputs import Prepared, cross_cov
+from association.errors import AssociationError
+from association.inputs import Prepared, cross_cov
 
 __all__ = ["jcbb_assign", "JCBBStats", "DEFAULT_MAX_NODES"]
 
@@ -105,7 +106,7 @@ def _extend_kernel(L, y, C, fl_stack, k, fl, nu, S_new):
 def jcbb_assign(prep: Prepared, gate_prob: float, max_nodes: int = DEFAULT_MAX_NODES):
     """Assignment (m,) int (feature index or -1) and `JCBBStats`."""
     if not isinstance(max_nodes, (int, np.integer)) or max_nodes < 1:
-        raise ValueError(f"max_nodes: must be a positive integer, got {max_nodes!r}")
+        raise AssociationError(f"max_nodes: must be a positive integer, got {max_nodes!r}")
     stats = JCBBStats()
     out = np.full(prep.m, -1, np.int64)
     if prep.pair_i.size == 0:

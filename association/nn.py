@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from association._inputs import Prepared
+from association.inputs import Prepared
 
 __all__ = ["nn_assign"]
 

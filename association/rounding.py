@@ -43,6 +43,8 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint, linprog, milp
 from scipy.sparse.csgraph import connected_components
 
+from association.errors import AssociationError
+
 __all__ = ["RoundingResult", "ihgr_round", "solve_set_partition", "check_problem"]
 
 _DENSE_MAX_ENTRIES = 40_000  # below this, a dense A is faster through linprog than a sparse one
@@ -81,43 +83,43 @@ def _check(costs, A, exact):
     try:
         c = np.asarray(costs, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"costs: cannot be read as a float array ({exc})") from None
+        raise AssociationError(f"costs: cannot be read as a float array ({exc})") from None
     if c.ndim != 1:
-        raise ValueError(f"costs: expected shape (N,), got {c.shape}")
+        raise AssociationError(f"costs: expected shape (N,), got {c.shape}")
     if not np.isfinite(c).all():
-        raise ValueError("costs: contains NaN or inf")
+        raise AssociationError("costs: contains NaN or inf")
     if sp.issparse(A):
         if A.ndim != 2:
-            raise ValueError(f"A: expected a 2-D (rows, N) matrix, got shape {A.shape}")
+            raise AssociationError(f"A: expected a 2-D (rows, N) matrix, got shape {A.shape}")
         Acsc = sp.csc_array(A, dtype=np.float64)
         Acsc.sum_duplicates()
         Acsc.eliminate_zeros()
         n_rows, n_cols = Acsc.shape
         if Acsc.nnz and not np.all(Acsc.data == 1.0):
-            raise ValueError("A: entries must be 0 or 1")
+            raise AssociationError("A: entries must be 0 or 1")
         indptr = Acsc.indptr.astype(np.int64)
         indices = Acsc.indices.astype(np.int64)
     else:
         try:
             Ad = np.asarray(A, dtype=np.float64)
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"A: cannot be read as a float matrix ({exc})") from None
+            raise AssociationError(f"A: cannot be read as a float matrix ({exc})") from None
         if Ad.ndim != 2:
-            raise ValueError(f"A: expected a 2-D (rows, N) matrix, got shape {Ad.shape}")
+            raise AssociationError(f"A: expected a 2-D (rows, N) matrix, got shape {Ad.shape}")
         n_rows, n_cols = Ad.shape
         if not np.isin(Ad, (0.0, 1.0)).all():
-            raise ValueError("A: entries must be 0 or 1")
+            raise AssociationError("A: entries must be 0 or 1")
         col, indices = np.nonzero(Ad.T)
         indptr = np.concatenate([[0], np.cumsum(np.bincount(col, minlength=n_cols))])
         indices = indices.astype(np.int64)
     if n_cols != c.shape[0]:
-        raise ValueError(f"A: has {n_cols} columns but costs has {c.shape[0]} entries")
+        raise AssociationError(f"A: has {n_cols} columns but costs has {c.shape[0]} entries")
     counts = np.diff(indptr)
     if (counts == 0).any():
-        raise ValueError(f"A: column {int(np.flatnonzero(counts == 0)[0])} covers no row")
+        raise AssociationError(f"A: column {int(np.flatnonzero(counts == 0)[0])} covers no row")
     e = np.asarray(exact)
     if e.shape != (n_rows,) or e.dtype != bool:
-        raise ValueError(
+        raise AssociationError(
             f"exact: expected a bool array of shape ({n_rows},), got {e.dtype} {e.shape}"
         )
     return c, n_rows, indptr, indices, e
@@ -188,7 +190,7 @@ def ihgr_round(
     True for "covered exactly once", False for "at most once". See the module docstring.
     """
     if not 0.0 < eps < 0.5:
-        raise ValueError(f"eps: must be in (0, 0.5), got {eps!r}")
+        raise AssociationError(f"eps: must be in (0, 0.5), got {eps!r}")
     c, n_rows, indptr, indices, exact = _check(costs, A, exact)
     n_cols = c.size
     row_has_col = np.bincount(indices, minlength=n_rows) > 0
@@ -301,6 +303,6 @@ def solve_set_partition(costs, A, exact, method: str = "ihgr", **params) -> Roun
         return ihgr_round(costs, A, exact, **params)
     if method == "milp":
         if params:
-            raise ValueError(f"method 'milp' takes no parameters, got {sorted(params)}")
+            raise AssociationError(f"method 'milp' takes no parameters, got {sorted(params)}")
         return _milp(costs, A, exact)
-    raise ValueError(f"method: expected 'ihgr' or 'milp', got {method!r}")
+    raise AssociationError(f"method: expected 'ihgr' or 'milp', got {method!r}")

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from association._inputs import Prepared
+from association.errors import AssociationError
+from association.inputs import Prepared
 from association.rounding import RoundingResult, ihgr_round
 
 __all__ = ["CostModel", "single_scan_problem", "ihgr_single"]
@@ -53,14 +54,14 @@ class CostModel:
         for name in ("p_detect", "clutter_density", "birth_density"):
             v = getattr(self, name)
             if not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
-                raise ValueError(f"CostModel.{name}: must be a finite number, got {v!r}")
+                raise AssociationError(f"CostModel.{name}: must be a finite number, got {v!r}")
             object.__setattr__(self, name, float(v))
         if not 0.0 < self.p_detect < 1.0:
-            raise ValueError(f"CostModel.p_detect: must be in (0, 1), got {self.p_detect!r}")
+            raise AssociationError(f"CostModel.p_detect: must be in (0, 1), got {self.p_detect!r}")
         if self.clutter_density < 0 or self.birth_density < 0:
-            raise ValueError("CostModel.clutter_density, birth_density: must be >= 0")
+            raise AssociationError("CostModel.clutter_density, birth_density: must be >= 0")
         if self.clutter_density + self.birth_density <= 0:
-            raise ValueError("CostModel.clutter_density + birth_density: must be > 0")
+            raise AssociationError("CostModel.clutter_density + birth_density: must be > 0")
 
     @property
     def detect_cost(self) -> float:
@@ -110,10 +111,7 @@ def single_scan_problem(prep: Prepared, model: CostModel):
     col_meas = np.concatenate([prep.pair_i, meas_order])
     col_feat = np.concatenate([prep.pair_j, np.full(m, -1, np.int64)])
     costs = np.concatenate(
-        [
-            model.pair_cost(prep.d2, prep.logdet_S),
-            np.full(m, model.unexplained_cost()),
-        ]
+        [model.pair_cost(prep.d2, prep.logdet_S), np.full(m, model.unexplained_cost())]
     )
     n_cols = k + m
     rows = np.concatenate([prep.pair_i, row_of_feat[prep.pair_j], meas_order])

@@ -72,10 +72,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from association._inputs import (
-    _as_float_array,
-    _block_psd_ok,
-    _check_finite,
+from association.errors import AssociationError
+from association.inputs import (
+    as_float_array,
+    block_psd_ok,
+    check_finite,
     chol2_solve,
     gate_threshold,
     prepare,
@@ -185,19 +186,21 @@ class SlidingWindowAssociator:
         **rounding,
     ) -> None:
         if not isinstance(K, (int, np.integer)) or not 1 <= K <= 8:
-            raise ValueError(f"K: must be an integer in 1..8, got {K!r}")
+            raise AssociationError(f"K: must be an integer in 1..8, got {K!r}")
         if not 0.0 < float(gate_prob) < 1.0:
-            raise ValueError(f"gate_prob: must be in (0, 1), got {gate_prob!r}")
+            raise AssociationError(f"gate_prob: must be in (0, 1), got {gate_prob!r}")
         if not isinstance(max_tracks, (int, np.integer)) or max_tracks < 0:
-            raise ValueError(f"max_tracks: must be a non-negative integer, got {max_tracks!r}")
+            raise AssociationError(
+                f"max_tracks: must be a non-negative integer, got {max_tracks!r}"
+            )
         unknown = set(rounding) - {"eps", "fix_ones", "presolve"}
         if unknown:
-            raise ValueError(f"{sorted(unknown)}: not options of ihgr_round")
+            raise AssociationError(f"{sorted(unknown)}: not options of ihgr_round")
         self.K = int(K)
         self.gate_prob = float(gate_prob)
         self.model = model if model is not None else CostModel()
         if not isinstance(self.model, CostModel):
-            raise ValueError(f"model: expected a CostModel, got {type(model).__name__}")
+            raise AssociationError(f"model: expected a CostModel, got {type(model).__name__}")
         self.max_tracks = int(max_tracks)
         self.rounding = rounding
         self._past: list[_PastScan] = []
@@ -321,20 +324,22 @@ class SlidingWindowAssociator:
             return np.arange(n, dtype=np.int64)
         a = np.asarray(ids)
         if a.shape != (n,) or a.dtype.kind not in "iu":
-            raise ValueError(f"feature_ids: expected ({n},) integers, got {a.dtype} {a.shape}")
+            raise AssociationError(
+                f"feature_ids: expected ({n},) integers, got {a.dtype} {a.shape}"
+            )
         if np.unique(a).size != n:
-            raise ValueError("feature_ids: must be distinct")
+            raise AssociationError("feature_ids: must be distinct")
         return a.astype(np.int64)
 
     def mark_mapped(self, indices) -> None:
         """The caller initialised map features from these measurements of the last scan: they and
         the earlier members of their tracks leave the pool of open measurements."""
         if self.last is None:
-            raise ValueError("mark_mapped: no scan has been associated yet")
+            raise AssociationError("mark_mapped: no scan has been associated yet")
         idx = np.atleast_1d(np.asarray(indices, dtype=np.int64))
         m = self.last.assignment.size
         if idx.ndim != 1 or ((idx < 0) | (idx >= m)).any():
-            raise ValueError(f"indices: must be in 0..{m - 1}, got {idx.tolist()}")
+            raise AssociationError(f"indices: must be in 0..{m - 1}, got {idx.tolist()}")
         if not self._past:
             return  # K = 1: nothing is kept
         for i in idx.tolist():
@@ -347,25 +352,25 @@ class SlidingWindowAssociator:
     def _check_pose(self, pose, Q):
         if pose is None:
             if Q is not None:
-                raise ValueError("sensor_pose_cov: given without sensor_pose")
+                raise AssociationError("sensor_pose_cov: given without sensor_pose")
             return None, np.zeros((3, 3))
-        pose = _as_float_array("sensor_pose", pose, "(3,)")
+        pose = as_float_array("sensor_pose", pose, "(3,)")
         if pose.shape != (3,):
-            raise ValueError(
+            raise AssociationError(
                 f"sensor_pose: expected shape (3,) [x_m, y_m, heading_rad], got {pose.shape}"
             )
-        _check_finite("sensor_pose", pose)
+        check_finite("sensor_pose", pose)
         if Q is None:
             Q = np.zeros((3, 3))
         else:
-            Q = _as_float_array("sensor_pose_cov", Q, "(3, 3)")
+            Q = as_float_array("sensor_pose_cov", Q, "(3, 3)")
             if Q.shape != (3, 3):
-                raise ValueError(f"sensor_pose_cov: expected shape (3, 3), got {Q.shape}")
-            _check_finite("sensor_pose_cov", Q)
+                raise AssociationError(f"sensor_pose_cov: expected shape (3, 3), got {Q.shape}")
+            check_finite("sensor_pose_cov", Q)
             if np.abs(Q - Q.T).max() > 1e-8 * max(np.abs(Q).max(), 1e-300):
-                raise ValueError("sensor_pose_cov: not symmetric")
-            if not _block_psd_ok(Q, np.arange(3), 1e-9):
-                raise ValueError("sensor_pose_cov: not positive semi-definite")
+                raise AssociationError("sensor_pose_cov: not symmetric")
+            if not block_psd_ok(Q, np.arange(3), 1e-9):
+                raise AssociationError("sensor_pose_cov: not positive semi-definite")
         return pose, Q
 
     def _tracks(self, past, open_nodes, prep, pose_cur, Q_cur):

@@ -1,10 +1,15 @@
-"""The `trunkslam` command line. Heavy imports happen inside the commands so `--help` is instant."""
+"""The `trunkslam` command line: typer only. Each command parses, calls one function, prints.
+
+Heavy imports happen inside the commands so `--help` is instant. `handle_errors` is the one
+place that turns the project's own errors (and OSError from files) into `error: ...` and exit
+code 1; anything else is a bug and shows its traceback.
+"""
 
 from __future__ import annotations
 
 import functools
 import logging
-import sys
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
@@ -25,24 +30,84 @@ app.add_typer(bench_app, name="bench")
 log = logging.getLogger("trunkslam")
 
 
-def _fail(msg: str) -> None:
-    typer.echo(f"error: {msg}", err=True)
-    raise typer.Exit(1)
+# Option choices. The values are written out here (importing the packages would make --help
+# slow); tests/experiments/test_cli.py checks them against features.METHODS and the rest.
+class ExtractMethod(StrEnum):
+    paper = "paper"
+    geometric = "geometric"
+    kasa = "kasa"
+    taubin = "taubin"
+    bailey = "bailey"
+
+
+class SlamFeatures(StrEnum):
+    paper = "paper"
+    geometric = "geometric"
+    bailey = "bailey"
+
+
+class Association(StrEnum):
+    ihgr = "ihgr"
+    jcbb = "jcbb"
+    nn = "nn"
+
+
+class LineTest(StrEnum):
+    lrt = "lrt"
+    paper = "paper"
+
+
+class Sensor(StrEnum):
+    pls200 = "pls200"
+    lms200 = "lms200"
+
+
+class ExperimentName(StrEnum):
+    features = "features"
+    table1 = "table1"
+    table2 = "table2"
+    circle_sweep = "circle-sweep"
+    table3 = "table3"
+    table4 = "table4"
+    association = "association"
+    noise_calibration = "noise-calibration"
+
+
+def project_errors() -> tuple[type[BaseException], ...]:
+    """The exception types that mean bad input, not a bug: shown as one line, exit code 1."""
+    from association import AssociationError
+    from experiments.errors import TrunkslamError
+    from features import FeaturesError
+    from slam import SlamError
+
+    return (TrunkslamError, FeaturesError, AssociationError, SlamError, OSError)
 
 
 def handle_errors(fn):
-    """The one place that maps our errors (and bad input) to a message and exit code 1."""
+    """Map the project's errors to `error: <message>` and exit code 1."""
 
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
-        from experiments.errors import TrunkslamError
-
         try:
             return fn(*args, **kwargs)
-        except (TrunkslamError, ValueError, OSError) as exc:
-            _fail(str(exc))
+        except project_errors() as exc:
+            typer.echo(f"error: {exc}", err=True)
+            raise typer.Exit(1) from None
 
     return wrapper
+
+
+def _numbers(option: str, text: str, n: int) -> list[float]:
+    """`text` as n comma-separated finite numbers, or a usage error naming the option."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != n or not all(abs(v) < float("inf") for v in values):
+        raise typer.BadParameter(
+            f"expected {n} comma-separated numbers, got {text!r}", param_hint=option
+        )
+    return values
 
 
 @app.callback()
@@ -52,94 +117,36 @@ def main(verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False) -> N
     )
 
 
-class _Progress:
-    """A progress bar on stderr: redrawn in place on a terminal, a line per quarter otherwise."""
-
-    def __init__(self) -> None:
-        self.last = ""
-        self.tty = sys.stderr.isatty()
-
-    def __call__(self, desc: str, done: int, total: int) -> None:
-        width = 30
-        frac = done / max(total, 1)
-        if not self.tty:
-            step = f"{desc} {int(4 * frac) * 25}%"
-            if step != self.last:
-                sys.stderr.write(f"{desc}: {done}/{total}\n")
-                self.last = step
-            return
-        filled = int(width * frac)
-        line = f"\r{desc:<28} [{'#' * filled}{'.' * (width - filled)}] {done}/{total}"
-        if line != self.last:
-            sys.stderr.write(line + ("\n" if done >= total else ""))
-            sys.stderr.flush()
-            self.last = line
-
-
 @app.command()
 @handle_errors
 def extract(
     input: Annotated[Path, typer.Argument(help="sequence file (.npz), see datasets/FORMAT.md")],
     out: Annotated[Path, typer.Option(help="features JSON to write")] = Path("features.json"),
-    method: Annotated[str, typer.Option(help="paper | geometric | kasa | taubin | bailey")] = (
-        "paper"
-    ),
+    method: Annotated[ExtractMethod, typer.Option(help="circle extractor")] = ExtractMethod.paper,
     sigma_r: Annotated[
-        float | None, typer.Option(help="range noise sigma (m) for paper/geometric")
+        float | None,
+        typer.Option(help="range noise sigma the extractor assumes, m (paper/geometric only)"),
     ] = None,
     line_test: Annotated[
-        str | None, typer.Option(help="lrt (default) | paper (eq. 5); paper/geometric only")
+        LineTest | None,
+        typer.Option(help="line test: lrt (default) or paper (eq. 5); paper/geometric only"),
     ] = None,
     rerun: Annotated[Path | None, typer.Option(help="also write a rerun recording")] = None,
 ) -> None:
     """Extract circles, lines, edges and clutter from every scan of a sequence file."""
-    from dataclasses import asdict
+    from experiments.pipeline.extract import run_extract
+    from experiments.render.progress import Progress
 
-    from experiments.export import FEATURES_SCHEMA, dumps_json, features_to_dict, write_atomic
-    from experiments.sequence import load_sequence
-    from experiments.viz import open_recording
-    from features import extract_features
-    from features.bailey import BaileyParams
-    from features.extract import ExtractorParams
-
-    params: dict = {}
-    if line_test is not None:
-        params["line_test"] = line_test
-    if sigma_r is not None:
-        params["sigma_r_m"] = sigma_r
-    if method == "bailey":
-        if params:
-            raise ValueError("--sigma-r and --line-test do not apply to --method bailey")
-        resolved = asdict(BaileyParams())
-    else:
-        resolved = ExtractorParams.from_kwargs(**params).to_dict()
-    if out.parent and not out.parent.is_dir():
-        raise ValueError(f"--out: folder {out.parent} does not exist")
-    seq = load_sequence(input)
-    rec = open_recording(rerun)
-    progress = _Progress()
-    scans = []
-    for k in range(seq.n_scans):
-        scan = seq.scan(k)
-        f = extract_features(scan, method, **params)
-        scans.append(features_to_dict(f, k))
-        rec.set_scan(k)
-        rec.log_scan(scan)
-        rec.log_features(scan, f)
-        if k % 50 == 0 or k == seq.n_scans - 1:
-            progress("extract", k + 1, seq.n_scans)
-    rec.close()
-    doc = {
-        "schema": FEATURES_SCHEMA,
-        "input": str(input),
-        "method": method,
-        "params": resolved,
-        "frame": "laser",
-        "scans": scans,
-    }
-    write_atomic(out, dumps_json(doc))
-    n_c = sum(len(s["circles"]) for s in scans)
-    typer.echo(f"{seq.n_scans} scans -> {out} ({n_c} circles)")
+    s = run_extract(
+        input,
+        out,
+        method.value,
+        sigma_r_m=sigma_r,
+        line_test=None if line_test is None else line_test.value,
+        rerun_path=rerun,
+        progress=Progress(),
+    )
+    typer.echo(f"{s['scans']} scans -> {out} ({s['circles']} circles)")
 
 
 @convert_app.command("victoria-park")
@@ -151,8 +158,8 @@ def convert_victoria_park(
     ] = None,
 ) -> None:
     """Victoria Park (odometry, GPS, the 2000 raw scans) as one sequence file."""
-    from experiments.sequence import save_sequence
-    from experiments.victoria_park import load_victoria_park
+    from experiments.io.sequence_file import save_sequence
+    from experiments.io.victoria_park import load_victoria_park
 
     seq = load_victoria_park(data)
     save_sequence(seq, out)
@@ -165,27 +172,19 @@ def simulate(
     scene: Annotated[str, typer.Argument(help="scene name in datasets/scenes, or a JSON path")],
     pose: Annotated[str, typer.Option(help="x,y,theta of the sensor in the world (m, m, rad)")],
     out: Annotated[Path, typer.Option(help="sequence file to write")] = Path("scan.npz"),
-    sensor: Annotated[str, typer.Option(help="pls200 | lms200")] = "pls200",
+    sensor: Annotated[Sensor, typer.Option(help="sensor preset")] = Sensor.pls200,
     back_to_back: Annotated[bool, typer.Option(help="two sensors back to back (360 deg)")] = False,
-    noise: Annotated[float | None, typer.Option(help="range noise sigma (m)")] = None,
-    seed: Annotated[int, typer.Option(min=0)] = 0,
+    noise: Annotated[float | None, typer.Option(help="range noise sigma, m (default 0.01)")] = None,
+    seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
 ) -> None:
     """Simulate one scan of a scene from a pose and write it as a sequence file."""
-    import numpy as np
-
-    from experiments.sequence import save_sequence
+    from experiments.io.sequence_file import save_sequence
     from experiments.sim import simulate_to_sequence
 
-    try:
-        xyz = np.array([float(v) for v in pose.split(",")])
-    except ValueError:
-        xyz = np.array([])
-    if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
-        raise ValueError(f"--pose: expected three numbers x,y,theta, got {pose!r}")
     seq = simulate_to_sequence(
         scene,
-        xyz[None, :],
-        sensor_name=sensor,
+        [_numbers("--pose", pose, 3)],
+        sensor_name=sensor.value,
         back_to_back=back_to_back,
         noise_m=noise,
         seed=seed,
@@ -194,78 +193,115 @@ def simulate(
     typer.echo(f"1 scan of {scene} -> {out}")
 
 
+@app.command("simulate-drive")
+@handle_errors
+def simulate_drive(
+    scene: Annotated[str, typer.Argument(help="scene with a route (scan_positions)")] = "tree_park",
+    out: Annotated[Path, typer.Option(help="sequence file to write")] = Path("run.npz"),
+    scans: Annotated[int, typer.Option(min=1, help="scans in the run (5 Hz)")] = 240,
+    seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
+) -> None:
+    """Simulate a Cycab drive around a scene's route (experiment 2's set-up): scans, odometry,
+    DGPS and truth, as one sequence file."""
+    import numpy as np
+
+    from experiments.io.sequence_file import save_sequence
+    from experiments.sim import CycabParams, simulate_cycab_run
+
+    seq = simulate_cycab_run(np.random.default_rng(seed), scene, CycabParams(n_scans=scans))
+    save_sequence(seq, out)
+    typer.echo(f"{seq.n_scans} scans of {scene} ({seq.scan_t[-1]:.1f} s) -> {out}")
+
+
 @app.command()
 @handle_errors
 def reproduce(
     names: Annotated[
-        list[str] | None, typer.Argument(help="experiments to run (default: all)")
+        list[ExperimentName] | None, typer.Argument(help="experiments to run (default: all)")
     ] = None,
     quick: Annotated[bool, typer.Option(help="small-sample version")] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("results"),
     seed: Annotated[int, typer.Option(help="root random seed", min=0)] = 0,
 ) -> None:
     """Run the paper's experiments: tables (.md/.csv), figures (.png), recordings (.rrd)."""
-    from experiments.reproduce import run_experiments
+    from experiments.paper.reproduce import run_experiments
+    from experiments.render.progress import Progress
 
-    written = run_experiments(names or [], out, quick=quick, seed=seed, progress=_Progress())
+    chosen = [n.value for n in names or []]
+    written = run_experiments(chosen, out, quick=quick, seed=seed, progress=Progress())
     typer.echo(f"{len(written)} files in {out}/ (see {out}/manifest.json)")
-
-
-@bench_app.command("extract")
-@handle_errors
-def bench_extract(
-    repeats: Annotated[int, typer.Option(help="passes over the 2000 scans")] = 3,
-    data: Annotated[Path | None, typer.Option(help="victoria_park folder")] = None,
-) -> None:
-    """Scans per second of each extractor on the 2000 real Victoria Park scans."""
-    from experiments.bench import bench_extract as run
-    from experiments.bench import format_extract
-
-    typer.echo(format_extract(run(repeats=repeats, root=data)))
-
-
-@bench_app.command("association")
-@handle_errors
-def bench_association(
-    repeats: Annotated[int, typer.Option(help="scans timed per method")] = 200,
-    seed: Annotated[int, typer.Option(min=0)] = 0,
-) -> None:
-    """Median time per scan of each association method at Victoria Park scale."""
-    from experiments.bench_association import bench, format_table
-
-    typer.echo(format_table(bench(repeats=repeats, seed=seed)))
 
 
 @app.command("slam")
 @handle_errors
 def slam_cmd(
     input: Annotated[Path, typer.Argument(help="sequence file (.npz), see datasets/FORMAT.md")],
-    features: Annotated[str, typer.Option(help="paper | geometric | bailey")] = "paper",
-    association: Annotated[str, typer.Option(help="ihgr | jcbb | nn")] = "ihgr",
+    features: Annotated[SlamFeatures, typer.Option(help="circle extractor")] = SlamFeatures.paper,
+    association: Annotated[Association, typer.Option(help="data association")] = Association.ihgr,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("slam_out"),
     rerun: Annotated[Path | None, typer.Option(help="also write a rerun recording")] = None,
     initial_heading: Annotated[
-        float | None, typer.Option(help="start heading (rad) when starting from GPS")
+        float | None, typer.Option(help="start heading, rad, when starting from GPS")
     ] = None,
 ) -> None:
     """EKF-SLAM over a sequence: trajectory (TUM and CSV with covariance), map, summary."""
-    from experiments.exp_slam import slam_command
+    from experiments.pipeline.slam import run_slam
 
-    s = slam_command(input, features, association, out, rerun, initial_heading)
+    s = run_slam(input, features.value, association.value, out, rerun, initial_heading)
     typer.echo(f"{s['n_scans']} scans, {s['landmarks']} landmarks, {s['seconds']:.1f} s -> {out}/")
+
+
+@bench_app.command("extract")
+@handle_errors
+def bench_extract(
+    repeats: Annotated[int, typer.Option(min=1, help="passes over the 2000 scans")] = 3,
+    data: Annotated[Path | None, typer.Option(help="victoria_park folder")] = None,
+) -> None:
+    """Scans per second of each extractor on the 2000 real Victoria Park scans."""
+    from experiments.bench.extract import bench_extract as bench
+    from experiments.bench.extract import format_extract
+
+    typer.echo(format_extract(bench(repeats=repeats, root=data)))
+
+
+@bench_app.command("association")
+@handle_errors
+def bench_association(
+    repeats: Annotated[int, typer.Option(min=1, help="scans timed per method")] = 200,
+    seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
+) -> None:
+    """Median time per scan of each association method at Victoria Park scale."""
+    from experiments.bench.association import bench, format_table
+
+    typer.echo(format_table(bench(repeats=repeats, seed=seed)))
 
 
 @bench_app.command("slam")
 @handle_errors
 def bench_slam(
-    trees: Annotated[int, typer.Option(help="trees along the avenue (the final map size)")] = 800,
-    association: Annotated[str, typer.Option(help="ihgr | jcbb | nn")] = "ihgr",
-    seed: Annotated[int, typer.Option(min=0)] = 0,
+    trees: Annotated[
+        int, typer.Option(min=1, help="trees along the avenue (the final map size)")
+    ] = 800,
+    association: Annotated[Association, typer.Option(help="data association")] = Association.ihgr,
+    seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
 ) -> None:
     """EKF-SLAM time per scan against the size of the map."""
-    from experiments.bench_slam import bench, format_table
+    from experiments.bench.slam import bench, format_table
 
-    typer.echo(format_table(bench(n_trees=trees, association=association, seed=seed)))
+    typer.echo(format_table(bench(n_trees=trees, association=association.value, seed=seed)))
+
+
+@bench_app.command("raycast")
+@handle_errors
+def bench_raycast(
+    repeats: Annotated[int, typer.Option(min=1, help="calls timed per pass")] = 300,
+    seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
+) -> None:
+    """Microseconds per 720-beam simulated scan on the bundled scenes and a random one."""
+    from experiments.bench.raycast import bench_raycast as bench
+    from experiments.bench.raycast import format_table
+
+    typer.echo(format_table(bench(repeats=repeats, seed=seed)))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -9,3 +9,7 @@ class TrunkslamError(Exception):
 
 class DataError(TrunkslamError, ValueError):
     """A data file or in-memory run is missing, corrupt or inconsistent; the message says what."""
+
+
+class ConfigError(TrunkslamError, ValueError):
+    """A parameter, option or configuration value that cannot be used; the message names it."""

@@ -3,6 +3,7 @@
 Stands alone: imports nothing else of trunkslam.
 """
 
+from features.errors import FeaturesError
 from features.extract import METHODS, ExtractorParams, extract_features
 from features.types import Circle, Edge, Features, Line, Scan, Segment
 
@@ -16,4 +17,5 @@ __all__ = [
     "ExtractorParams",
     "extract_features",
     "METHODS",
+    "FeaturesError",
 ]

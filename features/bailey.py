@@ -34,11 +34,12 @@ Generalisation to other scans (`angles_rad`, used by `extract_bailey` for simula
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import astuple, dataclass, fields
 
 import numpy as np
 from numba import njit
 
+from features.errors import FeaturesError
 from features.types import KIND_CIRCLE, KIND_CLUTTER, Features, Scan
 
 __all__ = ["BaileyParams", "detect_trees", "extract_bailey", "BAILEY_BEAM_RAD"]
@@ -66,9 +67,9 @@ class BaileyParams:
         for f in fields(self):
             v = getattr(self, f.name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"BaileyParams.{f.name}: must be a finite number, got {v!r}")
+                raise FeaturesError(f"BaileyParams.{f.name}: must be a finite number, got {v!r}")
             if v < 0:
-                raise ValueError(f"BaileyParams.{f.name}: must be >= 0, got {v!r}")
+                raise FeaturesError(f"BaileyParams.{f.name}: must be >= 0, got {v!r}")
 
 
 _DEFAULT = BaileyParams()
@@ -81,25 +82,25 @@ _DEFAULT_SIN = np.sin(_DEFAULT_ANGLES)
 def _check_ranges(ranges_m) -> np.ndarray:
     r = np.asarray(ranges_m)
     if r.dtype.kind not in "fiu":
-        raise ValueError(f"ranges_m: expected real numbers, got dtype {r.dtype}")
+        raise FeaturesError(f"ranges_m: expected real numbers, got dtype {r.dtype}")
     if r.ndim != 1:
-        raise ValueError(f"ranges_m: expected shape (B,), got {r.shape}")
+        raise FeaturesError(f"ranges_m: expected shape (B,), got {r.shape}")
     return r.astype(np.float64, copy=False)
 
 
 def _check_angles(angles_rad, n_beams: int) -> np.ndarray:
     a = np.asarray(angles_rad)
     if a.dtype.kind not in "fiu":
-        raise ValueError(f"angles_rad: expected real numbers, got dtype {a.dtype}")
+        raise FeaturesError(f"angles_rad: expected real numbers, got dtype {a.dtype}")
     if a.shape != (n_beams,):
-        raise ValueError(f"angles_rad: expected shape ({n_beams},) like ranges_m, got {a.shape}")
+        raise FeaturesError(f"angles_rad: expected shape ({n_beams},) like ranges_m, got {a.shape}")
     a = a.astype(np.float64, copy=False)
     if not np.all(np.isfinite(a)):
-        raise ValueError("angles_rad: must be finite")
+        raise FeaturesError("angles_rad: must be finite")
     if n_beams > 1 and not np.all(np.diff(a) > 0):
-        raise ValueError("angles_rad: must be strictly increasing")
+        raise FeaturesError("angles_rad: must be strictly increasing")
     if n_beams > 1 and a[-1] - a[0] >= _TWO_PI:
-        raise ValueError(
+        raise FeaturesError(
             f"angles_rad: span {a[-1] - a[0]:.6g} rad is 2*pi or more (degrees instead of radians?)"
         )
     return a
@@ -110,7 +111,7 @@ def _prepare(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
     n_beams = r.shape[0]
     if ang is None or (n_beams == 361 and np.array_equal(ang, _DEFAULT_ANGLES)):
         if n_beams != 361:
-            raise ValueError(
+            raise FeaturesError(
                 f"ranges_m: the original detector takes 361 beams at i*pi/360, got {n_beams}; "
                 "pass angles_rad for other scans"
             )
@@ -156,26 +157,9 @@ def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams, kernel=None)
     r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie, rot = _prepare(r, ang, p)
     ang = np.array(ang, dtype=np.float64)
     kernel = kernel or _kernel_numba
-    out, seg_first, seg_last, keep, det_seg = kernel(
-        r,
-        ang,
-        cos_t,
-        sin_t,
-        beam_rad,
-        check_fov,
-        fov_lo,
-        fov_hi,
-        tie,
-        p.max_range_m,
-        p.min_start_range_m,
-        p.break_jump_m,
-        p.break_gap_rad,
-        p.isolation_m,
-        p.occlusion_gap_rad,
-        p.max_chord_m,
-        p.fov_margin_rad,
-        p.edge_ratio,
-    )
+    # the kernels take the BaileyParams values in field order, after the field-of-view limits
+    limits = (check_fov, fov_lo, fov_hi, tie, *astuple(p))
+    out, seg_first, seg_last, keep, det_seg = kernel(r, ang, cos_t, sin_t, beam_rad, *limits)
     if rot:  # back to the caller's beam numbering and angle range
         K = seg_first.size
         seg_first = seg_first + rot
@@ -194,32 +178,18 @@ def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams, kernel=None)
     return out, seg_first, seg_last, keep, det_seg
 
 
-def _kernel_numpy(
-    r,
-    ang,
-    cos_t,
-    sin_t,
-    beam_rad,
-    check_fov,
-    fov_lo,
-    fov_hi,
-    tie,
-    max_range,
-    min_start,
-    jump,
-    gap,
-    iso,
-    occ,
-    chord,
-    margin,
-    edge_ratio,
-):
-    """Steps 1-10 vectorised with numpy: the test oracle of `_kernel_numba` (same arithmetic).
+def _kernel_numpy(r, ang, cos_t, sin_t, beam_rad, *limits):
+    """Steps 1-10 vectorised with numpy: the test oracle of `_kernel_numba` (same arithmetic,
+    same arguments).
 
     r, ang, cos_t, sin_t: (B,) ranges, beam angles and their cos/sin. beam_rad: the width added
-    to the diameter. check_fov: apply the field-of-view margin against [fov_lo, fov_hi]. tie:
-    angle differences within it of the break/occlusion thresholds count as equal to them.
+    to the diameter. limits, in `_kernel_numba`'s order: check_fov (apply the field-of-view
+    margin against [fov_lo, fov_hi]), fov_lo, fov_hi, tie (angle differences within it of the
+    break/occlusion thresholds count as equal to them), then the `BaileyParams` values
+    max_range, min_start, jump, gap, iso, occ, chord, margin, edge_ratio.
     """
+    check_fov, fov_lo, fov_hi, tie = limits[:4]
+    max_range, min_start, jump, gap, iso, occ, chord, margin, edge_ratio = limits[4:]
     # Step 1: valid beams (NaN < x is False, so NaN is invalid).
     with np.errstate(invalid="ignore"):
         idx = np.flatnonzero(r < max_range)
@@ -428,7 +398,7 @@ def detect_trees(ranges_m, angles_rad=None, params: BaileyParams | None = None) 
     ang = None if angles_rad is None else _check_angles(angles_rad, r.shape[0])
     p = params or _DEFAULT
     if not isinstance(p, BaileyParams):
-        raise ValueError(f"params: expected BaileyParams, got {type(params).__name__}")
+        raise FeaturesError(f"params: expected BaileyParams, got {type(params).__name__}")
     if r.shape[0] == 0:
         return np.zeros((3, 0))
     return _detect(r, ang, p)[0]
@@ -463,7 +433,7 @@ def extract_bailey(
     No lines and no edges; circle_rms_m is NaN (no fit).
     """
     if not isinstance(scan, Scan):
-        raise ValueError(f"scan: expected a features.Scan, got {type(scan).__name__}")
+        raise FeaturesError(f"scan: expected a features.Scan, got {type(scan).__name__}")
     for name, v in (
         ("range_sigma_m", range_sigma_m),
         ("range_sigma_per_m", range_sigma_per_m),
@@ -471,15 +441,15 @@ def extract_bailey(
         ("radius_sigma_m", radius_sigma_m),
     ):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-            raise ValueError(f"{name}: must be a finite number >= 0, got {v!r}")
+            raise FeaturesError(f"{name}: must be a finite number >= 0, got {v!r}")
     p = params or _DEFAULT
     if not isinstance(p, BaileyParams):
-        raise ValueError(f"params: expected BaileyParams, got {type(params).__name__}")
+        raise FeaturesError(f"params: expected BaileyParams, got {type(params).__name__}")
 
     inc = scan.angle_increment_rad
     n_beams = scan.n_beams
     if inc >= p.break_gap_rad:
-        raise ValueError(
+        raise FeaturesError(
             f"scan.angle_increment_rad: {inc:.4g} rad is not below the detector's break gap "
             f"({p.break_gap_rad:.4g} rad): every beam would be a segment of its own"
         )
@@ -488,7 +458,7 @@ def extract_bailey(
     else:
         ang = np.arange(n_beams) * inc
         if n_beams > 1 and ang[-1] >= _TWO_PI:
-            raise ValueError(f"scan: {n_beams} beams of {inc} rad cover more than 360 degrees")
+            raise FeaturesError(f"scan: {n_beams} beams of {inc} rad cover more than 360 degrees")
     out, seg_first, seg_last, kept, det_seg = _detect(scan.ranges_m, ang, p)
 
     circ, cov = _circles(

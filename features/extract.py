@@ -39,6 +39,7 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
+from features.errors import FeaturesError
 from features.fitting import (
     circle_covariance,
     circle_ssr,
@@ -48,7 +49,7 @@ from features.fitting import (
     fit_circle_taubin,
     fit_line_tls,
 )
-from features.segmentation import END_NO_RETURN, END_SCAN, _segment_kernel, max_growth_ratio
+from features.segmentation import END_NO_RETURN, END_SCAN, max_growth_ratio, segment_kernel
 from features.types import Features, Scan
 
 __all__ = ["ExtractorParams", "extract_features", "METHODS"]
@@ -86,42 +87,46 @@ class ExtractorParams:
             v = getattr(self, f.name)
             if f.name in ("merge_arcs", "isolated_circles"):
                 if not isinstance(v, bool):
-                    raise ValueError(f"{f.name}: must be True or False, got {v!r}")
+                    raise FeaturesError(f"{f.name}: must be True or False, got {v!r}")
                 continue
             if f.name == "line_test":
                 if v not in _LINE_TESTS:
-                    raise ValueError(f"line_test: must be one of {sorted(_LINE_TESTS)}, got {v!r}")
+                    raise FeaturesError(
+                        f"line_test: must be one of {sorted(_LINE_TESTS)}, got {v!r}"
+                    )
                 continue
             if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
-                raise ValueError(f"{f.name}: must be a finite number, got {v!r}")
+                raise FeaturesError(f"{f.name}: must be a finite number, got {v!r}")
             if f.type == "int":
                 if v != int(v):
-                    raise ValueError(f"{f.name}: must be a whole number, got {v!r}")
+                    raise FeaturesError(f"{f.name}: must be a whole number, got {v!r}")
                 object.__setattr__(self, f.name, int(v))
             else:
                 object.__setattr__(self, f.name, float(v))
         positive = ("sigma_r_m", "gate", "lrt_threshold", "r_max_m", "lambda0", "max_iter")
         for name in positive:
             if getattr(self, name) <= 0:
-                raise ValueError(f"{name}: must be > 0, got {getattr(self, name)!r}")
+                raise FeaturesError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         for name in ("q_m2", "roughness_m", "r_min_m", "edge_min_jump_m", "tol"):
             if getattr(self, name) < 0:
-                raise ValueError(f"{name}: must be >= 0, got {getattr(self, name)!r}")
+                raise FeaturesError(f"{name}: must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.class_prob < 1:
-            raise ValueError(f"class_prob: must be in (0, 1), got {self.class_prob!r}")
+            raise FeaturesError(f"class_prob: must be in (0, 1), got {self.class_prob!r}")
         if not 0 < self.max_incidence_deg < 90:
-            raise ValueError(f"max_incidence_deg: must be in (0, 90), got {self.max_incidence_deg}")
+            raise FeaturesError(
+                f"max_incidence_deg: must be in (0, 90), got {self.max_incidence_deg}"
+            )
         if self.min_points < 3 or self.min_circle_points < 4:
-            raise ValueError("min_points must be >= 3 and min_circle_points >= 4")
+            raise FeaturesError("min_points must be >= 3 and min_circle_points >= 4")
         if self.r_min_m >= self.r_max_m:
-            raise ValueError(f"r_min_m ({self.r_min_m}) must be < r_max_m ({self.r_max_m})")
+            raise FeaturesError(f"r_min_m ({self.r_min_m}) must be < r_max_m ({self.r_max_m})")
 
     @classmethod
     def from_kwargs(cls, **params) -> ExtractorParams:
         names = {f.name for f in fields(cls)}
         unknown = sorted(set(params) - names)
         if unknown:
-            raise ValueError(f"unknown extractor parameter(s) {unknown}; known: {sorted(names)}")
+            raise FeaturesError(f"unknown extractor parameter(s) {unknown}; known: {sorted(names)}")
         return cls(**params)
 
     def to_dict(self) -> dict:
@@ -246,7 +251,7 @@ def _extract_kernel(
     max_iter,
     tol,
 ):
-    bounds0, reason, innov, svar = _segment_kernel(
+    bounds0, reason, innov, svar = segment_kernel(
         ranges, math.cos(gamma), sigma_r, q, gate, max_growth
     )
     n_beams = ranges.shape[0]
@@ -440,17 +445,17 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
     params: fields of `ExtractorParams` (e.g. sigma_r_m=0.01, line_test="paper").
     """
     if not isinstance(scan, Scan):
-        raise ValueError(f"scan: expected a features.Scan, got {type(scan).__name__}")
+        raise FeaturesError(f"scan: expected a features.Scan, got {type(scan).__name__}")
     if method == "bailey":
         from features.bailey import extract_bailey
 
         return extract_bailey(scan, **params)
     if method not in _METHOD_CODE:
-        raise ValueError(f"method: must be one of {list(METHODS)}, got {method!r}")
+        raise FeaturesError(f"method: must be one of {list(METHODS)}, got {method!r}")
     p = _params(params)
     gamma = scan.angle_increment_rad
     if gamma >= math.pi / 2 - math.radians(p.max_incidence_deg):
-        raise ValueError(
+        raise FeaturesError(
             f"angle_increment_rad: {gamma} is too coarse for the planar model "
             f"with max_incidence_deg={p.max_incidence_deg}"
         )

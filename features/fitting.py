@@ -207,15 +207,8 @@ def fit_circle_paper(x, y, lambda0=0.01, max_iter=100, tol=1e-10, max_init_radiu
     it = 0
     while it < max_iter:
         it += 1
-        h00 = 0.0
-        h01 = 0.0
-        h02 = 0.0
-        h11 = 0.0
-        h12 = 0.0
-        h22 = 0.0
-        g0 = 0.0
-        g1 = 0.0
-        g2 = 0.0
+        h00 = h01 = h02 = h11 = h12 = h22 = 0.0  # A^T A (upper triangle)
+        g0 = g1 = g2 = 0.0  # -A^T g
         for i in range(n):
             dx = x[i] - x0
             dy = y[i] - y0
@@ -290,15 +283,8 @@ def fit_circle_geometric(x, y, max_iter=50, tol=1e-12):
     it = 0
     while it < max_iter:
         it += 1
-        h00 = 0.0
-        h01 = 0.0
-        h02 = 0.0
-        h11 = 0.0
-        h12 = 0.0
-        h22 = 0.0
-        g0 = 0.0
-        g1 = 0.0
-        g2 = 0.0
+        h00 = h01 = h02 = h11 = h12 = h22 = 0.0  # A^T A (upper triangle)
+        g0 = g1 = g2 = 0.0  # -A^T g
         for i in range(n):
             dx = x[i] - x0
             dy = y[i] - y0
@@ -355,12 +341,7 @@ def circle_covariance(x, y, x0, y0, r, sigma2):
     Jacobian. (Assuming isotropic point noise instead, sigma2 (J^T J)^-1, overstates the
     variance about twice on the short arcs a laser sees.) Returns (cov, ok).
     """
-    h00 = 0.0
-    h01 = 0.0
-    h02 = 0.0
-    h11 = 0.0
-    h12 = 0.0
-    h22 = 0.0
+    h00 = h01 = h02 = h11 = h12 = h22 = 0.0
     m00 = 0.0
     m01 = 0.0
     m02 = 0.0

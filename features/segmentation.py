@@ -6,9 +6,9 @@ model (eq. 2) with observation z = [1 0] x + w (eq. 3). A range whose normalised
 squared exceeds the gate delta (eq. 4) ends the segment; the filter restarts from that beam.
 
 Two implementations of the same per-beam loop:
-- `segment_ranges` / `_segment_kernel`: the numba kernel used in production (scalar, unrolled).
-- `segment_ranges_numpy`: a plain numpy twin written with 2x2 matrices, straight from the
-  equations, used as the test oracle.
+- `segment_kernel`: the numba kernel used in production (scalar, unrolled);
+- `segment_kernel_numpy`: a plain numpy twin written with 2x2 matrices, straight from the
+  equations, used as the test oracle (`segment_ranges(..., kernel="numpy")`).
 
 Conventions shared by both
 - No-return beams (NaN) end a segment and are never part of one.
@@ -34,6 +34,8 @@ import math
 import numpy as np
 from numba import njit
 
+from features.errors import FeaturesError
+
 __all__ = [
     "END_NO_RETURN",
     "END_GATE",
@@ -43,7 +45,8 @@ __all__ = [
     "planar_predict",
     "planar_jacobian",
     "segment_ranges",
-    "segment_ranges_numpy",
+    "segment_kernel",
+    "segment_kernel_numpy",
 ]
 
 # Why a segment ended (the reason is about the beam after its last one).
@@ -54,7 +57,7 @@ def max_growth_ratio(gamma_rad: float, max_incidence_rad: float) -> float:
     """Largest ratio d_(k+1)/d_k a plane seen at <= max_incidence_rad from its normal gives."""
     a = max_incidence_rad
     if not 0.0 < a + gamma_rad < math.pi / 2:
-        raise ValueError(
+        raise FeaturesError(
             f"max_incidence_rad: must be in (0, pi/2 - gamma), got {max_incidence_rad!r}"
         )
     return math.cos(a) / math.cos(a + gamma_rad)
@@ -74,7 +77,7 @@ def planar_jacobian(x: np.ndarray, cos_gamma: float) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _segment_kernel(ranges, cos_gamma, sigma_r, q, gate, max_growth):
+def segment_kernel(ranges, cos_gamma, sigma_r, q, gate, max_growth):
     """Numba kernel; see `segment_ranges`. Returns (bounds (S, 2), end_reason (S,), innov, s)."""
     n = ranges.shape[0]
     r2 = sigma_r * sigma_r
@@ -183,12 +186,12 @@ def _segment_kernel(ranges, cos_gamma, sigma_r, q, gate, max_growth):
 def _check(ranges_m, gamma_rad, sigma_r_m, q_m2, gate, max_incidence_rad):
     r = np.asarray(ranges_m, dtype=np.float64)
     if r.ndim != 1:
-        raise ValueError(f"ranges_m: expected shape (B,), got {r.shape}")
+        raise FeaturesError(f"ranges_m: expected shape (B,), got {r.shape}")
     for name, v in (("gamma_rad", gamma_rad), ("sigma_r_m", sigma_r_m), ("gate", gate)):
         if not (math.isfinite(v) and v > 0):
-            raise ValueError(f"{name}: must be a finite positive number, got {v!r}")
+            raise FeaturesError(f"{name}: must be a finite positive number, got {v!r}")
     if not (math.isfinite(q_m2) and q_m2 >= 0):
-        raise ValueError(f"q_m2: must be finite and >= 0, got {q_m2!r}")
+        raise FeaturesError(f"q_m2: must be finite and >= 0, got {q_m2!r}")
     with np.errstate(invalid="ignore"):
         r = np.where(np.isfinite(r) & (r > 0), r, np.nan)
     return r, max_growth_ratio(gamma_rad, max_incidence_rad)
@@ -201,6 +204,8 @@ def segment_ranges(
     q_m2: float = 1e-4,
     gate: float = 6.63,
     max_incidence_rad: float = math.radians(85.0),
+    *,
+    kernel: str = "numba",
 ):
     """Segment one scan's ranges with the planar-model EKF.
 
@@ -208,25 +213,22 @@ def segment_ranges(
     gamma_rad: angle between successive beams. sigma_r_m: range noise. q_m2: process noise Q
     (paper: 1e-4). gate: delta of eq. (4) (paper: 6.63, chi-square 1 dof at 0.99).
     max_incidence_rad: degenerate-case limit (see module doc).
+    kernel: "numba" (`segment_kernel`, production) or "numpy" (`segment_kernel_numpy`, the
+    test oracle).
 
     Returns (bounds (S, 2) int inclusive [first, last] beams, end_reason (S,) int,
     innovation_m (B,), innovation_var_m2 (B,)).
     """
+    kernels = {"numba": segment_kernel, "numpy": segment_kernel_numpy}
+    if kernel not in kernels:
+        raise FeaturesError(f"kernel: expected 'numba' or 'numpy', got {kernel!r}")
     r, growth = _check(ranges_m, gamma_rad, sigma_r_m, q_m2, gate, max_incidence_rad)
-    return _segment_kernel(r, math.cos(gamma_rad), sigma_r_m, q_m2, gate, growth)
+    return kernels[kernel](r, math.cos(gamma_rad), sigma_r_m, q_m2, gate, growth)
 
 
-def segment_ranges_numpy(
-    ranges_m: np.ndarray,
-    gamma_rad: float,
-    sigma_r_m: float = 0.02,
-    q_m2: float = 1e-4,
-    gate: float = 6.63,
-    max_incidence_rad: float = math.radians(85.0),
-):
-    """The plain-numpy twin of `segment_ranges` (same outputs), written with matrices."""
-    r, growth = _check(ranges_m, gamma_rad, sigma_r_m, q_m2, gate, max_incidence_rad)
-    c = math.cos(gamma_rad)
+def segment_kernel_numpy(r, c, sigma_r_m, q_m2, gate, growth):
+    """The plain-numpy twin of `segment_kernel` (same arguments and outputs), written with
+    2x2 matrices straight from the equations."""
     R = sigma_r_m**2
     Q = np.array([[q_m2, 0.0], [0.0, 0.0]])
     H = np.array([[1.0, 0.0]])

@@ -13,6 +13,8 @@ from typing import Literal
 
 import numpy as np
 
+from features.errors import FeaturesError
+
 __all__ = ["Scan", "Segment", "Circle", "Line", "Edge", "Features", "SegmentKind"]
 
 SegmentKind = Literal["line", "circle", "clutter"]
@@ -52,27 +54,27 @@ class Scan:
             try:
                 raw = np.asarray(raw)
             except Exception as exc:  # ragged lists and the like
-                raise ValueError(f"Scan.ranges_m: cannot be read as an array ({exc})") from None
+                raise FeaturesError(f"Scan.ranges_m: cannot be read as an array ({exc})") from None
         if raw.dtype.kind not in "fiu":
-            raise ValueError(
+            raise FeaturesError(
                 f"Scan.ranges_m: expected real numbers (float64), got dtype {raw.dtype}"
             )
         if raw.ndim != 1:
-            raise ValueError(f"Scan.ranges_m: expected shape (B,), got {raw.shape}")
+            raise FeaturesError(f"Scan.ranges_m: expected shape (B,), got {raw.shape}")
         if raw.size == 0:
-            raise ValueError("Scan.ranges_m: empty scan (0 beams)")
+            raise FeaturesError("Scan.ranges_m: empty scan (0 beams)")
         for name in ("angle_min_rad", "angle_increment_rad", "stamp_s"):
             v = getattr(self, name)
             if not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
-                raise ValueError(f"Scan.{name}: must be a finite number, got {v!r}")
+                raise FeaturesError(f"Scan.{name}: must be a finite number, got {v!r}")
             object.__setattr__(self, name, float(v))
         if self.angle_increment_rad <= 0.0:
-            raise ValueError(
+            raise FeaturesError(
                 f"Scan.angle_increment_rad: must be > 0, got {self.angle_increment_rad!r}"
             )
         mr = self.max_range_m
         if not isinstance(mr, (int, float, np.integer, np.floating)) or not mr > 0:
-            raise ValueError(f"Scan.max_range_m: must be a positive number or inf, got {mr!r}")
+            raise FeaturesError(f"Scan.max_range_m: must be a positive number or inf, got {mr!r}")
         object.__setattr__(self, "max_range_m", float(mr))
         raw64 = np.array(raw, dtype=np.float64)  # copy: the scan owns its data
         with np.errstate(invalid="ignore"):

@@ -1,33 +1,35 @@
-"""EKF-SLAM with car-like odometry: vehicle model, filter steps, map management, the run loop.
+"""EKF-SLAM with car-like odometry: the run's data, vehicle model, filter steps, map management,
+the run loop.
 
-    from slam import run, SlamConfig
+    from slam import run, Sequence, SlamConfig
     log = run(sequence, features="paper", association="ihgr")
 
 `slam` imports `features` and `association` only (never `experiments`).
 """
 
-from slam.ekf import EkfState, add_landmark, initial_state, observe, predict, update
+from slam.config import SlamConfig
+from slam.ekf import EkfState, add_landmark, initial_state, predict, update
+from slam.errors import SlamError
+from slam.log import TIMING_KEYS, SlamLog
 from slam.mapping import MapPolicy, Tentatives
-from slam.run import (
-    DEFAULT_CONSTANT_NOISE,
-    NullVisualiser,
-    SlamConfig,
-    SlamLog,
-    interpolate_poses,
-    measurements_from_features,
-    run,
-)
-from slam.vehicle import AckermannModel, Odometry, OdometryNoise, integrate, wrap_angle
+from slam.measurement import DEFAULT_CONSTANT_NOISE, measurements_from_features
+from slam.run import NullVisualiser, run
+from slam.se2 import interpolate_poses, observe, wrap_angle
+from slam.sequence import Sequence
+from slam.vehicle import AckermannModel, Odometry, OdometryNoise, integrate
 
 __all__ = [
     "DEFAULT_CONSTANT_NOISE",
+    "TIMING_KEYS",
     "AckermannModel",
     "EkfState",
     "MapPolicy",
     "NullVisualiser",
     "Odometry",
     "OdometryNoise",
+    "Sequence",
     "SlamConfig",
+    "SlamError",
     "SlamLog",
     "Tentatives",
     "add_landmark",

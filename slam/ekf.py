@@ -12,7 +12,7 @@ is measured as
 
 (laser frame, wrapped to (-pi, pi]). `observe` returns the prediction and its analytic Jacobian
 with respect to the five state entries it touches, [x, y, theta, m_x, m_y] (tested against
-numerical derivatives in tests/test_slam_ekf.py).
+numerical derivatives in tests/slam/test_se2.py); `slam.se2.observe` is that model.
 
 Steps, each returning a new `EkfState` (the input is never modified):
 - `predict`: the vehicle rows and columns only: P_vv <- F P_vv F^T + Q, P_vm <- F P_vm; the
@@ -32,17 +32,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.vehicle import wrap_angle
+from slam.errors import SlamError
+from slam.se2 import inverse_observe, observe, wrap_angle
 
 __all__ = [
     "EkfState",
     "add_landmark",
     "initial_state",
-    "inverse_observation",
-    "laser_position",
     "observe",
     "observe_jacobian_full",
-    "polar_cov_from_xy",
     "predict",
     "update",
 ]
@@ -73,16 +71,16 @@ class EkfState:
         P = np.array(self.P, dtype=np.float64)
         ids = np.array(self.landmark_ids, dtype=np.int64).reshape(-1)
         if x.ndim != 1 or x.shape[0] < 3 or (x.shape[0] - 3) % 2:
-            raise ValueError(f"EkfState.x: expected shape (3 + 2 n,), got {x.shape}")
+            raise SlamError(f"EkfState.x: expected shape (3 + 2 n,), got {x.shape}")
         d = x.shape[0]
         if P.shape != (d, d):
-            raise ValueError(f"EkfState.P: expected shape ({d}, {d}), got {P.shape}")
+            raise SlamError(f"EkfState.P: expected shape ({d}, {d}), got {P.shape}")
         if ids.shape[0] != (d - 3) // 2:
-            raise ValueError(
+            raise SlamError(
                 f"EkfState.landmark_ids: expected {(d - 3) // 2} ids, got {ids.shape[0]}"
             )
         if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
-            raise ValueError("EkfState.x, P: must be finite")
+            raise SlamError("EkfState.x, P: must be finite")
         object.__setattr__(self, "x", _readonly(x))
         object.__setattr__(self, "P", _readonly(P))
         object.__setattr__(self, "landmark_ids", _readonly(ids))
@@ -142,7 +140,7 @@ def initial_state(pose: np.ndarray, pose_cov: np.ndarray | None = None) -> EkfSt
     """A state with no landmarks at `pose` with covariance `pose_cov` (zeros when None)."""
     pose = np.asarray(pose, dtype=np.float64)
     if pose.shape != (3,):
-        raise ValueError(f"initial_state.pose: expected shape (3,), got {pose.shape}")
+        raise SlamError(f"initial_state.pose: expected shape (3,), got {pose.shape}")
     P = np.zeros((3, 3)) if pose_cov is None else np.asarray(pose_cov, dtype=np.float64)
     return EkfState(pose.copy(), P, np.zeros(0, np.int64))
 
@@ -162,43 +160,6 @@ def predict(state: EkfState, pose1: np.ndarray, F: np.ndarray, Q: np.ndarray) ->
         P[:3, 3:] = F @ state.P[:3, 3:]
         P[3:, :3] = P[:3, 3:].T
     return EkfState._own(x, P, state.landmark_ids)
-
-
-def laser_position(pose: np.ndarray, laser_pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The laser's world position p_L (2,) and d p_L / d theta (2,)."""
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    lx, ly = float(laser_pose[0]), float(laser_pose[1])
-    p = np.array([pose[0] + c * lx - s * ly, pose[1] + s * lx + c * ly])
-    return p, np.array([-s * lx - c * ly, c * lx - s * ly])
-
-
-def observe(
-    pose: np.ndarray, landmarks_xy: np.ndarray, laser_pose: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Predicted measurements of landmarks (k, 2) from `pose`, and their Jacobians.
-
-    Returns z_hat (k, 2) [range_m, bearing_rad] (laser frame) and H5 (k, 2, 5), the Jacobian of
-    each prediction with respect to [x, y, theta, m_x, m_y].
-    """
-    m = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
-    pL, dpL = laser_position(pose, laser_pose)
-    dx = m[:, 0] - pL[0]
-    dy = m[:, 1] - pL[1]
-    q = dx * dx + dy * dy
-    r = np.sqrt(q)
-    z = np.empty((m.shape[0], 2))
-    z[:, 0] = r
-    z[:, 1] = wrap_angle(np.arctan2(dy, dx) - pose[2] - laser_pose[2])
-    H = np.zeros((m.shape[0], 2, 5))
-    dr_dm = np.stack([dx / r, dy / r], axis=1)  # (k, 2)
-    db_dm = np.stack([-dy / q, dx / q], axis=1)
-    H[:, 0, 0:2] = -dr_dm
-    H[:, 0, 2] = -(dr_dm @ dpL)
-    H[:, 0, 3:5] = dr_dm
-    H[:, 1, 0:2] = -db_dm
-    H[:, 1, 2] = -(db_dm @ dpL) - 1.0
-    H[:, 1, 3:5] = db_dm
-    return z, H
 
 
 def _columns(idx: np.ndarray) -> np.ndarray:
@@ -253,7 +214,7 @@ def update(
     z = np.asarray(z, dtype=np.float64).reshape(k, 2)
     R = np.asarray(R, dtype=np.float64).reshape(k, 2, 2)
     if np.unique(idx).size != k:
-        raise ValueError("update.idx: a landmark appears twice in one batch")
+        raise SlamError("update.idx: a landmark appears twice in one batch")
     z_hat, H5 = observe(state.pose, state.landmarks_xy[idx], laser_pose)
     nu = z - z_hat
     nu[:, 1] = wrap_angle(nu[:, 1])
@@ -284,20 +245,6 @@ def update(
     return EkfState._own(x, P_new, state.landmark_ids), UpdateResult(nu, S, nis)
 
 
-def inverse_observation(
-    pose: np.ndarray, z: np.ndarray, laser_pose: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Landmark position from one measurement: m (2,), Gx = dm/dpose (2, 3), Gz = dm/dz (2, 2)."""
-    pL, dpL = laser_position(pose, laser_pose)
-    r, b = float(z[0]), float(z[1])
-    phi = pose[2] + laser_pose[2] + b
-    c, s = math.cos(phi), math.sin(phi)
-    m = pL + r * np.array([c, s])
-    Gx = np.array([[1.0, 0.0, dpL[0] - r * s], [0.0, 1.0, dpL[1] + r * c]])
-    Gz = np.array([[c, -r * s], [s, r * c]])
-    return m, Gx, Gz
-
-
 def add_landmark(
     state: EkfState, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray, landmark_id: int
 ) -> EkfState:
@@ -307,8 +254,8 @@ def add_landmark(
     covariance Gx P_vv Gx^T + Gz R Gz^T (cost O(d^2) for the copy, O(d) for the new rows).
     """
     if np.any(state.landmark_ids == landmark_id):
-        raise ValueError(f"add_landmark.landmark_id: {landmark_id} is already in the state")
-    m, Gx, Gz = inverse_observation(state.pose, z, laser_pose)
+        raise SlamError(f"add_landmark.landmark_id: {landmark_id} is already in the state")
+    m, Gx, Gz = inverse_observe(state.pose, z, laser_pose)
     d = state.dim
     P = np.zeros((d + 2, d + 2))
     P[:d, :d] = state.P
@@ -321,19 +268,3 @@ def add_landmark(
     ids = np.concatenate([state.landmark_ids, np.array([landmark_id], np.int64)])
     ids.setflags(write=False)
     return EkfState._own(x, P, ids)
-
-
-def polar_cov_from_xy(center_xy: np.ndarray, cov_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A laser-frame point (k, 2) with covariance (k, 2, 2) as [range, bearing] and its cov."""
-    c = np.asarray(center_xy, dtype=np.float64).reshape(-1, 2)
-    C = np.asarray(cov_xy, dtype=np.float64).reshape(-1, 2, 2)
-    r2 = c[:, 0] ** 2 + c[:, 1] ** 2
-    r = np.sqrt(r2)
-    z = np.stack([r, np.arctan2(c[:, 1], c[:, 0])], axis=1)
-    J = np.empty((c.shape[0], 2, 2))
-    J[:, 0, 0] = c[:, 0] / r
-    J[:, 0, 1] = c[:, 1] / r
-    J[:, 1, 0] = -c[:, 1] / r2
-    J[:, 1, 1] = c[:, 0] / r2
-    Rz = J @ C @ np.transpose(J, (0, 2, 1))
-    return z, 0.5 * (Rz + np.transpose(Rz, (0, 2, 1)))

@@ -6,7 +6,7 @@ SLAM more than 3 times" are not drawn in the map).
 
 Tentative features live outside the filter state, so a false feature (a bush that looked like a
 trunk once) never moves the vehicle estimate: each keeps its world position and covariance from
-its latest sighting (computed as a landmark initialisation would, `inverse_observation`), the
+its latest sighting (computed as a landmark initialisation would, `slam.se2.inverse_observe`), the
 number of scans it was associated in, and the number of consecutive scans it was missed in.
 For association they are offered alongside the map's landmarks with a covariance that ignores
 their correlation with the vehicle (their first-sighting covariance already contains the
@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.ekf import inverse_observation
+from slam.errors import SlamError
+from slam.se2 import inverse_observe
 
 __all__ = ["MapPolicy", "Tentatives", "sighting"]
 
@@ -41,14 +42,14 @@ class MapPolicy:
         for name in ("confirm_scans", "drop_after_missed"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise ValueError(f"MapPolicy.{name}: must be an integer >= 1, got {v!r}")
+                raise SlamError(f"MapPolicy.{name}: must be an integer >= 1, got {v!r}")
 
 
 def sighting(
     pose: np.ndarray, pose_cov: np.ndarray, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """World position (2,) and covariance (2, 2) of a feature seen as z (2,) with noise R."""
-    m, Gx, Gz = inverse_observation(pose, z, laser_pose)
+    m, Gx, Gz = inverse_observe(pose, z, laser_pose)
     C = Gx @ pose_cov @ Gx.T + Gz @ R @ Gz.T
     return m, 0.5 * (C + C.T)
 

@@ -32,6 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from slam.checks import finite, float_array, times
+from slam.errors import SlamError
+from slam.se2 import wrap_angle
+
 __all__ = [
     "AckermannModel",
     "Odometry",
@@ -39,14 +43,8 @@ __all__ = [
     "arc_step",
     "arc_step_jacobians",
     "integrate",
-    "integrate_numpy",
     "wrap_angle",
 ]
-
-
-def wrap_angle(a):
-    """Angles (rad) wrapped to (-pi, pi]; scalars or arrays."""
-    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
 
 
 def _sinc_and_derivative(h: float) -> tuple[float, float]:
@@ -74,26 +72,26 @@ class AckermannModel:
         for name in ("wheelbase_m", "encoder_offset_m"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
-                raise ValueError(f"AckermannModel.{name}: must be a number, got {v!r}")
+                raise SlamError(f"AckermannModel.{name}: must be a number, got {v!r}")
             if not math.isfinite(v):
-                raise ValueError(f"AckermannModel.{name}: must be finite, got {v!r}")
+                raise SlamError(f"AckermannModel.{name}: must be finite, got {v!r}")
             object.__setattr__(self, name, float(v))
         if self.wheelbase_m <= 0:
-            raise ValueError(f"AckermannModel.wheelbase_m: must be > 0, got {self.wheelbase_m!r}")
+            raise SlamError(f"AckermannModel.wheelbase_m: must be > 0, got {self.wheelbase_m!r}")
 
     @classmethod
     def from_vehicle(cls, vehicle: Mapping | None) -> AckermannModel:
         """From a sequence's `vehicle` dict ({"model": "ackermann", "wheelbase_m": ..., ...})."""
         if vehicle is None:
-            raise ValueError("vehicle: the sequence has no vehicle model (needed for odometry)")
+            raise SlamError("vehicle: the sequence has no vehicle model (needed for odometry)")
         if not isinstance(vehicle, Mapping):
-            raise ValueError(f"vehicle: expected a dict, got {type(vehicle).__name__}")
+            raise SlamError(f"vehicle: expected a dict, got {type(vehicle).__name__}")
         if vehicle.get("model") != "ackermann":
-            raise ValueError(
+            raise SlamError(
                 f"vehicle.model: only 'ackermann' is known, got {vehicle.get('model')!r}"
             )
         if "wheelbase_m" not in vehicle:
-            raise ValueError("vehicle.wheelbase_m: missing")
+            raise SlamError("vehicle.wheelbase_m: missing")
         return cls(vehicle["wheelbase_m"], vehicle.get("encoder_offset_m", 0.0))
 
     def axle_speed(self, v_enc_mps: float, steer_rad: float) -> float:
@@ -140,11 +138,7 @@ def arc_step_jacobians(
     F = np.array([[1.0, 0.0, -d * s_ * s], [0.0, 1.0, d * c_ * s], [0.0, 0.0, 1.0]])
     # pose1 as a function of (d, h)
     J_dh = np.array(
-        [
-            [c_ * s, d * (-s_ * s + c_ * ds)],
-            [s_ * s, d * (c_ * s + s_ * ds)],
-            [0.0, 2.0],
-        ]
+        [[c_ * s, d * (-s_ * s + c_ * ds)], [s_ * s, d * (c_ * s + s_ * ds)], [0.0, 2.0]]
     )
     # (d, h) as a function of (v_c, alpha): d = v dt, h = v dt tan(alpha) / (2 L)
     J_va = np.array([[dt_s, 0.0], [0.5 * dt_s * t / L, 0.5 * v * dt_s * sec2 / L]])
@@ -183,7 +177,7 @@ class OdometryNoise:
         ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
-                raise ValueError(f"OdometryNoise.{name}: must be a finite number >= 0, got {v!r}")
+                raise SlamError(f"OdometryNoise.{name}: must be a finite number >= 0, got {v!r}")
 
     @property
     def Q_u(self) -> np.ndarray:
@@ -210,28 +204,16 @@ class Odometry:
     steer_rad: np.ndarray
 
     def __post_init__(self) -> None:
-        for name in ("t_s", "speed_mps", "steer_rad"):
-            a = np.asarray(getattr(self, name), dtype=np.float64)
-            if a.ndim != 1:
-                raise ValueError(f"Odometry.{name}: expected shape (M,), got {a.shape}")
-            if not np.all(np.isfinite(a)):
-                raise ValueError(f"Odometry.{name}: values must be finite")
-            object.__setattr__(self, name, a)
+        object.__setattr__(self, "t_s", times("Odometry.t_s", self.t_s))
         m = self.t_s.shape[0]
         if m == 0:
-            raise ValueError("Odometry.t_s: no odometry samples")
-        if self.speed_mps.shape != (m,) or self.steer_rad.shape != (m,):
-            raise ValueError(
-                f"Odometry.speed_mps, steer_rad: expected shape ({m},) like t_s, got "
-                f"{self.speed_mps.shape} and {self.steer_rad.shape}"
-            )
-        bad = np.flatnonzero(np.diff(self.t_s) <= 0)
-        if bad.size:
-            i = int(bad[0])
-            raise ValueError(
-                f"Odometry.t_s: times must be strictly increasing; t_s[{i + 1}] = "
-                f"{self.t_s[i + 1]!r} follows t_s[{i}] = {self.t_s[i]!r}"
-            )
+            raise SlamError("Odometry.t_s: no odometry samples")
+        for name in ("speed_mps", "steer_rad"):
+            a = float_array(f"Odometry.{name}", getattr(self, name), 1)
+            if a.shape != (m,):
+                raise SlamError(f"Odometry.{name}: expected shape ({m},) like t_s, got {a.shape}")
+            finite(f"Odometry.{name}", a)
+            object.__setattr__(self, name, a)
 
     def pieces(self, t0_s: float, t1_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The hold pieces covering [t0_s, t1_s]: (dt (k,), speed (k,), steer (k,)).
@@ -239,7 +221,7 @@ class Odometry:
         Before the first sample the first sample's values hold, after the last the last's.
         """
         if not t1_s >= t0_s:
-            raise ValueError(f"Odometry.pieces: t1_s = {t1_s!r} is before t0_s = {t0_s!r}")
+            raise SlamError(f"Odometry.pieces: t1_s = {t1_s!r} is before t0_s = {t0_s!r}")
         t = self.t_s
         a = int(np.searchsorted(t, t0_s, side="right"))  # first sample after t0
         b = max(int(np.searchsorted(t, t1_s, side="left")), a)  # first sample at or after t1
@@ -258,52 +240,49 @@ def integrate(
     t0_s: float,
     t1_s: float,
     noise: OdometryNoise | None = None,
+    *,
+    kernel: str = "numba",
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Integrate the odometry from t0_s to t1_s: (pose1 (3,), F (3, 3), Q (3, 3)).
 
     F = d pose1 / d pose over the whole interval (the product of the steps' Jacobians) and Q
     the covariance the readings' noise adds, propagated step by step:
     Q <- F_k Q F_k^T + G_k Q_u G_k^T + Q_floor dt_k. The heading of pose1 is wrapped to
-    (-pi, pi]. The loop is a numba kernel; `integrate_numpy` is its plain twin (test oracle).
+    (-pi, pi]. kernel: "numba" (the loop as a numba kernel) or "numpy" (step by step with
+    `arc_step_jacobians`, its plain twin and test oracle).
     """
+    if kernel not in ("numba", "numpy"):
+        raise SlamError(f"kernel: expected 'numba' or 'numpy', got {kernel!r}")
     noise = noise or OdometryNoise(0.0, 0.0, 0.0, 0.0)
     dts, vs, alphas = odometry.pieces(float(t0_s), float(t1_s))
-    p, F, Q = _integrate_kernel(
-        np.asarray(pose, dtype=np.float64),
-        dts,
-        vs,
-        alphas,
-        model.wheelbase_m,
-        model.encoder_offset_m,
-        noise.speed_sigma_mps**2,
-        noise.steer_sigma_rad**2,
-        noise.floor_xy_m_per_sqrt_s**2,
-        noise.floor_theta_rad_per_sqrt_s**2,
-    )
+    pose = np.asarray(pose, dtype=np.float64)
+    if kernel == "numpy":
+        p, F, Q = _integrate_numpy(model, pose, dts, vs, alphas, noise)
+    else:
+        p, F, Q = _integrate_kernel(
+            pose,
+            dts,
+            vs,
+            alphas,
+            model.wheelbase_m,
+            model.encoder_offset_m,
+            noise.speed_sigma_mps**2,
+            noise.steer_sigma_rad**2,
+            noise.floor_xy_m_per_sqrt_s**2,
+            noise.floor_theta_rad_per_sqrt_s**2,
+        )
     p[2] = float(wrap_angle(p[2]))
     return p, F, Q
 
 
-def integrate_numpy(
-    model: AckermannModel,
-    pose: np.ndarray,
-    odometry: Odometry,
-    t0_s: float,
-    t1_s: float,
-    noise: OdometryNoise | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`integrate` step by step with `arc_step_jacobians` (the test oracle of the kernel)."""
-    p = np.asarray(pose, dtype=np.float64).copy()
+def _integrate_numpy(model, pose, dts, vs, alphas, noise):
+    p = pose.copy()
     F = np.eye(3)
     Q = np.zeros((3, 3))
-    Qu = noise.Q_u if noise is not None else np.zeros((2, 2))
-    Qf = noise.Q_floor if noise is not None else np.zeros((3, 3))
-    dts, vs, alphas = odometry.pieces(float(t0_s), float(t1_s))
     for dt, v, a in zip(dts, vs, alphas):
         p, Fk, Gk = arc_step_jacobians(model, p, float(v), float(a), float(dt))
         F = Fk @ F
-        Q = Fk @ Q @ Fk.T + Gk @ Qu @ Gk.T + Qf * dt
-    p[2] = float(wrap_angle(p[2]))
+        Q = Fk @ Q @ Fk.T + Gk @ noise.Q_u @ Gk.T + noise.Q_floor * dt
     return p, F, 0.5 * (Q + Q.T)
 
 

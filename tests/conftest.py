@@ -26,9 +26,9 @@ def _missing_data(message: str) -> None:
 @pytest.fixture(scope="session")
 def vp_dir() -> Path:
     """The Victoria Park folder with every file the readers use; skip or fail if absent."""
-    from experiments.data import victoria_park_dir
     from experiments.errors import DataError
-    from experiments.victoria_park import VP_FILES
+    from experiments.io.paths import victoria_park_dir
+    from experiments.io.victoria_park import VP_FILES
 
     try:
         d = victoria_park_dir()

@@ -1,5 +1,7 @@
-"""The laser simulator: a 2D world of walls, balusters, pillars, trunks and bushes; exact ray
-casting; a SICK sensor model; scans and sequences with per-beam truth labels.
+"""Simulation with known truth: a 2D world of walls, balusters, pillars, trunks and bushes;
+exact ray casting; a SICK sensor model; scans and sequences with per-beam truth labels; a
+Cycab-like car driven through a scene (`trajectory`); point-landmark worlds for association and
+filter studies (`landmarks`).
 
     scene = load_scene("pillar_court")
     sensor = sensor_preset("pls200", back_to_back=True)
@@ -10,6 +12,14 @@ Label convention (== `scan_labels` in datasets/FORMAT.md): scene.circles are 0..
 `truth_landmarks`), then scene.walls, then scene.bushes; -1 no return; -2 mixed return.
 """
 
+from experiments.sim.landmarks import (
+    LandmarkScan,
+    LandmarkSimConfig,
+    avenue,
+    predict_map,
+    simulate_landmark_scans,
+    vp_scale_scans,
+)
 from experiments.sim.raycast import raycast, raycast_dense
 from experiments.sim.scene import (
     CIRCLE_KINDS,
@@ -35,6 +45,7 @@ from experiments.sim.simulate import (
     simulate_sequence,
     simulate_to_sequence,
 )
+from experiments.sim.trajectory import CycabParams, simulate_cycab_run
 
 __all__ = [
     "Scene",
@@ -59,4 +70,12 @@ __all__ = [
     "simulate_scan",
     "simulate_sequence",
     "simulate_to_sequence",
+    "CycabParams",
+    "simulate_cycab_run",
+    "LandmarkScan",
+    "LandmarkSimConfig",
+    "avenue",
+    "predict_map",
+    "simulate_landmark_scans",
+    "vp_scale_scans",
 ]

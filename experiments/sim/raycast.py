@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from experiments.errors import ConfigError
 from experiments.sim.scene import NO_RETURN_LABEL, Scene
 
 __all__ = ["raycast", "raycast_dense"]
@@ -30,10 +31,10 @@ _PAD_RAD = 1e-7  # widen every object's bearing interval by this; the exact test
 def _check(origin_xy: Any, angles_world_rad: Any) -> tuple[float, float, np.ndarray]:
     o = np.asarray(origin_xy, dtype=np.float64)
     if o.shape != (2,) or not np.all(np.isfinite(o)):
-        raise ValueError(f"raycast.origin_xy: expected 2 finite numbers, got {origin_xy!r}")
+        raise ConfigError(f"raycast.origin_xy: expected 2 finite numbers, got {origin_xy!r}")
     a = np.asarray(angles_world_rad, dtype=np.float64)
     if a.ndim != 1 or not np.all(np.isfinite(a)):
-        raise ValueError(
+        raise ConfigError(
             f"raycast.angles_world_rad: expected a finite (B,) array, got shape {a.shape}"
         )
     return float(o[0]), float(o[1]), a

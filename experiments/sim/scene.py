@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from experiments.errors import DataError
-from experiments.sequence import MIXED_LABEL, NO_RETURN_LABEL  # datasets/FORMAT.md's values
+from experiments.errors import ConfigError, DataError
+from slam.sequence import MIXED_LABEL, NO_RETURN_LABEL  # datasets/FORMAT.md's values
 
 __all__ = [
     "CircleObject",
@@ -74,13 +74,13 @@ def _is_number(v: Any) -> bool:
 
 def _check_name(owner: str, name: Any) -> str:
     if not isinstance(name, str) or not name:
-        raise ValueError(f"{owner}.name: must be a non-empty string, got {name!r}")
+        raise ConfigError(f"{owner}.name: must be a non-empty string, got {name!r}")
     return name
 
 
 def _check_height(owner: str, h: Any) -> float:
     if not _is_number(h) or not h > 0:  # inf allowed, NaN rejected by `not h > 0`
-        raise ValueError(f"{owner}.height_m: must be a positive number or inf, got {h!r}")
+        raise ConfigError(f"{owner}.height_m: must be a positive number or inf, got {h!r}")
     return float(h)
 
 
@@ -88,13 +88,15 @@ def _points_array(owner: str, pts: Any, min_points: int) -> np.ndarray:
     try:
         a = np.array(pts, dtype=np.float64)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{owner}.points_xy: cannot be read as an (P, 2) array ({exc})") from None
+        raise ConfigError(f"{owner}.points_xy: cannot be read as an (P, 2) array ({exc})") from None
     if a.ndim != 2 or a.shape[1] != 2:
-        raise ValueError(f"{owner}.points_xy: expected shape (P, 2), got {a.shape}")
+        raise ConfigError(f"{owner}.points_xy: expected shape (P, 2), got {a.shape}")
     if a.shape[0] < min_points:
-        raise ValueError(f"{owner}.points_xy: needs at least {min_points} points, got {a.shape[0]}")
+        raise ConfigError(
+            f"{owner}.points_xy: needs at least {min_points} points, got {a.shape[0]}"
+        )
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"{owner}.points_xy: all coordinates must be finite")
+        raise ConfigError(f"{owner}.points_xy: all coordinates must be finite")
     return _readonly(a)
 
 
@@ -117,16 +119,16 @@ class CircleObject:
         _check_name("CircleObject", self.name)
         c = np.array(self.center_xy, dtype=np.float64)
         if c.shape != (2,) or not np.all(np.isfinite(c)):
-            raise ValueError(
+            raise ConfigError(
                 f"{owner}.center_xy: expected 2 finite numbers, got {self.center_xy!r}"
             )
         object.__setattr__(self, "center_xy", _readonly(c))
         r = self.radius_m
         if not _is_number(r) or not math.isfinite(r) or r <= 0:
-            raise ValueError(f"{owner}.radius_m: must be a finite number > 0, got {r!r}")
+            raise ConfigError(f"{owner}.radius_m: must be a finite number > 0, got {r!r}")
         object.__setattr__(self, "radius_m", float(r))
         if self.kind not in CIRCLE_KINDS:
-            raise ValueError(f"{owner}.kind: must be one of {CIRCLE_KINDS}, got {self.kind!r}")
+            raise ConfigError(f"{owner}.kind: must be one of {CIRCLE_KINDS}, got {self.kind!r}")
         object.__setattr__(self, "height_m", _check_height(owner, self.height_m))
 
 
@@ -151,13 +153,13 @@ class WallObject:
         p = _points_array(owner, self.points_xy, 2)
         object.__setattr__(self, "points_xy", p)
         if self.kind not in WALL_KINDS:
-            raise ValueError(f"{owner}.kind: must be one of {WALL_KINDS}, got {self.kind!r}")
+            raise ConfigError(f"{owner}.kind: must be one of {WALL_KINDS}, got {self.kind!r}")
         if not isinstance(self.closed, (bool, np.bool_)):
-            raise ValueError(f"{owner}.closed: must be true or false, got {self.closed!r}")
+            raise ConfigError(f"{owner}.closed: must be true or false, got {self.closed!r}")
         object.__setattr__(self, "closed", bool(self.closed))
         seg = self.segments_xy
         if np.any(np.hypot(*(seg[:, 1] - seg[:, 0]).T) == 0.0):
-            raise ValueError(
+            raise ConfigError(
                 f"{owner}.points_xy: two consecutive points coincide (zero-length segment)"
             )
         object.__setattr__(self, "height_m", _check_height(owner, self.height_m))
@@ -191,10 +193,10 @@ class BushObject:
         x, y = p[:, 0], p[:, 1]
         area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
         if not area > 0:
-            raise ValueError(f"{owner}.points_xy: polygon has zero area")
+            raise ConfigError(f"{owner}.points_xy: polygon has zero area")
         q = np.vstack([p, p[:1]])
         if np.any(np.hypot(*(q[1:] - q[:-1]).T) == 0.0):
-            raise ValueError(f"{owner}.points_xy: two consecutive vertices coincide")
+            raise ConfigError(f"{owner}.points_xy: two consecutive vertices coincide")
         object.__setattr__(self, "height_m", _check_height(owner, self.height_m))
 
     @property
@@ -237,25 +239,25 @@ class Scene:
             objs = tuple(getattr(self, fname))
             for i, o in enumerate(objs):
                 if not isinstance(o, typ):
-                    raise ValueError(
+                    raise ConfigError(
                         f"Scene.{fname}[{i}]: expected {typ.__name__}, got {type(o).__name__}"
                     )
             object.__setattr__(self, fname, objs)
         names = [o.name for o in self.objects]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ValueError(f"Scene: object names must be unique, repeated: {dup}")
+            raise ConfigError(f"Scene: object names must be unique, repeated: {dup}")
         sp = np.array(self.scan_positions, dtype=np.float64)
         if sp.size == 0:
             sp = np.zeros((0, 3))
         if sp.ndim != 2 or sp.shape[1] != 3 or not np.all(np.isfinite(sp)):
-            raise ValueError(
+            raise ConfigError(
                 f"Scene.scan_positions: expected finite (S, 3) [x, y, theta], got shape {sp.shape}"
             )
         object.__setattr__(self, "scan_positions", _readonly(sp))
         spn = tuple(self.scan_position_names) or tuple(str(i + 1) for i in range(sp.shape[0]))
         if len(spn) != sp.shape[0] or not all(isinstance(s, str) for s in spn):
-            raise ValueError(
+            raise ConfigError(
                 f"Scene.scan_position_names: expected {sp.shape[0]} strings, "
                 f"got {self.scan_position_names!r}"
             )
@@ -296,14 +298,14 @@ class Scene:
         try:
             return self._label_of[name]
         except KeyError:
-            raise ValueError(f"Scene {self.name!r}: no object named {name!r}") from None
+            raise ConfigError(f"Scene {self.name!r}: no object named {name!r}") from None
 
     def _lut(self, lut: np.ndarray, labels: Any) -> np.ndarray:
         lab = np.asarray(labels)
         if lab.dtype.kind not in "iu":
-            raise ValueError(f"labels: expected integers, got dtype {lab.dtype}")
+            raise ConfigError(f"labels: expected integers, got dtype {lab.dtype}")
         if lab.size and (lab.min() < MIXED_LABEL or lab.max() >= self.n_objects):
-            raise ValueError(
+            raise ConfigError(
                 f"labels: must lie in [{MIXED_LABEL}, {self.n_objects - 1}] for scene "
                 f"{self.name!r}, got [{lab.min()}, {lab.max()}]"
             )
@@ -599,11 +601,11 @@ def make_bush(
     Used to write the bush outlines of the bundled scene files.
     """
     if not mean_radius_m > 0:
-        raise ValueError(f"make_bush.mean_radius_m: must be > 0, got {mean_radius_m!r}")
+        raise ConfigError(f"make_bush.mean_radius_m: must be > 0, got {mean_radius_m!r}")
     if n_vertices < 3:
-        raise ValueError(f"make_bush.n_vertices: must be >= 3, got {n_vertices!r}")
+        raise ConfigError(f"make_bush.n_vertices: must be >= 3, got {n_vertices!r}")
     if not 0 <= irregularity < 1:
-        raise ValueError(f"make_bush.irregularity: must be in [0, 1), got {irregularity!r}")
+        raise ConfigError(f"make_bush.irregularity: must be in [0, 1), got {irregularity!r}")
     c = np.asarray(tuple(center_xy), dtype=np.float64)
     k = np.arange(n_vertices)
     ang = 2 * np.pi * (k + rng.uniform(-0.3, 0.3, n_vertices)) / n_vertices

@@ -24,10 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from experiments.sequence import Sequence
+from experiments.errors import ConfigError
 from experiments.sim.raycast import raycast
 from experiments.sim.scene import MIXED_LABEL, NO_RETURN_LABEL, Scene, load_scene
 from features.types import Scan
+from slam import Sequence, se2
 
 __all__ = [
     "SensorModel",
@@ -94,61 +95,61 @@ class SensorModel:
         def num(field_name: str) -> float:
             v = getattr(self, field_name)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
-                raise ValueError(f"SensorModel.{field_name}: must be a number, got {v!r}")
+                raise ConfigError(f"SensorModel.{field_name}: must be a number, got {v!r}")
             if math.isnan(v):
-                raise ValueError(f"SensorModel.{field_name}: must not be NaN")
+                raise ConfigError(f"SensorModel.{field_name}: must not be NaN")
             object.__setattr__(self, field_name, float(v))
             return float(v)
 
         inc = num("angle_increment_rad")
         if not (0 < inc < math.pi):
-            raise ValueError(f"SensorModel.angle_increment_rad: must be in (0, pi), got {inc!r}")
+            raise ConfigError(f"SensorModel.angle_increment_rad: must be in (0, pi), got {inc!r}")
         fov = num("fov_rad")
         if not (0 < fov < _TWO_PI):
-            raise ValueError(
+            raise ConfigError(
                 f"SensorModel.fov_rad: must be in (0, 2 pi) (back_to_back gives 360 deg), "
                 f"got {fov!r}"
             )
         if _whole(fov / inc) is None:
-            raise ValueError(
+            raise ConfigError(
                 f"SensorModel.fov_rad: must be a whole number of increments, got {fov!r} / {inc!r}"
             )
         if not num("max_range_m") > 0:
-            raise ValueError(
+            raise ConfigError(
                 f"SensorModel.max_range_m: must be > 0 (inf allowed), got {self.max_range_m!r}"
             )
         sig = num("range_sigma_m")
         if not (0 <= sig < math.inf):
-            raise ValueError(f"SensorModel.range_sigma_m: must be finite and >= 0, got {sig!r}")
+            raise ConfigError(f"SensorModel.range_sigma_m: must be finite and >= 0, got {sig!r}")
         q = num("quantisation_m")
         if not (0 <= q < math.inf):
-            raise ValueError(f"SensorModel.quantisation_m: must be finite and >= 0, got {q!r}")
+            raise ConfigError(f"SensorModel.quantisation_m: must be finite and >= 0, got {q!r}")
         p = num("mixed_prob")
         if not (0 <= p <= 1):
-            raise ValueError(f"SensorModel.mixed_prob: must be in [0, 1], got {p!r}")
+            raise ConfigError(f"SensorModel.mixed_prob: must be in [0, 1], got {p!r}")
         j = num("mixed_min_jump_m")
         if not (0 < j < math.inf):
-            raise ValueError(f"SensorModel.mixed_min_jump_m: must be finite and > 0, got {j!r}")
+            raise ConfigError(f"SensorModel.mixed_min_jump_m: must be finite and > 0, got {j!r}")
         h = num("mount_height_m")
         if not (0 <= h < math.inf):
-            raise ValueError(f"SensorModel.mount_height_m: must be finite and >= 0, got {h!r}")
+            raise ConfigError(f"SensorModel.mount_height_m: must be finite and >= 0, got {h!r}")
         if not isinstance(self.back_to_back, (bool, np.bool_)):
-            raise ValueError(
+            raise ConfigError(
                 f"SensorModel.back_to_back: must be True or False, got {self.back_to_back!r}"
             )
         object.__setattr__(self, "back_to_back", bool(self.back_to_back))
         if self.back_to_back:
             if fov < math.pi - 1e-9:
-                raise ValueError(
+                raise ConfigError(
                     f"SensorModel.fov_rad: back_to_back needs sensors of >= 180 deg, got {fov!r}"
                 )
             if _whole(_TWO_PI / inc) is None:
-                raise ValueError(
+                raise ConfigError(
                     f"SensorModel.angle_increment_rad: back_to_back needs 2 pi to be a whole "
                     f"number of increments, got {inc!r}"
                 )
         if not isinstance(self.name, str):
-            raise ValueError(f"SensorModel.name: must be a string, got {self.name!r}")
+            raise ConfigError(f"SensorModel.name: must be a string, got {self.name!r}")
 
     @property
     def n_beams(self) -> int:
@@ -166,6 +167,12 @@ class SensorModel:
     def angles_rad(self) -> np.ndarray:
         """(B,) beam bearings in the laser frame, angle_min + k * increment."""
         return self.angle_min_rad + self.angle_increment_rad * np.arange(self.n_beams)
+
+    @property
+    def effective_sigma_m(self) -> float:
+        """The range noise an extractor should assume, m: the Gaussian noise and the uniform
+        quantisation error combined, sqrt(sigma^2 + q^2 / 12)."""
+        return math.sqrt(self.range_sigma_m**2 + self.quantisation_m**2 / 12.0)
 
     def scan(self, ranges_m: np.ndarray, stamp_s: float = 0.0) -> Scan:
         """Wrap simulated ranges as a `features.Scan` with this sensor's angles and max range."""
@@ -190,13 +197,13 @@ def sensor_preset(name: str, **overrides: Any) -> SensorModel:
     """A preset sensor ("pls200", "lms200"), with any `SensorModel` field overridden."""
     key = str(name).lower()
     if key not in SENSOR_PRESETS:
-        raise ValueError(
+        raise ConfigError(
             f"sensor_preset.name: unknown sensor {name!r}; known: {sorted(SENSOR_PRESETS)}"
         )
     fields = {f.name for f in dataclasses.fields(SensorModel)}
     bad = sorted(set(overrides) - fields)
     if bad:
-        raise ValueError(
+        raise ConfigError(
             f"sensor_preset: unknown SensorModel field(s) {bad}; fields: {sorted(fields)}"
         )
     return SensorModel(**{**SENSOR_PRESETS[key], **overrides})
@@ -205,16 +212,13 @@ def sensor_preset(name: str, **overrides: Any) -> SensorModel:
 def _pose3(v: Any, what: str) -> np.ndarray:
     a = np.asarray(v, dtype=np.float64)
     if a.shape != (3,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{what}: expected 3 finite numbers [x, y, theta], got {v!r}")
+        raise ConfigError(f"{what}: expected 3 finite numbers [x, y, theta], got {v!r}")
     return a
 
 
 def laser_world_pose(pose_xytheta: Any, laser_pose: Any = (0.0, 0.0, 0.0)) -> np.ndarray:
     """(3,) the laser's world pose T_world_vehicle * T_vehicle_laser, [x, y, theta]."""
-    x, y, th = _pose3(pose_xytheta, "pose_xytheta")
-    lx, ly, lth = _pose3(laser_pose, "laser_pose")
-    c, s = math.cos(th), math.sin(th)
-    return np.array([x + c * lx - s * ly, y + s * lx + c * ly, th + lth])
+    return se2.compose(_pose3(pose_xytheta, "pose_xytheta"), _pose3(laser_pose, "laser_pose"))
 
 
 def simulate_scan(
@@ -232,7 +236,7 @@ def simulate_scan(
     sensor.angle_min_rad + k * sensor.angle_increment_rad in the laser frame.
     """
     if not isinstance(rng, np.random.Generator):
-        raise ValueError(
+        raise ConfigError(
             f"simulate_scan.rng: expected a numpy.random.Generator, got {type(rng).__name__}"
         )
     lx, ly, lth = laser_world_pose(pose_xytheta, laser_pose)
@@ -299,7 +303,7 @@ def simulate_sequence(
     if P.ndim == 1 and P.shape == (3,):
         P = P[None, :]
     if P.ndim != 2 or P.shape[1] != 3 or P.shape[0] == 0 or not np.all(np.isfinite(P)):
-        raise ValueError(
+        raise ConfigError(
             f"simulate_sequence.poses: expected a finite (T, 3) array, got shape {P.shape}"
         )
     T = P.shape[0]
@@ -308,11 +312,11 @@ def simulate_sequence(
     else:
         t = np.array(times_s, dtype=np.float64)
         if t.shape != (T,) or not np.all(np.isfinite(t)):
-            raise ValueError(
+            raise ConfigError(
                 f"simulate_sequence.times_s: expected {T} finite times, got shape {t.shape}"
             )
         if T > 1 and not np.all(np.diff(t) > 0):
-            raise ValueError("simulate_sequence.times_s: must be strictly increasing")
+            raise ConfigError("simulate_sequence.times_s: must be strictly increasing")
     lp = _pose3(laser_pose, "simulate_sequence.laser_pose")
     ranges = np.empty((T, sensor.n_beams))
     labels = np.empty((T, sensor.n_beams), dtype=np.int64)
@@ -355,7 +359,7 @@ def simulate_to_sequence(
     )
     if poses is None:
         if scene.scan_positions.shape[0] == 0:
-            raise ValueError(
+            raise ConfigError(
                 f"simulate_to_sequence.poses: scene {scene.name!r} has no scan positions, "
                 "so poses must be given"
             )

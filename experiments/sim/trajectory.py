@@ -33,9 +33,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from experiments.sequence import Sequence
+from experiments.errors import ConfigError
 from experiments.sim.scene import Scene, load_scene
 from experiments.sim.simulate import laser_world_pose, sensor_preset, simulate_scan
+from slam import Sequence
 from slam.vehicle import arc_step
 
 __all__ = ["CycabParams", "Drive", "drive", "route_polyline", "simulate_cycab_run"]
@@ -87,7 +88,7 @@ class CycabParams:
             "dgps_rate_hz",
         ):
             if not getattr(self, name) > 0:
-                raise ValueError(f"CycabParams.{name}: must be > 0, got {getattr(self, name)!r}")
+                raise ConfigError(f"CycabParams.{name}: must be > 0, got {getattr(self, name)!r}")
         for name in (
             "accel_time_s",
             "speed_sigma_mps",
@@ -98,15 +99,15 @@ class CycabParams:
             "mixed_prob",
         ):
             if not getattr(self, name) >= 0:
-                raise ValueError(f"CycabParams.{name}: must be >= 0, got {getattr(self, name)!r}")
+                raise ConfigError(f"CycabParams.{name}: must be >= 0, got {getattr(self, name)!r}")
         if not (isinstance(self.scan_every, int) and self.scan_every >= 1):
-            raise ValueError(
+            raise ConfigError(
                 f"CycabParams.scan_every: must be an integer >= 1, got {self.scan_every!r}"
             )
         if not (isinstance(self.n_scans, int) and self.n_scans >= 1):
-            raise ValueError(f"CycabParams.n_scans: must be an integer >= 1, got {self.n_scans!r}")
+            raise ConfigError(f"CycabParams.n_scans: must be an integer >= 1, got {self.n_scans!r}")
         if len(self.laser_pose) != 3:
-            raise ValueError("CycabParams.laser_pose: expected (x, y, theta)")
+            raise ConfigError("CycabParams.laser_pose: expected (x, y, theta)")
 
     @property
     def vehicle(self) -> dict:
@@ -138,7 +139,7 @@ def route_polyline(waypoints: np.ndarray, spacing_m: float = 0.1) -> np.ndarray:
     """The closed route through the waypoints' (x, y), resampled every ~spacing_m: (K, 2)."""
     w = np.asarray(waypoints, dtype=np.float64)[:, :2]
     if w.shape[0] < 2:
-        raise ValueError("route_polyline.waypoints: need at least 2 waypoints")
+        raise ConfigError("route_polyline.waypoints: need at least 2 waypoints")
     loop = np.vstack([w, w[:1]])
     out = []
     for a, b in itertools.pairwise(loop):
@@ -150,7 +151,7 @@ def route_polyline(waypoints: np.ndarray, spacing_m: float = 0.1) -> np.ndarray:
 def drive(scene: Scene, p: CycabParams, n_samples: int) -> Drive:
     """Pure pursuit around the scene's route from its first waypoint, n_samples odometry samples."""
     if scene.scan_positions.shape[0] < 2:
-        raise ValueError(f"drive.scene: scene {scene.name!r} has no route (scan_positions)")
+        raise ConfigError(f"drive.scene: scene {scene.name!r} has no route (scan_positions)")
     route = route_polyline(scene.scan_positions)
     K = route.shape[0]
     step = np.hypot(*np.diff(np.vstack([route, route[:1]]), axis=0).T)
@@ -197,13 +198,11 @@ def _pose_at(d: Drive, p: CycabParams, t: np.ndarray) -> np.ndarray:
 
 
 def simulate_cycab_run(
-    rng: np.random.Generator,
-    scene: Scene | str = "tree_park",
-    params: CycabParams | None = None,
+    rng: np.random.Generator, scene: Scene | str = "tree_park", params: CycabParams | None = None
 ) -> Sequence:
     """One simulated Cycab run through `scene` as a `Sequence` (see the module docstring)."""
     if not isinstance(rng, np.random.Generator):
-        raise ValueError(
+        raise ConfigError(
             f"simulate_cycab_run.rng: expected a numpy.random.Generator, got {type(rng).__name__}"
         )
     p = params or CycabParams()

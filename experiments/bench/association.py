@@ -1,0 +1,129 @@
+"""`trunkslam bench association`: time per scan of each association method at Victoria Park scale.
+
+The scene is `experiments.sim.landmarks.vp_scale_scans`: 200 mapped trunks and 20 not yet in the
+map over a 160 m x 160 m park, about 10 within the 20 m range, a 403-dimensional state with a
+dense covariance, 2 clutter returns per scan, P_D 0.9. Each method sees the same scans, taken in
+turn scan by scan (so that background load hits every method alike); the time is the wall time
+of one call (input checks, gating and the method), after 5 untimed warm-up scans.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from experiments.errors import ConfigError
+from experiments.io.provenance import machine
+from experiments.io.writers import markdown_table
+from experiments.sim.landmarks import N_LANDMARKS, vp_scale_scans
+
+__all__ = ["bench", "format_table"]
+
+WARMUP = 5
+
+
+def _stats(times_s: list[float]) -> tuple[float, float]:
+    t = np.asarray(times_s) * 1e3
+    return float(np.median(t)), float(np.percentile(t, 90))
+
+
+def bench(repeats: int = 200, seed: int = 0) -> list[dict]:
+    """Rows (method, median_ms, p90_ms, notes): wall time per scan over `repeats` scans."""
+    from association import SlidingWindowAssociator, associate_detailed
+    from association.inputs import prepare
+
+    if repeats < 1:
+        raise ConfigError(f"repeats: must be >= 1, got {repeats}")
+    scans = vp_scale_scans(repeats + WARMUP, seed)
+    m_mean = np.mean([s["z"].shape[0] for s in scans])
+    args = ("z", "R", "z_hat", "H", "P")
+    win = SlidingWindowAssociator(K=3)
+    Q_rel = np.diag([0.02**2, 0.02**2, math.radians(0.2) ** 2])
+
+    def window(s):
+        win.step(*(s[a] for a in args), sensor_pose=s["pose"], sensor_pose_cov=Q_rel)
+        return win.last
+
+    methods = {
+        "checks": lambda s: prepare(*(s[a] for a in args), 0.99),
+        "ihgr": lambda s: associate_detailed(*(s[a] for a in args), "ihgr"),
+        "ihgr_nopre": lambda s: associate_detailed(*(s[a] for a in args), "ihgr", presolve=False),
+        "window": window,
+        "jcbb": lambda s: associate_detailed(*(s[a] for a in args), "jcbb"),
+        "nn": lambda s: associate_detailed(*(s[a] for a in args), "nn"),
+    }
+    times: dict[str, list[float]] = {k: [] for k in methods}
+    infos: dict[str, list] = {k: [] for k in methods}
+    for k, s in enumerate(scans):  # round robin: every method on this scan, then the next scan
+        for name, fn in methods.items():
+            t0 = time.perf_counter()
+            info = fn(s)
+            dt = time.perf_counter() - t0
+            if k >= WARMUP:
+                times[name].append(dt)
+                infos[name].append(info)
+
+    rows = [("input checks + gating only", *_stats(times["checks"]), "common to every method")]
+    lp = np.array([i.lp_solves for i in infos["ihgr"]])
+    rows.append(
+        (
+            "IHGR single scan",
+            *_stats(times["ihgr"]),
+            f"{(lp > 0).mean():.1%} of scans needed an LP (max {lp.max()} solves); "
+            "the rest were settled by presolve",
+        )
+    )
+    lp = np.array([i.lp_solves for i in infos["ihgr_nopre"]])
+    rows.append(
+        (
+            "IHGR single scan, presolve off",
+            *_stats(times["ihgr_nopre"]),
+            f"every scan through linprog (HiGHS), mean {lp.mean():.2f} solves",
+        )
+    )
+    info = infos["window"]
+    rows.append(
+        (
+            "IHGR K = 3 window",
+            *_stats(times["window"]),
+            f"mean {np.mean([i.n_tracks for i in info]):.1f} track hypotheses, "
+            f"{np.mean([i.rounding.lp_solves > 0 for i in info]):.1%} of scans needed an LP "
+            f"(max {max(i.rounding.lp_solves for i in info)} solves)",
+        )
+    )
+    nodes = np.array([i.nodes for i in infos["jcbb"]])
+    hits = sum(i.budget_exhausted for i in infos["jcbb"])
+    rows.append(
+        (
+            "JCBB (node budget 20000)",
+            *_stats(times["jcbb"]),
+            f"nodes: median {np.median(nodes):.0f}, max {nodes.max()}; budget exhausted "
+            f"in {hits} scans",
+        )
+    )
+    rows.append(("NN (gated, greedy)", *_stats(times["nn"]), ""))
+    return [
+        {
+            "method": r[0],
+            "median_ms": round(r[1], 3),
+            "p90_ms": round(r[2], 3),
+            "notes": r[3]
+            + (
+                f" [{m_mean:.1f} measurements, {N_LANDMARKS} features, state {3 + 2 * N_LANDMARKS}]"
+                if r[0].startswith("input")
+                else ""
+            ),
+        }
+        for r in rows
+    ]
+
+
+def format_table(rows: list[dict]) -> str:
+    """Markdown table of `bench` rows, with the machine."""
+    body = markdown_table(
+        ["method", "median ms/scan", "p90 ms/scan", "notes"],
+        [[r["method"], r["median_ms"], r["p90_ms"], r["notes"]] for r in rows],
+    )
+    return f"Association time per scan at Victoria Park scale ({machine()})\n\n{body}"

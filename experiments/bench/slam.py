@@ -1,0 +1,72 @@
+"""`trunkslam bench slam`: EKF-SLAM time per scan against the size of the map.
+
+The map has to grow to hundreds of landmarks, which the tree park cannot give, so the bench
+drives the filter down a long avenue (`experiments.sim.landmarks.avenue`): trees on both sides
+of a straight road, 5 Hz scans and 20 Hz odometry with the Cycab noise, every tree ahead within
+20 m measured as a circle centre with the `paper` noise model (the extractor itself is timed by
+`trunkslam bench extract`). `slam.run` times its phases per scan; the rows give their medians
+over the scans whose map size falls in each bin. One process; numpy's BLAS may use more than
+one thread for the larger matrices.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+
+import numpy as np
+
+from experiments.io.provenance import machine
+from experiments.io.writers import markdown_table
+from experiments.sim.landmarks import avenue
+from slam import TIMING_KEYS, SlamConfig, run
+
+__all__ = ["bench", "format_table"]
+
+
+def bench(
+    n_trees: int = 800,
+    association: str = "ihgr",
+    seed: int = 0,
+    bins=(0, 25, 50, 100, 200, 300, 400, 600, 800, 1200),
+) -> list[dict]:
+    """Median ms per scan of each phase, by map size (landmarks in the filter)."""
+    seq, feats = avenue(n_trees, np.random.default_rng(seed))
+    t0 = time.perf_counter()
+    log = run(seq, features=feats, association=association, config=SlamConfig())
+    wall = time.perf_counter() - t0
+    n_map = log.n_map
+    rows = []
+    for lo, hi in itertools.pairwise(bins):
+        sel = (n_map >= lo) & (n_map < hi)
+        if not sel.any():
+            continue
+        row = {
+            "map size": f"{lo}-{hi - 1}",
+            "scans": int(sel.sum()),
+            "state dim": int(3 + 2 * np.median(n_map[sel])),
+            "measurements": round(float(np.mean(log.n_features[sel])), 1),
+        }
+        for k in TIMING_KEYS:
+            if k != "features":
+                row[f"{k} ms"] = round(1e3 * float(np.median(log.timing_s[k][sel])), 3)
+        rows.append(row)
+    rows.append(
+        {
+            "map size": "whole run",
+            "scans": log.n_scans,
+            "state dim": int(3 + 2 * n_map[-1]),
+            "measurements": round(float(np.mean(log.n_features)), 1),
+            "total ms": round(1e3 * wall / log.n_scans, 3),
+        }
+    )
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    header = list(dict.fromkeys(k for r in rows for k in r))
+    body = [[r.get(k, "") for k in header] for r in rows]
+    return (
+        f"EKF-SLAM time per scan against map size (avenue of trees, IHGR; {machine()})\n\n"
+        + markdown_table(header, body)
+    )

@@ -1,0 +1,55 @@
+"""Where the real datasets live: `TRUNKSLAM_DATA`, else `../shared/datasets` next to the repo.
+
+The data are not part of the repository. `TRUNKSLAM_DATA` names the folder holding one
+sub-folder per dataset (`victoria_park/`, ...). A relative `TRUNKSLAM_DATA` is taken relative to
+the current directory, or failing that to the repository root (CI sets
+`TRUNKSLAM_DATA=../shared/datasets` and runs from the repository root, where both agree).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from experiments.errors import DataError
+
+__all__ = ["DATA_ENV", "REPO_ROOT", "DEFAULT_DATA_ROOT", "data_root", "victoria_park_dir"]
+
+DATA_ENV = "TRUNKSLAM_DATA"
+REPO_ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_DATA_ROOT = REPO_ROOT.parent / "shared" / "datasets"
+
+_HOW_TO_GET = (
+    "The Victoria Park files (aa3_dr.mat, aa3_gpsx.mat, partial_raw_scans_ss2002/sick.mat, "
+    "reference_detections/VictoriaParkSinSincronizar.mat) and where each comes from are listed "
+    "in shared/datasets/victoria_park/README.md (the shared data folder beside this "
+    "repository, with each file's source repository and sha256). Put them under "
+    f"<data>/victoria_park/ and set {DATA_ENV}=<data>."
+)
+
+
+def data_root() -> Path:
+    """The folder holding the datasets (one sub-folder each); `DataError` if there is none."""
+    value = os.environ.get(DATA_ENV, "").strip()
+    if value:
+        p = Path(value).expanduser()
+        candidates = [p] if p.is_absolute() else [Path.cwd() / p, REPO_ROOT / p]
+        for c in candidates:
+            if c.is_dir():
+                return c.resolve()
+        tried = ", ".join(str(c) for c in candidates)
+        raise DataError(f"{DATA_ENV}={value!r} is not a folder (tried {tried}). {_HOW_TO_GET}")
+    if DEFAULT_DATA_ROOT.is_dir():
+        return DEFAULT_DATA_ROOT.resolve()
+    raise DataError(
+        f"no dataset folder: {DATA_ENV} is not set and the default {DEFAULT_DATA_ROOT} does not "
+        f"exist. {_HOW_TO_GET}"
+    )
+
+
+def victoria_park_dir() -> Path:
+    """`data_root() / "victoria_park"`; `DataError` if it is missing."""
+    d = data_root() / "victoria_park"
+    if not d.is_dir():
+        raise DataError(f"Victoria Park folder not found: {d}. {_HOW_TO_GET}")
+    return d

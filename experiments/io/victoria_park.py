@@ -1,0 +1,202 @@
+"""The Victoria Park dataset (ACFR, Guivant & Nebot) as a `Sequence`, plus the reference detections.
+
+Conventions (see `../shared/datasets/victoria_park/README.md`):
+- the original clocks are milliseconds (the reference file's TLsr is already seconds);
+  everything here is seconds;
+- raw laser words keep the range in cm in their low 13 bits (mask 8191); ranges >= 80 m
+  (8000 cm) mean "no reflection";
+- beam i (0..360) of the SICK points at i*pi/360 from the vehicle's right, i.e. at
+  -pi/2 + i*pi/360 in the laser frame (x forward like the vehicle);
+- the laser (and the GPS antenna) sits at (L + a, b) = (3.78, 0.50) m in the vehicle frame
+  (rear-axle centre, x forward, y left); wheelbase L = 2.83 m; the speed encoder is on the
+  rear-left wheel, H = 0.76 m left of the centre line.
+Only the first 2000 raw scans exist (`partial_raw_scans_ss2002/sick.mat`); their times are
+`TLsr(1:2000)` of `reference_detections/VictoriaParkSinSincronizar.mat`.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from experiments.errors import ConfigError, DataError
+from experiments.io.paths import victoria_park_dir
+from slam import Sequence
+
+__all__ = [
+    "VP_LASER_POSE",
+    "VP_VEHICLE",
+    "VP_MAX_RANGE_M",
+    "VP_N_RAW_SCANS",
+    "VP_FILES",
+    "load_victoria_park",
+    "load_reference_detections",
+    "load_raw_sick_ranges",
+    "load_raw_sick_words",
+]
+
+VP_LASER_POSE = (3.78, 0.50, 0.0)  # (L + a, b, 0) in the vehicle frame, m, m, rad
+VP_VEHICLE = {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
+VP_MAX_RANGE_M = 80.0  # 8000 cm: "no reflection" at or beyond
+VP_N_RAW_SCANS = 2000
+VP_ANGLE_MIN_RAD = -math.pi / 2
+VP_ANGLE_INCREMENT_RAD = math.pi / 360
+RANGE_MASK = 8191  # low 13 bits: range in cm
+
+VP_FILES = {
+    "odometry": "aa3_dr.mat",
+    "gps": "aa3_gpsx.mat",
+    "sick": "partial_raw_scans_ss2002/sick.mat",
+    "reference": "reference_detections/VictoriaParkSinSincronizar.mat",
+}
+
+_HOW_TO_GET = (
+    "see shared/datasets/victoria_park/README.md (beside this repository) for where each file "
+    "comes from and its sha256"
+)
+
+
+def _root(root: Path | str | None) -> Path:
+    return victoria_park_dir() if root is None else Path(root)
+
+
+def load_mat(root: Path, key: str, variables: tuple[str, ...]) -> dict[str, np.ndarray]:
+    """Load `VP_FILES[key]` under `root` and check that it has `variables`."""
+    from scipy.io import loadmat  # heavy-ish import, only when reading data
+
+    path = root / VP_FILES[key]
+    if not path.is_file():
+        raise DataError(f"Victoria Park file missing: {path}; {_HOW_TO_GET}")
+    try:
+        mat = loadmat(path)
+    except Exception as exc:  # scipy raises assorted errors on corrupt files
+        raise DataError(f"{path}: cannot be read as a MATLAB file ({exc}); {_HOW_TO_GET}") from None
+    missing = [v for v in variables if v not in mat]
+    if missing:
+        raise DataError(f"{path}: missing variable(s) {missing}; {_HOW_TO_GET}")
+    return mat
+
+
+def _column(path_key: str, mat: dict, name: str, length: int | None = None) -> np.ndarray:
+    a = np.asarray(mat[name])
+    if a.ndim != 2 or 1 not in a.shape:
+        raise DataError(f"{VP_FILES[path_key]}: {name} should be a vector, got shape {a.shape}")
+    a = a.ravel()
+    if length is not None and a.size != length:
+        raise DataError(
+            f"{VP_FILES[path_key]}: {name} has {a.size} entries, expected {length} like the others"
+        )
+    return a
+
+
+def load_raw_sick_words(root: Path | str | None = None) -> np.ndarray:
+    """The raw SICK words of scans 1..2000: (2000, 361) uint16 (range cm in the low 13 bits)."""
+    root = _root(root)
+    mat = load_mat(root, "sick", ("sick",))
+    words = np.asarray(mat["sick"])
+    if words.shape != (VP_N_RAW_SCANS, 361) or words.dtype.kind not in "iu":
+        raise DataError(
+            f"{root / VP_FILES['sick']}: sick should be ({VP_N_RAW_SCANS}, 361) integers, "
+            f"got {words.shape} {words.dtype}"
+        )
+    return words.astype(np.uint16)
+
+
+def load_raw_sick_ranges(
+    root: Path | str | None = None, *, no_return_as_nan: bool = True
+) -> np.ndarray:
+    """Ranges of raw scans 1..2000: (2000, 361) float64 metres = (word & 8191) / 100.
+
+    no_return_as_nan: readings >= 80 m ("no reflection") become NaN; with False they stay as
+        the masked values (up to 81.91 m), exactly the original detector's input. Either feeds
+        `features.bailey.detect_trees` identically, since it ignores everything >= 75 m.
+    """
+    ranges = (load_raw_sick_words(root) & RANGE_MASK).astype(np.float64) / 100.0
+    if no_return_as_nan:
+        ranges[ranges >= VP_MAX_RANGE_M] = np.nan
+    return ranges
+
+
+def load_reference_detections(
+    root: Path | str | None = None,
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The original detector's output on all 7249 scans, and the scan times.
+
+    Returns t_s (7249,) float64 seconds (TLsr) and a list of 7249 (3, n) float64 arrays
+    [range (m); bearing (rad, 0..pi from the vehicle's right); diameter (m)], (3, 0) when empty.
+    """
+    root = _root(root)
+    mat = load_mat(root, "reference", ("TLsr", "zt"))
+    t_s = _column("reference", mat, "TLsr").astype(np.float64)
+    zt = np.asarray(mat["zt"]).ravel()
+    if zt.size != t_s.size:
+        raise DataError(
+            f"{root / VP_FILES['reference']}: zt has {zt.size} cells but TLsr {t_s.size} times"
+        )
+    dets: list[np.ndarray] = []
+    for k, cell in enumerate(zt):
+        a = np.asarray(cell, dtype=np.float64)
+        if a.size == 0:
+            a = np.zeros((3, 0))
+        elif a.ndim != 2 or a.shape[0] != 3:
+            raise DataError(
+                f"{root / VP_FILES['reference']}: zt{{{k + 1}}} should be 3 x n, got {a.shape}"
+            )
+        dets.append(a)
+    return t_s, dets
+
+
+def load_victoria_park(root: Path | str | None = None, n_scans: int | None = None) -> Sequence:
+    """The Victoria Park run as a `Sequence`: the 2000 raw scans, odometry and GPS.
+
+    root: the `victoria_park` folder (default: `experiments.io.paths.victoria_park_dir()`).
+    n_scans: keep the first n_scans scans (1..2000; default all 2000). Odometry (61945 rows,
+        the whole 26 min) and GPS (4466 fixes) are always complete: they run on past the
+        last raw scan (448.865 s).
+    Scans: ranges (word & 8191) / 100 m, >= 80 m -> NaN, scan_max_range 80 m; angle_min -pi/2,
+    increment pi/360 (laser frame, x forward). gps_xy = [Lo_m, La_m] (x east, y north, m);
+    gps_pose = laser position (the antenna sits at the laser).
+    """
+    if n_scans is not None and (
+        isinstance(n_scans, bool)
+        or not isinstance(n_scans, (int, np.integer))
+        or not 1 <= n_scans <= VP_N_RAW_SCANS
+    ):
+        raise ConfigError(f"n_scans: must be an integer in 1..{VP_N_RAW_SCANS}, got {n_scans!r}")
+    root = _root(root)
+    n = VP_N_RAW_SCANS if n_scans is None else int(n_scans)
+
+    ranges = load_raw_sick_ranges(root)[:n]
+    t_all, _ = load_reference_detections(root)
+    if t_all.size < VP_N_RAW_SCANS:
+        raise DataError(f"{root / VP_FILES['reference']}: TLsr has only {t_all.size} times")
+    scan_t = t_all[:n]
+
+    dr = load_mat(root, "odometry", ("time", "speed", "steering"))
+    odo_ms = _column("odometry", dr, "time")
+    speed = _column("odometry", dr, "speed", odo_ms.size)
+    steer = _column("odometry", dr, "steering", odo_ms.size)
+
+    gps = load_mat(root, "gps", ("timeGps", "La_m", "Lo_m"))
+    gps_ms = _column("gps", gps, "timeGps")
+    lo = _column("gps", gps, "Lo_m", gps_ms.size)
+    la = _column("gps", gps, "La_m", gps_ms.size)
+
+    return Sequence(
+        scan_t=scan_t,
+        scan_ranges=ranges,
+        scan_angle_min=VP_ANGLE_MIN_RAD,
+        scan_angle_increment=VP_ANGLE_INCREMENT_RAD,
+        laser_pose=np.array(VP_LASER_POSE),
+        scan_max_range=VP_MAX_RANGE_M,
+        odo_t=odo_ms.astype(np.float64) / 1000.0,
+        odo_speed=speed,
+        odo_steer=steer,
+        vehicle=dict(VP_VEHICLE),
+        gps_t=gps_ms.astype(np.float64) / 1000.0,
+        gps_xy=np.stack([lo, la], axis=1),
+        gps_pose=np.array(VP_LASER_POSE),
+        name="victoria_park",
+    )

@@ -1,0 +1,131 @@
+"""Experiment `features`: how the extractor classifies, and what it finds in real scans.
+
+Writes
+  classification.md/.csv/.png   how trunks, walls and bushes are classified (lrt vs paper eq. 5)
+  fig_vp_scan.png               a real Victoria Park scan: paper and Bailey circles, edges, zoom
+  features.rrd                  the Victoria Park scans in rerun (timeline `scan`)
+The paper's Figs. 2-4 on the simulated pillar court come from experiment `table1`
+(experiments/paper/circles.py).
+"""
+
+from __future__ import annotations
+
+import logging
+
+from experiments.errors import DataError
+from experiments.io.writers import write_table
+from experiments.paper.classification import RADII_M, RANGES_M, classification_study
+from experiments.render import plots
+from experiments.render.viz import open_recording
+from features import extract_features
+
+log = logging.getLogger(__name__)
+
+
+def classification(ctx) -> None:
+    n = 8 if ctx.quick else 60
+    sigma = 0.01
+    ctx.config["features"]["classification"] = {
+        "n_trials": n,
+        "sigma_m": sigma,
+        "radii_m": RADII_M,
+        "ranges_m": RANGES_M,
+    }
+    res = classification_study(ctx.rng("classification"), n, sigma, progress=ctx.progress)
+    header = [
+        "radius (m)",
+        "range (m)",
+        "beams on trunk",
+        "circle rate (lrt)",
+        "circle rate (paper eq. 5)",
+    ]
+    rows = [
+        [
+            r,
+            d,
+            round(res.beams[(r, d)], 1),
+            res.circle_rate["lrt"][(r, d)],
+            res.circle_rate["paper"][(r, d)],
+        ]
+        for r in RADII_M
+        for d in RANGES_M
+    ]
+    notes = (
+        f"{n} trials per cell, PLS200 with {sigma} m range noise and 1 cm quantisation.\n\n"
+        "| object | lrt | paper eq. 5 |\n|---|---|---|\n"
+        f"| wall beams inside line segments | {res.wall_line_fraction['lrt']:.3f} | "
+        f"{res.wall_line_fraction['paper']:.3f} |\n"
+        f"| false circles per wall | {res.wall_false_circles['lrt']:.3f} | "
+        f"{res.wall_false_circles['paper']:.3f} |\n"
+        f"| bushes extracted as a circle | {res.bush_circle_rate['lrt']:.3f} | "
+        f"{res.bush_circle_rate['paper']:.3f} |\n"
+    )
+    ctx.outputs += write_table(
+        ctx.out_dir / "classification",
+        header,
+        rows,
+        title="Classification of simulated trunks, walls and bushes",
+        notes=notes,
+    )
+    ctx.outputs.append(plots.plot_circle_rates(res, ctx.out_dir / "classification.png"))
+
+
+def victoria_park_figure(ctx, rec) -> None:
+    from experiments.io.victoria_park import load_victoria_park
+
+    try:
+        seq = load_victoria_park()
+    except DataError as exc:
+        log.warning("Victoria Park figure skipped: %s", exc)
+        ctx.config["features"]["victoria_park"] = f"skipped: {exc}"
+        return
+    n = 300 if ctx.quick else seq.n_scans
+    best_k, best_n = 0, -1
+    for k in range(n):
+        scan = seq.scan(k)
+        f = extract_features(scan, "paper")
+        b = extract_features(scan, "bailey")
+        rec.set_scan(k)
+        rec.log_scan(scan, path="victoria_park/scan")
+        rec.log_features(scan, f, path="victoria_park/features/paper")
+        rec.log_circles("victoria_park/features/bailey/circles", b.circle_params, method="bailey")
+        if f.n_circles > best_n:
+            best_k, best_n = k, f.n_circles
+        if k % 100 == 0:
+            ctx.progress("victoria park scans", k + 1, n)
+    ctx.progress("victoria park scans", n, n)
+    scan = seq.scan(best_k)
+    f = extract_features(scan, "paper")
+    b = extract_features(scan, "bailey")
+    ctx.config["features"]["victoria_park"] = {"scan_index": best_k, "scans_logged": n}
+    ctx.outputs.append(
+        plots.plot_features(
+            scan.points_xy,
+            plots.segments_of(f),
+            [
+                ("paper", f.circle_params, plots.METHOD_COLORS["paper"]),
+                ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"]),
+            ],
+            f.edge_xy,
+            f"Victoria Park scan {best_k + 1} (t = {scan.stamp_s:.2f} s; laser frame)",
+            ctx.out_dir / "fig_vp_scan.png",
+            zoom=plots.zoom_box(f.circle_params),
+        )
+    )
+
+
+def run(ctx) -> None:
+    from dataclasses import asdict
+
+    from features.bailey import BaileyParams
+    from features.extract import ExtractorParams
+
+    ctx.config.setdefault("features", {})
+    ctx.config["features"]["extractor_defaults"] = ExtractorParams().to_dict()
+    ctx.config["features"]["bailey"] = asdict(BaileyParams())
+    classification(ctx)
+    rec = open_recording(ctx.path("features.rrd"))
+    try:
+        victoria_park_figure(ctx, rec)
+    finally:
+        rec.close()

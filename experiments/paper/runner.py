@@ -1,0 +1,90 @@
+"""What every experiment receives, and the registry `trunkslam reproduce` runs from."""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from experiments.errors import ConfigError
+
+__all__ = ["EXPERIMENTS", "Experiment", "RunContext", "experiment_seed", "get_experiment"]
+
+
+@dataclass
+class RunContext:
+    """Settings shared by all experiments of one `trunkslam reproduce` call.
+
+    out_dir: folder for tables (.md/.csv), figures (.png) and recordings (.rrd).
+    quick: small-sample version (tests, smoke runs).
+    seed: the root seed; experiments derive their generators with `rng(name)`.
+    progress: callback(description, done, total) for long loops; no-op by default.
+    config: the resolved parameters each experiment used, written to manifest.json.
+    """
+
+    out_dir: Path
+    quick: bool = False
+    seed: int = 0
+    progress: Callable[[str, int, int], None] = lambda desc, done, total: None
+    config: dict = field(default_factory=dict)
+    outputs: list[Path] = field(default_factory=list)
+
+    def rng(self, name: str) -> np.random.Generator:
+        """A generator for one experiment, independent of the others and of their order."""
+        return np.random.default_rng(experiment_seed(self.seed, name))
+
+    def path(self, name: str) -> Path:
+        """Where to write output `name`; it is recorded in the manifest."""
+        p = self.out_dir / name
+        p.parent.mkdir(parents=True, exist_ok=True)
+        self.outputs.append(p)
+        return p
+
+
+def experiment_seed(seed: int, name: str) -> np.random.SeedSequence:
+    """The seed sequence of experiment `name` under root seed `seed`."""
+    return np.random.SeedSequence([seed] + [ord(c) for c in name])
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A registered experiment: its function ("module:function", called with a RunContext) and
+    what it shows. Names that share a function (table1 and table2, table3 and table4) are one
+    run."""
+
+    target: str
+    about: str = ""
+
+
+# Order is the run order.
+EXPERIMENTS: dict[str, Experiment] = {
+    "features": Experiment(
+        "experiments.paper.features:run", about="trunk classification; a Victoria Park scan"
+    ),
+    "table1": Experiment("experiments.paper.circles:run_tables", about="circle-centre error CE"),
+    "table2": Experiment("experiments.paper.circles:run_tables", about="radius error RE"),
+    "circle-sweep": Experiment(
+        "experiments.paper.circles:run_sweep", about="CE, RE against range, radius, noise"
+    ),
+    "table3": Experiment("experiments.paper.slam:run", about="EKF-SLAM pose errors"),
+    "table4": Experiment("experiments.paper.slam:run", about="false-detection rates"),
+    "association": Experiment(
+        "experiments.paper.association:run", about="IHGR, JCBB and NN: rates and optimality"
+    ),
+    "noise-calibration": Experiment(
+        "experiments.paper.calibration:run", about="fit of the constant measurement-noise model"
+    ),
+}
+
+
+def get_experiment(name: str) -> Callable[[RunContext], None]:
+    try:
+        target = EXPERIMENTS[name].target
+    except KeyError:
+        known = ", ".join(EXPERIMENTS)
+        raise ConfigError(f"unknown experiment {name!r}; known: {known}") from None
+    module, func = target.split(":")
+    return getattr(importlib.import_module(module), func)

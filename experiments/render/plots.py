@@ -1,0 +1,393 @@
+"""Static figures (PNG) like the paper's; the only module that imports matplotlib."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Circle as CirclePatch  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
+
+from experiments.io.writers import write_atomic  # noqa: E402
+from experiments.render.shapes import ellipse_polyline  # noqa: E402
+
+__all__ = ["plot_raw_scan", "plot_features", "save", "METHOD_COLORS"]
+
+# one colour per circle-fitting method, in every figure
+METHOD_COLORS = {
+    "paper": "tab:green",
+    "geometric": "m",
+    "bailey": "goldenrod",
+    "taubin": "c",
+    "kasa": "tab:cyan",
+}
+
+
+def save(fig, path: Path) -> Path:
+    """Write the figure as PNG atomically (see `write_atomic`) and close it."""
+    try:
+        return write_atomic(
+            path, lambda fh: fig.savefig(fh, format="png", dpi=130, bbox_inches="tight")
+        )
+    finally:
+        plt.close(fig)
+
+
+def plot_raw_scan(points_xy: np.ndarray, title: str, path: Path) -> Path:
+    """Fig. 2(b): the points of one whole scan around the sensor at the origin."""
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    p = points_xy[np.all(np.isfinite(points_xy), axis=1)]
+    ax.plot(p[:, 0], p[:, 1], ".", ms=2.5, color="k")
+    ax.plot([0], [0], "r+", ms=12, mew=2)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    return save(fig, path)
+
+
+def zoom_box(circles_xyr: np.ndarray, n: int = 1, margin: float = 1.5):
+    """A box around the n circles nearest the sensor."""
+    if len(circles_xyr) == 0:
+        return None
+    near = circles_xyr[np.argsort(np.hypot(circles_xyr[:, 0], circles_xyr[:, 1]))[:n]]
+    lo = near[:, :2].min(axis=0) - margin
+    hi = near[:, :2].max(axis=0) + margin
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+def segments_of(f):
+    """[((first, last), kind)] of a `Features`' segments, as `plot_features` takes them."""
+    return [((int(a), int(b)), int(k)) for (a, b), k in zip(f.segment_beams, f.segment_kind)]
+
+
+def _draw(ax, points_xy, segments, circles, edges, truth, lw=1.0):
+    p = points_xy
+    ax.plot(p[:, 0], p[:, 1], ".", ms=2, color="0.55", zorder=1)
+    colors = {0: "tab:orange", 1: "tab:blue", 2: "tab:green"}
+    for (a, b), k in segments:
+        q = p[np.arange(a, b + 1) % len(p)]  # runs may cross a 360 deg scan's seam
+        ax.plot(q[:, 0], q[:, 1], "-", color=colors[int(k)], lw=lw, zorder=2)
+    for name, circ, color in circles:
+        for i, (cx, cy, r) in enumerate(circ):
+            ax.add_patch(
+                CirclePatch(
+                    (cx, cy),
+                    r,
+                    fill=False,
+                    color=color,
+                    lw=1.3,
+                    zorder=3,
+                    label=name if i == 0 else None,
+                )
+            )
+    if truth is not None and len(truth):
+        for i, (cx, cy, r) in enumerate(truth):
+            ax.add_patch(
+                CirclePatch(
+                    (cx, cy),
+                    r,
+                    fill=False,
+                    ls="--",
+                    color="k",
+                    lw=0.8,
+                    zorder=2,
+                    label="truth" if i == 0 else None,
+                )
+            )
+    if len(edges):
+        ax.plot(edges[:, 0], edges[:, 1], "x", color="red", ms=7, mew=1.5, zorder=4, label="edges")
+    ax.plot([0], [0], "k^", ms=7)
+    ax.set_aspect("equal")
+    ax.grid(alpha=0.3)
+
+
+def plot_features(
+    points_xy: np.ndarray,
+    segments: Sequence,
+    circles: Sequence[tuple[str, np.ndarray, str]],
+    edges_xy: np.ndarray,
+    title: str,
+    path: Path,
+    zoom: tuple[float, float, float, float] | None = None,
+    truth_xyr: np.ndarray | None = None,
+) -> Path:
+    """Figs. 3 and 4: circles and edges on the scan (left), and a zoom on a box (right).
+
+    points_xy: (B, 2) scan points (NaN rows for no return). segments: [((first, last), kind)].
+    circles: [(label, (C, 3) [x, y, r], colour)]. zoom: (xmin, xmax, ymin, ymax).
+    """
+    ncols = 2 if zoom else 1
+    fig, axes = plt.subplots(1, ncols, figsize=(6.5 * ncols, 6.2))
+    axes = np.atleast_1d(axes)
+    for ax in axes:
+        _draw(ax, points_xy, segments, circles, edges_xy, truth_xyr, lw=1.0)
+    axes[0].set_title(title)
+    axes[0].set_xlabel("x (m)")
+    axes[0].set_ylabel("y (m)")
+    if zoom:
+        x0, x1, y0, y1 = zoom
+        axes[0].add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", color="m"))
+        axes[1].set_xlim(x0, x1)
+        axes[1].set_ylim(y0, y1)
+        axes[1].set_title("zoom on the dashed box")
+        axes[1].legend(loc="best", fontsize=8)
+    else:
+        axes[0].legend(loc="best", fontsize=8)
+    return save(fig, path)
+
+
+def plot_rates(table: dict[str, dict[str, float]], title: str, ylabel: str, path: Path) -> Path:
+    """Grouped bars: table[group][series] = value."""
+    groups = list(table)
+    series = sorted({s for g in table.values() for s in g})
+    fig, ax = plt.subplots(figsize=(7, 4))
+    w = 0.8 / max(len(series), 1)
+    for i, s in enumerate(series):
+        ax.bar(
+            np.arange(len(groups)) + i * w, [table[g].get(s, np.nan) for g in groups], w, label=s
+        )
+    ax.set_xticks(np.arange(len(groups)) + 0.4 - w / 2, groups)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    ax.grid(axis="y", alpha=0.3)
+    return save(fig, path)
+
+
+def plot_circle_rates(res, path: Path) -> Path:
+    """Circle-extraction rate of simulated trunks against range, per radius and line test."""
+    tests = list(res.circle_rate)
+    fig, axes = plt.subplots(1, len(tests), figsize=(5.5 * len(tests), 4), sharey=True)
+    axes = np.atleast_1d(axes)
+    for ax, t in zip(axes, tests):
+        cells = res.circle_rate[t]
+        for r in sorted({r for r, _ in cells}):
+            ds = sorted(d for rr, d in cells if rr == r)
+            ax.plot(ds, [cells[(r, d)] for d in ds], "o-", label=f"r = {r} m")
+        ax.set_title(
+            {"lrt": "likelihood-ratio test (default)", "paper": "paper's eq. (5) test"}.get(t, t)
+        )
+        ax.set_xlabel("range (m)")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("fraction of trunks extracted as circles")
+    axes[0].legend(fontsize=8)
+    return save(fig, path)
+
+
+def plot_scene(scene, path: Path) -> Path:
+    """Fig. 2(a): the scene from above, pillars labelled, scan positions as numbered crosses."""
+    fig, ax = plt.subplots(figsize=(8, 6.5))
+    for w in scene.walls:
+        p = np.vstack([w.points_xy, w.points_xy[:1]]) if w.closed else w.points_xy
+        style = dict(color="0.2", lw=2.0) if w.kind == "wall" else dict(color="0.5", lw=1.2, ls=":")
+        ax.plot(p[:, 0], p[:, 1], **style)
+    for b in scene.bushes:
+        p = np.vstack([b.points_xy, b.points_xy[:1]])
+        ax.fill(p[:, 0], p[:, 1], color="tab:olive", alpha=0.5, lw=0)
+    for c in scene.circles:
+        ax.add_patch(CirclePatch(c.center_xy, c.radius_m, color="tab:brown"))
+        ax.annotate(c.name, c.center_xy, xytext=(6, 6), textcoords="offset points")
+    for i, p in enumerate(scene.scan_positions):
+        ax.plot(p[0], p[1], "r+", ms=11, mew=2)
+        ax.annotate(str(i + 1), p[:2], xytext=(5, -12), textcoords="offset points", color="r")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"Fig. 2(a): {scene.name} (walls solid, low balusters dotted, shrubs green)")
+    ax.grid(alpha=0.3)
+    return save(fig, path)
+
+
+def plot_sweep(results: dict, path: Path) -> Path:
+    """CE and RE (rows) against each swept variable (columns), one line per method."""
+    variables = list(results)
+    fig, axes = plt.subplots(2, len(variables), figsize=(5 * len(variables), 7.5))
+    styles = {"paper": "o-", "geometric": "s-", "bailey": "^-", "taubin": "d-", "crlb": "k--"}
+    for j, var in enumerate(variables):
+        xs = sorted(results[var])
+        methods = list(results[var][xs[0]])
+        for i, label in enumerate(("RMS CE", "RMS RE")):
+            ax = axes[i, j]
+            for m in methods:
+                ys = [results[var][x][m][i] for x in xs]
+                ax.plot(
+                    xs,
+                    ys,
+                    styles.get(m, "o-"),
+                    label="Cramer-Rao (RMS)" if m == "crlb" else m,
+                    ms=4,
+                )
+            ax.set_yscale("log")
+            ax.set_xlabel(var.replace("_m", " (m)"))
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3, which="both")
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle("Circle accuracy: one pillar ahead of a PLS200 (others at 10 m, 0.3 m, 1 cm)")
+    return save(fig, path)
+
+
+# ---- EKF-SLAM (experiment 2: the paper's Figs. 7, 10, 11; consistency) -------------------------
+
+
+def plot_slam_path(
+    truth_xy: np.ndarray,
+    est_xy: np.ndarray,
+    trees_xyr: np.ndarray,
+    map_xy: np.ndarray,
+    map_cov: np.ndarray,
+    title: str,
+    path: Path,
+    walls: Sequence[np.ndarray] = (),
+    bushes: Sequence[np.ndarray] = (),
+) -> Path:
+    """Fig. 7: true path (dashed), estimated path (solid), trees (stars), the map's landmarks
+    with 95% ellipses (magnified x10 to be visible), walls and bushes of the scene (grey)."""
+    fig, ax = plt.subplots(figsize=(8, 6))
+    for w in walls:
+        ax.plot(w[:, 0], w[:, 1], "-", color="0.4", lw=2)
+    for b in bushes:
+        q = np.vstack([b, b[:1]])
+        ax.fill(q[:, 0], q[:, 1], color="0.85", zorder=0)
+    ax.plot(truth_xy[:, 0], truth_xy[:, 1], "k--", lw=1.2, label="true path (DGPS truth)")
+    ax.plot(est_xy[:, 0], est_xy[:, 1], "-", color="tab:blue", lw=1.2, label="estimated path")
+    ax.plot(trees_xyr[:, 0], trees_xyr[:, 1], "*", color="tab:green", ms=13, label="trees (truth)")
+    if len(map_xy):
+        ax.plot(
+            map_xy[:, 0], map_xy[:, 1], "+", color="tab:red", ms=10, mew=1.5, label="map landmarks"
+        )
+        for i, (c, P) in enumerate(zip(map_xy, map_cov)):
+            e = ellipse_polyline(c, 100.0 * np.asarray(P))
+            ax.plot(
+                e[:, 0],
+                e[:, 1],
+                "-",
+                color="tab:red",
+                lw=0.7,
+                label="95% ellipse x10" if i == 0 else None,
+            )
+    ax.plot(truth_xy[0, 0], truth_xy[0, 1], "ko", ms=6)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return save(fig, path)
+
+
+def plot_innovations(series: Sequence[dict], title: str, path: Path) -> Path:
+    """Fig. 10: range and bearing innovations with their 3-sigma bounds.
+
+    series: dicts with label, scan (k,), innov (k, 2) [m, rad], sigma (k, 2) and style (a
+    matplotlib line style such as "-." or "-").
+    """
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    _plot_with_bounds(axes, series, "innov", "innovation")
+    axes[0].set_ylabel("range innovation (m)")
+    axes[1].set_ylabel("bearing innovation (rad)")
+    axes[1].set_xlabel("scan")
+    axes[0].set_title(title)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, ncol=2)
+    return save(fig, path)
+
+
+def plot_pose_errors(series: Sequence[dict], title: str, path: Path) -> Path:
+    """Fig. 11: x, y and heading errors of the vehicle with their 3-sigma bounds.
+
+    series: dicts with label, scan (N,), err (N, 3) [m, m, rad], sigma (N, 3), style.
+    """
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
+    names = ["x error (m)", "y error (m)", "heading error (rad)"]
+    _plot_with_bounds(axes, series, "err", "error")
+    for ax, n in zip(axes, names):
+        ax.set_ylabel(n)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("scan")
+    axes[0].set_title(title)
+    axes[0].legend(fontsize=7, ncol=2)
+    return save(fig, path)
+
+
+def plot_consistency(
+    series: dict[str, np.ndarray],
+    bounds: tuple[float, float],
+    title: str,
+    ylabel: str,
+    path: Path,
+    expected: float | None = None,
+) -> Path:
+    """Average NEES (or NIS) per scan over Monte Carlo runs, with its 95% chi-square bounds."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for label, v in series.items():
+        ax.plot(np.arange(len(v)), v, "-", lw=1.0, label=label)
+    ax.axhline(bounds[0], color="k", ls="--", lw=0.8, label="95% bounds")
+    ax.axhline(bounds[1], color="k", ls="--", lw=0.8)
+    if expected is not None:
+        ax.axhline(expected, color="0.5", ls=":", lw=0.8)
+    ax.set_xlabel("scan")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return save(fig, path)
+
+
+def plot_association(
+    rows: list[dict], path: Path, method_labels: dict[str, str], sweep_xlabels: dict[str, str]
+) -> Path:
+    """Correct-association and false-pairing rates against each sweep, one column per sweep.
+
+    rows: dicts with keys sweep, value, method, correct_rate, false_pair_rate (as `rate_study`
+    returns); method_labels: method -> legend label (also the plotting order); sweep_xlabels:
+    sweep -> x-axis label.
+    """
+    sweeps = list(dict.fromkeys(r["sweep"] for r in rows))
+    fig, axes = plt.subplots(2, len(sweeps), figsize=(4.6 * len(sweeps), 7.2), squeeze=False)
+    styles = ["o-", "s--", "^-", "v:", "d-."]
+    colors = ["tab:blue", "tab:cyan", "tab:red", "tab:gray", "tab:green"]
+    for c, sw in enumerate(sweeps):
+        for k, (m, label) in enumerate(method_labels.items()):
+            rs = [r for r in rows if r["sweep"] == sw and r["method"] == m]
+            if not rs:
+                continue
+            x = [r["value"] for r in rs]
+            st, color = styles[k % len(styles)], colors[k % len(colors)]
+            axes[0, c].plot(x, [r["correct_rate"] for r in rs], st, color=color, label=label)
+            axes[1, c].plot(x, [r["false_pair_rate"] for r in rs], st, color=color)
+        axes[1, c].set_xlabel(sweep_xlabels.get(sw, sw))
+        axes[0, c].set_title(f"sweep: {sw}")
+        for ax in axes[:, c]:
+            ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("correct association rate")
+    axes[1, 0].set_ylabel("false pairing rate")
+    axes[0, 0].legend(fontsize=8, loc="lower left")
+    fig.tight_layout()
+    return save(fig, path)
+
+
+def _plot_with_bounds(axes, series, key: str, what: str) -> None:
+    """Each series' column i of s[key] on axes[i], with its +-3 sigma bounds dotted."""
+    colors = ["tab:blue", "tab:orange", "tab:green", "tab:red"]
+    for s, c in zip(series, colors):
+        for i, ax in enumerate(axes):
+            ax.plot(
+                s["scan"],
+                s[key][:, i],
+                s.get("style", "-"),
+                color=c,
+                lw=1.0,
+                label=f"{s['label']} {what}",
+            )
+            ax.plot(
+                s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0, label=f"{s['label']} 3 sigma"
+            )
+            ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)

@@ -1,0 +1,21 @@
+"""Outlines drawn by both the figures and the recordings: circles and covariance ellipses."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["circle_polyline", "ellipse_polyline"]
+
+
+def circle_polyline(cx: float, cy: float, r: float, n: int = 48) -> np.ndarray:
+    """(n + 1, 2) closed polyline of a circle."""
+    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    return np.stack([cx + r * np.cos(t), cy + r * np.sin(t)], axis=1)
+
+
+def ellipse_polyline(center_xy, cov_2x2, n_sigma: float = 2.4477, n: int = 40) -> np.ndarray:
+    """(n + 1, 2) closed polyline of the n_sigma ellipse of a 2D Gaussian (2.4477: 95%)."""
+    w, v = np.linalg.eigh(0.5 * (np.asarray(cov_2x2) + np.asarray(cov_2x2).T))
+    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=1) * (n_sigma * np.sqrt(np.maximum(w, 0.0)))
+    return np.asarray(center_xy, float) + circle @ v.T

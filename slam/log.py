@@ -1,0 +1,208 @@
+"""What a run did (`SlamLog`), and the one small builder `slam.run` fills scan by scan."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = [
+    "AMBIGUOUS",
+    "CONFIRMED",
+    "NEW_TENTATIVE",
+    "OUT_OF_RANGE",
+    "TENTATIVE_HIT",
+    "TIMING_KEYS",
+    "LogBuilder",
+    "SlamLog",
+]
+
+TIMING_KEYS = ("predict", "features", "associate", "update", "manage", "total")
+
+# Status of each measurement in SlamLog.meas_status (>= 0: the landmark id it updated).
+NEW_TENTATIVE = -1
+TENTATIVE_HIT = -2
+CONFIRMED = -3
+AMBIGUOUS = -4
+OUT_OF_RANGE = -5
+
+
+@dataclass(frozen=True, eq=False)
+class SlamLog:
+    """Everything one run did. N scans; world frame; m, rad, s.
+
+    scan_t: (N,) scan times. pose, pose_cov: (N, 3), (N, 3, 3) the estimate of the rear-axle
+        centre after the scan's update. pred_pose, pred_pose_cov: the same after the prediction,
+        before the update (pred == pose for scans without an update).
+    landmark_xy (n, 2), landmark_cov (n, 2, 2), landmark_id (n,), landmark_first_scan (n,),
+        landmark_n_obs (n,): the final map (first_scan: the scan it joined the map; n_obs: the
+        scans it was associated in, its tentative sightings included).
+    obs_*: one row per measurement used in an update: obs_scan, obs_feature (circle index in the
+        scan's features), obs_landmark (id), obs_z (range, bearing), obs_innov (z - z_hat),
+        obs_innov_cov (2, 2) its block of the joint innovation covariance.
+    meas_*: one row per circle extracted: meas_scan, meas_feature, meas_z (K, 2), meas_R
+        (K, 2, 2), meas_status (landmark id >= 0 when used in an update; -1 new tentative,
+        -2 tentative seen again, -3 tentative confirmed into the map, -4 ambiguous (gated but not
+        assigned, ignored), -5 beyond max_feature_range_m).
+    scan_nis (N,), scan_nis_dof (N,): NIS of each scan's batch update and its degrees of
+        freedom (NaN, 0 without an update).
+    n_features, n_associated, n_tentative, n_map: (N,) per scan.
+    timing_s: {"predict", "features", "associate", "update", "manage", "total"} -> (N,) s.
+    final_x, final_P: the final state. landmark ids index `final_x` via landmark_id order.
+    start: "truth", "gps" or "origin". features_method, association_method: names used.
+    config: the resolved configuration (plain types).
+    """
+
+    scan_t: np.ndarray
+    pose: np.ndarray
+    pose_cov: np.ndarray
+    pred_pose: np.ndarray
+    pred_pose_cov: np.ndarray
+    landmark_xy: np.ndarray
+    landmark_cov: np.ndarray
+    landmark_id: np.ndarray
+    landmark_first_scan: np.ndarray
+    landmark_n_obs: np.ndarray
+    obs_scan: np.ndarray
+    obs_feature: np.ndarray
+    obs_landmark: np.ndarray
+    obs_z: np.ndarray
+    obs_innov: np.ndarray
+    obs_innov_cov: np.ndarray
+    meas_scan: np.ndarray
+    meas_feature: np.ndarray
+    meas_z: np.ndarray
+    meas_R: np.ndarray
+    meas_status: np.ndarray
+    scan_nis: np.ndarray
+    scan_nis_dof: np.ndarray
+    n_features: np.ndarray
+    n_associated: np.ndarray
+    n_tentative: np.ndarray
+    n_map: np.ndarray
+    timing_s: dict
+    final_x: np.ndarray
+    final_P: np.ndarray
+    start: str
+    features_method: str
+    association_method: str
+    config: dict
+
+    @property
+    def n_scans(self) -> int:
+        return int(self.scan_t.shape[0])
+
+
+class LogBuilder:
+    """Collects a run's per-scan figures and measurement rows; `build` makes the `SlamLog`.
+
+    n_obs and first_scan (landmark id -> count / scan index) are kept here because only the
+    log needs them; the map-management step updates them as landmarks are seen and confirmed.
+    """
+
+    def __init__(self, scan_t: np.ndarray) -> None:
+        n = scan_t.shape[0]
+        self.scan_t = scan_t
+        self.pose = np.empty((n, 3))
+        self.pose_cov = np.empty((n, 3, 3))
+        self.pred_pose = np.empty((n, 3))
+        self.pred_pose_cov = np.empty((n, 3, 3))
+        self.nis = np.full(n, np.nan)
+        self.nis_dof = np.zeros(n, np.int64)
+        self.counts = {
+            k: np.zeros(n, np.int64) for k in ("n_features", "n_associated", "n_tentative", "n_map")
+        }
+        self.timing = {k: np.zeros(n) for k in TIMING_KEYS}
+        self.obs: dict[str, list] = {
+            k: [] for k in ("scan", "feature", "landmark", "z", "innov", "S")
+        }
+        self.meas: dict[str, list] = {k: [] for k in ("scan", "feature", "z", "R", "status")}
+        self.n_obs: dict[int, int] = {}
+        self.first_scan: dict[int, int] = {}
+
+    def predicted(self, k: int, pose: np.ndarray, cov: np.ndarray) -> None:
+        self.pred_pose[k] = pose
+        self.pred_pose_cov[k] = cov
+
+    def observation(self, k: int, feature: int, landmark: int, z, innov, S) -> None:
+        """One measurement used in scan k's update."""
+        self.n_obs[landmark] = self.n_obs.get(landmark, 0) + 1
+        self.obs["scan"].append(k)
+        self.obs["feature"].append(feature)
+        self.obs["landmark"].append(landmark)
+        self.obs["z"].append(z)
+        self.obs["innov"].append(innov)
+        self.obs["S"].append(S)
+
+    def scan_done(
+        self,
+        k: int,
+        state,
+        n_tentative: int,
+        z,
+        R,
+        status,
+        n_associated: int,
+        nis: float,
+        nis_dof: int,
+        times: list[float],
+    ) -> None:
+        """Scan k's estimate, counts, measurements with their status, and phase times
+        (`times`: perf_counter at the start and after each of the five steps)."""
+        self.pose[k] = state.pose
+        self.pose_cov[k] = state.pose_cov
+        self.nis[k] = nis
+        self.nis_dof[k] = nis_dof
+        m = z.shape[0]
+        self.counts["n_features"][k] = m
+        self.counts["n_associated"][k] = n_associated
+        self.counts["n_tentative"][k] = n_tentative
+        self.counts["n_map"][k] = state.n_landmarks
+        for i in range(m):
+            self.meas["scan"].append(k)
+            self.meas["feature"].append(i)
+            self.meas["z"].append(z[i])
+            self.meas["R"].append(R[i])
+            self.meas["status"].append(int(status[i]))
+        for key, a, b in zip(TIMING_KEYS[:5], times[:-1], times[1:]):
+            self.timing[key][k] = b - a
+        self.timing["total"][k] = times[-1] - times[0]
+
+    def build(
+        self, state, *, start: str, features_method: str, association_method: str, config: dict
+    ) -> SlamLog:
+        ids = state.landmark_ids
+        obs, meas = self.obs, self.meas
+        return SlamLog(
+            scan_t=self.scan_t,
+            pose=self.pose,
+            pose_cov=self.pose_cov,
+            pred_pose=self.pred_pose,
+            pred_pose_cov=self.pred_pose_cov,
+            landmark_xy=state.landmarks_xy.copy(),
+            landmark_cov=state.landmark_covs,
+            landmark_id=ids.copy(),
+            landmark_first_scan=np.array([self.first_scan.get(int(i), -1) for i in ids], np.int64),
+            landmark_n_obs=np.array([self.n_obs.get(int(i), 0) for i in ids], np.int64),
+            obs_scan=np.array(obs["scan"], np.int64),
+            obs_feature=np.array(obs["feature"], np.int64),
+            obs_landmark=np.array(obs["landmark"], np.int64),
+            obs_z=np.array(obs["z"]).reshape(-1, 2),
+            obs_innov=np.array(obs["innov"]).reshape(-1, 2),
+            obs_innov_cov=np.array(obs["S"]).reshape(-1, 2, 2),
+            meas_scan=np.array(meas["scan"], np.int64),
+            meas_feature=np.array(meas["feature"], np.int64),
+            meas_z=np.array(meas["z"]).reshape(-1, 2),
+            meas_R=np.array(meas["R"]).reshape(-1, 2, 2),
+            meas_status=np.array(meas["status"], np.int64),
+            scan_nis=self.nis,
+            scan_nis_dof=self.nis_dof,
+            **self.counts,
+            timing_s=self.timing,
+            final_x=state.x.copy(),
+            final_P=state.P.copy(),
+            start=start,
+            features_method=features_method,
+            association_method=association_method,
+            config=config,
+        )

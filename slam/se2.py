@@ -1,0 +1,150 @@
+"""Planar poses (SE(2)) and range-bearing observations, with their Jacobians.
+
+A pose is [x_m, y_m, theta_rad]: the frame's origin and heading in its parent frame, so a pose
+`T_world_vehicle` maps vehicle-frame points into the world. Every pose composed by hand anywhere
+in trunkslam comes through here (`compose`, `inverse`, `transform_points`, `to_frame`,
+`rotate`), and so does the range-bearing model of a landmark seen by a sensor mounted on the
+vehicle (`observe`, `inverse_observe`). Headings are not wrapped unless a function says so;
+`wrap_angle` wraps to (-pi, pi].
+
+Single poses use `math.cos`/`math.sin` and write each coordinate out, in the order the inline
+code they replaced used, so the project's results did not move by a bit when it came here.
+The Jacobians are checked against numerical derivatives in tests/slam/test_se2.py.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = [
+    "compose",
+    "interpolate_poses",
+    "inverse",
+    "inverse_observe",
+    "observe",
+    "rotate",
+    "sensor_position",
+    "to_frame",
+    "transform_points",
+    "wrap_angle",
+]
+
+
+def wrap_angle(a):
+    """Angles (rad) wrapped to (-pi, pi]; scalars or arrays."""
+    return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
+
+
+def rotate(theta_rad: float, v_xy) -> np.ndarray:
+    """The 2-vector(s) v_xy (2,) or (k, 2) rotated by theta_rad: R(theta) v."""
+    c, s = math.cos(theta_rad), math.sin(theta_rad)
+    v = np.asarray(v_xy, dtype=np.float64)
+    return np.stack([c * v[..., 0] - s * v[..., 1], s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def compose(T_ab, T_bc) -> np.ndarray:
+    """T_ac = T_ab * T_bc for single poses (3,): [x_ab + R_ab x_bc, theta_ab + theta_bc].
+
+    E.g. the laser's world pose is compose(T_world_vehicle, T_vehicle_laser). The heading is the
+    plain sum (not wrapped).
+    """
+    x, y, th = float(T_ab[0]), float(T_ab[1]), float(T_ab[2])
+    lx, ly, lth = float(T_bc[0]), float(T_bc[1]), float(T_bc[2])
+    c, s = math.cos(th), math.sin(th)
+    return np.array([x + c * lx - s * ly, y + s * lx + c * ly, th + lth])
+
+
+def inverse(T_ab) -> np.ndarray:
+    """T_ba = T_ab^-1 for a single pose (3,): [-R^T t, -theta]."""
+    x, y, th = float(T_ab[0]), float(T_ab[1]), float(T_ab[2])
+    c, s = math.cos(th), math.sin(th)
+    return np.array([-(c * x + s * y), -(-s * x + c * y), -th])
+
+
+def transform_points(T_ab, p_b) -> np.ndarray:
+    """Points p_b (k, 2) (or (2,)) given in frame b, expressed in frame a: t_ab + R_ab p_b."""
+    x, y, th = float(T_ab[0]), float(T_ab[1]), float(T_ab[2])
+    c, s = math.cos(th), math.sin(th)
+    p = np.asarray(p_b, dtype=np.float64)
+    return np.stack([x + (c * p[..., 0] - s * p[..., 1]), y + (s * p[..., 0] + c * p[..., 1])], -1)
+
+
+def to_frame(T_ab, p_a) -> np.ndarray:
+    """Points p_a (k, 2) (or (2,)) given in frame a, expressed in frame b: R_ab^T (p_a - t_ab)."""
+    x, y, th = float(T_ab[0]), float(T_ab[1]), float(T_ab[2])
+    c, s = math.cos(th), math.sin(th)
+    p = np.asarray(p_a, dtype=np.float64)
+    dx, dy = p[..., 0] - x, p[..., 1] - y
+    return np.stack([dx * c + dy * s, -dx * s + dy * c], axis=-1)
+
+
+def sensor_position(pose, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
+    """World position p_S (2,) of a sensor mounted at `sensor_pose` (vehicle frame) when the
+    vehicle is at `pose`, and d p_S / d theta (2,)."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    lx, ly = float(sensor_pose[0]), float(sensor_pose[1])
+    p = np.array([pose[0] + c * lx - s * ly, pose[1] + s * lx + c * ly])
+    return p, np.array([-s * lx - c * ly, c * lx - s * ly])
+
+
+def observe(pose, landmarks_xy, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
+    """Range and bearing of world points from a sensor mounted on the vehicle, with Jacobians.
+
+    pose: (3,) vehicle [x, y, theta] in the world. landmarks_xy: (k, 2) world points.
+    sensor_pose: (3,) [lx, ly, lth] of the sensor in the vehicle frame. With p_S the sensor's
+    world position, range = |m - p_S| and bearing = atan2((m - p_S)_y, (m - p_S)_x) - theta
+    - lth, wrapped to (-pi, pi].
+    Returns z (k, 2) [range_m, bearing_rad] and H (k, 2, 5), the Jacobian of each prediction
+    with respect to [x, y, theta, m_x, m_y].
+    """
+    m = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
+    pL, dpL = sensor_position(pose, sensor_pose)
+    dx = m[:, 0] - pL[0]
+    dy = m[:, 1] - pL[1]
+    q = dx * dx + dy * dy
+    r = np.sqrt(q)
+    z = np.empty((m.shape[0], 2))
+    z[:, 0] = r
+    z[:, 1] = wrap_angle(np.arctan2(dy, dx) - pose[2] - sensor_pose[2])
+    H = np.zeros((m.shape[0], 2, 5))
+    dr_dm = np.stack([dx / r, dy / r], axis=1)  # (k, 2)
+    db_dm = np.stack([-dy / q, dx / q], axis=1)
+    H[:, 0, 0:2] = -dr_dm
+    H[:, 0, 2] = -(dr_dm @ dpL)
+    H[:, 0, 3:5] = dr_dm
+    H[:, 1, 0:2] = -db_dm
+    H[:, 1, 2] = -(db_dm @ dpL) - 1.0
+    H[:, 1, 3:5] = db_dm
+    return z, H
+
+
+def inverse_observe(pose, z, sensor_pose) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The world point seen at z (2,) [range, bearing]: m (2,), Gx = dm/dpose (2, 3) and
+    Gz = dm/dz (2, 2) (the inverse of `observe` for one measurement)."""
+    pL, dpL = sensor_position(pose, sensor_pose)
+    r, b = float(z[0]), float(z[1])
+    phi = pose[2] + sensor_pose[2] + b
+    c, s = math.cos(phi), math.sin(phi)
+    m = pL + r * np.array([c, s])
+    Gx = np.array([[1.0, 0.0, dpL[0] - r * s], [0.0, 1.0, dpL[1] + r * c]])
+    Gz = np.array([[c, -r * s], [s, r * c]])
+    return m, Gx, Gz
+
+
+def interpolate_poses(t_query, t_s, poses) -> np.ndarray:
+    """Poses (T, 3) sampled at t_s, linearly interpolated at t_query (heading unwrapped first,
+    result wrapped). Queries outside [t_s[0], t_s[-1]] take the end values."""
+    t_s = np.asarray(t_s, dtype=np.float64)
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    tq = np.atleast_1d(np.asarray(t_query, dtype=np.float64))
+    th = np.unwrap(poses[:, 2])
+    return np.stack(
+        [
+            np.interp(tq, t_s, poses[:, 0]),
+            np.interp(tq, t_s, poses[:, 1]),
+            wrap_angle(np.interp(tq, t_s, th)),
+        ],
+        axis=1,
+    )

@@ -1,0 +1,300 @@
+"""The run `slam.run` consumes (`Sequence`): scans, odometry, GPS and truth, validated.
+
+Construction checks every field and raises `SlamError` (a `ValueError`) naming it, so a
+`Sequence` that exists is one the rest of the package can trust. The file format (one `.npz`,
+datasets/FORMAT.md) is read and written by `experiments.io.sequence_file`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from features.types import Scan
+from slam.checks import finite, float_array, readonly, times
+from slam.errors import SlamError
+
+__all__ = ["MIXED_LABEL", "NO_RETURN_LABEL", "OPTIONAL", "REQUIRED", "VEHICLE_MODELS", "Sequence"]
+
+# Vehicle models and their parameters: name -> (required keys, optional keys with defaults).
+VEHICLE_MODELS: dict[str, tuple[tuple[str, ...], dict[str, float]]] = {
+    "ackermann": (("wheelbase_m",), {"encoder_offset_m": 0.0})
+}
+
+REQUIRED = ("scan_t", "scan_ranges", "scan_angle_min", "scan_angle_increment", "laser_pose")
+OPTIONAL = (
+    "scan_max_range",
+    "odo_t",
+    "odo_speed",
+    "odo_steer",
+    "vehicle",
+    "gps_t",
+    "gps_xy",
+    "gps_pose",
+    "truth_t",
+    "truth_pose",
+    "truth_landmarks",
+    "scan_labels",
+    "name",
+)
+NO_RETURN_LABEL = -1  # scan_labels: the beam hit nothing (or nothing within range)
+MIXED_LABEL = -2  # scan_labels: a mixed return between two objects at a depth jump
+
+
+def _arr(name: str, value, ndim: int, width: int | None = None) -> np.ndarray:
+    return float_array(f"Sequence.{name}", value, ndim, width)
+
+
+def _t(name: str, value) -> np.ndarray:
+    return times(f"Sequence.{name}", value)
+
+
+def _fin(name: str, a: np.ndarray) -> None:
+    finite(f"Sequence.{name}", a)
+
+
+def _timed_pair(t_name: str, t, v_name: str, v, width: int) -> list[tuple[str, np.ndarray]]:
+    """Validate optional times t (N,) with values v (N, width) that must come together;
+    returns [(t_name, t), (v_name, v)] checked and converted, or [] when both are absent."""
+    if (t is None) != (v is None):
+        missing = v_name if v is None else t_name
+        raise SlamError(f"Sequence.{missing}: {t_name} and {v_name} go together; {missing} missing")
+    if t is None:
+        return []
+    t_arr = _t(t_name, t)
+    if t_arr.size == 0:
+        raise SlamError(f"Sequence.{t_name}: empty; leave {t_name} and {v_name} out instead")
+    vals = _arr(v_name, v, 2, width=width)
+    if vals.shape[0] != t_arr.shape[0]:
+        raise SlamError(
+            f"Sequence.{v_name}: expected shape ({t_arr.shape[0]}, {width}) like {t_name}, "
+            f"got {vals.shape}"
+        )
+    _fin(v_name, vals)
+    return [(t_name, t_arr), (v_name, vals)]
+
+
+def _scalar(name: str, value, *, allow_inf: bool = False) -> float:
+    if isinstance(value, np.ndarray):
+        if value.size != 1:
+            raise SlamError(f"Sequence.{name}: expected one number, got shape {value.shape}")
+        value = value.reshape(()).item()
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise SlamError(f"Sequence.{name}: expected a number, got {value!r}")
+    v = float(value)
+    if math.isnan(v) or (math.isinf(v) and not allow_inf):
+        raise SlamError(f"Sequence.{name}: must be finite, got {v!r}")
+    return v
+
+
+def _pose(name: str, value) -> np.ndarray:
+    p = _arr(name, value, 1)
+    if p.shape != (3,):
+        raise SlamError(f"Sequence.{name}: expected shape (3,) [x, y, theta], got {p.shape}")
+    _fin(name, p)
+    return p
+
+
+def _vehicle(value) -> dict:
+    if isinstance(value, (str, bytes)):
+        try:
+            value = json.loads(value)
+        except json.JSONDecodeError as exc:
+            raise SlamError(f"Sequence.vehicle: not valid JSON ({exc})") from None
+    if not isinstance(value, dict):
+        raise SlamError(f"Sequence.vehicle: expected a dict (JSON object), got {value!r}")
+    model = value.get("model")
+    if model not in VEHICLE_MODELS:
+        raise SlamError(
+            f"Sequence.vehicle: unknown or missing 'model' {model!r}; "
+            f"known: {sorted(VEHICLE_MODELS)}"
+        )
+    required, optional = VEHICLE_MODELS[model]
+    unknown = sorted(set(value) - {"model", *required, *optional})
+    if unknown:
+        raise SlamError(f"Sequence.vehicle: unknown key(s) {unknown} for model {model!r}")
+    out: dict = {"model": model}
+    for key in required:
+        if key not in value:
+            raise SlamError(f"Sequence.vehicle: model {model!r} needs {key!r}")
+    for key in (*required, *optional):
+        v = value.get(key, optional.get(key))
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise SlamError(f"Sequence.vehicle[{key!r}]: must be a finite number, got {v!r}")
+        out[key] = float(v)
+    if out.get("wheelbase_m", 1.0) <= 0:
+        raise SlamError(f"Sequence.vehicle['wheelbase_m']: must be > 0, got {out['wheelbase_m']}")
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Sequence:
+    """One run: laser scans plus whatever odometry, GPS and truth came with them.
+
+    Frames: the vehicle frame has its origin at the rear-axle centre, x forward, y left; the laser
+    frame is the laser's (0 rad = its x-axis, CCW positive); the world frame is the run's fixed
+    frame (GPS, truth). Arrays are stored as read-only float64 (scan_labels: int64) copies.
+
+    Required
+      scan_t: (N,) s, strictly increasing.
+      scan_ranges: (N, B) m, NaN = no return.
+      scan_angle_min, scan_angle_increment: rad, laser frame (0 = laser x-axis, CCW positive);
+        increment > 0 and the B beams span less than 360 degrees.
+      laser_pose: (3,) [x, y, theta] of the laser in the vehicle frame (rear-axle centre).
+    Optional (None when absent)
+      scan_max_range: m; readings at or beyond it are no return (inf when absent).
+      odo_t (M,) s, odo_speed (M,) m/s as measured by the encoder, odo_steer (M,) rad front wheel
+        (|steer| <= pi/2); all three or none.
+      vehicle: dict, e.g. {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
+        (a JSON string is accepted and parsed; encoder_offset_m defaults to 0).
+      gps_t (G,) s, gps_xy (G, 2) m world, both or neither; gps_pose (3,) antenna in the vehicle
+        frame (the laser's position when absent).
+      truth_t (T,) s, truth_pose (T, 3) [x, y, theta] of the rear-axle centre, world frame, both
+        or neither.
+      truth_landmarks (L, 3) [x, y, r] m, world frame, r > 0.
+      scan_labels (N, B) int: id of the object each beam hit (landmark k of truth_landmarks has
+        label k; other objects have labels >= L), NO_RETURN_LABEL (-1) for none, MIXED_LABEL (-2)
+        for a mixed return between two objects at a depth jump.
+      name: free text describing the run.
+    Construction validates everything and raises `SlamError` (a `ValueError`) naming the field.
+    """
+
+    scan_t: np.ndarray
+    scan_ranges: np.ndarray
+    scan_angle_min: float
+    scan_angle_increment: float
+    laser_pose: np.ndarray
+    scan_max_range: float = float("inf")
+    odo_t: np.ndarray | None = None
+    odo_speed: np.ndarray | None = None
+    odo_steer: np.ndarray | None = None
+    vehicle: dict | None = None
+    gps_t: np.ndarray | None = None
+    gps_xy: np.ndarray | None = None
+    gps_pose: np.ndarray | None = None
+    truth_t: np.ndarray | None = None
+    truth_pose: np.ndarray | None = None
+    truth_landmarks: np.ndarray | None = None
+    scan_labels: np.ndarray | None = None
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        put = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+
+        # Scans.
+        scan_t = _t("scan_t", self.scan_t)
+        n = scan_t.shape[0]
+        if n == 0:
+            raise SlamError("Sequence.scan_t: no scans (length 0)")
+        ranges = _arr("scan_ranges", self.scan_ranges, 2)
+        if ranges.shape[0] != n or ranges.shape[1] == 0:
+            raise SlamError(
+                f"Sequence.scan_ranges: expected shape (N, B) with N = len(scan_t) = {n} and "
+                f"B >= 1, got {ranges.shape}"
+            )
+        put("scan_t", scan_t)
+        put("scan_ranges", ranges)
+        amin = _scalar("scan_angle_min", self.scan_angle_min)
+        inc = _scalar("scan_angle_increment", self.scan_angle_increment)
+        if inc <= 0:
+            raise SlamError(f"Sequence.scan_angle_increment: must be > 0 rad, got {inc!r}")
+        n_beams = ranges.shape[1]
+        if (n_beams - 1) * inc >= 2 * math.pi:
+            raise SlamError(
+                f"Sequence.scan_angle_increment: {n_beams} beams of {inc!r} rad span "
+                f"{(n_beams - 1) * inc:.4g} rad, 360 degrees or more (degrees instead of radians?)"
+            )
+        put("scan_angle_min", amin)
+        put("scan_angle_increment", inc)
+        mr = _scalar("scan_max_range", self.scan_max_range, allow_inf=True)
+        if mr <= 0:
+            raise SlamError(f"Sequence.scan_max_range: must be > 0 m (or inf), got {mr!r}")
+        put("scan_max_range", mr)
+        put("laser_pose", _pose("laser_pose", self.laser_pose))
+
+        # Odometry: all three or none.
+        odo = {k: getattr(self, k) for k in ("odo_t", "odo_speed", "odo_steer")}
+        present = [k for k, v in odo.items() if v is not None]
+        if present and len(present) != 3:
+            missing = sorted(set(odo) - set(present))
+            raise SlamError(
+                f"Sequence.{missing[0]}: odometry needs odo_t, odo_speed and odo_steer together; "
+                f"missing {missing}"
+            )
+        if present:
+            odo_t = _t("odo_t", odo["odo_t"])
+            if odo_t.size == 0:
+                raise SlamError("Sequence.odo_t: empty; leave the odometry out instead")
+            put("odo_t", odo_t)
+            for k in ("odo_speed", "odo_steer"):
+                a = _arr(k, odo[k], 1)
+                if a.shape != odo_t.shape:
+                    raise SlamError(
+                        f"Sequence.{k}: expected shape {odo_t.shape} like odo_t, got {a.shape}"
+                    )
+                _fin(k, a)
+                put(k, a)
+            if np.any(np.abs(self.odo_steer) > math.pi / 2):
+                raise SlamError(
+                    f"Sequence.odo_steer: front-wheel angles must be within +-pi/2 rad, found "
+                    f"{float(np.max(np.abs(self.odo_steer))):.4g} (degrees instead of radians?)"
+                )
+        if self.vehicle is not None:
+            put("vehicle", _vehicle(self.vehicle))
+
+        # GPS.
+        for name, v in _timed_pair("gps_t", self.gps_t, "gps_xy", self.gps_xy, 2):
+            put(name, v)
+        if self.gps_pose is not None:
+            put("gps_pose", _pose("gps_pose", self.gps_pose))
+
+        # Truth.
+        for name, v in _timed_pair("truth_t", self.truth_t, "truth_pose", self.truth_pose, 3):
+            put(name, v)
+        if self.truth_landmarks is not None:
+            lm = _arr("truth_landmarks", self.truth_landmarks, 2, width=3)
+            _fin("truth_landmarks", lm)
+            if np.any(lm[:, 2] <= 0):
+                i = int(np.flatnonzero(lm[:, 2] <= 0)[0])
+                raise SlamError(
+                    f"Sequence.truth_landmarks: radius r must be > 0 m, row {i} has {lm[i, 2]!r}"
+                )
+            put("truth_landmarks", lm)
+        if self.scan_labels is not None:
+            lab = np.asarray(self.scan_labels)
+            if lab.dtype.kind not in "iu":
+                raise SlamError(f"Sequence.scan_labels: expected integers, got dtype {lab.dtype}")
+            if lab.shape != ranges.shape:
+                raise SlamError(
+                    f"Sequence.scan_labels: expected shape {ranges.shape} like scan_ranges, "
+                    f"got {lab.shape}"
+                )
+            if lab.size and lab.min() < MIXED_LABEL:
+                raise SlamError(
+                    f"Sequence.scan_labels: labels must be >= {MIXED_LABEL} (-1 = no return, "
+                    f"-2 = mixed return), found {int(lab.min())}"
+                )
+            put("scan_labels", readonly(lab.astype(np.int64)))
+        if not isinstance(self.name, str):
+            raise SlamError(f"Sequence.name: expected a string, got {self.name!r}")
+
+    @property
+    def n_scans(self) -> int:
+        return int(self.scan_t.shape[0])
+
+    @property
+    def n_beams(self) -> int:
+        return int(self.scan_ranges.shape[1])
+
+    def scan(self, k: int) -> Scan:
+        """Scan k as a `features.Scan`."""
+        return Scan(
+            self.scan_ranges[k],
+            self.scan_angle_min,
+            self.scan_angle_increment,
+            stamp_s=float(self.scan_t[k]),
+            max_range_m=self.scan_max_range,
+        )

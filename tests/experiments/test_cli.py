@@ -1,0 +1,190 @@
+"""The command line: simulate -> extract round trip, reproduce --quick, clear errors."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+from support import simulated_scan_file
+from typer.testing import CliRunner
+
+from experiments.cli import app
+from experiments.io.sequence_file import load_sequence
+
+runner = CliRunner()
+
+
+def test_simulate_then_extract_finds_the_pillars(tmp_path):
+    scan = tmp_path / "scan.npz"
+    res = runner.invoke(
+        app,
+        [
+            "simulate",
+            "pillar_court",
+            "--pose",
+            "0,0,0",
+            "--back-to-back",
+            "--out",
+            str(scan),
+            "--seed",
+            "3",
+        ],
+    )
+    assert res.exit_code == 0, res.output
+    seq = load_sequence(scan)
+    assert seq.n_scans == 1 and seq.scan_ranges.shape[1] == 720
+    out = tmp_path / "features.json"
+    rrd = tmp_path / "run.rrd"
+    res = runner.invoke(
+        app, ["extract", str(scan), "--method", "geometric", "--out", str(out), "--rerun", str(rrd)]
+    )
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["schema"] == "trunkslam.features/1" and doc["frame"] == "laser"
+    circles = doc["scans"][0]["circles"]
+    truth = seq.truth_landmarks
+    labels = seq.scan_labels[0]
+    found = set()
+    for c in circles:
+        a, b = c["beams"]
+        lab = np.bincount(labels[np.arange(a, b + 1) % labels.size] + 2).argmax() - 2  # majority
+        cov = np.array(c["cov"])
+        assert cov.shape == (3, 3) and np.all(np.linalg.eigvalsh(cov) > 0)
+        if 0 <= lab < len(truth):  # on a pillar (laser frame == world frame at pose 0,0,0)
+            assert np.hypot(*(np.array(c["center_xy"]) - truth[lab, :2])) < 0.1
+            assert abs(c["radius_m"] - truth[lab, 2]) < 0.05
+            found.add(int(lab))
+    # every pillar seen with >= 6 beams is extracted
+    seen = {k for k in range(len(truth)) if np.sum(labels == k) >= 6}
+    assert len(seen) >= 3 and seen <= found
+    assert rrd.stat().st_size > 1000
+
+
+def test_extract_bailey_method(tmp_path):
+    scan = simulated_scan_file(tmp_path)
+    out = tmp_path / "f.json"
+    res = runner.invoke(app, ["extract", str(scan), "--method", "bailey", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    circles = doc["scans"][0]["circles"]
+    seq = load_sequence(scan)
+    truth = seq.truth_landmarks
+    assert doc["method"] == "bailey" and len(circles) >= 5
+    near = [np.min(np.hypot(*(truth[:, :2] - c["center_xy"]).T)) for c in circles]
+    assert np.median(near) < 0.15  # Bailey's centres land on the true trunks
+    assert all(math.isfinite(c["radius_m"]) for c in circles)
+
+
+def test_errors_are_one_line_and_exit_1(tmp_path):
+    res = runner.invoke(app, ["extract", str(tmp_path / "missing.npz")])
+    assert res.exit_code == 1 and "missing.npz" in res.output
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip file")
+    res = runner.invoke(app, ["extract", str(bad)])
+    assert res.exit_code == 1 and "Traceback" not in res.output
+    res = runner.invoke(app, ["simulate", "no_such_scene", "--pose", "0,0,0"])
+    assert res.exit_code == 1 and "no_such_scene" in res.output
+
+
+def test_bad_option_values_are_usage_errors_naming_the_option(tmp_path):
+    """Choices are typed: a wrong value is click's usage error (exit 2) naming the option and
+    listing the choices; nothing runs."""
+    scan = simulated_scan_file(tmp_path)
+    cases = [
+        (["extract", str(scan), "--method", "hough"], "--method", "geometric"),
+        (["extract", str(scan), "--line-test", "eq5"], "--line-test", "lrt"),
+        (["slam", str(scan), "--features", "kasa"], "--features", "bailey"),
+        (["slam", str(scan), "--association", "hungarian"], "--association", "jcbb"),
+        (["simulate", "test_yard", "--pose", "1,2"], "--pose", "3 comma-separated"),
+        (["simulate", "test_yard", "--pose", "0,0,0", "--sensor", "lidar"], "--sensor", "lms200"),
+        (["reproduce", "no_such_experiment", "--out", str(tmp_path)], "names", "circle-sweep"),
+    ]
+    for args, option, choice in cases:
+        res = runner.invoke(app, args)
+        out = " ".join(res.output.split())  # the usage box wraps lines
+        assert res.exit_code == 2, (args, res.output)
+        assert option in out and choice in out, (args, res.output)
+    assert not (tmp_path / "manifest.json").exists()
+
+
+def test_the_cli_choices_are_the_library_names():
+    import typer.main
+
+    from association import METHODS as ASSOCIATION_METHODS
+    from experiments import cli
+    from experiments.paper.runner import EXPERIMENTS
+    from experiments.sim import SENSOR_PRESETS
+    from features import METHODS as FEATURE_METHODS
+    from features.extract import ExtractorParams
+
+    assert tuple(m.value for m in cli.ExtractMethod) == FEATURE_METHODS
+    assert tuple(m.value for m in cli.Association) == ASSOCIATION_METHODS
+    assert {m.value for m in cli.SlamFeatures} <= set(FEATURE_METHODS)
+    assert tuple(m.value for m in cli.ExperimentName) == tuple(EXPERIMENTS)
+    assert {m.value for m in cli.Sensor} == set(SENSOR_PRESETS)
+    for v in cli.LineTest:
+        ExtractorParams(line_test=v.value)  # accepted
+    assert typer.main.get_command(cli.app)  # the app builds
+
+
+def test_a_bug_is_not_turned_into_a_one_line_message(tmp_path, monkeypatch):
+    """Only the project's own errors (and OSError) become `error: ...`; anything else from
+    deep inside is a bug and keeps its traceback."""
+    import experiments.pipeline.extract as pipeline
+
+    def broken(*args, **kwargs):
+        raise ValueError("operands could not be broadcast together")
+
+    monkeypatch.setattr(pipeline, "run_extract", broken)
+    res = runner.invoke(app, ["extract", str(tmp_path / "x.npz")])
+    assert res.exit_code != 0 and isinstance(res.exception, ValueError)
+    assert "error: operands" not in res.output
+
+
+def test_convert_victoria_park_round_trip(tmp_path, vp_dir):
+    out = tmp_path / "vp.npz"
+    res = runner.invoke(app, ["convert", "victoria-park", "--data", str(vp_dir), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    seq = load_sequence(out)
+    assert seq.scan_ranges.shape == (2000, 361)
+    assert abs(seq.scan_t[0] - 21.819) < 1e-9 and abs(seq.scan_t[-1] - 448.865) < 1e-9
+    assert seq.vehicle["wheelbase_m"] == 2.83
+    np.testing.assert_allclose(seq.laser_pose, [3.78, 0.50, 0.0])
+
+
+def test_output_errors_and_option_checks(tmp_path):
+    scan = simulated_scan_file(tmp_path)
+    for out in (tmp_path, tmp_path / "missing_dir" / "f.json"):
+        res = runner.invoke(app, ["extract", str(scan), "--out", str(out)])
+        assert res.exit_code == 1 and "error:" in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "missing_dir").exists()
+    res = runner.invoke(app, ["extract", str(scan), "--method", "bailey", "--sigma-r", "0.5"])
+    assert res.exit_code == 1 and "bailey" in res.output
+    res = runner.invoke(app, ["reproduce", "--seed", "-1", "--out", str(tmp_path / "r")])
+    assert res.exit_code != 0 and "seed" in res.output
+
+
+def test_features_json_records_resolved_parameters_and_files_are_readable(tmp_path):
+    scan = simulated_scan_file(tmp_path)
+    out = tmp_path / "f.json"
+    res = runner.invoke(app, ["extract", str(scan), "--sigma-r", "0.015", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    params = json.loads(out.read_text())["params"]
+    assert params["sigma_r_m"] == 0.015 and params["gate"] == 6.63 and params["q_m2"] == 1e-4
+    assert out.stat().st_mode & 0o777 == 0o644
+    assert scan.stat().st_mode & 0o777 == 0o644
+
+
+def test_simulate_drive_then_slam(tmp_path):
+    run = tmp_path / "run.npz"
+    res = runner.invoke(app, ["simulate-drive", "--scans", "60", "--seed", "2", "--out", str(run)])
+    assert res.exit_code == 0, res.output
+    seq = load_sequence(run)
+    assert seq.n_scans == 60 and seq.odo_t is not None and seq.truth_landmarks.shape == (8, 3)
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["slam", str(run), "--features", "geometric", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    s = json.loads((out / "summary.json").read_text())
+    assert s["start"] == "truth" and s["landmarks"] >= 3
+    assert max(s["truth"]["mean_abs_error"].values()) < 0.05

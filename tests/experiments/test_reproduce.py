@@ -1,0 +1,52 @@
+"""`trunkslam reproduce features --quick`: every promised output, and a manifest to re-create it."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+from support import assert_outputs, quick_reproduce
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    return quick_reproduce(tmp_path_factory, "features", seed=7)
+
+
+def test_outputs_exist(quick_run):
+    names = ["classification.md", "classification.csv", "classification.png", "features.rrd"]
+    assert_outputs(quick_run, names + ["manifest.json"], 501)
+
+
+def test_victoria_park_figure_with_data(quick_run, vp_dir):
+    assert (quick_run / "fig_vp_scan.png").stat().st_size > 500
+
+
+def test_victoria_park_figure_skipped_and_said_without_data(tmp_path, monkeypatch):
+    from experiments.paper.features import victoria_park_figure
+    from experiments.paper.runner import RunContext
+    from experiments.render.viz import NullRecorder
+
+    monkeypatch.setenv("TRUNKSLAM_DATA", str(tmp_path / "nowhere"))
+    ctx = RunContext(out_dir=tmp_path)
+    ctx.config["features"] = {}
+    victoria_park_figure(ctx, NullRecorder())
+    assert ctx.config["features"]["victoria_park"].startswith("skipped")
+    assert not (tmp_path / "fig_vp_scan.png").exists()
+
+
+def test_manifest_records_how_to_recreate(quick_run):
+    m = json.loads((quick_run / "manifest.json").read_text())
+    assert m["seed"] == 7 and m["quick"] is True and m["experiments"] == ["features"]
+    assert m["config"]["features"]["extractor_defaults"]["gate"] == 6.63
+    assert m["config"]["features"]["extractor_defaults"]["q_m2"] == 1e-4
+    assert m["versions"]["numpy"] and "features" in m["seconds"]
+    assert "classification.csv" in m["outputs"]
+
+
+def test_classification_table_is_consistent(quick_run):
+    rows = list(csv.DictReader((quick_run / "classification.csv").open()))
+    assert len(rows) == 25
+    big = [r for r in rows if float(r["beams on trunk"]) >= 8]
+    assert big and all(float(r["circle rate (lrt)"]) >= 0.75 for r in big)

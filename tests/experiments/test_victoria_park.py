@@ -1,0 +1,211 @@
+"""The Victoria Park reader against the facts verified in its README (shared/datasets)."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import experiments.io.paths as data
+from experiments.errors import DataError
+from experiments.io.sequence_file import load_sequence, save_sequence
+from experiments.io.victoria_park import (
+    VP_FILES,
+    load_raw_sick_ranges,
+    load_raw_sick_words,
+    load_reference_detections,
+    load_victoria_park,
+)
+
+
+@pytest.fixture(scope="module")
+def vp(vp_dir):
+    return load_victoria_park(vp_dir)
+
+
+# ---- the run ---------------------------------------------------------------------------------
+
+
+@pytest.mark.data
+def test_scans(vp):
+    assert vp.name == "victoria_park"
+    assert vp.scan_ranges.shape == (2000, 361) and vp.n_scans == 2000
+    assert vp.scan_t[0] == pytest.approx(21.819, abs=1e-9)
+    assert vp.scan_t[-1] == pytest.approx(448.865, abs=1e-9)
+    steps = np.diff(vp.scan_t)
+    assert steps.min() >= 0.212 and steps.max() <= 0.216  # 213-215 ms, about 4.67 Hz
+    assert vp.scan_angle_min == -math.pi / 2
+    assert vp.scan_angle_increment == math.pi / 360
+    assert vp.scan_max_range == 80.0
+    np.testing.assert_array_equal(vp.laser_pose, [3.78, 0.50, 0.0])
+    np.testing.assert_array_equal(vp.gps_pose, [3.78, 0.50, 0.0])
+    assert vp.vehicle == {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
+    assert vp.truth_t is None and vp.truth_landmarks is None and vp.scan_labels is None
+
+
+@pytest.mark.data
+def test_scan_ranges_decode_the_13_bit_words(vp, vp_dir):
+    r = vp.scan_ranges
+    valid = np.isfinite(r)
+    assert np.mean(~valid) == pytest.approx(0.829, abs=0.001)  # 82.9 % no return
+    assert r[valid].min() == pytest.approx(0.07)  # 7 cm
+    assert r[valid].max() < 80.0
+    words = load_raw_sick_words(vp_dir)
+    assert words.dtype == np.uint16 and words.shape == (2000, 361)
+    assert int(np.count_nonzero(words > 8191)) == 4  # the only words with intensity bits
+    masked = load_raw_sick_ranges(vp_dir, no_return_as_nan=False)
+    assert masked.max() == pytest.approx(81.91)
+    np.testing.assert_array_equal(r[valid], masked[valid])
+    np.testing.assert_array_equal(~valid, masked >= 80.0)
+    # Scan k of the run is row k of sick.mat, as a features.Scan with beam 0 at -pi/2.
+    s = vp.scan(7)
+    assert s.stamp_s == vp.scan_t[7] and s.angle_min_rad == -math.pi / 2
+    np.testing.assert_array_equal(s.ranges_m, r[7])
+
+
+@pytest.mark.data
+def test_odometry(vp):
+    assert vp.odo_t.shape == vp.odo_speed.shape == vp.odo_steer.shape == (61945,)
+    assert vp.odo_t[0] == pytest.approx(21.940) and vp.odo_t[-1] == pytest.approx(1570.540)
+    np.testing.assert_allclose(np.diff(vp.odo_t), 0.025, atol=1e-9)  # 40 Hz
+    assert vp.odo_speed.min() == pytest.approx(-0.059, abs=5e-4)
+    assert vp.odo_speed.max() == pytest.approx(6.628, abs=5e-4)
+    assert vp.odo_speed.mean() == pytest.approx(2.60, abs=0.005)
+    assert vp.odo_steer.min() == pytest.approx(-0.592, abs=5e-4)
+    assert vp.odo_steer.max() == pytest.approx(0.564, abs=5e-4)
+    distance_m = float(np.sum(vp.odo_speed[:-1] * np.diff(vp.odo_t)))
+    assert distance_m == pytest.approx(4030, abs=5)
+
+
+@pytest.mark.data
+def test_gps(vp):
+    assert vp.gps_t.shape == (4466,) and vp.gps_xy.shape == (4466, 2)
+    assert vp.gps_t[0] == pytest.approx(20.967) and vp.gps_t[-1] == pytest.approx(1570.193)
+    x, y = vp.gps_xy[:, 0], vp.gps_xy[:, 1]  # x = Lo_m (east), y = La_m (north)
+    assert x.min() == pytest.approx(-254.14, abs=0.005)
+    assert x.max() == pytest.approx(55.16, abs=0.005)
+    assert y.min() == pytest.approx(-79.98, abs=0.005)
+    assert y.max() == pytest.approx(176.18, abs=0.005)
+    gaps = np.diff(vp.gps_t)
+    assert int(np.count_nonzero(gaps > 2.0)) == 67  # the failing receiver
+    assert gaps.max() == pytest.approx(58.3, abs=0.05)
+
+
+@pytest.mark.data
+def test_first_n_scans(vp_dir, vp):
+    short = load_victoria_park(vp_dir, n_scans=10)
+    assert short.n_scans == 10
+    np.testing.assert_array_equal(short.scan_ranges, vp.scan_ranges[:10])
+    np.testing.assert_array_equal(short.scan_t, vp.scan_t[:10])
+    assert short.odo_t.shape == (61945,)  # odometry and GPS are always complete
+    for bad in (0, 2001, 2.5, True):
+        with pytest.raises(ValueError, match="n_scans"):
+            load_victoria_park(vp_dir, n_scans=bad)
+
+
+@pytest.mark.data
+def test_reference_detections(vp_dir, vp):
+    t_s, zt = load_reference_detections(vp_dir)
+    assert t_s.shape == (7249,) and len(zt) == 7249
+    assert t_s[0] == pytest.approx(21.819) and t_s[-1] == pytest.approx(1570.208)
+    np.testing.assert_array_equal(t_s[:2000], vp.scan_t)
+    counts = np.array([z.shape[1] for z in zt])
+    assert all(z.shape[0] == 3 and z.dtype == np.float64 for z in zt)
+    assert counts.sum() == 52974 and counts.max() == 18 and np.count_nonzero(counts == 0) == 19
+    allz = np.concatenate(zt, axis=1)
+    assert allz[0].min() == pytest.approx(1.48, abs=0.005)
+    assert allz[0].max() == pytest.approx(75.3, abs=0.05)
+    assert 0.11 < allz[1].min() and allz[1].max() < 3.09  # bearings 0..pi
+    assert np.median(allz[2]) == pytest.approx(0.42, abs=0.005)
+
+
+@pytest.mark.data
+def test_round_trip_through_a_sequence_file(vp, tmp_path):
+    back = load_sequence(save_sequence(vp, tmp_path / "vp.npz"))
+    for name in ("scan_t", "scan_ranges", "odo_t", "odo_speed", "odo_steer", "gps_t", "gps_xy"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(vp, name), err_msg=name)
+    assert back.vehicle == vp.vehicle and back.scan_max_range == 80.0
+    assert back.scan_angle_increment == math.pi / 360 and back.name == "victoria_park"
+
+
+# ---- missing or broken data ------------------------------------------------------------------
+
+
+def _partial_copy(vp_dir: Path, dest: Path, skip: str) -> Path:
+    """Symlink every reader file except `skip` into dest."""
+    for key, rel in VP_FILES.items():
+        if key == skip:
+            continue
+        (dest / rel).parent.mkdir(parents=True, exist_ok=True)
+        os.symlink(vp_dir / rel, dest / rel)
+    return dest
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("skip", sorted(VP_FILES))
+def test_missing_file_is_named_with_where_to_get_it(vp_dir, tmp_path, skip):
+    root = _partial_copy(vp_dir, tmp_path, skip)
+    with pytest.raises(DataError) as info:
+        load_victoria_park(root)
+    msg = str(info.value)
+    assert VP_FILES[skip] in msg and "README.md" in msg
+
+
+def test_corrupt_mat_file(tmp_path):
+    (tmp_path / "partial_raw_scans_ss2002").mkdir()
+    (tmp_path / VP_FILES["sick"]).write_bytes(b"MATLAB 5.0 MAT-file, garbage" + bytes(200))
+    with pytest.raises(DataError, match="cannot be read as a MATLAB file"):
+        load_raw_sick_ranges(tmp_path)
+
+
+def test_mat_file_without_the_variable(tmp_path):
+    from scipy.io import savemat
+
+    savemat(tmp_path / "aa3_dr.mat", {"time": np.arange(3), "speed": np.zeros(3)})
+    from experiments.io.victoria_park import load_mat
+
+    with pytest.raises(DataError, match=r"missing variable\(s\) \['steering'\]"):
+        load_mat(tmp_path, "odometry", ("time", "speed", "steering"))
+
+
+def test_data_root_from_the_environment(tmp_path, monkeypatch):
+    monkeypatch.setenv(data.DATA_ENV, str(tmp_path))
+    assert data.data_root() == tmp_path.resolve()
+    with pytest.raises(DataError, match="Victoria Park folder not found"):
+        data.victoria_park_dir()
+    (tmp_path / "victoria_park").mkdir()
+    assert data.victoria_park_dir() == tmp_path.resolve() / "victoria_park"
+
+
+def test_relative_data_root_is_taken_from_the_current_folder(tmp_path, monkeypatch):
+    (tmp_path / "d").mkdir()
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv(data.DATA_ENV, "d")
+    assert data.data_root() == (tmp_path / "d").resolve()
+
+
+def test_data_root_that_does_not_exist(tmp_path, monkeypatch):
+    monkeypatch.setenv(data.DATA_ENV, str(tmp_path / "nowhere"))
+    with pytest.raises(DataError) as info:
+        data.data_root()
+    assert "nowhere" in str(info.value) and "README.md" in str(info.value)
+
+
+def test_no_environment_and_no_default_folder(tmp_path, monkeypatch):
+    monkeypatch.delenv(data.DATA_ENV, raising=False)
+    monkeypatch.setattr(data, "DEFAULT_DATA_ROOT", tmp_path / "missing")
+    with pytest.raises(DataError) as info:
+        data.data_root()
+    msg = str(info.value)
+    assert data.DATA_ENV in msg and "missing" in msg and "README.md" in msg
+
+
+def test_default_folder_when_the_environment_is_unset(tmp_path, monkeypatch):
+    # The real default is ../shared/datasets beside the repository.
+    assert data.DEFAULT_DATA_ROOT == data.REPO_ROOT.parent / "shared" / "datasets"
+    monkeypatch.delenv(data.DATA_ENV, raising=False)
+    monkeypatch.setattr(data, "DEFAULT_DATA_ROOT", tmp_path)
+    assert data.data_root() == tmp_path.resolve()

@@ -1,0 +1,307 @@
+"""slam.run: the loop on whole sequences (start, dead reckoning, map management, errors)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from features.types import Features
+from slam import (
+    MapPolicy,
+    NullVisualiser,
+    Sequence,
+    SlamConfig,
+    SlamError,
+    interpolate_poses,
+    run,
+    se2,
+)
+from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT
+from slam.mapping import Tentatives
+from slam.vehicle import AckermannModel, Odometry, integrate
+
+CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
+LASER = (1.55, 0.0, 0.0)
+EXACT = SlamConfig(measurement_noise="constant")
+
+
+def drive_sequence(
+    v: float, steer: float, n_scans: int = 40, with_truth: bool = True, **extra
+) -> Sequence:
+    """Constant (v, steer) at 20 Hz, scans at 5 Hz with no returns; truth by exact arcs."""
+    t = np.arange((n_scans - 1) * 4 + 1) * 0.05
+    odo = Odometry(t, np.full(t.size, v), np.full(t.size, steer))
+    car = AckermannModel(1.2)
+    truth = np.zeros((t.size, 3))
+    truth[0] = [2.0, -1.0, 0.3]
+    for i in range(1, t.size):
+        truth[i] = integrate(car, truth[i - 1], odo, t[i - 1], t[i])[0]
+    kw = {"truth_t": t, "truth_pose": truth} if with_truth else {}
+    kw.update(extra)
+    return Sequence(
+        scan_t=t[::4],
+        scan_ranges=np.full((n_scans, 361), np.nan),
+        scan_angle_min=-math.pi / 2,
+        scan_angle_increment=math.pi / 360,
+        laser_pose=np.array(LASER),
+        scan_max_range=80.0,
+        odo_t=t,
+        odo_speed=odo.speed_mps,
+        odo_steer=odo.steer_rad,
+        vehicle=CAR,
+        **kw,
+    )
+
+
+@pytest.mark.parametrize("steer", [0.0, 0.3], ids=["straight", "circle"])
+def test_exact_odometry_without_features_reproduces_the_truth(steer):
+    seq = drive_sequence(1.5, steer)
+    log = run(seq, features="paper")
+    truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    err = log.pose - truth
+    err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    assert np.abs(err).max() < 1e-9
+    assert log.start == "truth"
+    assert log.n_features.sum() == 0 and log.landmark_xy.shape == (0, 2)
+    # the covariance grows with the odometry noise and stays symmetric
+    assert np.all(np.diff(log.pose_cov[:, 0, 0] + log.pose_cov[:, 1, 1]) > 0)
+    np.testing.assert_array_equal(log.pose_cov, np.transpose(log.pose_cov, (0, 2, 1)))
+    assert set(log.timing_s) == {"predict", "features", "associate", "update", "manage", "total"}
+    assert np.all(log.timing_s["total"] >= log.timing_s["predict"])
+
+
+def point_features(
+    seq: Sequence, landmarks: np.ndarray, rng, sigma=(0.01, 0.001), extra: dict | None = None
+) -> list:
+    """Circles at the true landmark positions (laser frame) plus noise, from the truth poses;
+    `extra`: scan -> list of extra (x, y) laser-frame circles (false features)."""
+    truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    out = []
+    for k, p in enumerate(truth):
+        pl = se2.compose(p, LASER)[:2]
+        d = landmarks - pl
+        r = np.hypot(d[:, 0], d[:, 1]) + sigma[0] * rng.standard_normal(len(d))
+        b = np.arctan2(d[:, 1], d[:, 0]) - p[2] + sigma[1] * rng.standard_normal(len(d))
+        keep = (np.abs(b) < np.pi / 2) & (r < 30)
+        xy = np.stack([r[keep] * np.cos(b[keep]), r[keep] * np.sin(b[keep])], 1)
+        if extra and k in extra:
+            xy = np.vstack([xy, np.asarray(extra[k], float).reshape(-1, 2)])
+        n = len(xy)
+        f = Features.empty(float(seq.scan_t[k]), "paper")
+        out.append(
+            dataclasses.replace(
+                f,
+                circle_params=np.column_stack([xy, np.full(n, 0.3)]),
+                circle_cov=np.zeros((n, 3, 3)),
+                circle_beams=np.zeros((n, 2), np.int64),
+                circle_rms_m=np.zeros(n),
+            )
+        )
+    return out
+
+
+LANDMARKS = np.array([[10.0, 3.0], [14.0, -4.0], [20.0, 6.0], [26.0, -2.0]])
+
+
+@pytest.mark.parametrize("method", ["ihgr", "jcbb", "nn"])
+def test_landmarks_join_the_map_after_three_scans_and_stay_unique(method):
+    seq = drive_sequence(1.5, 0.0, n_scans=30)
+    feats = point_features(seq, LANDMARKS, np.random.default_rng(0))
+    log = run(
+        seq,
+        features=feats,
+        association=method,
+        config=SlamConfig(
+            range_sigma_m=0.01,
+            range_sigma_per_m=0.0,
+            bearing_sigma_rad=0.001,
+            cross_range_sigma_m=0.0,
+        ),
+    )
+    assert log.association_method == method
+    # every landmark seen from scan 0 is a tentative at 0, seen again at 1, confirmed at 2
+    first = log.meas_scan == 0
+    assert np.all(log.meas_status[first] == NEW_TENTATIVE)
+    assert np.all(log.meas_status[log.meas_scan == 1] == TENTATIVE_HIT)
+    assert np.all(log.meas_status[log.meas_scan == 2] == CONFIRMED)
+    assert np.all(log.meas_status[log.meas_scan > 2] >= 0)
+    assert log.landmark_xy.shape[0] == 4
+    d = np.hypot(*(log.landmark_xy[:, None, :] - LANDMARKS[None]).transpose(2, 0, 1))
+    assert np.all(d.min(axis=1) < 0.05) and len(set(d.argmin(axis=1))) == 4
+    assert np.all(log.landmark_first_scan == 2)
+    assert log.n_associated[3:].min() >= 1
+    assert np.isfinite(log.scan_nis[3:]).all() and np.all(log.scan_nis_dof[3:] >= 2)
+
+
+def test_a_false_feature_seen_twice_never_joins_the_map():
+    seq = drive_sequence(1.5, 0.0, n_scans=20)
+    ghost = {5: [(6.0, 1.0)], 6: [(5.76, 1.0)]}  # a bush seen in two scans only
+    feats = point_features(seq, LANDMARKS, np.random.default_rng(1), extra=ghost)
+    log = run(seq, features=feats)
+    assert log.landmark_xy.shape[0] == 4
+    at5 = (log.meas_scan == 5) & (log.meas_feature == log.meas_feature[log.meas_scan == 5].max())
+    at6 = (log.meas_scan == 6) & (log.meas_feature == log.meas_feature[log.meas_scan == 6].max())
+    assert log.meas_status[at5][0] == NEW_TENTATIVE
+    assert log.meas_status[at6][0] == TENTATIVE_HIT
+    assert log.n_tentative[6] == 1 and log.n_tentative[8] == 0  # dropped when not seen again
+
+
+def test_tentatives_policy_confirms_and_drops():
+    t = Tentatives.empty()
+    pol = MapPolicy(confirm_scans=3, drop_after_missed=2)
+    C = np.eye(2) * 0.01
+    t, conf = t.step({}, [(np.array([1.0, 2.0]), C, 7), (np.array([5.0, 5.0]), C, 8)], 0, pol)
+    assert len(t) == 2 and conf == []
+    t, conf = t.step({0: (np.array([1.1, 2.0]), C)}, [], 1, pol)  # 7 seen, 8 missed once
+    assert conf == [] and t.hits.tolist() == [2, 1] and t.missed.tolist() == [0, 1]
+    t2, conf = t.step({0: (np.array([1.1, 2.0]), C)}, [], 2, pol)  # 7 confirmed, 8 dropped
+    assert conf == [0] and len(t2) == 0
+    with pytest.raises(ValueError, match="confirm_scans"):
+        MapPolicy(confirm_scans=0)
+
+
+def test_ambiguous_measurement_is_not_a_new_landmark():
+    # a measurement 5 cm off a mapped landmark with tight noise fails the association gate but
+    # lies inside the new-feature gate: it is ignored, not mapped twice
+    seq = drive_sequence(1.5, 0.0, n_scans=12)
+    feats = point_features(seq, LANDMARKS[:1], np.random.default_rng(2), sigma=(0.0, 0.0))
+    f = feats[8]
+    p = f.circle_params.copy()
+    p[0, :2] *= 1.0 + 0.05 / np.hypot(*p[0, :2])
+    feats[8] = dataclasses.replace(f, circle_params=p)
+    cfg = SlamConfig(
+        range_sigma_m=0.01,
+        range_sigma_per_m=0.0,
+        bearing_sigma_rad=0.001,
+        cross_range_sigma_m=0.0,
+        gate_prob=0.99,
+        new_feature_gate_prob=0.99999999,
+    )
+    log = run(seq, features=feats, config=cfg)
+    assert log.meas_status[log.meas_scan == 8][0] == AMBIGUOUS
+    assert log.landmark_xy.shape[0] == 1
+    # with both gates equal the same measurement starts a (duplicate) tentative feature
+    log = run(seq, features=feats, config=dataclasses.replace(cfg, new_feature_gate_prob=0.99))
+    assert log.meas_status[log.meas_scan == 8][0] == NEW_TENTATIVE
+
+
+def test_start_from_gps_with_heading_from_motion_or_option():
+    seq = drive_sequence(2.0, 0.0, with_truth=False)
+    t = seq.odo_t[::2]
+    # antenna at the laser, truth heading 0.3 rad, straight line
+    c, s = math.cos(0.3), math.sin(0.3)
+    xy = np.array([2.0, -1.0]) + np.outer(2.0 * t, [c, s]) + np.array([c * 1.55, s * 1.55])
+    g = dataclasses.replace(seq, gps_t=t, gps_xy=xy)
+    log = run(g)
+    assert log.start == "gps"
+    np.testing.assert_allclose(log.pose[0], [2.0, -1.0, 0.3], atol=1e-9)
+    assert log.pose_cov[0, 0, 0] == pytest.approx(1.0)  # gps_sigma_m = 1 m
+    log = run(g, initial_heading_rad=0.5)
+    assert log.pose[0, 2] == pytest.approx(0.5)
+    still = dataclasses.replace(seq, gps_t=t[:3], gps_xy=np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="initial_heading"):
+        run(still)
+    origin = run(seq)
+    assert origin.start == "origin" and np.all(origin.pose[0] == 0)
+
+
+class Recording(NullVisualiser):
+    def __init__(self):
+        self.calls: dict[str, int] = {}
+
+    def __getattribute__(self, name):
+        if name.startswith("log_") or name == "set_scan":
+            calls = object.__getattribute__(self, "calls")
+            calls[name] = calls.get(name, 0) + 1
+        return object.__getattribute__(self, name)
+
+
+def test_visualiser_receives_every_scan():
+    seq = drive_sequence(1.5, 0.0, n_scans=10)
+    vis = Recording()
+    run(seq, features=point_features(seq, LANDMARKS, np.random.default_rng(3)), visualiser=vis)
+    for name in (
+        "set_scan",
+        "log_scan",
+        "log_features",
+        "log_vehicle",
+        "log_landmarks",
+        "log_associations",
+        "log_truth",
+        "log_tentatives",
+    ):
+        assert vis.calls.get(name) == 10, name
+
+
+# ---- bad sequences ------------------------------------------------------------------------------
+
+
+def test_bad_runs_give_clear_errors():
+    seq = drive_sequence(1.0, 0.0, n_scans=5)
+    with pytest.raises(SlamError, match="expected a slam.Sequence"):
+        run(SimpleNamespace(**{f.name: getattr(seq, f.name) for f in dataclasses.fields(seq)}))
+    with pytest.raises(SlamError, match="missing odometry"):
+        run(dataclasses.replace(seq, odo_t=None, odo_speed=None, odo_steer=None))
+    with pytest.raises(SlamError, match="missing vehicle"):
+        run(dataclasses.replace(seq, vehicle=None))
+    t = np.arange(17) * 0.05
+    gap = np.concatenate([t[:3], t[12:]])  # no odometry from 0.10 s to 0.60 s
+    with pytest.raises(SlamError, match=r"no odometry from 0.100 s to 0.600 s"):
+        run(
+            dataclasses.replace(
+                seq, odo_t=gap, odo_speed=np.ones(gap.size), odo_steer=np.zeros(gap.size)
+            ),
+            config=SlamConfig(max_odometry_gap_s=0.3),
+        )
+    with pytest.raises(SlamError, match="ends at"):
+        run(
+            dataclasses.replace(seq, odo_t=t[:4], odo_speed=np.ones(4), odo_steer=np.zeros(4)),
+            config=SlamConfig(max_odometry_gap_s=0.3),
+        )
+    with pytest.raises(SlamError, match="3 precomputed feature sets for 5 scans"):
+        run(seq, features=[Features.empty()] * 3)
+    with pytest.raises(SlamError, match="method"):
+        run(seq, association="hungarian")
+    with pytest.raises(SlamError, match="SlamConfig"):
+        run(seq, config={"gate_prob": 0.9})
+    # the Sequence itself refuses unsorted times with the variable's name
+    with pytest.raises(SlamError, match="scan_t"):
+        dataclasses.replace(seq, scan_t=np.array([0, 1, 1, 2, 3.0]))
+
+
+def test_config_validation():
+    with pytest.raises(ValueError, match="measurement_noise"):
+        SlamConfig(measurement_noise="fitted")
+    with pytest.raises(ValueError, match="gate_prob"):
+        SlamConfig(gate_prob=1.0)
+    kind, model = SlamConfig().noise_for("geometric")
+    assert kind == "fit"
+    kind, model = SlamConfig(range_sigma_m=0.5).noise_for("bailey")
+    assert kind == "constant" and model[0] == 0.5
+
+
+def test_truth_that_starts_after_the_first_scan_is_not_the_start():
+    seq = drive_sequence(1.5, 0.1)
+    late = dataclasses.replace(seq, truth_t=seq.truth_t[20:], truth_pose=seq.truth_pose[20:])
+    log = run(late, features="paper")
+    assert log.start == "origin"
+    np.testing.assert_allclose(log.pose[0], [0.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_initial_heading_does_not_override_the_truth_start():
+    seq = drive_sequence(1.5, 0.0)
+    log = run(seq, features="paper", initial_heading_rad=2.0)
+    assert log.start == "truth" and log.pose[0, 2] == pytest.approx(0.3, abs=1e-12)
+
+
+def test_impossible_encoder_offset_is_a_clear_error():
+    seq = drive_sequence(1.0, 0.6)
+    bad = dataclasses.replace(
+        seq, vehicle={"model": "ackermann", "wheelbase_m": 1.0, "encoder_offset_m": 2.0}
+    )
+    with pytest.raises(ValueError, match="encoder_offset_m"):
+        run(bad, features="paper")

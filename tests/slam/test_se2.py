@@ -1,0 +1,105 @@
+"""slam.se2: pose algebra against homogeneous matrices, observation Jacobians against numerical
+derivatives (as GTSAM's Python tests do with numericalDerivative)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from support import num_jac
+
+from slam import se2
+
+LASER = np.array([1.55, 0.2, 0.05])
+coord = st.floats(-50, 50, allow_nan=False)
+angle = st.floats(-7, 7, allow_nan=False)
+poses = st.tuples(coord, coord, angle).map(np.array)
+
+
+def matrix(p) -> np.ndarray:
+    c, s = math.cos(p[2]), math.sin(p[2])
+    return np.array([[c, -s, p[0]], [s, c, p[1]], [0.0, 0.0, 1.0]])
+
+
+def from_matrix(T) -> np.ndarray:
+    return np.array([T[0, 2], T[1, 2], math.atan2(T[1, 0], T[0, 0])])
+
+
+def same_pose(a, b, atol=1e-9):
+    np.testing.assert_allclose(a[:2], b[:2], atol=atol)
+    assert abs(float(se2.wrap_angle(a[2] - b[2]))) < atol
+
+
+@settings(max_examples=200, deadline=None)
+@given(poses, poses)
+def test_compose_and_inverse_match_homogeneous_matrices(a, b):
+    same_pose(se2.compose(a, b), from_matrix(matrix(a) @ matrix(b)))
+    same_pose(se2.inverse(a), from_matrix(np.linalg.inv(matrix(a))))
+    same_pose(se2.compose(a, se2.inverse(a)), np.zeros(3))
+    assert se2.compose(a, b)[2] == a[2] + b[2]  # headings add, not wrapped
+
+
+@settings(max_examples=200, deadline=None)
+@given(poses, st.lists(st.tuples(coord, coord), min_size=1, max_size=5))
+def test_points_move_between_frames_and_back(T, pts):
+    p = np.array(pts, float)
+    w = se2.transform_points(T, p)
+    hom = (matrix(T) @ np.column_stack([p, np.ones(len(p))]).T).T[:, :2]
+    np.testing.assert_allclose(w, hom, atol=1e-9)
+    np.testing.assert_allclose(se2.to_frame(T, w), p, atol=1e-9)
+    np.testing.assert_allclose(se2.transform_points(T, p[0]), w[0])  # a single point
+    np.testing.assert_allclose(se2.rotate(T[2], p), w - T[:2], atol=1e-9)
+
+
+def test_wrap_angle_range():
+    a = np.array([-3 * np.pi, -np.pi, 0.0, np.pi, 3 * np.pi + 0.1])
+    w = se2.wrap_angle(a)
+    assert np.all(w > -np.pi) and np.all(w <= np.pi)
+    np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-12)
+    assert se2.wrap_angle(-np.pi) == np.pi
+
+
+@pytest.mark.parametrize("laser", [np.zeros(3), LASER, np.array([3.78, 0.5, 0.0])])
+def test_observation_jacobian_matches_numerical(laser):
+    x = np.array([1.0, 2.0, 0.7, 9.0, 6.5])
+    z, H = se2.observe(x[:3], x[3:][None], laser)
+    Hn = num_jac(lambda v: se2.observe(v[:3], v[3:][None], laser)[0][0], x)
+    np.testing.assert_allclose(H[0], Hn, atol=1e-8)
+    # the prediction is a range and a bearing in the sensor frame
+    d = se2.to_frame(se2.compose(x[:3], laser), x[3:])
+    assert z[0, 0] == pytest.approx(np.hypot(*d))
+    assert z[0, 1] == pytest.approx(math.atan2(d[1], d[0]))
+
+
+def test_inverse_observation_inverts_and_its_jacobians_match():
+    pose = np.array([-3.0, 4.0, 2.5])
+    z = np.array([7.5, -0.4])
+    m, Gx, Gz = se2.inverse_observe(pose, z, LASER)
+    np.testing.assert_allclose(se2.observe(pose, m[None], LASER)[0][0], z, atol=1e-12)
+    np.testing.assert_allclose(
+        Gx, num_jac(lambda p: se2.inverse_observe(p, z, LASER)[0], pose), atol=1e-8
+    )
+    np.testing.assert_allclose(
+        Gz, num_jac(lambda q: se2.inverse_observe(pose, q, LASER)[0], z), atol=1e-8
+    )
+
+
+def test_sensor_position_and_its_heading_derivative():
+    pose = np.array([2.0, -1.0, 0.4])
+    p, dp = se2.sensor_position(pose, LASER)
+    np.testing.assert_allclose(p, se2.compose(pose, LASER)[:2])
+    np.testing.assert_allclose(
+        dp, num_jac(lambda th: se2.sensor_position([2.0, -1.0, th[0]], LASER)[0], [0.4])[:, 0]
+    )
+
+
+def test_interpolate_poses_unwraps_the_heading():
+    t = np.array([0.0, 1.0])
+    poses = np.array([[0.0, 0.0, np.pi - 0.1], [2.0, 4.0, -np.pi + 0.1]])
+    mid = se2.interpolate_poses(0.5, t, poses)[0]
+    np.testing.assert_allclose(mid[:2], [1.0, 2.0])
+    assert abs(abs(mid[2]) - np.pi) < 1e-12  # through pi, not through 0
+    np.testing.assert_allclose(se2.interpolate_poses([-1.0, 2.0], t, poses), poses)

@@ -1,0 +1,134 @@
+"""slam.Sequence: every field validated, a clear SlamError naming the problem."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from support import B, N, full_kwargs
+
+from features.types import Scan
+from slam import Sequence, SlamError
+from slam.sequence import OPTIONAL, REQUIRED
+
+
+def test_full_sequence_is_normalised():
+    seq = Sequence(**full_kwargs())
+    assert seq.n_scans == N and seq.n_beams == B
+    assert seq.scan_ranges.dtype == np.float64 and seq.laser_pose.dtype == np.float64
+    assert seq.scan_labels.dtype == np.int64
+    assert not seq.scan_ranges.flags.writeable  # frozen all the way down
+    assert seq.vehicle == {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
+    np.testing.assert_array_equal(seq.laser_pose, [3.78, 0.5, 0.0])
+
+
+def test_inputs_are_copied_not_shared():
+    kw = full_kwargs()
+    seq = Sequence(**kw)
+    kw["scan_ranges"][0, 0] = -123.0
+    assert seq.scan_ranges[0, 0] != -123.0
+    assert kw["scan_ranges"].flags.writeable  # the caller's array is left alone
+
+
+def test_vehicle_json_string_and_default_encoder_offset():
+    seq = Sequence(**{**full_kwargs(), "vehicle": '{"model": "ackermann", "wheelbase_m": 1.2}'})
+    assert seq.vehicle == {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
+
+
+def test_scan_k_is_a_features_scan():
+    seq = Sequence(**full_kwargs())
+    s = seq.scan(0)
+    assert isinstance(s, Scan)
+    assert s.stamp_s == 10.0 and s.max_range_m == 50.0
+    assert s.angle_min_rad == -math.pi / 2 and s.angle_increment_rad == math.pi / 360
+    assert np.isnan(s.ranges_m[2]) and s.ranges_m[0] == seq.scan_ranges[0, 0]
+
+
+def test_minimal_sequence_has_none_for_optional_fields():
+    kw = full_kwargs()
+    seq = Sequence(**{k: kw[k] for k in REQUIRED})
+    assert seq.scan_max_range == math.inf
+    for name in OPTIONAL:
+        if name not in ("scan_max_range", "name"):
+            assert getattr(seq, name) is None, name
+    assert seq.name == ""
+
+
+def test_sequence_errors_are_value_errors():
+    assert issubclass(SlamError, ValueError)
+
+
+BAD_RUNS = [
+    # (changes to the valid run, words the message must contain)
+    ({"scan_t": [10.0, 10.2, 10.2, 10.6, 10.8]}, ["scan_t", "strictly increasing", "scan_t[2]"]),
+    ({"scan_t": [10.0, 10.2, 10.1, 10.6, 10.8]}, ["scan_t", "strictly increasing"]),
+    ({"scan_t": [10.0, np.nan, 10.4, 10.6, 10.8]}, ["scan_t", "finite"]),
+    ({"scan_t": np.zeros((N, 1))}, ["scan_t", "shape"]),
+    ({"scan_t": []}, ["scan_t"]),
+    ({"scan_ranges": np.ones((N + 1, B))}, ["scan_ranges", "N = len(scan_t) = 5"]),
+    ({"scan_ranges": np.ones(N)}, ["scan_ranges", "shape"]),
+    ({"scan_ranges": np.full((N, B), "x")}, ["scan_ranges", "dtype"]),
+    ({"scan_angle_min": np.nan}, ["scan_angle_min", "finite"]),
+    ({"scan_angle_min": "0"}, ["scan_angle_min", "number"]),
+    ({"scan_angle_increment": 0.0}, ["scan_angle_increment", "> 0"]),
+    ({"scan_angle_increment": -0.01}, ["scan_angle_increment", "> 0"]),
+    ({"scan_angle_increment": 90.0}, ["scan_angle_increment", "degrees"]),
+    ({"scan_max_range": 0.0}, ["scan_max_range", "> 0"]),
+    ({"laser_pose": [3.78, 0.5]}, ["laser_pose", "(3,)"]),
+    ({"laser_pose": [3.78, np.inf, 0.0]}, ["laser_pose", "finite"]),
+    ({"odo_steer": None}, ["odo_steer", "together"]),
+    ({"odo_t": None, "odo_speed": None}, ["odo_", "together"]),
+    ({"odo_speed": np.zeros(11)}, ["odo_speed", "like odo_t"]),
+    ({"odo_steer": np.full(12, 30.0)}, ["odo_steer", "degrees"]),
+    ({"odo_speed": np.full(12, np.nan)}, ["odo_speed", "finite"]),
+    ({"odo_t": np.arange(12)[::-1] * 0.1}, ["odo_t", "strictly increasing"]),
+    ({"vehicle": {"model": "tank", "wheelbase_m": 2.0}}, ["vehicle", "model", "ackermann"]),
+    ({"vehicle": {"wheelbase_m": 2.0}}, ["vehicle", "model"]),
+    ({"vehicle": {"model": "ackermann"}}, ["vehicle", "wheelbase_m"]),
+    ({"vehicle": {"model": "ackermann", "wheelbase_m": 0.0}}, ["wheelbase_m", "> 0"]),
+    ({"vehicle": {"model": "ackermann", "wheelbase_m": -2.83}}, ["wheelbase_m", "> 0"]),
+    ({"vehicle": {"model": "ackermann", "wheelbase_m": "2.83"}}, ["wheelbase_m", "number"]),
+    ({"vehicle": {"model": "ackermann", "wheelbase": 2.83}}, ["vehicle", "wheelbase"]),
+    ({"vehicle": "{not json"}, ["vehicle", "JSON"]),
+    ({"vehicle": [1, 2]}, ["vehicle", "dict"]),
+    ({"gps_xy": None}, ["gps_xy", "together"]),
+    ({"gps_xy": np.zeros((3, 3))}, ["gps_xy", "(n, 2)"]),
+    ({"gps_xy": np.zeros((2, 2))}, ["gps_xy", "like gps_t"]),
+    ({"gps_t": [10.0, 9.0, 11.0]}, ["gps_t", "strictly increasing"]),
+    ({"gps_pose": [1.0, 0.0]}, ["gps_pose", "(3,)"]),
+    ({"truth_pose": None}, ["truth_pose", "together"]),
+    ({"truth_pose": np.zeros((N, 2))}, ["truth_pose", "(n, 3)"]),
+    ({"truth_pose": np.zeros((N - 1, 3))}, ["truth_pose", "like truth_t"]),
+    ({"truth_t": np.arange(N)[::-1] * 1.0}, ["truth_t", "strictly increasing"]),
+    ({"truth_landmarks": np.array([[1.0, 2.0, 0.0]])}, ["truth_landmarks", "r must be > 0"]),
+    ({"truth_landmarks": np.array([[1.0, 2.0, -0.3]])}, ["truth_landmarks", "row 0"]),
+    ({"truth_landmarks": np.zeros((2, 2))}, ["truth_landmarks", "(n, 3)"]),
+    ({"scan_labels": np.zeros((N, B + 1), int)}, ["scan_labels", "like scan_ranges"]),
+    ({"scan_labels": np.zeros((N, B))}, ["scan_labels", "integers"]),
+    ({"scan_labels": np.full((N, B), -3)}, ["scan_labels", ">= -2"]),
+    ({"name": 5}, ["name", "string"]),
+]
+
+
+@pytest.mark.parametrize("changes, words", BAD_RUNS)
+def test_malformed_run_raises_naming_the_problem(changes, words):
+    kw = {**full_kwargs(), **changes}
+    with pytest.raises(SlamError) as info:
+        Sequence(**kw)
+    msg = str(info.value)
+    for w in words:
+        assert w in msg, f"{w!r} not in {msg!r}"
+
+
+@pytest.mark.parametrize(
+    "changes, name",
+    [
+        ({"odo_t": [], "odo_speed": [], "odo_steer": []}, "odo_t"),
+        ({"gps_t": [], "gps_xy": np.zeros((0, 2))}, "gps_t"),
+        ({"truth_t": [], "truth_pose": np.zeros((0, 3))}, "truth_t"),
+    ],
+)
+def test_an_empty_optional_group_is_refused(changes, name):
+    with pytest.raises(SlamError, match=f"Sequence.{name}: empty"):
+        Sequence(**{**full_kwargs(), **changes})

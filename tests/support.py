@@ -1,0 +1,92 @@
+"""Helpers shared by test modules (tests/ is on pytest's pythonpath)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from slam import Sequence
+from slam.sequence import OPTIONAL, REQUIRED
+
+N, B = 5, 7
+
+
+def full_kwargs() -> dict:
+    """Every field of a small simulated-looking run, all valid."""
+    rng = np.random.default_rng(1)
+    ranges = rng.uniform(1.0, 30.0, (N, B))
+    ranges[0, 2] = np.nan
+    ranges[3, :] = np.nan  # a scan with no return at all
+    labels = rng.integers(-1, 6, (N, B))
+    labels[1, 1] = -2  # mixed return
+    return dict(
+        scan_t=np.arange(N) * 0.2 + 10.0,
+        scan_ranges=ranges,
+        scan_angle_min=-math.pi / 2,
+        scan_angle_increment=math.pi / 360,
+        laser_pose=[3.78, 0.5, 0.0],
+        scan_max_range=50.0,
+        odo_t=np.arange(12) * 0.1 + 10.0,
+        odo_speed=np.linspace(0.0, 2.0, 12),
+        odo_steer=np.linspace(-0.1, 0.1, 12),
+        vehicle={"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76},
+        gps_t=np.array([10.0, 10.5, 11.0]),
+        gps_xy=np.array([[0.0, 1.0], [1.0, 1.5], [2.0, 2.0]]),
+        gps_pose=[1.0, 0.0, 0.0],
+        truth_t=np.arange(N) * 0.2 + 10.0,
+        truth_pose=rng.normal(size=(N, 3)),
+        truth_landmarks=np.array([[5.0, 1.0, 0.2], [8.0, -2.0, 0.35]]),
+        scan_labels=labels,
+        name="unit test run",
+    )
+
+
+def assert_same(a: Sequence, b: Sequence) -> None:
+    for name in (*REQUIRED, *OPTIONAL):
+        va, vb = getattr(a, name), getattr(b, name)
+        if isinstance(va, np.ndarray):
+            assert isinstance(vb, np.ndarray), name
+            assert va.dtype == vb.dtype and va.shape == vb.shape, name
+            np.testing.assert_array_equal(va, vb, err_msg=name)  # NaN == NaN here
+        else:
+            assert va == vb, name
+
+
+def num_jac(f, x, eps=1e-6) -> np.ndarray:
+    """Central-difference Jacobian of f at x (the oracle of every analytic Jacobian)."""
+    x = np.asarray(x, float)
+    cols = []
+    for i in range(x.size):
+        d = np.zeros_like(x)
+        d[i] = eps
+        cols.append((f(x + d) - f(x - d)) / (2 * eps))
+    return np.stack(cols, axis=-1)
+
+
+def assert_outputs(folder, names, min_bytes: int = 1) -> None:
+    """Every file in `names` exists in `folder` with at least `min_bytes` bytes."""
+    for name in names:
+        p = folder / name
+        assert p.exists() and p.stat().st_size >= min_bytes, name
+
+
+def simulated_scan_file(tmp_path, scene: str = "test_yard"):
+    """`trunkslam simulate SCENE --pose 0,0,0` into tmp_path/scan.npz; returns the path."""
+    from typer.testing import CliRunner
+
+    from experiments.cli import app
+
+    path = tmp_path / "scan.npz"
+    res = CliRunner().invoke(app, ["simulate", scene, "--pose", "0,0,0", "--out", str(path)])
+    assert res.exit_code == 0, res.output
+    return path
+
+
+def quick_reproduce(tmp_path_factory, name: str, seed: int):
+    """`trunkslam reproduce NAME --quick --seed SEED` into a new temporary folder; returns it."""
+    from experiments.paper.reproduce import run_experiments
+
+    out = tmp_path_factory.mktemp(name)
+    run_experiments([name], out, quick=True, seed=seed)
+    return out
