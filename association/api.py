@@ -47,6 +47,18 @@ class Association:
     budget_exhausted: bool = False
 
 
+def _rounding_options(params: dict) -> dict:
+    """The IHGR rounding options among `params`, checked: eps in (0, 0.5), flags booleans."""
+    out = {k: params[k] for k in _ROUNDING_KEYS if k in params}
+    eps = out.get("eps", 1e-6)
+    if isinstance(eps, bool) or not isinstance(eps, (int, float)) or not 0.0 < eps < 0.5:
+        raise AssociationError(f"eps: must be a number in (0, 0.5), got {eps!r}")
+    for flag in ("fix_ones", "presolve"):
+        if flag in out and not isinstance(out[flag], (bool, np.bool_)):
+            raise AssociationError(f"{flag}: must be True or False, got {out[flag]!r}")
+    return out
+
+
 def associate_detailed(
     z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float = 0.99, **params
 ) -> Association:
@@ -63,7 +75,7 @@ def associate_detailed(
     extra: dict = {}
     if method == "ihgr":
         model = CostModel(**{k: params[k] for k in _COST_KEYS if k in params})
-        rounding = {k: params[k] for k in _ROUNDING_KEYS if k in params}
+        rounding = _rounding_options(params)
         out, res = ihgr_single(prep, model, **rounding)
         cost = res.cost
         extra = {"lp_solves": res.lp_solves, "fractional": res.fractional}

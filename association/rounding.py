@@ -192,6 +192,26 @@ def ihgr_round(
     if not 0.0 < eps < 0.5:
         raise AssociationError(f"eps: must be in (0, 0.5), got {eps!r}")
     c, n_rows, indptr, indices, exact = _check(costs, A, exact)
+    return ihgr_round_csc(
+        c, n_rows, indptr, indices, exact, eps=eps, fix_ones=fix_ones, presolve=presolve
+    )
+
+
+def ihgr_round_csc(
+    c: np.ndarray,
+    n_rows: int,
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    exact: np.ndarray,
+    *,
+    eps: float = 1e-6,
+    fix_ones: bool = False,
+    presolve: bool = True,
+) -> RoundingResult:
+    """`ihgr_round` on a problem given in CSC index form (column h covers rows
+    indices[indptr[h]:indptr[h + 1]]), without the input checks: for problems this package
+    builds itself, valid by construction (the single-scan program), where the checks and the
+    sparse-matrix round trip would cost more than the solve."""
     n_cols = c.size
     row_has_col = np.bincount(indices, minlength=n_rows) > 0
     if (exact & ~row_has_col).any():

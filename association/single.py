@@ -28,7 +28,7 @@ import scipy.sparse as sp
 
 from association.errors import AssociationError
 from association.inputs import Prepared
-from association.rounding import RoundingResult, ihgr_round
+from association.rounding import RoundingResult, ihgr_round_csc
 
 __all__ = ["CostModel", "single_scan_problem", "ihgr_single"]
 
@@ -94,13 +94,10 @@ class CostModel:
         )
 
 
-def single_scan_problem(prep: Prepared, model: CostModel):
-    """The set-partitioning form of the single-scan program.
-
-    Returns (costs, A, exact, col_meas, col_feat): rows are the m measurements (exact) followed by
-    the gated features (at most once); columns are the gated pairs in canonical order, then one
-    new/clutter singleton per measurement (col_feat = -1).
-    """
+def _csc_problem(prep: Prepared, model: CostModel):
+    """(costs, n_rows, indptr, indices, exact, col_meas, col_feat) of the single-scan program:
+    rows are the m measurements (exact) followed by the gated features (at most once); columns
+    are the gated pairs in canonical order, then one new/clutter singleton per measurement."""
     m = prep.m
     feats = np.unique(prep.pair_j)
     feats = feats[np.argsort(prep.rank_feat[feats])]
@@ -113,19 +110,31 @@ def single_scan_problem(prep: Prepared, model: CostModel):
     costs = np.concatenate(
         [model.pair_cost(prep.d2, prep.logdet_S), np.full(m, model.unexplained_cost())]
     )
-    n_cols = k + m
-    rows = np.concatenate([prep.pair_i, row_of_feat[prep.pair_j], meas_order])
-    cols = np.concatenate([np.arange(k), np.arange(k), k + np.arange(m)])
-    A = sp.csc_array((np.ones(rows.size), (rows, cols)), shape=(m + feats.size, n_cols))
+    # a pair column covers its measurement's row and (below it) its feature's row
+    pair_rows = np.stack([prep.pair_i, row_of_feat[prep.pair_j]], axis=1).reshape(-1)
+    indices = np.concatenate([pair_rows, meas_order]).astype(np.int64)
+    indptr = np.concatenate([np.arange(0, 2 * k + 1, 2), 2 * k + np.arange(1, m + 1)])
     exact = np.zeros(m + feats.size, bool)
     exact[:m] = True
+    return costs, m + feats.size, indptr.astype(np.int64), indices, exact, col_meas, col_feat
+
+
+def single_scan_problem(prep: Prepared, model: CostModel):
+    """The set-partitioning form of the single-scan program.
+
+    Returns (costs, A, exact, col_meas, col_feat): rows are the m measurements (exact) followed by
+    the gated features (at most once); columns are the gated pairs in canonical order, then one
+    new/clutter singleton per measurement (col_feat = -1). A is a scipy.sparse CSC matrix.
+    """
+    costs, n_rows, indptr, indices, exact, col_meas, col_feat = _csc_problem(prep, model)
+    A = sp.csc_array((np.ones(indices.size), indices, indptr), shape=(n_rows, costs.size))
     return costs, A, exact, col_meas, col_feat
 
 
 def ihgr_single(prep: Prepared, model: CostModel, **rounding) -> tuple[np.ndarray, RoundingResult]:
     """Assignment (m,) of one scan by IHGR, and the rounding result."""
-    costs, A, exact, col_meas, col_feat = single_scan_problem(prep, model)
-    res = ihgr_round(costs, A, exact, **rounding)
+    costs, n_rows, indptr, indices, exact, col_meas, col_feat = _csc_problem(prep, model)
+    res = ihgr_round_csc(costs, n_rows, indptr, indices, exact, **rounding)
     out = np.full(prep.m, -1, np.int64)
     sel = res.selected
     out[col_meas[sel]] = col_feat[sel]

@@ -153,17 +153,25 @@ def extract(
 @handle_errors
 def convert_victoria_park(
     out: Annotated[Path, typer.Option(help="sequence file to write")] = Path("vp.npz"),
+    full: Annotated[
+        bool,
+        typer.Option(
+            help="all 7249 scans with the published detections only (default: the 2000 scans "
+            "with raw laser data, detections beside them)"
+        ),
+    ] = False,
     data: Annotated[
         Path | None, typer.Option(help="victoria_park folder (default: $TRUNKSLAM_DATA/...)")
     ] = None,
 ) -> None:
-    """Victoria Park (odometry, GPS, the 2000 raw scans) as one sequence file."""
+    """Victoria Park (odometry, GPS, raw scans and/or published detections) as one sequence file."""
     from experiments.io.sequence_file import save_sequence
     from experiments.io.victoria_park import load_victoria_park
 
-    seq = load_victoria_park(data)
+    seq = load_victoria_park(data, full=full)
     save_sequence(seq, out)
-    typer.echo(f"{seq.n_scans} scans -> {out}")
+    kind = "detections only" if full else "raw scans and detections"
+    typer.echo(f"{seq.n_scans} scans ({kind}, {seq.det_scan.size} detections) -> {out}")
 
 
 @app.command()

@@ -1,29 +1,46 @@
-"""`SlamConfig`: every setting of a `slam.run`, with the experiments' values as defaults."""
+"""`SlamConfig`: every setting of a `slam.run`, with the experiments' values as defaults, and
+its strict conversion from and to plain dicts (what a TOML configuration file holds).
+
+`SlamConfig.from_dict(d)` refuses unknown keys and wrong types naming the key's path
+("odometry_noise.speed_sigma_mps: ..."), then the dataclasses' own checks refuse impossible
+values (negative sigmas, probabilities outside (0, 1)). `to_dict()` gives the same structure
+back, leaving out settings that are None (TOML has no null), so a dumped configuration can be
+fed back unchanged.
+"""
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields, is_dataclass
 
 from slam.errors import SlamError
 from slam.mapping import MapPolicy
-from slam.measurement import DEFAULT_CONSTANT_NOISE
+from slam.measurement import DEFAULT_CONSTANT_NOISE, NoiseModel
 from slam.vehicle import OdometryNoise
 
-__all__ = ["SlamConfig"]
+__all__ = ["SlamConfig", "config_from_dict", "config_to_dict"]
 
 
 @dataclass(frozen=True)
 class SlamConfig:
-    """Parameters of the run; defaults are the ones the experiments use.
+    """Parameters of the run; defaults are the ones the experiments use (the simulated Cycab).
 
     odometry_noise: sigma of each odometry sample's speed and steering readings.
-    measurement_noise: "auto" (fit covariance for `geometric` features, constant otherwise),
-        "fit" or "constant".
-    range_sigma_m, range_sigma_per_m, bearing_sigma_rad, cross_range_sigma_m: the constant
-        noise model (see `DEFAULT_CONSTANT_NOISE`); None = the feature method's default.
+    measurement_noise: "auto" (the circles' own covariance when the extractor gives one:
+        `geometric` features, or detections carrying det_cov; constant otherwise), "fit" or
+        "constant".
+    constant_noise: the constant noise model of each extractor (`slam.measurement.NoiseModel`),
+        by method name; methods not given keep their `DEFAULT_CONSTANT_NOISE` entry, methods
+        unknown to both use its "other" entry.
+    range_sigma_m, range_sigma_per_m, bearing_sigma_rad, cross_range_sigma_m: when set, they
+        override that part of the constant model for every method.
     fit_floor_range_m, fit_floor_bearing_rad: added in quadrature to the fit's noise (model
         error the fit cannot see; 0 in simulation where trunks are true circles).
+    laser_pose: (x_m, y_m, theta_rad) of the laser in the vehicle frame, replacing the
+        sequence's (a calibrated mounting); None keeps the sequence's.
     gate_prob: chi-square probability of the association gates (passed to `associate`). 0.999
         rather than association's 0.99: in the tree park a 3-sigma odometry heading step
         (one in about a thousand scans) pushed both visible trees out of a 0.99 gate; they were
@@ -36,8 +53,12 @@ class SlamConfig:
     association_params: extra keyword arguments of `association.associate`.
     map_policy: tentative features (`slam.mapping.MapPolicy`).
     initial_pose_sigma: (sigma_x_m, sigma_y_m, sigma_theta_rad) of the start pose when it comes
-        from the truth (0: the map's frame is the start pose).
-    gps_sigma_m, initial_heading_sigma_rad: start uncertainty when the start is a GPS fix.
+        from the truth or the origin (0: the map's frame is the start pose).
+    gps_start_fit_m: a start from GPS fits the dead-reckoned antenna track of the first this
+        many metres of driving to the GPS fixes (position and heading, with their uncertainty
+        from the fit); see `slam.start`.
+    gps_sigma_m, initial_heading_sigma_rad: floors of the start uncertainty from GPS (the fit's
+        own uncertainty is used when it is larger).
     max_odometry_gap_s: a longer stretch without odometry inside the run is an error.
     max_feature_range_m: circles farther away are not used.
     view_margin_m, view_margin_rad: landmarks this far outside the laser's range and field of
@@ -46,17 +67,20 @@ class SlamConfig:
 
     odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
     measurement_noise: str = "auto"
+    constant_noise: Mapping[str, NoiseModel] = field(default_factory=dict)
     range_sigma_m: float | None = None
     range_sigma_per_m: float | None = None
     bearing_sigma_rad: float | None = None
     cross_range_sigma_m: float | None = None
     fit_floor_range_m: float = 0.0
     fit_floor_bearing_rad: float = 0.0
+    laser_pose: tuple[float, float, float] | None = None
     gate_prob: float = 0.999
     new_feature_gate_prob: float = 0.9999
     association_params: dict = field(default_factory=dict)
     map_policy: MapPolicy = field(default_factory=MapPolicy)
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    gps_start_fit_m: float = 50.0
     gps_sigma_m: float = 1.0
     initial_heading_sigma_rad: float = math.radians(5.0)
     max_odometry_gap_s: float = 1.0
@@ -86,6 +110,7 @@ class SlamConfig:
         for name in (
             "fit_floor_range_m",
             "fit_floor_bearing_rad",
+            "gps_start_fit_m",
             "gps_sigma_m",
             "initial_heading_sigma_rad",
             "view_margin_m",
@@ -96,26 +121,138 @@ class SlamConfig:
                 raise SlamError(f"SlamConfig.{name}: must be finite and >= 0, got {v!r}")
         if not self.max_odometry_gap_s > 0:
             raise SlamError("SlamConfig.max_odometry_gap_s: must be > 0")
+        if not self.max_feature_range_m > 0:
+            raise SlamError("SlamConfig.max_feature_range_m: must be > 0 (inf: no limit)")
         if len(self.initial_pose_sigma) != 3 or min(self.initial_pose_sigma) < 0:
             raise SlamError("SlamConfig.initial_pose_sigma: expected three sigmas >= 0")
+        if self.laser_pose is not None and (
+            len(self.laser_pose) != 3 or not all(math.isfinite(v) for v in self.laser_pose)
+        ):
+            raise SlamError("SlamConfig.laser_pose: expected three finite numbers (x, y, theta)")
+        models = dict(DEFAULT_CONSTANT_NOISE)  # the given methods replace their defaults
+        for method, model in dict(self.constant_noise).items():
+            m = NoiseModel(*model)
+            if not all(0 <= v < math.inf for v in m):
+                raise SlamError(f"SlamConfig.constant_noise.{method}: sigmas must be finite, >= 0")
+            models[method] = m
+        object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
 
-    def noise_for(self, method: str) -> tuple[str, tuple[float, float, float, float]]:
-        """("fit" | "constant", (range_sigma_m, range_sigma_per_m, bearing_sigma_rad,
-        cross_range_sigma_m)) for a feature method."""
+    def noise_for(self, method: str, has_cov: bool | None = None) -> tuple[str, NoiseModel]:
+        """("fit" | "constant", NoiseModel) for circles from `method`. has_cov: whether they carry
+        their own covariance (default: only `geometric` does)."""
         kind = self.measurement_noise
         if kind == "auto":
-            kind = "fit" if method == "geometric" else "constant"
-        base = DEFAULT_CONSTANT_NOISE.get(method, DEFAULT_CONSTANT_NOISE["other"])
+            own = method == "geometric" if has_cov is None else has_cov
+            kind = "fit" if own else "constant"
+        base = self.constant_noise.get(method, self.constant_noise["other"])
         given = (
             self.range_sigma_m,
             self.range_sigma_per_m,
             self.bearing_sigma_rad,
             self.cross_range_sigma_m,
         )
-        model = tuple(float(b if g is None else g) for b, g in zip(base, given))
+        model = NoiseModel(*(float(b if g is None else g) for b, g in zip(base, given)))
         if kind == "constant" and (model[0] + model[1] <= 0 or model[2] + model[3] <= 0):
-            raise SlamError(f"SlamConfig: the constant noise model {model} is zero")
-        return kind, model  # type: ignore[return-value]
+            raise SlamError(f"SlamConfig: the constant noise model {tuple(model)} is zero")
+        return kind, model
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """Plain nested dict (None settings left out); `from_dict` reads it back."""
+        return config_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> SlamConfig:
+        """A config from a plain nested dict; unknown keys and wrong types are errors naming
+        the key's path. Keys left out keep their defaults."""
+        return config_from_dict(cls, data)
+
+
+def config_to_dict(obj) -> dict:
+    """A dataclass (or NamedTuple) as a plain nested dict, None values left out."""
+    out = {}
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if v is None:
+            continue
+        out[f.name] = _plain(v)
+    return out
+
+
+def _plain(v):
+    if is_dataclass(v):
+        return config_to_dict(v)
+    if isinstance(v, tuple) and hasattr(v, "_asdict"):
+        return {k: _plain(x) for k, x in v._asdict().items()}
+    if isinstance(v, Mapping):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    return v
+
+
+def config_from_dict(cls, data: Mapping, path: str = ""):
+    """`cls` (a dataclass) from a plain nested dict, strictly; see the module doc."""
+    if not isinstance(data, Mapping):
+        raise SlamError(f"{path or cls.__name__}: expected a table of settings, got {data!r}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        where = f"{path}." if path else ""
+        raise SlamError(
+            f"{where}{unknown[0]}: unknown setting of {cls.__name__} (known: {sorted(names)})"
+        )
+    kwargs = {k: _convert(hints[k], v, f"{path}.{k}" if path else k) for k, v in data.items()}
+    try:
+        return cls(**kwargs)
+    except SlamError:
+        raise
+    except (TypeError, ValueError) as exc:  # a nested type's own check
+        raise SlamError(f"{path or cls.__name__}: {exc}") from None
+
+
+def _convert(tp, value, path: str):
+    origin = typing.get_origin(tp)
+    args = typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _convert(inner, value, path)
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SlamError(f"{path}: expected a number, got {value!r}")
+        return float(value)
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SlamError(f"{path}: expected a whole number, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise SlamError(f"{path}: expected a string, got {value!r}")
+        return value
+    if tp is dict:  # free-form parameters (checked by whoever takes them)
+        if not isinstance(value, Mapping):
+            raise SlamError(f"{path}: expected a table, got {value!r}")
+        return dict(value)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)) or len(value) != len(args):
+            raise SlamError(f"{path}: expected a list of {len(args)} numbers, got {value!r}")
+        return tuple(_convert(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+    if origin in (Mapping, dict) and args:
+        if not isinstance(value, Mapping):
+            raise SlamError(f"{path}: expected a table, got {value!r}")
+        return {str(k): _convert(args[1], v, f"{path}.{k}") for k, v in value.items()}
+    if isinstance(tp, type) and issubclass(tp, tuple) and hasattr(tp, "_fields"):  # NamedTuple
+        if not isinstance(value, Mapping):
+            raise SlamError(f"{path}: expected a table with {list(tp._fields)}, got {value!r}")
+        missing = [k for k in tp._fields if k not in value]
+        unknown = sorted(set(value) - set(tp._fields))
+        if missing or unknown:
+            raise SlamError(
+                f"{path}: needs exactly {list(tp._fields)} (missing {missing}, unknown {unknown})"
+            )
+        return tp(*(_convert(float, value[k], f"{path}.{k}") for k in tp._fields))
+    if is_dataclass(tp):
+        return config_from_dict(tp, value, path)
+    raise SlamError(f"{path}: cannot read a setting of type {tp!r}")  # pragma: no cover

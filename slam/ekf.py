@@ -10,19 +10,21 @@ is measured as
 
     range_m = |m - p_L|,   bearing_rad = atan2((m - p_L)_y, (m - p_L)_x) - theta - lth
 
-(laser frame, wrapped to (-pi, pi]). `observe` returns the prediction and its analytic Jacobian
-with respect to the five state entries it touches, [x, y, theta, m_x, m_y] (tested against
-numerical derivatives in tests/slam/test_se2.py); `slam.se2.observe` is that model.
+(laser frame, wrapped to (-pi, pi]); `slam.se2.observe` gives the prediction and its analytic
+Jacobian with respect to the five state entries it touches, [x, y, theta, m_x, m_y].
 
-Steps, each returning a new `EkfState` (the input is never modified):
+The steps work in place on a `Filter` (the run loop's working state), so a scan costs no copy of
+the d x d covariance:
 - `predict`: the vehicle rows and columns only: P_vv <- F P_vv F^T + Q, P_vm <- F P_vm; the
-  landmark block is untouched, so the arithmetic is linear in the map size (the functional
-  style copies P, a memory copy of d^2 numbers, measured in `trunkslam bench slam`).
+  landmark block is untouched, so the cost is linear in the map size.
 - `update`: all of a scan's associated measurements at once, gain from np.linalg.solve, Joseph
-  form (I - K H) P (I - K H)^T + K R K^T, evaluated in O(q d^2) because H has few non-zero
-  columns, then symmetrised.
+  form (I - K H) P (I - K H)^T + K R K^T. Expanded, with S = H P H^T + R and PHt = P H^T, it is
+  P - K PHt^T - PHt K^T + K S K^T = P + (G + G^T) with G = K (K S / 2 - PHt)^T: one rank-q
+  product (q = 2 x measurements) and a sum that is symmetric to the last bit.
 - `add_landmark`: initialisation from one measurement with its cross covariances:
-  m = g(pose, z), P_mm = Gx P_vv Gx^T + Gz R Gz^T, P_m* = Gx P_v*.
+  m = g(pose, z), P_mm = Gx P_vv Gx^T + Gz R Gz^T, P_m* = Gx P_v* (this one grows P: a copy).
+The functions `predict`, `update` and `add_landmark` do the same on an immutable `EkfState`
+(copying it), for callers that want values rather than a working state.
 """
 
 from __future__ import annotations
@@ -37,6 +39,8 @@ from slam.se2 import inverse_observe, observe, wrap_angle
 
 __all__ = [
     "EkfState",
+    "Filter",
+    "UpdateResult",
     "add_landmark",
     "initial_state",
     "observe",
@@ -51,48 +55,12 @@ def _readonly(a: np.ndarray) -> np.ndarray:
     return a
 
 
-@dataclass(frozen=True, eq=False)
-class EkfState:
-    """The filter's estimate.
-
-    x: (3 + 2 n,) [x_m, y_m, theta_rad, then n landmark positions x_m, y_m], world frame.
-    P: (3 + 2 n, 3 + 2 n) covariance, symmetric positive semi-definite.
-    landmark_ids: (n,) int64 stable ids of the landmarks, in state order.
-    Arrays are stored read-only; the constructor validates and copies them (the steps below
-    build their results with `EkfState._own`, which skips both: they own fresh arrays).
-    """
+class _Estimate:
+    """Read-only views shared by `EkfState` and `Filter` (both have x, P, landmark_ids)."""
 
     x: np.ndarray
     P: np.ndarray
     landmark_ids: np.ndarray
-
-    def __post_init__(self) -> None:
-        x = np.array(self.x, dtype=np.float64)
-        P = np.array(self.P, dtype=np.float64)
-        ids = np.array(self.landmark_ids, dtype=np.int64).reshape(-1)
-        if x.ndim != 1 or x.shape[0] < 3 or (x.shape[0] - 3) % 2:
-            raise SlamError(f"EkfState.x: expected shape (3 + 2 n,), got {x.shape}")
-        d = x.shape[0]
-        if P.shape != (d, d):
-            raise SlamError(f"EkfState.P: expected shape ({d}, {d}), got {P.shape}")
-        if ids.shape[0] != (d - 3) // 2:
-            raise SlamError(
-                f"EkfState.landmark_ids: expected {(d - 3) // 2} ids, got {ids.shape[0]}"
-            )
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
-            raise SlamError("EkfState.x, P: must be finite")
-        object.__setattr__(self, "x", _readonly(x))
-        object.__setattr__(self, "P", _readonly(P))
-        object.__setattr__(self, "landmark_ids", _readonly(ids))
-
-    @classmethod
-    def _own(cls, x: np.ndarray, P: np.ndarray, landmark_ids: np.ndarray) -> EkfState:
-        """A state from freshly computed arrays (no copy, no validation)."""
-        obj = object.__new__(cls)
-        object.__setattr__(obj, "x", _readonly(x))
-        object.__setattr__(obj, "P", _readonly(P))
-        object.__setattr__(obj, "landmark_ids", landmark_ids)
-        return obj
 
     @property
     def dim(self) -> int:
@@ -136,6 +104,152 @@ class EkfState:
         return int(hits[0])
 
 
+@dataclass(frozen=True, eq=False)
+class EkfState(_Estimate):
+    """The filter's estimate, immutable.
+
+    x: (3 + 2 n,) [x_m, y_m, theta_rad, then n landmark positions x_m, y_m], world frame.
+    P: (3 + 2 n, 3 + 2 n) covariance, symmetric positive semi-definite.
+    landmark_ids: (n,) int64 stable ids of the landmarks, in state order.
+    Arrays are stored read-only; the constructor validates and copies them.
+    """
+
+    x: np.ndarray
+    P: np.ndarray
+    landmark_ids: np.ndarray
+
+    def __post_init__(self) -> None:
+        x = np.array(self.x, dtype=np.float64)
+        P = np.array(self.P, dtype=np.float64)
+        ids = np.array(self.landmark_ids, dtype=np.int64).reshape(-1)
+        if x.ndim != 1 or x.shape[0] < 3 or (x.shape[0] - 3) % 2:
+            raise SlamError(f"EkfState.x: expected shape (3 + 2 n,), got {x.shape}")
+        d = x.shape[0]
+        if P.shape != (d, d):
+            raise SlamError(f"EkfState.P: expected shape ({d}, {d}), got {P.shape}")
+        if ids.shape[0] != (d - 3) // 2:
+            raise SlamError(
+                f"EkfState.landmark_ids: expected {(d - 3) // 2} ids, got {ids.shape[0]}"
+            )
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+            raise SlamError("EkfState.x, P: must be finite")
+        object.__setattr__(self, "x", _readonly(x))
+        object.__setattr__(self, "P", _readonly(P))
+        object.__setattr__(self, "landmark_ids", _readonly(ids))
+
+
+@dataclass(frozen=True, eq=False)
+class UpdateResult:
+    """What an update returns besides the new state.
+
+    innovation: (k, 2) z - z_hat (bearing wrapped). S: (2 k, 2 k) joint innovation covariance.
+    nis: nu^T S^-1 nu of the whole batch (chi-square with 2 k dof when consistent).
+    logdet: ln |S| (with nis, the batch's Gaussian log-likelihood -1/2 (nis + ln|2 pi S|)).
+    """
+
+    innovation: np.ndarray
+    S: np.ndarray
+    nis: float
+    logdet: float = math.nan
+
+
+class Filter(_Estimate):
+    """The working state of a run, changed in place by `predict`, `update`, `add_landmark`.
+
+    Built from an `EkfState` (copied); `snapshot()` returns an immutable `EkfState`. Views such
+    as `pose` or `P` change with the filter: copy what must be kept.
+    """
+
+    def __init__(self, state: EkfState) -> None:
+        self.x = np.array(state.x, dtype=np.float64)
+        self.P = np.array(state.P, dtype=np.float64)
+        self.landmark_ids = np.array(state.landmark_ids, dtype=np.int64)
+
+    def snapshot(self) -> EkfState:
+        return EkfState(self.x, self.P, self.landmark_ids)
+
+    def predict(self, pose1: np.ndarray, F: np.ndarray, Q: np.ndarray) -> None:
+        """Prediction with the motion's result `pose1`, Jacobian F (3, 3) and noise Q (3, 3).
+
+        Only the vehicle rows and columns change (the landmarks are static): cost O(n).
+        """
+        P = self.P
+        Pvv = F @ P[:3, :3] @ F.T + Q
+        P[:3, :3] = 0.5 * (Pvv + Pvv.T)
+        if self.dim > 3:
+            P[:3, 3:] = F @ P[:3, 3:]
+            P[3:, :3] = P[:3, 3:].T
+        self.x[:3] = pose1
+        self.x[2] = float(wrap_angle(self.x[2]))
+
+    def update(
+        self, idx: np.ndarray, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray
+    ) -> UpdateResult:
+        """Batch update with measurements z (k, 2) of the landmarks at state positions idx (k,).
+
+        R: (k, 2, 2) measurement covariances (independent measurements). Joseph form, expanded
+        (see the module doc); H touches only the pose and the observed landmarks' columns.
+        """
+        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+        k = idx.size
+        if k == 0:
+            return UpdateResult(np.zeros((0, 2)), np.zeros((0, 0)), math.nan)
+        z = np.asarray(z, dtype=np.float64).reshape(k, 2)
+        R = np.asarray(R, dtype=np.float64).reshape(k, 2, 2)
+        if np.unique(idx).size != k:
+            raise SlamError("update.idx: a landmark appears twice in one batch")
+        z_hat, H5 = observe(self.pose, self.landmarks_xy[idx], laser_pose)
+        nu = z - z_hat
+        nu[:, 1] = wrap_angle(nu[:, 1])
+        # The columns the batch touches, [x, y, theta, then each landmark's pair], and H on them.
+        cols = np.concatenate([[0, 1, 2], np.stack([3 + 2 * idx, 4 + 2 * idx], 1).reshape(-1)])
+        q = 2 * k
+        j = np.arange(k)
+        Hc = np.zeros((q, 3 + q))
+        Hc[:, :3] = H5[:, :, :3].reshape(q, 3)
+        H_lm = np.zeros((k, 2, k, 2))  # block diagonal: landmark j's 2 x 2 block in row pair j
+        H_lm[j, :, j, :] = H5[:, :, 3:5]
+        Hc[:, 3:] = H_lm.reshape(q, q)
+        R_blk = np.zeros((k, 2, k, 2))
+        R_blk[j, :, j, :] = R
+        P = self.P
+        PHt = P[:, cols] @ Hc.T  # (d, q)
+        S = Hc @ PHt[cols, :] + R_blk.reshape(q, q)
+        S = 0.5 * (S + S.T)
+        K = np.linalg.solve(S, PHt.T).T  # (d, q): K = P H^T S^-1
+        nu_flat = nu.reshape(-1)
+        nis = float(nu_flat @ np.linalg.solve(S, nu_flat))
+        logdet = float(np.linalg.slogdet(S)[1])
+        self.x += K @ nu_flat
+        self.x[2] = float(wrap_angle(self.x[2]))
+        G = K @ (0.5 * (K @ S) - PHt).T  # Joseph form: P + G + G^T
+        P += G + G.T
+        return UpdateResult(nu, S, nis, logdet)
+
+    def add_landmark(
+        self, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray, landmark_id: int
+    ) -> None:
+        """Append a landmark initialised from measurement z (2,) with covariance R (2, 2).
+
+        Its cross covariances with the vehicle and every other landmark are Gx P_v*, its own
+        covariance Gx P_vv Gx^T + Gz R Gz^T (cost O(d^2) for the copy, O(d) for the new rows).
+        """
+        if np.any(self.landmark_ids == landmark_id):
+            raise SlamError(f"add_landmark.landmark_id: {landmark_id} is already in the state")
+        m, Gx, Gz = inverse_observe(self.pose, z, laser_pose)
+        d = self.dim
+        P = np.zeros((d + 2, d + 2))
+        P[:d, :d] = self.P
+        cross = Gx @ self.P[:3, :]  # (2, d)
+        P[d:, :d] = cross
+        P[:d, d:] = cross.T
+        Pmm = Gx @ self.P[:3, :3] @ Gx.T + Gz @ np.asarray(R) @ Gz.T
+        P[d:, d:] = 0.5 * (Pmm + Pmm.T)
+        self.P = P
+        self.x = np.concatenate([self.x, m])
+        self.landmark_ids = np.concatenate([self.landmark_ids, np.array([landmark_id], np.int64)])
+
+
 def initial_state(pose: np.ndarray, pose_cov: np.ndarray | None = None) -> EkfState:
     """A state with no landmarks at `pose` with covariance `pose_cov` (zeros when None)."""
     pose = np.asarray(pose, dtype=np.float64)
@@ -146,23 +260,31 @@ def initial_state(pose: np.ndarray, pose_cov: np.ndarray | None = None) -> EkfSt
 
 
 def predict(state: EkfState, pose1: np.ndarray, F: np.ndarray, Q: np.ndarray) -> EkfState:
-    """Prediction with the motion's result `pose1`, Jacobian F (3, 3) and noise Q (3, 3).
-
-    Only the vehicle rows and columns change (the landmarks are static): cost O(n).
-    """
-    x = state.x.copy()
-    x[:3] = pose1
-    x[2] = float(wrap_angle(x[2]))
-    P = state.P.copy()
-    P[:3, :3] = F @ state.P[:3, :3] @ F.T + Q
-    P[:3, :3] = 0.5 * (P[:3, :3] + P[:3, :3].T)
-    if state.dim > 3:
-        P[:3, 3:] = F @ state.P[:3, 3:]
-        P[3:, :3] = P[:3, 3:].T
-    return EkfState._own(x, P, state.landmark_ids)
+    """`Filter.predict` on a copy of `state`."""
+    f = Filter(state)
+    f.predict(pose1, F, Q)
+    return f.snapshot()
 
 
-def _columns(idx: np.ndarray) -> np.ndarray:
+def update(
+    state: EkfState, idx: np.ndarray, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray
+) -> tuple[EkfState, UpdateResult]:
+    """`Filter.update` on a copy of `state`: (new state, UpdateResult)."""
+    f = Filter(state)
+    res = f.update(idx, z, R, laser_pose)
+    return f.snapshot(), res
+
+
+def add_landmark(
+    state: EkfState, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray, landmark_id: int
+) -> EkfState:
+    """`Filter.add_landmark` on a copy of `state`."""
+    f = Filter(state)
+    f.add_landmark(z, R, laser_pose, landmark_id)
+    return f.snapshot()
+
+
+def landmark_columns(idx: np.ndarray) -> np.ndarray:
     """(k, 5) state columns [0, 1, 2, 3 + 2 i, 4 + 2 i] of landmarks at positions idx."""
     idx = np.asarray(idx, dtype=np.int64).reshape(-1)
     cols = np.empty((idx.size, 5), np.int64)
@@ -173,98 +295,13 @@ def _columns(idx: np.ndarray) -> np.ndarray:
 
 
 def observe_jacobian_full(
-    state: EkfState, idx: np.ndarray, laser_pose: np.ndarray
+    state: _Estimate, idx: np.ndarray, laser_pose: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """z_hat (k, 2) and the dense Jacobians H (k, 2, d) of landmarks at positions idx."""
     idx = np.asarray(idx, dtype=np.int64).reshape(-1)
     z, H5 = observe(state.pose, state.landmarks_xy[idx], laser_pose)
     H = np.zeros((idx.size, 2, state.dim))
-    cols = _columns(idx)
+    cols = landmark_columns(idx)
     for j in range(idx.size):
         H[j][:, cols[j]] = H5[j]
     return z, H
-
-
-@dataclass(frozen=True, eq=False)
-class UpdateResult:
-    """What `update` returns besides the new state.
-
-    innovation: (k, 2) z - z_hat (bearing wrapped). S: (2 k, 2 k) joint innovation covariance.
-    nis: nu^T S^-1 nu of the whole batch (chi-square with 2 k dof when consistent).
-    """
-
-    innovation: np.ndarray
-    S: np.ndarray
-    nis: float
-
-
-def update(
-    state: EkfState, idx: np.ndarray, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray
-) -> tuple[EkfState, UpdateResult]:
-    """Batch update with measurements z (k, 2) of the landmarks at state positions idx (k,).
-
-    R: (k, 2, 2) measurement covariances (independent measurements). Joseph form, evaluated
-    without forming I - K H: with M = P - K (H P), (I - K H) P (I - K H)^T = M - (M H^T) K^T,
-    and H touches only the pose and the observed landmarks' columns.
-    """
-    idx = np.asarray(idx, dtype=np.int64).reshape(-1)
-    k = idx.size
-    if k == 0:
-        return state, UpdateResult(np.zeros((0, 2)), np.zeros((0, 0)), math.nan)
-    z = np.asarray(z, dtype=np.float64).reshape(k, 2)
-    R = np.asarray(R, dtype=np.float64).reshape(k, 2, 2)
-    if np.unique(idx).size != k:
-        raise SlamError("update.idx: a landmark appears twice in one batch")
-    z_hat, H5 = observe(state.pose, state.landmarks_xy[idx], laser_pose)
-    nu = z - z_hat
-    nu[:, 1] = wrap_angle(nu[:, 1])
-    # The columns the batch touches, [x, y, theta, then each landmark's pair], and H on them.
-    cols = np.concatenate([[0, 1, 2], np.stack([3 + 2 * idx, 4 + 2 * idx], 1).reshape(-1)])
-    q = 2 * k
-    j = np.arange(k)
-    Hc = np.zeros((q, 3 + q))
-    Hc[:, :3] = H5[:, :, :3].reshape(q, 3)
-    H_lm = np.zeros((k, 2, k, 2))  # block diagonal: landmark j's 2 x 2 block in row pair j
-    H_lm[j, :, j, :] = H5[:, :, 3:5]
-    Hc[:, 3:] = H_lm.reshape(q, q)
-    R_blk = np.zeros((k, 2, k, 2))
-    R_blk[j, :, j, :] = R
-    Rb = R_blk.reshape(q, q)
-    P = state.P
-    PHt = P[:, cols] @ Hc.T  # (d, q)
-    S = Hc @ PHt[cols, :] + Rb
-    S = 0.5 * (S + S.T)
-    K = np.linalg.solve(S, PHt.T).T  # (d, q): K = P H^T S^-1
-    nu_flat = nu.reshape(-1)
-    nis = float(nu_flat @ np.linalg.solve(S, nu_flat))
-    x = state.x + K @ nu_flat
-    x[2] = float(wrap_angle(x[2]))
-    M = P - K @ PHt.T  # (I - K H) P
-    P_new = M - (M[:, cols] @ Hc.T) @ K.T + K @ Rb @ K.T  # Joseph form
-    P_new = 0.5 * (P_new + P_new.T)
-    return EkfState._own(x, P_new, state.landmark_ids), UpdateResult(nu, S, nis)
-
-
-def add_landmark(
-    state: EkfState, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray, landmark_id: int
-) -> EkfState:
-    """Append a landmark initialised from measurement z (2,) with covariance R (2, 2).
-
-    Its cross covariances with the vehicle and every other landmark are Gx P_v*, its own
-    covariance Gx P_vv Gx^T + Gz R Gz^T (cost O(d^2) for the copy, O(d) for the new rows).
-    """
-    if np.any(state.landmark_ids == landmark_id):
-        raise SlamError(f"add_landmark.landmark_id: {landmark_id} is already in the state")
-    m, Gx, Gz = inverse_observe(state.pose, z, laser_pose)
-    d = state.dim
-    P = np.zeros((d + 2, d + 2))
-    P[:d, :d] = state.P
-    cross = Gx @ state.P[:3, :]  # (2, d)
-    P[d:, :d] = cross
-    P[:d, d:] = cross.T
-    Pmm = Gx @ state.P[:3, :3] @ Gx.T + Gz @ np.asarray(R) @ Gz.T
-    P[d:, d:] = 0.5 * (Pmm + Pmm.T)
-    x = np.concatenate([state.x, m])
-    ids = np.concatenate([state.landmark_ids, np.array([landmark_id], np.int64)])
-    ids.setflags(write=False)
-    return EkfState._own(x, P, ids)

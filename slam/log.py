@@ -45,7 +45,7 @@ class SlamLog:
         -2 tentative seen again, -3 tentative confirmed into the map, -4 ambiguous (gated but not
         assigned, ignored), -5 beyond max_feature_range_m).
     scan_nis (N,), scan_nis_dof (N,): NIS of each scan's batch update and its degrees of
-        freedom (NaN, 0 without an update).
+        freedom (NaN, 0 without an update); scan_logdet (N,): ln |S| of that batch (NaN without).
     n_features, n_associated, n_tentative, n_map: (N,) per scan.
     timing_s: {"predict", "features", "associate", "update", "manage", "total"} -> (N,) s.
     final_x, final_P: the final state. landmark ids index `final_x` via landmark_id order.
@@ -76,6 +76,7 @@ class SlamLog:
     meas_status: np.ndarray
     scan_nis: np.ndarray
     scan_nis_dof: np.ndarray
+    scan_logdet: np.ndarray
     n_features: np.ndarray
     n_associated: np.ndarray
     n_tentative: np.ndarray
@@ -109,6 +110,7 @@ class LogBuilder:
         self.pred_pose_cov = np.empty((n, 3, 3))
         self.nis = np.full(n, np.nan)
         self.nis_dof = np.zeros(n, np.int64)
+        self.logdet = np.full(n, np.nan)
         self.counts = {
             k: np.zeros(n, np.int64) for k in ("n_features", "n_associated", "n_tentative", "n_map")
         }
@@ -197,6 +199,7 @@ class LogBuilder:
             meas_status=np.array(meas["status"], np.int64),
             scan_nis=self.nis,
             scan_nis_dof=self.nis_dof,
+            scan_logdet=self.logdet,
             **self.counts,
             timing_s=self.timing,
             final_x=state.x.copy(),

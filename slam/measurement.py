@@ -11,10 +11,29 @@ Two noise models (`SlamConfig.measurement_noise`):
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["DEFAULT_CONSTANT_NOISE", "measurements_from_features", "polar_cov_from_xy"]
+__all__ = [
+    "DEFAULT_CONSTANT_NOISE",
+    "NoiseModel",
+    "constant_noise",
+    "measurements_from_features",
+    "polar_cov_from_xy",
+]
+
+
+class NoiseModel(NamedTuple):
+    """The constant measurement-noise model of an extractor (metres, radians):
+    sigma_range = range_sigma_m + range_sigma_per_m * range,
+    sigma_bearing^2 = bearing_sigma_rad^2 + (cross_range_sigma_m / range)^2."""
+
+    range_sigma_m: float
+    range_sigma_per_m: float
+    bearing_sigma_rad: float
+    cross_range_sigma_m: float
+
 
 # The "constant" measurement noise model of each extractor: configured constants, not a fit:
 #   sigma_range = range_sigma_m + range_sigma_per_m * range,
@@ -28,12 +47,13 @@ __all__ = ["DEFAULT_CONSTANT_NOISE", "measurements_from_features", "polar_cov_fr
 # bearing error falls as 1/range); the Bailey detector's bearing is quantised by the beams
 # (about 0.1 deg whatever the range). The paper's fit also has a mean range error of -4 mm
 # (Kasa's bias toward the sensor), which a zero-mean model cannot represent.
-# (range_sigma_m, range_sigma_per_m, bearing_sigma_rad, cross_range_sigma_m):
-DEFAULT_CONSTANT_NOISE: dict[str, tuple[float, float, float, float]] = {
-    "paper": (0.011, 0.001, 0.00022, 0.0067),
-    "geometric": (0.007, 0.0014, 0.00031, 0.0061),
-    "bailey": (0.0092, 0.0015, 0.0019, 0.0028),
-    "other": (0.05, 0.01, math.radians(0.5), 0.0),
+# "other" (any other source of circles): the Zaragoza SLAM-school model of the Victoria Park
+# detections, 0.05 m + 1% of the range and 0.5 deg (BAILEY_DETECTOR.md section 4).
+DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
+    "paper": NoiseModel(0.011, 0.001, 0.00022, 0.0067),
+    "geometric": NoiseModel(0.007, 0.0014, 0.00031, 0.0061),
+    "bailey": NoiseModel(0.0092, 0.0015, 0.0019, 0.0028),
+    "other": NoiseModel(0.05, 0.01, math.radians(0.5), 0.0),
 }
 
 
@@ -49,17 +69,23 @@ def measurements_from_features(
     diag((s_r + s_r_per_m r)^2, s_b^2 + (s_t / r)^2).
     """
     c = np.asarray(features.circle_params, dtype=np.float64).reshape(-1, 3)
-    kind, (s_r, s_rm, s_b, s_t) = noise
+    kind, model = noise
     if kind == "fit":
         z, R = polar_cov_from_xy(c[:, :2], np.asarray(features.circle_cov)[:, :2, :2])
-        R = R + np.diag([floor[0] ** 2, floor[1] ** 2])
-    else:
-        z, _ = polar_cov_from_xy(c[:, :2], np.zeros((c.shape[0], 2, 2)))
-        R = np.zeros((c.shape[0], 2, 2))
-        R[:, 0, 0] = (s_r + s_rm * z[:, 0]) ** 2
-        with np.errstate(divide="ignore"):
-            R[:, 1, 1] = s_b**2 + (s_t / z[:, 0]) ** 2
-    return z, R
+        return z, R + np.diag([floor[0] ** 2, floor[1] ** 2])
+    z, _ = polar_cov_from_xy(c[:, :2], np.zeros((c.shape[0], 2, 2)))
+    return z, constant_noise(z, model)
+
+
+def constant_noise(z: np.ndarray, model) -> np.ndarray:
+    """(m, 2, 2) diagonal covariances of measurements z (m, 2) [range, bearing] under the
+    constant model (range_sigma_m, range_sigma_per_m, bearing_sigma_rad, cross_range_sigma_m)."""
+    s_r, s_rm, s_b, s_t = model
+    R = np.zeros((z.shape[0], 2, 2))
+    R[:, 0, 0] = (s_r + s_rm * z[:, 0]) ** 2
+    with np.errstate(divide="ignore"):
+        R[:, 1, 1] = s_b**2 + (s_t / z[:, 0]) ** 2
+    return R
 
 
 def polar_cov_from_xy(center_xy: np.ndarray, cov_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -3,8 +3,8 @@
 Per scan k (times `scan_t[k]`), five steps, each a function below:
 1. `_predict`: integrate the odometry from the previous scan (zero-order hold, `slam.vehicle`);
 2. `_measure`: the scan's circles (a method name for `features.extract_features`, a callable
-   (k, scan) -> Features, or a list of precomputed Features) as range-bearing measurements of
-   their centres in the laser frame (`slam.measurement`);
+   (k, scan) -> Features, a list of precomputed Features, or the sequence's own detections) as
+   range-bearing measurements of their centres in the laser frame (`slam.measurement`);
 3. `_associate`: the landmarks and tentative features that can be in view are offered to
    `association.associate` (IHGR by default, JCBB or NN), on the sub-state [pose, those
    landmarks] (the Jacobians are zero elsewhere, so this is exact and keeps the cost down);
@@ -14,15 +14,16 @@ Per scan k (times `scan_t[k]`), five steps, each a function below:
    measurements that gate with no landmark or tentative start new tentatives; tentatives not
    associated are dropped.
 
-The start pose is the truth at the first scan when the sequence has truth, else the first GPS
-fix (antenna offset removed; heading from `initial_heading_rad` or the first GPS motion of at
-least 2 m), else the origin. Everything the run did is returned as a `SlamLog`
-(`slam.log.LogBuilder` assembles it). The optional visualiser is any object with the methods of
-`NullVisualiser` (which does nothing).
+The start pose is the truth at the first scan when the sequence has truth, else a fit of the
+dead-reckoned antenna track to the GPS fixes of the first `gps_start_fit_m` metres
+(`slam.start`; the heading from `initial_heading_rad` when given), else the origin.
+Everything the run did is returned as a `SlamLog` (`slam.log.LogBuilder` assembles it). The
+optional visualiser is any object with the methods of `NullVisualiser` (which does nothing).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -31,9 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from features.types import Features
 from slam import se2
 from slam.config import SlamConfig
-from slam.ekf import EkfState, add_landmark, initial_state, predict, update
+from slam.ekf import Filter, initial_state, landmark_columns
 from slam.errors import SlamError
 from slam.log import (
     AMBIGUOUS,
@@ -45,8 +47,9 @@ from slam.log import (
     SlamLog,
 )
 from slam.mapping import Tentatives, sighting
-from slam.measurement import measurements_from_features
+from slam.measurement import constant_noise, measurements_from_features
 from slam.sequence import Sequence
+from slam.start import fit_gps_start
 from slam.vehicle import AckermannModel, Odometry, integrate
 
 __all__ = ["NullVisualiser", "run"]
@@ -76,7 +79,7 @@ class _Setup:
 
     seq: Sequence
     cfg: SlamConfig
-    features: Callable  # (k, scan) -> Features
+    features: Callable  # (k, scan) -> (Features, z (m, 2), R (m, 2, 2))
     associate: Callable  # the signature of association.associate minus `method`
     model: AckermannModel
     odometry: Odometry
@@ -113,8 +116,9 @@ def run(
 ) -> SlamLog:
     """EKF-SLAM over `sequence` (a `slam.Sequence`); returns the `SlamLog`.
 
-    features: a `features.extract_features` method name ("paper", "geometric", "bailey"), a
-        callable (k, scan) -> Features, or a list of N precomputed Features (laser frame).
+    features: a `features.extract_features` method name ("paper", "geometric", "bailey"),
+        "detections" (the sequence's precomputed detections), a callable (k, scan) -> Features,
+        or a list of N precomputed Features (laser frame).
     association: "ihgr", "jcbb", "nn", or a callable with the signature of
         `association.associate` minus `method` (z, R, z_hat, H, P, gate_prob=..., **params).
     feature_params: keyword arguments for `extract_features` (method name only).
@@ -126,24 +130,24 @@ def run(
     """
     s = _setup(sequence, features, association, config, feature_params)
     vis = visualiser or NullVisualiser()
-    pose0, cov0, start = _start(sequence, s.cfg, initial_heading_rad)
-    state = initial_state(pose0, cov0)
+    pose0, cov0, start = _start(s, initial_heading_rad)
+    state = Filter(initial_state(pose0, cov0))
     tent = Tentatives.empty()
     next_id = 0
     book = LogBuilder(np.asarray(sequence.scan_t, dtype=np.float64))
     N = sequence.n_scans
     for k in range(N):
         t = [time.perf_counter()]
-        state = _predict(s, state, k)
+        _predict(s, state, k)
         book.predicted(k, state.pose, state.pose_cov)
         t.append(time.perf_counter())
         scan, f, z, R, status = _measure(s, k)
         t.append(time.perf_counter())
         a = _associate(s, state, tent, z, R, status != OUT_OF_RANGE)
         t.append(time.perf_counter())
-        state, nis, n_used = _update(s, state, z, R, a, status, book, k)
+        nis, n_used = _update(s, state, z, R, a, status, book, k)
         t.append(time.perf_counter())
-        state, tent, next_id = _manage(s, state, tent, z, R, a, status, book, k, next_id)
+        tent, next_id = _manage(s, state, tent, z, R, a, status, book, k, next_id)
         t.append(time.perf_counter())
         book.scan_done(k, state, len(tent), z, R, status, n_used, nis, 2 * n_used, t)
         _visualise(vis, k, sequence, scan, f, state, tent, s.laser, z, status)
@@ -164,7 +168,29 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
     cfg = config or SlamConfig()
     if not isinstance(cfg, SlamConfig):
         raise SlamError(f"config: expected a SlamConfig, got {type(cfg).__name__}")
-    feat_fn, n_pre = _resolve_features(features, dict(feature_params or {}))
+    if features == "detections":
+        if not seq.has_detections:
+            raise SlamError(
+                "features: 'detections' needs a sequence with precomputed detections (det_scan, "
+                f"...); {seq.name or 'this sequence'!r} has none"
+            )
+        has_cov = seq.det_cov is not None
+        noise = cfg.noise_for(seq.det_method, has_cov)
+        if noise[0] == "fit" and not has_cov:
+            raise SlamError("measurement_noise: 'fit' needs det_cov in the sequence's detections")
+        feat_fn, n_pre = _detections_source(seq, noise, cfg), None
+    else:
+        if feature_params and not isinstance(features, str):
+            raise SlamError("feature_params: only for a features method name")
+        raw, n_pre = _resolve_features(features, dict(feature_params or {}))
+        noise = cfg.noise_for(raw.method)
+        floor = (cfg.fit_floor_range_m, cfg.fit_floor_bearing_rad)
+        feat_fn = _from_features(raw, noise, floor)
+        if isinstance(features, str) and not seq.has_ranges:
+            raise SlamError(
+                f"features: {features!r} extracts from raw scans, and this sequence has none; "
+                "use features='detections'"
+            )
     _check_runnable(seq, n_pre, cfg)
     a0 = float(seq.scan_angle_min)
     return _Setup(
@@ -174,8 +200,8 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
         associate=_resolve_association(association),
         model=AckermannModel.from_vehicle(seq.vehicle),
         odometry=Odometry(seq.odo_t, seq.odo_speed, seq.odo_steer),
-        laser=np.asarray(seq.laser_pose, dtype=np.float64),
-        noise=cfg.noise_for(feat_fn.method),
+        laser=np.asarray(seq.laser_pose if cfg.laser_pose is None else cfg.laser_pose, float),
+        noise=noise,
         floor=(cfg.fit_floor_range_m, cfg.fit_floor_bearing_rad),
         fov=(a0, a0 + float(seq.scan_angle_increment) * (seq.n_beams - 1)),
         max_range=min(float(seq.scan_max_range), cfg.max_feature_range_m),
@@ -186,92 +212,105 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
 # ---- the five steps -----------------------------------------------------------------------------
 
 
-def _predict(s: _Setup, state: EkfState, k: int) -> EkfState:
+def _predict(s: _Setup, state: Filter, k: int) -> None:
     """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan)."""
     if k == 0:
-        return state
+        return
     t = s.seq.scan_t
     p1, F, Q = integrate(s.model, state.pose, s.odometry, t[k - 1], t[k], s.cfg.odometry_noise)
-    return predict(state, p1, F, Q)
+    state.predict(p1, F, Q)
 
 
 def _measure(s: _Setup, k: int):
     """Step 2: scan k, its features, their measurements z (m, 2), R (m, 2, 2), and the status of
     each (NEW_TENTATIVE until decided; OUT_OF_RANGE beyond the usable range or not finite)."""
     scan = s.seq.scan(k)
-    f = s.features(k, scan)
-    z, R = measurements_from_features(f, s.noise, s.floor)
+    f, z, R = s.features(k, scan)
     status = np.full(z.shape[0], NEW_TENTATIVE, np.int64)
     usable = (z[:, 0] <= s.max_range) & np.all(np.isfinite(z), axis=1)
     status[~usable] = OUT_OF_RANGE
     return scan, f, z, R, status
 
 
-def _associate(s: _Setup, state: EkfState, tent: Tentatives, z, R, usable) -> _Association:
-    """Step 3: the usable measurements against the landmarks and tentatives that can be in view,
-    on the sub-state [pose, landmarks in view] (tentatives with their own covariance)."""
+def _associate(s: _Setup, state: Filter, tent: Tentatives, z, R, usable) -> _Association:
+    """Step 3: the usable measurements against the landmarks and tentatives that can be in view.
+
+    Each candidate's innovation covariance comes from its 5 x 5 block [pose, point] (tentatives
+    with their own covariance and no correlation with the pose). Candidates that gate with no
+    measurement, even at the wider new-feature gate, cannot be paired and do not make anything
+    ambiguous, so only the others are offered to the associator, on the sub-state [pose,
+    those landmarks, those tentatives]: exact, and the cost no longer grows with the map.
+    """
     cfg = s.cfg
     z_lm, H_lm = se2.observe(state.pose, state.landmarks_xy, s.laser)
-    vis_lm = _in_view(z_lm, s.max_range, s.fov, cfg)
     z_t, H_t = se2.observe(state.pose, tent.xy, s.laser)
-    vis_t = _in_view(z_t, s.max_range, s.fov, cfg)
-    lm_idx = np.arange(state.n_landmarks)[vis_lm]
-    t_idx = np.flatnonzero(vis_t)
-    n = lm_idx.size + t_idx.size
+    lm_idx = np.flatnonzero(_in_view(z_lm, s.max_range, s.fov, cfg))
+    t_idx = np.flatnonzero(_in_view(z_t, s.max_range, s.fov, cfg))
+    n_l, n = lm_idx.size, lm_idx.size + t_idx.size
     m = z.shape[0]
     assign = np.full(m, -1, np.int64)
     ambiguous = np.zeros(m, bool)
     use = np.flatnonzero(usable)
-    if use.size and n:
-        zh = np.concatenate([z_lm[vis_lm], z_t[vis_t]])
-        d_sub = 3 + 2 * n
-        Hv = np.concatenate([H_lm[vis_lm], H_t[vis_t]])  # (n, 2, 5)
-        H = np.zeros((n, 2, d_sub))
-        H[:, :, :3] = Hv[:, :, :3]
-        for j in range(n):
-            H[j, :, 3 + 2 * j : 5 + 2 * j] = Hv[j, :, 3:5]
-        cols = np.concatenate(
-            [[0, 1, 2], np.stack([3 + 2 * lm_idx, 4 + 2 * lm_idx], 1).reshape(-1)]
-        ).astype(np.int64)
-        P_sub = np.zeros((d_sub, d_sub))
-        nc = cols.size
-        P_sub[:nc, :nc] = state.P[np.ix_(cols, cols)]
-        for j, ti in enumerate(t_idx):
-            a = nc + 2 * j
-            P_sub[a : a + 2, a : a + 2] = tent.cov[ti]
+    if not (use.size and n):
+        return _Association(assign, ambiguous, lm_idx, t_idx)
+    zh = np.concatenate([z_lm[lm_idx], z_t[t_idx]])
+    H5 = np.concatenate([H_lm[lm_idx], H_t[t_idx]])  # (n, 2, 5)
+    C5 = np.zeros((n, 5, 5))  # covariance of [pose, point] of each candidate
+    cols = landmark_columns(lm_idx)
+    C5[:n_l] = state.P[cols[:, :, None], cols[:, None, :]]
+    C5[n_l:, :3, :3] = state.P[:3, :3]
+    C5[n_l:, 3:, 3:] = tent.cov[t_idx]
+    gated = _gates(z[use], R[use], zh, H5, C5, s.gate_new)  # (m_use, n)
+    ambiguous[use] = gated.any(axis=1)
+    cand = np.flatnonzero(gated.any(axis=0))
+    if cand.size:
+        nc = cand.size
+        H = np.zeros((nc, 2, 3 + 2 * nc))
+        H[:, :, :3] = H5[cand, :, :3]
+        for j in range(nc):
+            H[j, :, 3 + 2 * j : 5 + 2 * j] = H5[cand[j], :, 3:5]
+        P_sub = np.zeros((3 + 2 * nc, 3 + 2 * nc))
+        c_lm = cand[cand < n_l]
+        sub = np.concatenate([[0, 1, 2], landmark_columns(lm_idx[c_lm])[:, 3:].ravel()])
+        P_sub[: sub.size, : sub.size] = state.P[np.ix_(sub, sub)]
+        for j, c in enumerate(cand[cand >= n_l]):
+            a = sub.size + 2 * j
+            P_sub[a : a + 2, a : a + 2] = tent.cov[t_idx[c - n_l]]
         a_use = s.associate(
-            z[use], R[use], zh, H, P_sub, gate_prob=cfg.gate_prob, **cfg.association_params
+            z[use], R[use], zh[cand], H, P_sub, gate_prob=cfg.gate_prob, **cfg.association_params
         )
-        assign[use] = np.asarray(a_use, dtype=np.int64)
-        ambiguous[use] = (assign[use] < 0) & _gated_any(z[use], R[use], zh, H, P_sub, s.gate_new)
+        a_use = np.asarray(a_use, dtype=np.int64)
+        assign[use] = np.where(a_use >= 0, cand[np.maximum(a_use, 0)], -1)
+    ambiguous &= assign < 0
     return _Association(assign, ambiguous, lm_idx, t_idx)
 
 
-def _update(s: _Setup, state: EkfState, z, R, a: _Association, status, book: LogBuilder, k: int):
+def _update(s: _Setup, state: Filter, z, R, a: _Association, status, book: LogBuilder, k: int):
     """Step 4: one batch update with the measurements paired with map landmarks.
 
-    Returns the new state, the batch NIS (NaN without an update) and the number of
-    measurements used; sets their status to the landmark id and logs them."""
+    Returns the batch NIS (NaN without an update) and the number of measurements used; sets
+    their status to the landmark id and logs them."""
     n_l = a.lm_idx.size
     to_map = np.flatnonzero(a.assign >= 0)
     to_map = to_map[a.assign[to_map] < n_l]
     if not to_map.size:
-        return state, math.nan, 0
+        return math.nan, 0
     pos = a.lm_idx[a.assign[to_map]]
-    state, res = update(state, pos, z[to_map], R[to_map], s.laser)
+    res = state.update(pos, z[to_map], R[to_map], s.laser)
+    book.logdet[k] = res.logdet
     for j, i in enumerate(to_map):
         lid = int(state.landmark_ids[pos[j]])
         status[i] = lid
         S_j = res.S[2 * j : 2 * j + 2, 2 * j : 2 * j + 2]
         book.observation(k, int(i), lid, z[i], res.innovation[j], S_j)
-    return state, res.nis, int(to_map.size)
+    return res.nis, int(to_map.size)
 
 
-def _manage(s: _Setup, state, tent: Tentatives, z, R, a: _Association, status, book, k, next_id):
+def _manage(s: _Setup, state: Filter, tent, z, R, a: _Association, status, book, k, next_id):
     """Step 5: tentatives seen again count a sighting (and join the map at the policy's count),
     new measurements start tentatives, ambiguous ones are ignored, unseen tentatives drop out.
 
-    Returns the new state, tentatives and next free landmark id; sets each measurement's status.
+    Returns the new tentatives and next free landmark id; sets each measurement's status.
     """
     policy = s.cfg.map_policy
     n_l = a.lm_idx.size
@@ -294,7 +333,7 @@ def _manage(s: _Setup, state, tent: Tentatives, z, R, a: _Association, status, b
         next_id += 1
     if policy.confirm_scans == 1:  # every sighting joins the map at once
         for (_, _, lid), i in zip(new, new_meas):
-            state = add_landmark(state, z[i], R[i], s.laser, lid)
+            state.add_landmark(z[i], R[i], s.laser, lid)
             status[i] = CONFIRMED
             book.n_obs[lid] = 1
             book.first_scan[lid] = k
@@ -303,11 +342,11 @@ def _manage(s: _Setup, state, tent: Tentatives, z, R, a: _Association, status, b
     for ti in confirm:
         i = matched_meas[ti]
         lid = int(tent.ids[ti])
-        state = add_landmark(state, z[i], R[i], s.laser, lid)
+        state.add_landmark(z[i], R[i], s.laser, lid)
         status[i] = CONFIRMED
         book.n_obs[lid] = int(tent.hits[ti]) + 1
         book.first_scan[lid] = k
-    return state, tent_new, next_id
+    return tent_new, next_id
 
 
 # ---- helpers ------------------------------------------------------------------------------------
@@ -325,14 +364,18 @@ def _in_view(z_hat: np.ndarray, max_range: float, fov: tuple[float, float], cfg:
     return in_fov & (z_hat[:, 0] <= max_range + cfg.view_margin_m)
 
 
-def _gated_any(z, R, z_hat, H, P, gate: float) -> np.ndarray:
-    """(m,) bool: measurement i passes the individual gate with at least one prediction."""
-    HPH = np.einsum("nad,de,nbe->nab", H, P, H)  # (n, 2, 2)
+def _gates(z, R, z_hat, H5, C5, gate: float) -> np.ndarray:
+    """(m, n) bool: measurement i passes the individual gate of candidate j, with
+    S_ij = H5_j C5_j H5_j^T + R_i (2 x 2, solved in closed form)."""
+    HPH = np.einsum("nij,njk,nlk->nil", H5, C5, H5)  # (n, 2, 2)
+    S = HPH[None, :, :, :] + R[:, None, :, :]  # (m, n, 2, 2)
     nu = z[:, None, :] - z_hat[None, :, :]
     nu[..., 1] = se2.wrap_angle(nu[..., 1])
-    S = HPH[None, :, :, :] + R[:, None, :, :]
-    d2 = np.einsum("mna,mna->mn", nu, np.linalg.solve(S, nu[..., None])[..., 0])
-    return np.any(d2 <= gate, axis=1)
+    a, b, c = S[..., 0, 0], 0.5 * (S[..., 0, 1] + S[..., 1, 0]), S[..., 1, 1]
+    d2 = (c * nu[..., 0] ** 2 - 2.0 * b * nu[..., 0] * nu[..., 1] + a * nu[..., 1] ** 2) / (
+        a * c - b * b
+    )
+    return d2 <= gate
 
 
 def _check_runnable(seq: Sequence, n_features: int | None, cfg: SlamConfig) -> None:
@@ -378,8 +421,9 @@ def _check_runnable(seq: Sequence, n_features: int | None, cfg: SlamConfig) -> N
         )
 
 
-def _start(seq: Sequence, cfg: SlamConfig, initial_heading_rad: float | None):
-    """(pose (3,), covariance (3, 3), "truth" | "gps" | "origin") of the first scan."""
+def _start(s: _Setup, initial_heading_rad: float | None):
+    """(pose (3,), covariance (3, 3), how) of the first scan: "truth", "gps" or "origin"."""
+    seq, cfg = s.seq, s.cfg
     t0 = float(seq.scan_t[0])
     truth_t = seq.truth_t
     if truth_t is not None and not truth_t[0] <= t0 <= truth_t[-1]:
@@ -397,28 +441,34 @@ def _start(seq: Sequence, cfg: SlamConfig, initial_heading_rad: float | None):
             log.warning("initial_heading_rad ignored: the run starts from the truth")
         return pose, np.diag(np.square(cfg.initial_pose_sigma)), "truth"
     if seq.gps_t is not None:
-        xy = seq.gps_xy
-        if initial_heading_rad is not None:
-            th = float(initial_heading_rad)
-        else:
-            far = np.flatnonzero(np.hypot(*(xy - xy[0]).T) >= 2.0)
-            if far.size == 0:
-                raise SlamError(
-                    "initial_heading_rad: the GPS never moves 2 m from its first fix, so the "
-                    "start heading is unknown; give --initial-heading"
-                )
-            d = xy[far[0]] - xy[0]
-            th = math.atan2(d[1], d[0])
-        ant = seq.gps_pose if seq.gps_pose is not None else seq.laser_pose
-        p = xy[0] - se2.rotate(th, ant[:2])
-        if abs(float(seq.gps_t[0]) - t0) > 1.0:
+        if float(seq.gps_t[0]) - t0 > 1.0:
             log.warning(
-                "first GPS fix at %.3f s is %.3f s from the first scan",
+                "first GPS fix at %.3f s is %.3f s after the first scan",
                 float(seq.gps_t[0]),
                 float(seq.gps_t[0]) - t0,
             )
-        cov = np.diag([cfg.gps_sigma_m**2, cfg.gps_sigma_m**2, cfg.initial_heading_sigma_rad**2])
-        return np.array([p[0], p[1], th]), cov, "gps"
+        ant = seq.gps_pose if seq.gps_pose is not None else s.laser
+        fit = fit_gps_start(
+            t0,
+            seq.gps_t,
+            seq.gps_xy,
+            ant,
+            s.model,
+            s.odometry,
+            cfg.gps_start_fit_m,
+            initial_heading_rad,
+        )
+        floors = np.array([cfg.gps_sigma_m, cfg.gps_sigma_m, cfg.initial_heading_sigma_rad]) ** 2
+        cov = fit.cov + np.diag(np.maximum(floors - np.diag(fit.cov), 0.0))
+        log.info(
+            "start from GPS: %d fixes over %.1f m (%d rejected), rms %.2f m, heading %.2f deg",
+            fit.n_fixes,
+            fit.distance_m,
+            fit.n_rejected,
+            fit.rms_m,
+            math.degrees(fit.pose[2]),
+        )
+        return fit.pose, cov, "gps"
     th = 0.0 if initial_heading_rad is None else float(initial_heading_rad)
     return np.array([0.0, 0.0, th]), np.diag(np.square(cfg.initial_pose_sigma)), "origin"
 
@@ -446,6 +496,43 @@ def _resolve_association(association) -> Callable:
 
     call.method = method
     return call
+
+
+def _from_features(feat_fn: Callable, noise, floor) -> Callable:
+    """(k, scan) -> (Features, z, R) from a features callable."""
+
+    def measure(k, scan):
+        f = feat_fn(k, scan)
+        z, R = measurements_from_features(f, noise, floor)
+        return f, z, R
+
+    measure.method = feat_fn.method
+    return measure
+
+
+def _detections_source(seq: Sequence, noise, cfg: SlamConfig) -> Callable:
+    """(k, scan) -> (Features, z, R) from the sequence's precomputed detections: z as stored,
+    R their covariance (plus the fit floor) or the constant model of their method; the Features
+    (circles at the detections) are for the visualiser."""
+    kind, model = noise
+    floor = np.diag([cfg.fit_floor_range_m**2, cfg.fit_floor_bearing_rad**2])
+
+    def measure(k, scan):
+        z, radius, cov = seq.detections(k)
+        R = cov + floor if kind == "fit" else constant_noise(z, model)
+        n = z.shape[0]
+        c, s_ = np.cos(z[:, 1]), np.sin(z[:, 1])
+        f = dataclasses.replace(
+            Features.empty(float(seq.scan_t[k]), seq.det_method, seq.n_beams),
+            circle_params=np.column_stack([z[:, 0] * c, z[:, 0] * s_, radius]),
+            circle_cov=np.zeros((n, 3, 3)),
+            circle_beams=np.zeros((n, 2), np.int64),
+            circle_rms_m=np.full(n, np.nan),
+        )
+        return f, z, R
+
+    measure.method = seq.det_method
+    return measure
 
 
 def _resolve_features(features, feature_params: dict) -> tuple[Callable, int | None]:
@@ -477,7 +564,7 @@ def _resolve_features(features, feature_params: dict) -> tuple[Callable, int | N
 
 
 def _visualise(
-    vis, k, seq: Sequence, scan, f, state: EkfState, tent: Tentatives, laser, z, status
+    vis, k, seq: Sequence, scan, f, state: Filter, tent: Tentatives, laser, z, status
 ) -> None:
     if type(vis) is NullVisualiser:
         return

@@ -24,9 +24,17 @@ VEHICLE_MODELS: dict[str, tuple[tuple[str, ...], dict[str, float]]] = {
     "ackermann": (("wheelbase_m",), {"encoder_offset_m": 0.0})
 }
 
-REQUIRED = ("scan_t", "scan_ranges", "scan_angle_min", "scan_angle_increment", "laser_pose")
+REQUIRED = ("scan_t", "scan_angle_min", "scan_angle_increment", "laser_pose")
 OPTIONAL = (
+    "scan_ranges",
+    "scan_n_beams",
     "scan_max_range",
+    "det_scan",
+    "det_range",
+    "det_bearing",
+    "det_radius",
+    "det_cov",
+    "det_method",
     "odo_t",
     "odo_speed",
     "odo_steer",
@@ -40,6 +48,7 @@ OPTIONAL = (
     "scan_labels",
     "name",
 )
+DETECTIONS = ("det_scan", "det_range", "det_bearing", "det_radius")
 NO_RETURN_LABEL = -1  # scan_labels: the beam hit nothing (or nothing within range)
 MIXED_LABEL = -2  # scan_labels: a mixed return between two objects at a depth jump
 
@@ -130,6 +139,83 @@ def _vehicle(value) -> dict:
     return out
 
 
+def _beam_count(value, ranges: np.ndarray | None) -> int:
+    """B from scan_n_beams or from scan_ranges (equal when both are given)."""
+    if value is None:
+        if ranges is None:
+            raise SlamError(
+                "Sequence.scan_n_beams: needed when there is no scan_ranges (it sets the field of "
+                "view of the detections)"
+            )
+        return int(ranges.shape[1])
+    v = _scalar("scan_n_beams", value)
+    if v != int(v) or v < 1:
+        raise SlamError(f"Sequence.scan_n_beams: must be a whole number >= 1, got {value!r}")
+    if ranges is not None and int(v) != ranges.shape[1]:
+        raise SlamError(
+            f"Sequence.scan_n_beams: {int(v)} but scan_ranges has {ranges.shape[1]} beams"
+        )
+    return int(v)
+
+
+def _detections(seq, n_scans: int) -> dict:
+    """The checked detection fields (empty dict when absent) plus `_det_bounds`."""
+    given = {k: getattr(seq, k) for k in DETECTIONS}
+    present = [k for k, v in given.items() if v is not None]
+    if not present:
+        for k in ("det_cov", "det_method"):
+            if getattr(seq, k) is not None:
+                raise SlamError(f"Sequence.{k}: given without the detections (det_scan, ...)")
+        return {}
+    if len(present) != len(DETECTIONS):
+        missing = sorted(set(DETECTIONS) - set(present))
+        raise SlamError(
+            f"Sequence.{missing[0]}: detections need {list(DETECTIONS)}; missing {missing}"
+        )
+    scan = np.asarray(given["det_scan"])
+    if scan.ndim != 1 or (scan.size and scan.dtype.kind not in "iu"):
+        raise SlamError(f"Sequence.det_scan: expected (D,) integers, got {scan.dtype} {scan.shape}")
+    scan = scan.astype(np.int64)
+    D = scan.size
+    if D and (scan.min() < 0 or scan.max() >= n_scans):
+        raise SlamError(f"Sequence.det_scan: scan indices must be in 0..{n_scans - 1}")
+    if np.any(np.diff(scan) < 0):
+        raise SlamError("Sequence.det_scan: must be sorted by scan (non-decreasing)")
+    out = {"det_scan": readonly(scan)}
+    for k in ("det_range", "det_bearing", "det_radius"):
+        a = _arr(k, given[k], 1)
+        if a.shape != (D,):
+            raise SlamError(f"Sequence.{k}: expected shape ({D},) like det_scan, got {a.shape}")
+        out[k] = a
+    _fin("det_range", out["det_range"])
+    _fin("det_bearing", out["det_bearing"])
+    if D and out["det_range"].min() <= 0:
+        raise SlamError("Sequence.det_range: ranges must be > 0 m")
+    if np.any(out["det_radius"] < 0):
+        raise SlamError("Sequence.det_radius: radii must be >= 0 m (NaN when unknown)")
+    if seq.det_cov is not None:
+        cov = _arr("det_cov", np.asarray(seq.det_cov).reshape(-1, 4), 2, width=4).reshape(-1, 2, 2)
+        if cov.shape[0] != D:
+            raise SlamError(
+                f"Sequence.det_cov: expected shape ({D}, 2, 2), got {np.shape(seq.det_cov)}"
+            )
+        _fin("det_cov", cov)
+        a, b, c = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
+        if (
+            np.any(np.abs(b - cov[:, 1, 0]) > 1e-9 * (a + c))
+            or np.any(a <= 0)
+            or np.any(a * c - b * b <= 0)
+        ):
+            raise SlamError("Sequence.det_cov: each covariance must be symmetric positive definite")
+        out["det_cov"] = readonly(cov.copy())
+    method = seq.det_method if seq.det_method is not None else "other"
+    if not isinstance(method, str) or not method:
+        raise SlamError(f"Sequence.det_method: expected a non-empty string, got {seq.det_method!r}")
+    out["det_method"] = method
+    out["_det_bounds"] = np.searchsorted(scan, np.arange(n_scans + 1))
+    return out
+
+
 @dataclass(frozen=True, eq=False)
 class Sequence:
     """One run: laser scans plus whatever odometry, GPS and truth came with them.
@@ -140,11 +226,18 @@ class Sequence:
 
     Required
       scan_t: (N,) s, strictly increasing.
-      scan_ranges: (N, B) m, NaN = no return.
       scan_angle_min, scan_angle_increment: rad, laser frame (0 = laser x-axis, CCW positive);
         increment > 0 and the B beams span less than 360 degrees.
       laser_pose: (3,) [x, y, theta] of the laser in the vehicle frame (rear-axle centre).
+      and the raw scans, or precomputed detections, or both:
+      scan_ranges: (N, B) m, NaN = no return.
+      det_scan (D,) int scan index (non-decreasing, 0..N-1), det_range (D,) m (> 0) and
+        det_bearing (D,) rad of each detected trunk's centre in the laser frame, det_radius (D,) m
+        (>= 0, NaN when unknown); det_cov (D, 2, 2) optional covariance of (range, bearing);
+        det_method: the extractor that made them ("bailey", ...), which names the noise model.
     Optional (None when absent)
+      scan_n_beams: B, the beams of a scan; needed without scan_ranges (the field of view is
+        B beams from scan_angle_min), checked against scan_ranges otherwise.
       scan_max_range: m; readings at or beyond it are no return (inf when absent).
       odo_t (M,) s, odo_speed (M,) m/s as measured by the encoder, odo_steer (M,) rad front wheel
         (|steer| <= pi/2); all three or none.
@@ -163,11 +256,18 @@ class Sequence:
     """
 
     scan_t: np.ndarray
-    scan_ranges: np.ndarray
     scan_angle_min: float
     scan_angle_increment: float
     laser_pose: np.ndarray
+    scan_ranges: np.ndarray | None = None
+    scan_n_beams: int | None = None
     scan_max_range: float = float("inf")
+    det_scan: np.ndarray | None = None
+    det_range: np.ndarray | None = None
+    det_bearing: np.ndarray | None = None
+    det_radius: np.ndarray | None = None
+    det_cov: np.ndarray | None = None
+    det_method: str | None = None
     odo_t: np.ndarray | None = None
     odo_speed: np.ndarray | None = None
     odo_steer: np.ndarray | None = None
@@ -189,19 +289,27 @@ class Sequence:
         n = scan_t.shape[0]
         if n == 0:
             raise SlamError("Sequence.scan_t: no scans (length 0)")
-        ranges = _arr("scan_ranges", self.scan_ranges, 2)
-        if ranges.shape[0] != n or ranges.shape[1] == 0:
-            raise SlamError(
-                f"Sequence.scan_ranges: expected shape (N, B) with N = len(scan_t) = {n} and "
-                f"B >= 1, got {ranges.shape}"
-            )
         put("scan_t", scan_t)
-        put("scan_ranges", ranges)
+        if self.scan_ranges is None and self.det_scan is None:
+            raise SlamError(
+                "Sequence.scan_ranges: a sequence needs raw scans (scan_ranges) or precomputed "
+                "detections (det_scan, det_range, det_bearing, det_radius), or both"
+            )
+        ranges = None
+        if self.scan_ranges is not None:
+            ranges = _arr("scan_ranges", self.scan_ranges, 2)
+            if ranges.shape[0] != n or ranges.shape[1] == 0:
+                raise SlamError(
+                    f"Sequence.scan_ranges: expected shape (N, B) with N = len(scan_t) = {n} "
+                    f"and B >= 1, got {ranges.shape}"
+                )
+            put("scan_ranges", ranges)
+        n_beams = _beam_count(self.scan_n_beams, ranges)
+        put("scan_n_beams", n_beams)
         amin = _scalar("scan_angle_min", self.scan_angle_min)
         inc = _scalar("scan_angle_increment", self.scan_angle_increment)
         if inc <= 0:
             raise SlamError(f"Sequence.scan_angle_increment: must be > 0 rad, got {inc!r}")
-        n_beams = ranges.shape[1]
         if (n_beams - 1) * inc >= 2 * math.pi:
             raise SlamError(
                 f"Sequence.scan_angle_increment: {n_beams} beams of {inc!r} rad span "
@@ -214,6 +322,8 @@ class Sequence:
             raise SlamError(f"Sequence.scan_max_range: must be > 0 m (or inf), got {mr!r}")
         put("scan_max_range", mr)
         put("laser_pose", _pose("laser_pose", self.laser_pose))
+        for name, v in _detections(self, n).items():
+            put(name, v)
 
         # Odometry: all three or none.
         odo = {k: getattr(self, k) for k in ("odo_t", "odo_speed", "odo_steer")}
@@ -267,10 +377,10 @@ class Sequence:
             lab = np.asarray(self.scan_labels)
             if lab.dtype.kind not in "iu":
                 raise SlamError(f"Sequence.scan_labels: expected integers, got dtype {lab.dtype}")
-            if lab.shape != ranges.shape:
+            if ranges is None or lab.shape != ranges.shape:
                 raise SlamError(
-                    f"Sequence.scan_labels: expected shape {ranges.shape} like scan_ranges, "
-                    f"got {lab.shape}"
+                    f"Sequence.scan_labels: expected shape {(n, n_beams)} like scan_ranges, "
+                    f"got {lab.shape}" + ("" if ranges is not None else " (no scan_ranges)")
                 )
             if lab.size and lab.min() < MIXED_LABEL:
                 raise SlamError(
@@ -287,12 +397,33 @@ class Sequence:
 
     @property
     def n_beams(self) -> int:
-        return int(self.scan_ranges.shape[1])
+        return int(self.scan_n_beams)
+
+    @property
+    def has_ranges(self) -> bool:
+        return self.scan_ranges is not None
+
+    @property
+    def has_detections(self) -> bool:
+        return self.det_scan is not None
+
+    def detections(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Scan k's precomputed detections: z (m, 2) [range_m, bearing_rad] (laser frame),
+        radius (m,) m, and their (m, 2, 2) covariance or None."""
+        if self.det_scan is None:
+            raise SlamError(f"Sequence.det_scan: the sequence {self.name!r} has no detections")
+        a, b = self._det_bounds[k], self._det_bounds[k + 1]
+        z = np.stack([self.det_range[a:b], self.det_bearing[a:b]], axis=1)
+        cov = None if self.det_cov is None else self.det_cov[a:b]
+        return z, self.det_radius[a:b], cov
 
     def scan(self, k: int) -> Scan:
-        """Scan k as a `features.Scan`."""
+        """Scan k as a `features.Scan` (every beam a no-return when there are no raw scans)."""
+        ranges = (
+            self.scan_ranges[k] if self.scan_ranges is not None else np.full(self.n_beams, np.nan)
+        )
         return Scan(
-            self.scan_ranges[k],
+            ranges,
             self.scan_angle_min,
             self.scan_angle_increment,
             stamp_s=float(self.scan_t[k]),

@@ -39,6 +39,12 @@ def full_kwargs() -> dict:
         truth_landmarks=np.array([[5.0, 1.0, 0.2], [8.0, -2.0, 0.35]]),
         scan_labels=labels,
         name="unit test run",
+        det_scan=np.array([0, 0, 2, 4]),
+        det_range=np.array([5.0, 7.5, 6.2, 12.0]),
+        det_bearing=np.array([-0.4, 0.3, 0.0, 1.2]),
+        det_radius=np.array([0.2, 0.3, np.nan, 0.15]),
+        det_cov=np.array([np.diag([0.01, 1e-4])] * 4),
+        det_method="bailey",
     )
 
 

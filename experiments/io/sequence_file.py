@@ -26,7 +26,8 @@ __all__ = ["load_sequence", "save_sequence"]
 
 log = logging.getLogger(__name__)
 
-_SCALARS = ("scan_angle_min", "scan_angle_increment", "scan_max_range")
+_SCALARS = ("scan_angle_min", "scan_angle_increment", "scan_max_range", "scan_n_beams")
+_STRINGS = ("vehicle", "name", "det_method")
 
 
 def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
@@ -99,7 +100,7 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
                 raise DataError(
                     f"{path}: variable {k!r} is corrupt or unreadable ({exc})"
                 ) from None
-            if k in ("vehicle", "name"):
+            if k in _STRINGS:
                 if a.dtype.kind != "U" or a.ndim != 0:
                     raise DataError(
                         f"{path}: variable {k!r} must be a string, got dtype {a.dtype} "

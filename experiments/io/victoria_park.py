@@ -27,6 +27,7 @@ from slam import Sequence
 
 __all__ = [
     "VP_LASER_POSE",
+    "VP_N_SCANS",
     "VP_VEHICLE",
     "VP_MAX_RANGE_M",
     "VP_N_RAW_SCANS",
@@ -41,6 +42,7 @@ VP_LASER_POSE = (3.78, 0.50, 0.0)  # (L + a, b, 0) in the vehicle frame, m, m, r
 VP_VEHICLE = {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
 VP_MAX_RANGE_M = 80.0  # 8000 cm: "no reflection" at or beyond
 VP_N_RAW_SCANS = 2000
+VP_N_SCANS = 7249
 VP_ANGLE_MIN_RAD = -math.pi / 2
 VP_ANGLE_INCREMENT_RAD = math.pi / 360
 RANGE_MASK = 8191  # low 13 bits: range in cm
@@ -148,31 +150,39 @@ def load_reference_detections(
     return t_s, dets
 
 
-def load_victoria_park(root: Path | str | None = None, n_scans: int | None = None) -> Sequence:
-    """The Victoria Park run as a `Sequence`: the 2000 raw scans, odometry and GPS.
+def load_victoria_park(
+    root: Path | str | None = None, n_scans: int | None = None, *, full: bool = False
+) -> Sequence:
+    """The Victoria Park run as a `Sequence`, with odometry, GPS and the published detections.
 
     root: the `victoria_park` folder (default: `experiments.io.paths.victoria_park_dir()`).
-    n_scans: keep the first n_scans scans (1..2000; default all 2000). Odometry (61945 rows,
-        the whole 26 min) and GPS (4466 fixes) are always complete: they run on past the
-        last raw scan (448.865 s).
+    full: False (default): the 2000 scans that have raw laser data (scans 1-2000, 21.8-448.9 s),
+        with the published detections beside them; True: all 7249 scans (1548 s of driving) with
+        the published detections only (`scan_n_beams` 361, no raw ranges).
+    n_scans: keep the first n_scans scans (1..2000, or 1..7249 with full). Odometry (61945 rows,
+        the whole 26 min) and GPS (4466 fixes) are always complete.
     Scans: ranges (word & 8191) / 100 m, >= 80 m -> NaN, scan_max_range 80 m; angle_min -pi/2,
     increment pi/360 (laser frame, x forward). gps_xy = [Lo_m, La_m] (x east, y north, m);
-    gps_pose = laser position (the antenna sits at the laser).
+    gps_pose = laser position (the antenna sits at the laser). Detections (det_method
+    "bailey", the original detector's output): det_range = its range to the trunk centre,
+    det_bearing = its bearing - pi/2 (laser frame), det_radius = its diameter / 2.
     """
+    limit = VP_N_SCANS if full else VP_N_RAW_SCANS
     if n_scans is not None and (
         isinstance(n_scans, bool)
         or not isinstance(n_scans, (int, np.integer))
-        or not 1 <= n_scans <= VP_N_RAW_SCANS
+        or not 1 <= n_scans <= limit
     ):
-        raise ConfigError(f"n_scans: must be an integer in 1..{VP_N_RAW_SCANS}, got {n_scans!r}")
+        raise ConfigError(f"n_scans: must be an integer in 1..{limit}, got {n_scans!r}")
     root = _root(root)
-    n = VP_N_RAW_SCANS if n_scans is None else int(n_scans)
-
-    ranges = load_raw_sick_ranges(root)[:n]
-    t_all, _ = load_reference_detections(root)
-    if t_all.size < VP_N_RAW_SCANS:
+    n = limit if n_scans is None else int(n_scans)
+    t_all, dets = load_reference_detections(root)
+    if t_all.size < limit:
         raise DataError(f"{root / VP_FILES['reference']}: TLsr has only {t_all.size} times")
     scan_t = t_all[:n]
+    ranges = None if full else load_raw_sick_ranges(root)[:n]
+    k = np.concatenate([np.full(d.shape[1], i) for i, d in enumerate(dets[:n])]).astype(np.int64)
+    d = np.concatenate(dets[:n], axis=1)
 
     dr = load_mat(root, "odometry", ("time", "speed", "steering"))
     odo_ms = _column("odometry", dr, "time")
@@ -187,10 +197,16 @@ def load_victoria_park(root: Path | str | None = None, n_scans: int | None = Non
     return Sequence(
         scan_t=scan_t,
         scan_ranges=ranges,
+        scan_n_beams=361,
         scan_angle_min=VP_ANGLE_MIN_RAD,
         scan_angle_increment=VP_ANGLE_INCREMENT_RAD,
         laser_pose=np.array(VP_LASER_POSE),
         scan_max_range=VP_MAX_RANGE_M,
+        det_scan=k,
+        det_range=d[0],
+        det_bearing=d[1] - math.pi / 2,
+        det_radius=d[2] / 2,
+        det_method="bailey",
         odo_t=odo_ms.astype(np.float64) / 1000.0,
         odo_speed=speed,
         odo_steer=steer,
@@ -198,5 +214,5 @@ def load_victoria_park(root: Path | str | None = None, n_scans: int | None = Non
         gps_t=gps_ms.astype(np.float64) / 1000.0,
         gps_xy=np.stack([lo, la], axis=1),
         gps_pose=np.array(VP_LASER_POSE),
-        name="victoria_park",
+        name="victoria_park (full run, published detections)" if full else "victoria_park",
     )

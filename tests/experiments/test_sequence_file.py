@@ -37,7 +37,7 @@ def test_round_trip_every_field(tmp_path):
 
 def test_round_trip_minimal_run(tmp_path):
     kw = full_kwargs()
-    seq = Sequence(**{k: kw[k] for k in REQUIRED})
+    seq = Sequence(**{k: kw[k] for k in (*REQUIRED, "scan_ranges")})
     back = load_sequence(save_sequence(seq, tmp_path / "min.npz"))
     assert_same(seq, back)
     assert back.odo_t is None and back.vehicle is None and back.scan_max_range == math.inf
@@ -122,7 +122,7 @@ def _write_npz(path, **arrays):
 
 def _valid_arrays() -> dict:
     seq = Sequence(**full_kwargs())
-    out = {k: np.asarray(getattr(seq, k)) for k in REQUIRED}
+    out = {k: np.asarray(getattr(seq, k)) for k in (*REQUIRED, "scan_ranges")}
     out["odo_t"], out["odo_speed"], out["odo_steer"] = seq.odo_t, seq.odo_speed, seq.odo_steer
     out["vehicle"] = np.array(json.dumps(seq.vehicle))
     return out

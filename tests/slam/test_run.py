@@ -203,7 +203,7 @@ def test_start_from_gps_with_heading_from_motion_or_option():
     log = run(g, initial_heading_rad=0.5)
     assert log.pose[0, 2] == pytest.approx(0.5)
     still = dataclasses.replace(seq, gps_t=t[:3], gps_xy=np.zeros((3, 2)))
-    with pytest.raises(ValueError, match="initial_heading"):
+    with pytest.raises(SlamError, match="start heading is unknown"):
         run(still)
     origin = run(seq)
     assert origin.start == "origin" and np.all(origin.pose[0] == 0)
@@ -305,3 +305,85 @@ def test_impossible_encoder_offset_is_a_clear_error():
     )
     with pytest.raises(ValueError, match="encoder_offset_m"):
         run(bad, features="paper")
+
+
+def test_gps_start_fits_heading_and_position_through_noise_and_a_jump():
+    """A curving drive, GPS at 5 Hz with 0.1 m noise and one 15 m jump: the fit over the first
+    20 m finds the start within centimetres and a fraction of a degree, drops the jump, and its
+    covariance is about as large as the error."""
+    from slam.start import fit_gps_start
+
+    seq = drive_sequence(2.0, 0.15, n_scans=60, with_truth=True)
+    rng = np.random.default_rng(5)
+    t = np.arange(seq.odo_t[0], seq.odo_t[-1], 0.2)
+    truth = interpolate_poses(t, seq.truth_t, seq.truth_pose)
+    xy = np.array([se2.compose(p, LASER)[:2] for p in truth]) + 0.1 * rng.standard_normal(
+        (t.size, 2)
+    )
+    xy[20] += [15.0, 0.0]
+    car = AckermannModel(1.2)
+    odo = Odometry(seq.odo_t, seq.odo_speed, seq.odo_steer)
+    fit = fit_gps_start(seq.scan_t[0], t, xy, np.array(LASER), car, odo, 20.0)
+    err = fit.pose - seq.truth_pose[0]
+    assert np.hypot(*err[:2]) < 0.1 and abs(err[2]) < math.radians(0.5)
+    assert fit.n_rejected == 1 and 19 <= fit.distance_m <= 21 and 0.08 < fit.rms_m < 0.13
+    sd = np.sqrt(np.diag(fit.cov))
+    assert np.all(sd > 0) and sd[2] < math.radians(0.5)
+    fixed = fit_gps_start(seq.scan_t[0], t, xy, np.array(LASER), car, odo, 20.0, heading_rad=0.3)
+    assert (
+        fixed.pose[2] == pytest.approx(0.3, abs=1e-12)
+        and np.hypot(*(fixed.pose[:2] - seq.truth_pose[0, :2])) < 0.1
+    )
+
+
+def as_detections(seq: Sequence, feats: list, method: str) -> Sequence:
+    """`seq` carrying the circles of `feats` as precomputed detections (range and bearing of
+    each centre, its radius)."""
+    k = np.concatenate([np.full(f.n_circles, i) for i, f in enumerate(feats)]).astype(np.int64)
+    c = np.concatenate([f.circle_params for f in feats])
+    return dataclasses.replace(
+        seq,
+        det_scan=k,
+        det_range=np.hypot(c[:, 0], c[:, 1]),
+        det_bearing=np.arctan2(c[:, 1], c[:, 0]),
+        det_radius=c[:, 2],
+        det_method=method,
+    )
+
+
+@pytest.mark.parametrize("method", ["ihgr", "jcbb"])
+def test_detections_drive_the_filter_exactly_as_the_same_circles(method):
+    seq = drive_sequence(1.5, 0.1, n_scans=40)
+    feats = point_features(seq, LANDMARKS, np.random.default_rng(7), extra={5: [(6.0, 1.0)]})
+    by_features = run(seq, features=feats, association=method)
+    by_detections = run(
+        as_detections(seq, feats, "paper"), features="detections", association=method
+    )
+    assert by_detections.features_method == "paper"
+    np.testing.assert_allclose(by_detections.pose, by_features.pose, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(by_detections.pose_cov, by_features.pose_cov, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(by_detections.meas_status, by_features.meas_status)
+    np.testing.assert_allclose(by_detections.landmark_xy, by_features.landmark_xy, atol=1e-12)
+    assert by_features.landmark_xy.shape[0] == 4
+
+
+def test_detections_noise_model_and_errors():
+    seq = drive_sequence(1.5, 0.0, n_scans=12)
+    feats = point_features(seq, LANDMARKS, np.random.default_rng(8))
+    det = as_detections(seq, feats, "bailey")
+    cov = np.array([np.diag([0.04**2, 0.002**2])] * det.det_scan.size)
+    with_cov = dataclasses.replace(det, det_cov=cov)
+    lg = run(with_cov, features="detections")  # auto: the detections' own covariance
+    np.testing.assert_allclose(lg.meas_R, cov)
+    lg = run(with_cov, features="detections", config=SlamConfig(measurement_noise="constant"))
+    z = lg.meas_z
+    expected = 0.0092 + 0.0015 * z[:, 0]  # the bailey constant model
+    np.testing.assert_allclose(np.sqrt(lg.meas_R[:, 0, 0]), expected)
+    with pytest.raises(SlamError, match="'fit' needs det_cov"):
+        run(det, features="detections", config=SlamConfig(measurement_noise="fit"))
+    with pytest.raises(SlamError, match="has none"):
+        run(seq, features="detections")
+    no_ranges = dataclasses.replace(det, scan_ranges=None, scan_n_beams=361)
+    assert run(no_ranges, features="detections").landmark_xy.shape[0] == 4
+    with pytest.raises(SlamError, match="extracts from raw scans"):
+        run(no_ranges, features="paper")

@@ -47,16 +47,36 @@ def test_scan_k_is_a_features_scan():
 
 def test_minimal_sequence_has_none_for_optional_fields():
     kw = full_kwargs()
-    seq = Sequence(**{k: kw[k] for k in REQUIRED})
-    assert seq.scan_max_range == math.inf
+    seq = Sequence(**{k: kw[k] for k in (*REQUIRED, "scan_ranges")})
+    assert seq.scan_max_range == math.inf and seq.scan_n_beams == B
     for name in OPTIONAL:
-        if name not in ("scan_max_range", "name"):
+        if name not in ("scan_ranges", "scan_n_beams", "scan_max_range", "name"):
             assert getattr(seq, name) is None, name
-    assert seq.name == ""
+    assert seq.name == "" and not seq.has_detections
 
 
 def test_sequence_errors_are_value_errors():
     assert issubclass(SlamError, ValueError)
+
+
+def test_detections_only_sequence():
+    kw = full_kwargs()
+    dets = {k: kw[k] for k in ("det_scan", "det_range", "det_bearing", "det_radius", "det_cov")}
+    seq = Sequence(**{k: kw[k] for k in REQUIRED}, scan_n_beams=361, det_method="bailey", **dets)
+    assert not seq.has_ranges and seq.has_detections and seq.n_beams == 361
+    scan = seq.scan(1)
+    assert scan.n_beams == 361 and not scan.valid.any() and scan.stamp_s == seq.scan_t[1]
+    z, r, cov = seq.detections(0)
+    np.testing.assert_array_equal(z, [[5.0, -0.4], [7.5, 0.3]])
+    np.testing.assert_array_equal(r, [0.2, 0.3])
+    assert cov.shape == (2, 2, 2)
+    z, r, cov = seq.detections(1)  # a scan without detections
+    assert z.shape == (0, 2) and r.shape == (0,) and cov.shape == (0, 2, 2)
+    assert seq.detections(4)[0].tolist() == [[12.0, 1.2]]
+    with pytest.raises(SlamError, match="scan_n_beams: needed"):
+        Sequence(**{k: kw[k] for k in REQUIRED}, **dets)
+    with pytest.raises(SlamError, match="raw scans .* or precomputed detections"):
+        Sequence(**{k: kw[k] for k in REQUIRED})
 
 
 BAD_RUNS = [
@@ -108,6 +128,19 @@ BAD_RUNS = [
     ({"scan_labels": np.zeros((N, B))}, ["scan_labels", "integers"]),
     ({"scan_labels": np.full((N, B), -3)}, ["scan_labels", ">= -2"]),
     ({"name": 5}, ["name", "string"]),
+    ({"scan_n_beams": B + 1}, ["scan_n_beams", f"{B + 1} but scan_ranges has {B}"]),
+    ({"scan_n_beams": 2.5}, ["scan_n_beams", "whole number"]),
+    ({"det_scan": [0, 2, 0, 4]}, ["det_scan", "sorted"]),
+    ({"det_scan": [0, 0, 2, N]}, ["det_scan", f"0..{N - 1}"]),
+    ({"det_scan": [0.0, 0.0, 2.0, 4.0]}, ["det_scan", "integers"]),
+    ({"det_range": [5.0, -1.0, 6.2, 12.0]}, ["det_range", "> 0"]),
+    ({"det_range": [5.0, 7.5, 6.2]}, ["det_range", "(4,) like det_scan"]),
+    ({"det_bearing": [0.0, np.nan, 0.0, 0.0]}, ["det_bearing", "finite"]),
+    ({"det_radius": [0.2, -0.3, 0.1, 0.1]}, ["det_radius", ">= 0"]),
+    ({"det_radius": None}, ["det_radius", "missing"]),
+    ({"det_cov": np.array([np.diag([0.01, -1e-4])] * 4)}, ["det_cov", "positive definite"]),
+    ({"det_cov": np.zeros((3, 2, 2))}, ["det_cov", "(4, 2, 2)"]),
+    ({"det_method": ""}, ["det_method", "non-empty"]),
 ]
 
 

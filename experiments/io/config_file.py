@@ -1,0 +1,62 @@
+"""SLAM configuration files (TOML): read with the standard `tomllib`, written with `tomli_w`.
+
+The file's keys are the fields of `slam.SlamConfig` (nested tables for `odometry_noise`,
+`map_policy`, `constant_noise.<method>` and `association_params`); keys left out keep their
+defaults. `SlamConfig.from_dict` refuses unknown keys, wrong types and impossible values, and
+the error names the file and the key. Presets: datasets/configs/*.toml.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import tomli_w
+
+from experiments.errors import ConfigError, DataError
+from experiments.io.paths import REPO_ROOT
+from slam import SlamConfig, SlamError
+
+__all__ = ["PRESETS_DIR", "config_toml", "load_slam_config", "preset_path"]
+
+PRESETS_DIR = REPO_ROOT / "datasets" / "configs"
+
+
+def preset_path(name_or_path: str | Path) -> Path:
+    """A preset name (datasets/configs/NAME.toml) or a path to a TOML file."""
+    p = Path(name_or_path)
+    if p.suffix != ".toml" and not p.exists():
+        candidate = PRESETS_DIR / f"{name_or_path}.toml"
+        if candidate.is_file():
+            return candidate
+        known = sorted(q.stem for q in PRESETS_DIR.glob("*.toml"))
+        raise ConfigError(f"config {name_or_path!r}: not a file nor a preset (presets: {known})")
+    return p
+
+
+def load_slam_config(path: str | Path) -> SlamConfig:
+    """The `SlamConfig` in a TOML file (or preset name); `DataError`/`ConfigError` naming the
+    file and what is wrong."""
+    path = preset_path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DataError(f"config file not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: cannot be read ({exc})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise DataError(f"{path}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise DataError(f"{path}: nested too deeply to be a configuration") from None
+    try:
+        return SlamConfig.from_dict(data)
+    except SlamError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+def config_toml(cfg: SlamConfig, header: str = "") -> str:
+    """The configuration as TOML text (what `load_slam_config` reads back)."""
+    lines = "".join(f"# {h}\n" for h in header.splitlines()) if header else ""
+    return lines + tomli_w.dumps(cfg.to_dict())
