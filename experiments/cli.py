@@ -44,6 +44,7 @@ class SlamFeatures(StrEnum):
     paper = "paper"
     geometric = "geometric"
     bailey = "bailey"
+    detections = "detections"
 
 
 class Association(StrEnum):
@@ -70,7 +71,9 @@ class ExperimentName(StrEnum):
     table3 = "table3"
     table4 = "table4"
     association = "association"
+    victoria_park = "victoria-park"
     noise_calibration = "noise-calibration"
+    victoria_park_calibration = "victoria-park-calibration"
 
 
 def project_errors() -> tuple[type[BaseException], ...]:
@@ -225,7 +228,8 @@ def simulate_drive(
 @handle_errors
 def reproduce(
     names: Annotated[
-        list[ExperimentName] | None, typer.Argument(help="experiments to run (default: all)")
+        list[ExperimentName] | None,
+        typer.Argument(help="experiments to run (default: all but victoria-park-calibration)"),
     ] = None,
     quick: Annotated[bool, typer.Option(help="small-sample version")] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("results"),
@@ -243,20 +247,74 @@ def reproduce(
 @app.command("slam")
 @handle_errors
 def slam_cmd(
-    input: Annotated[Path, typer.Argument(help="sequence file (.npz), see datasets/FORMAT.md")],
-    features: Annotated[SlamFeatures, typer.Option(help="circle extractor")] = SlamFeatures.paper,
+    input: Annotated[
+        Path | None, typer.Argument(help="sequence file (.npz), see datasets/FORMAT.md")
+    ] = None,
+    features: Annotated[
+        SlamFeatures,
+        typer.Option(help="circle extractor on the raw scans, or the sequence's detections"),
+    ] = SlamFeatures.paper,
+    features_file: Annotated[
+        Path | None,
+        typer.Option(help="features JSON from `trunkslam extract` to use instead of --features"),
+    ] = None,
     association: Annotated[Association, typer.Option(help="data association")] = Association.ihgr,
+    config: Annotated[
+        str | None, typer.Option(help="SLAM settings: a TOML file or a preset of datasets/configs")
+    ] = None,
+    dump_config: Annotated[
+        bool, typer.Option(help="print the resolved settings as TOML and exit")
+    ] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("slam_out"),
     rerun: Annotated[Path | None, typer.Option(help="also write a rerun recording")] = None,
     initial_heading: Annotated[
         float | None, typer.Option(help="start heading, rad, when starting from GPS")
     ] = None,
 ) -> None:
-    """EKF-SLAM over a sequence: trajectory (TUM and CSV with covariance), map, summary."""
+    """EKF-SLAM over a sequence: trajectory (TUM and CSV with covariance), map, config, summary."""
+    from experiments.io.config_file import config_toml, load_slam_config
     from experiments.pipeline.slam import run_slam
+    from experiments.render.progress import Progress
+    from slam import SlamConfig
 
-    s = run_slam(input, features.value, association.value, out, rerun, initial_heading)
-    typer.echo(f"{s['n_scans']} scans, {s['landmarks']} landmarks, {s['seconds']:.1f} s -> {out}/")
+    cfg = load_slam_config(config) if config is not None else SlamConfig()
+    if dump_config:
+        typer.echo(config_toml(cfg, f"trunkslam slam settings ({config or 'defaults'})"), nl=False)
+        return
+    if input is None:
+        raise typer.BadParameter("a sequence file is needed", param_hint="INPUT")
+    progress = Progress()
+    s = run_slam(
+        input,
+        features.value,
+        association.value,
+        out,
+        rerun,
+        initial_heading,
+        config=cfg,
+        features_file=features_file,
+        progress=lambda done, total: (
+            progress("slam", done, total) if done % 100 == 0 or done == total else None
+        ),
+    )
+    gps = s.get("gps")
+    err = f", {gps['all_rmse']:.2f} m RMS from GPS" if gps else ""
+    typer.echo(
+        f"{s['n_scans']} scans, {s['landmarks']} landmarks{err}, {s['seconds']:.1f} s -> {out}/"
+    )
+
+
+@app.command("export-reference")
+@handle_errors
+def export_reference_cmd(
+    input: Annotated[Path, typer.Argument(help="sequence file (.npz) with GPS or truth")],
+    out: Annotated[Path, typer.Option(help="output folder")] = Path("reference"),
+) -> None:
+    """Write a sequence's GPS track (and, for simulated runs, the truth) as TUM files for evo."""
+    from experiments.pipeline.reference import export_reference
+
+    written = export_reference(input, out)
+    typer.echo(f"{', '.join(p.name for p in written)} -> {out}/")
 
 
 @bench_app.command("extract")

@@ -83,6 +83,7 @@ class SlamConfig:
     gps_start_fit_m: float = 50.0
     gps_sigma_m: float = 1.0
     initial_heading_sigma_rad: float = math.radians(5.0)
+    first_estimates_jacobians: bool = False
     max_odometry_gap_s: float = 1.0
     max_feature_range_m: float = math.inf
     view_margin_m: float = 2.0
@@ -226,6 +227,10 @@ def _convert(tp, value, path: str):
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise SlamError(f"{path}: expected a whole number, got {value!r}")
+        return value
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise SlamError(f"{path}: expected true or false, got {value!r}")
         return value
     if tp is str:
         if not isinstance(value, str):

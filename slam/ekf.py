@@ -160,10 +160,13 @@ class Filter(_Estimate):
     as `pose` or `P` change with the filter: copy what must be kept.
     """
 
-    def __init__(self, state: EkfState) -> None:
+    def __init__(self, state: EkfState, first_estimates: bool = False) -> None:
         self.x = np.array(state.x, dtype=np.float64)
         self.P = np.array(state.P, dtype=np.float64)
         self.landmark_ids = np.array(state.landmark_ids, dtype=np.int64)
+        self.first_estimates = bool(first_estimates)
+        self.first_xy = self.landmarks_xy.copy()  # each landmark's first estimate
+        self.prior_pose = self.x[:3].copy()  # the pose after the last prediction
 
     def snapshot(self) -> EkfState:
         return EkfState(self.x, self.P, self.landmark_ids)
@@ -173,6 +176,15 @@ class Filter(_Estimate):
 
         Only the vehicle rows and columns change (the landmarks are static): cost O(n).
         """
+        if self.first_estimates:  # FEJ: the Jacobian from the prior poses (see the module doc)
+            F = np.array(
+                [
+                    [1.0, 0.0, -(pose1[1] - self.prior_pose[1])],
+                    [0.0, 1.0, pose1[0] - self.prior_pose[0]],
+                    [0.0, 0.0, 1.0],
+                ]
+            )
+            self.prior_pose = np.array(pose1, dtype=np.float64)
         P = self.P
         Pvv = F @ P[:3, :3] @ F.T + Q
         P[:3, :3] = 0.5 * (Pvv + Pvv.T)
@@ -199,6 +211,8 @@ class Filter(_Estimate):
         if np.unique(idx).size != k:
             raise SlamError("update.idx: a landmark appears twice in one batch")
         z_hat, H5 = observe(self.pose, self.landmarks_xy[idx], laser_pose)
+        if self.first_estimates:  # FEJ: Jacobians at the landmarks' first estimates
+            H5 = observe(self.pose, self.first_xy[idx], laser_pose)[1]
         nu = z - z_hat
         nu[:, 1] = wrap_angle(nu[:, 1])
         # The columns the batch touches, [x, y, theta, then each landmark's pair], and H on them.
@@ -248,6 +262,7 @@ class Filter(_Estimate):
         self.P = P
         self.x = np.concatenate([self.x, m])
         self.landmark_ids = np.concatenate([self.landmark_ids, np.array([landmark_id], np.int64)])
+        self.first_xy = np.concatenate([self.first_xy, m[None, :]])
 
 
 def initial_state(pose: np.ndarray, pose_cov: np.ndarray | None = None) -> EkfState:

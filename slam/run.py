@@ -131,7 +131,7 @@ def run(
     s = _setup(sequence, features, association, config, feature_params)
     vis = visualiser or NullVisualiser()
     pose0, cov0, start = _start(s, initial_heading_rad)
-    state = Filter(initial_state(pose0, cov0))
+    state = Filter(initial_state(pose0, cov0), first_estimates=s.cfg.first_estimates_jacobians)
     tent = Tentatives.empty()
     next_id = 0
     book = LogBuilder(np.asarray(sequence.scan_t, dtype=np.float64))

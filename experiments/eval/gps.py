@@ -25,7 +25,7 @@ import numpy as np
 from slam import interpolate_poses, se2
 from slam.start import procrustes_2d
 
-__all__ = ["GpsScore", "flag_jumps", "score_against_gps"]
+__all__ = ["GpsScore", "flag_jumps", "score_against_gps", "score_sequence", "top_speed"]
 
 
 def flag_jumps(t_s: np.ndarray, xy: np.ndarray, max_speed_mps: float, slack_m: float = 1.0):
@@ -129,3 +129,20 @@ def score_against_gps(
         errors=e,
         jump=jump,
     )
+
+
+def top_speed(seq) -> float:
+    """The speed above which a GPS fix counts as a jump: 1.25 times the fastest odometry reading
+    of the run (at least 1 m/s); 20 m/s without odometry."""
+    if seq.odo_speed is None:
+        return 20.0
+    return max(1.25 * float(np.max(np.abs(seq.odo_speed))), 1.0)
+
+
+def score_sequence(seq, scan_t: np.ndarray, pose: np.ndarray, laser_pose=None) -> GpsScore:
+    """`score_against_gps` for a run over `seq` (its GPS, its antenna: gps_pose, else the laser,
+    `laser_pose` when the run used a calibrated one)."""
+    ant = seq.gps_pose if seq.gps_pose is not None else seq.laser_pose
+    if seq.gps_pose is None and laser_pose is not None:
+        ant = laser_pose
+    return score_against_gps(scan_t, pose, seq.gps_t, seq.gps_xy, ant, top_speed(seq))

@@ -36,6 +36,7 @@ __all__ = [
     "load_reference_detections",
     "load_raw_sick_ranges",
     "load_raw_sick_words",
+    "load_ss2002_reference",
 ]
 
 VP_LASER_POSE = (3.78, 0.50, 0.0)  # (L + a, b, 0) in the vehicle frame, m, m, rad
@@ -52,6 +53,11 @@ VP_FILES = {
     "gps": "aa3_gpsx.mat",
     "sick": "partial_raw_scans_ss2002/sick.mat",
     "reference": "reference_detections/VictoriaParkSinSincronizar.mat",
+}
+# the 2002 SLAM summer school's solution over scans 1-2000 (a reference, not ground truth)
+SS2002_FILES = {
+    "vehicle": "partial_raw_scans_ss2002/vehicle.mat",
+    "features": "partial_raw_scans_ss2002/features.mat",
 }
 
 _HOW_TO_GET = (
@@ -216,3 +222,35 @@ def load_victoria_park(
         gps_pose=np.array(VP_LASER_POSE),
         name="victoria_park (full run, published detections)" if full else "victoria_park",
     )
+
+
+def load_ss2002_reference(root: Path | str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The 2002 SLAM summer school's solution over scans 1-2000 (Zaragoza, J. Neira and J.
+    Tardos): its vehicle poses (2000, 3) [x, y, phi] (`vehicle.ground`, relative to the first
+    scan's pose) and its map of 145 trees (145, 3) [x, y, r] in the same frame. A SLAM result,
+    not surveyed truth; compare a map with it after aligning the two paths."""
+    import scipy.io
+
+    root = _root(root)
+    out = []
+    for key, var in (("vehicle", "vehicle"), ("features", "features")):
+        path = root / SS2002_FILES[key]
+        try:
+            mat = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
+        except FileNotFoundError:
+            raise DataError(f"{path}: not found; {_HOW_TO_GET}") from None
+        except Exception as exc:  # scipy raises many types for a corrupt file
+            raise DataError(f"{path}: cannot be read as a MATLAB file ({exc})") from None
+        if var not in mat:
+            raise DataError(f"{path}: missing variable {var!r}")
+        out.append(mat[var])
+    vehicle, feats = out
+    try:
+        ground = np.array([np.asarray(g.x, float).reshape(3) for g in vehicle.ground])
+        xy = np.asarray(feats.x, float).reshape(-1, 2)
+        r = np.asarray(feats.radius, float).reshape(-1)
+    except (AttributeError, ValueError, TypeError) as exc:
+        raise DataError(f"{root / SS2002_FILES['vehicle']}: unexpected layout ({exc})") from None
+    if ground.shape != (VP_N_RAW_SCANS, 3) or r.shape[0] != xy.shape[0]:
+        raise DataError(f"{root}: the SS2002 reference has an unexpected size {ground.shape}")
+    return ground, np.column_stack([xy, r])

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from experiments.io.provenance import git_commit, versions
 from experiments.io.writers import dumps_json, write_atomic
-from experiments.paper.runner import EXPERIMENTS, RunContext, get_experiment
+from experiments.paper.runner import DEFAULT_EXPERIMENTS, RunContext, get_experiment
 
 __all__ = ["run_experiments"]
 
@@ -24,7 +24,7 @@ def run_experiments(
     progress: Callable[[str, int, int], None] | None = None,
 ) -> list[Path]:
     """Run the named experiments (all when empty) into out_dir; returns the files written."""
-    names = list(dict.fromkeys(names)) or list(EXPERIMENTS)
+    names = list(dict.fromkeys(names)) or list(DEFAULT_EXPERIMENTS)
     groups: dict[Callable, list[str]] = {}  # names that share a function are one run
     for n in names:  # unknown names fail before any work
         groups.setdefault(get_experiment(n), []).append(n)

@@ -11,7 +11,14 @@ import numpy as np
 
 from experiments.errors import ConfigError
 
-__all__ = ["EXPERIMENTS", "Experiment", "RunContext", "experiment_seed", "get_experiment"]
+__all__ = [
+    "DEFAULT_EXPERIMENTS",
+    "EXPERIMENTS",
+    "Experiment",
+    "RunContext",
+    "experiment_seed",
+    "get_experiment",
+]
 
 
 @dataclass
@@ -51,12 +58,13 @@ def experiment_seed(seed: int, name: str) -> np.random.SeedSequence:
 
 @dataclass(frozen=True)
 class Experiment:
-    """A registered experiment: its function ("module:function", called with a RunContext) and
-    what it shows. Names that share a function (table1 and table2, table3 and table4) are one
-    run."""
+    """A registered experiment: its function ("module:function", called with a RunContext),
+    what it shows, and whether `trunkslam reproduce` without names runs it. Names that share a
+    function (table1 and table2, table3 and table4) are one run."""
 
     target: str
     about: str = ""
+    default: bool = True
 
 
 # Order is the run order.
@@ -74,10 +82,20 @@ EXPERIMENTS: dict[str, Experiment] = {
     "association": Experiment(
         "experiments.paper.association:run", about="IHGR, JCBB and NN: rates and optimality"
     ),
+    "victoria-park": Experiment(
+        "experiments.paper.victoria_park:run",
+        about="EKF-SLAM on the real run against GPS (needs the data; skipped without)",
+    ),
     "noise-calibration": Experiment(
         "experiments.paper.calibration:run", about="fit of the constant measurement-noise model"
     ),
+    "victoria-park-calibration": Experiment(
+        "experiments.paper.vp_calibration:run",
+        about="the ute's noise and laser yaw from scans 1-2000 (15 min; not in the default run)",
+        default=False,
+    ),
 }
+DEFAULT_EXPERIMENTS = tuple(name for name, e in EXPERIMENTS.items() if e.default)
 
 
 def get_experiment(name: str) -> Callable[[RunContext], None]:

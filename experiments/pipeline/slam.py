@@ -7,12 +7,15 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.eval.gps import score_sequence
 from experiments.eval.poses import nees, pose_errors
+from experiments.io.config_file import config_toml
+from experiments.io.features_json import load_features_json
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import dumps_json, json_types, write_atomic
 from experiments.render.viz import open_recording
-from slam import Sequence, SlamConfig, SlamLog, interpolate_poses
+from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, se2
 from slam import run as slam_run
 
 __all__ = ["run_slam", "summarise"]
@@ -27,36 +30,53 @@ def run_slam(
     initial_heading: float | None = None,
     *,
     config: SlamConfig | None = None,
+    features_file: Path | str | None = None,
+    progress=None,
 ) -> dict:
     """Run EKF-SLAM over the sequence file `input_path` and write the results into out_dir.
 
+    features: an extractor ("paper", "geometric", "bailey") run on the raw scans, or
+        "detections" (the sequence's own precomputed detections); features_file: a features
+        JSON from `trunkslam extract` instead (then `features` is ignored).
+    Writes
     trajectory.tum   the rear-axle centre at the scan times, `t x y z qx qy qz qw` (z = 0,
                      rotation about z by theta), readable by evo
+    trajectory_gps_antenna.tum  the same path at the GPS antenna (sequences with GPS), to compare
+                     with `trunkslam export-reference`'s gps.tum
     trajectory.csv   t, x, y, theta and the upper triangle of the pose covariance
     map.csv          id, x, y, covariance (xx, xy, yy), scan it joined the map, scans seen in
+    config.toml      the resolved configuration (`--config` reads it back)
     summary.json     input, methods, start, counts, timings (mean, median, p95, max per phase),
-                     the configuration, and when the sequence has truth the Table-3 errors and
-                     the mean NEES
+                     errors against GPS (`experiments.eval.gps`) when the sequence has GPS, and
+                     against the truth (Table-3 errors, mean NEES) when it has truth
     Returns the summary. initial_heading: start heading in radians (GPS starts). config: the
-    filter's settings (default `SlamConfig()`: the simulated Cycab's odometry noise and the
-    calibrated measurement noise of the tree park).
+    filter's settings (default `SlamConfig()`: the simulated Cycab's).
     """
     seq = load_sequence(input_path)
+    cfg = config or SlamConfig()
+    source = features
+    if features_file is not None:
+        source = load_features_json(features_file, seq.n_scans, seq.n_beams)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rec = open_recording(rerun_path)
     t0 = time.perf_counter()
     lg = slam_run(
         seq,
-        features=features,
+        features=source,
         association=association,
-        config=config,
+        config=cfg,
         visualiser=rec,
         initial_heading_rad=initial_heading,
+        progress=progress,
     )
     seconds = time.perf_counter() - t0
     rec.close()
     write_atomic(out / "trajectory.tum", trajectory_tum(lg.scan_t, lg.pose))
+    if seq.gps_t is not None:
+        ant = seq.gps_pose if seq.gps_pose is not None else _laser(seq, cfg)
+        ant_xy = np.array([se2.compose(p, ant) for p in lg.pose])
+        write_atomic(out / "trajectory_gps_antenna.tum", trajectory_tum(lg.scan_t, ant_xy))
     write_atomic(out / "trajectory.csv", trajectory_csv(lg.scan_t, lg.pose, lg.pose_cov))
     write_atomic(
         out / "map.csv",
@@ -68,15 +88,25 @@ def run_slam(
             lg.landmark_n_obs,
         ),
     )
-    summary = summarise(lg, seq, seconds)
-    summary = {"input": str(input_path), **summary}
+    write_atomic(out / "config.toml", config_toml(cfg, f"trunkslam slam {input_path}"))
+    summary = summarise(lg, seq, seconds, laser_pose=_laser(seq, cfg))
+    summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
     write_atomic(out / "summary.json", dumps_json(summary))
     return summary
 
 
-def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
-    """Counts, timings per phase, the configuration, and errors against the truth (scans the
-    truth covers, the first left out since the run may start there)."""
+def _str(p) -> str | None:
+    return None if p is None else str(p)
+
+
+def _laser(seq: Sequence, cfg: SlamConfig) -> np.ndarray:
+    return np.asarray(seq.laser_pose if cfg.laser_pose is None else cfg.laser_pose, float)
+
+
+def summarise(lg: SlamLog, seq: Sequence, seconds: float, laser_pose=None) -> dict:
+    """Counts, timings per phase, the configuration, errors against GPS (when the sequence has
+    GPS) and against the truth (scans the truth covers, the first left out since the run may
+    start there)."""
     timing = {}
     for k, v in lg.timing_s.items():
         timing[k] = {
@@ -91,6 +121,7 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
         "association": lg.association_method,
         "n_scans": lg.n_scans,
         "start": lg.start,
+        "start_pose": [float(v) for v in lg.pose[0]],
         "landmarks": int(lg.landmark_xy.shape[0]),
         "circles_per_scan": float(lg.n_features.mean()),
         "associated_per_scan": float(lg.n_associated.mean()),
@@ -98,6 +129,8 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
         "timing": timing,
         "config": json_types(lg.config),
     }
+    if seq.gps_t is not None:
+        summary["gps"] = score_sequence(seq, lg.scan_t, lg.pose, laser_pose).to_dict()
     inside = (
         np.zeros(seq.n_scans, bool)
         if seq.truth_t is None

@@ -391,3 +391,75 @@ def _plot_with_bounds(axes, series, key: str, what: str) -> None:
                 s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0, label=f"{s['label']} 3 sigma"
             )
             ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)
+
+
+# ---- Victoria Park ------------------------------------------------------------------------------
+
+
+def plot_vp_map(
+    gps_xy: np.ndarray,
+    paths: dict[str, np.ndarray],
+    map_xy: np.ndarray,
+    title: str,
+    path: Path,
+    reference_xy: np.ndarray | None = None,
+) -> Path:
+    """The GPS fixes (grey dots), estimated antenna paths (one line each), the map's landmarks
+    (black +) and, when given, reference landmarks (open circles), world frame."""
+    fig, ax = plt.subplots(figsize=(9, 9))
+    ax.plot(gps_xy[:, 0], gps_xy[:, 1], ".", ms=2, color="0.6", label="GPS fixes", zorder=1)
+    colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
+    for (label, xy), c in zip(paths.items(), colors):
+        ax.plot(xy[:, 0], xy[:, 1], "-", lw=0.9, color=c, label=label, zorder=2)
+    if len(map_xy):
+        ax.plot(map_xy[:, 0], map_xy[:, 1], "+", ms=5, color="k", label="map landmarks", zorder=3)
+    if reference_xy is not None and len(reference_xy):
+        ref = reference_xy
+        label = "reference trees (SLAM school 2002)"
+        ax.plot(ref[:, 0], ref[:, 1], "o", ms=6, mfc="none", color="tab:orange", label=label)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return save(fig, path)
+
+
+def plot_vp_timeseries(
+    gps_t: np.ndarray,
+    errors: dict[str, np.ndarray],
+    jumps: np.ndarray,
+    gaps: Sequence[tuple[float, float]],
+    scan_t: np.ndarray,
+    nis_in: np.ndarray,
+    map_size: dict[str, np.ndarray],
+    title: str,
+    path: Path,
+) -> Path:
+    """Three panels against time: distance to each GPS fix (jumps marked x, GPS gaps over 2 s
+    shaded), the fraction of recent scans whose NIS is inside its 95% bounds (100-scan window),
+    and the map size."""
+    fig, axes = plt.subplots(3, 1, figsize=(11, 9), sharex=True)
+    colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
+    for a, b in gaps:
+        for ax in axes:
+            ax.axvspan(a, b, color="0.9", lw=0)
+    for (label, e), c in zip(errors.items(), colors):
+        axes[0].plot(gps_t[~jumps], e[~jumps], ".", ms=2, color=c, label=label)
+        axes[0].plot(gps_t[jumps], e[jumps], "x", ms=5, color=c)
+    axes[0].set_ylabel("distance to GPS fix (m)")
+    axes[0].set_yscale("log")
+    axes[0].legend(fontsize=8, markerscale=4, title="x: fixes flagged as jumps; grey: no GPS")
+    axes[1].plot(scan_t, nis_in, "-", color="tab:blue", lw=1)
+    axes[1].axhline(0.95, color="k", ls="--", lw=0.8)
+    axes[1].set_ylabel("NIS inside 95% bounds\n(100-scan window)")
+    axes[1].set_ylim(0, 1.05)
+    for (label, n), c in zip(map_size.items(), colors):
+        axes[2].plot(scan_t[: n.size], n, "-", color=c, lw=1, label=label)
+    axes[2].set_ylabel("landmarks in the map")
+    axes[2].set_xlabel("time (s)")
+    axes[0].set_title(title)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    return save(fig, path)

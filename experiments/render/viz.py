@@ -66,24 +66,36 @@ class NullRecorder:
 class Recorder(NullRecorder):
     """Writes a `.rrd` recording (open it with `rerun FILE.rrd`)."""
 
-    def __init__(self, path: Path | str, app_id: str = "trunkslam"):
+    def __init__(self, path: Path | str, app_id: str = "trunkslam", decimate: int = 1):
+        """decimate: log the scene of every this-many scans only (paths still grow every scan);
+        a whole Victoria Park run at 1 would be gigabytes."""
         self.path = Path(path)
+        self.decimate = max(int(decimate), 1)
+        self._k = 0
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.rec = rr.RecordingStream(app_id)
         self.rec.save(str(self.path))
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
 
+    def _skip(self) -> bool:
+        return self._k % self.decimate != 0
+
     def set_scan(self, k: int, stamp_s: float | None = None) -> None:
         """Timeline `scan` = k; with the scan's time, also timeline `time` (seconds)."""
+        self._k = int(k)
         self.rec.set_time("scan", sequence=int(k))
         if stamp_s is not None:
             self.rec.set_time("time", duration=float(stamp_s))
 
     def log_scan(self, scan: Scan, pose=None, path: str = "world/scan") -> None:
+        if self._skip():
+            return
         pts = scan.points_xy[scan.valid]
         self.rec.log(path, rr.Points2D(_transform(pts, pose), radii=0.03, colors=[180, 180, 180]))
 
     def log_features(self, scan: Scan, features: Features, pose=None, path="world/features"):
+        if self._skip():
+            return
         pts = scan.points_xy
         strips, colors = [], []
         for (a, b), k in zip(features.segment_beams, features.segment_kind):
@@ -121,6 +133,8 @@ class Recorder(NullRecorder):
         cov = np.asarray(cov, float)
         path = self.__dict__.setdefault("_est_path", [])
         path.append(pose[:2].copy())
+        if self._skip():
+            return
         head = 1.0 * np.array([np.cos(pose[2]), np.sin(pose[2])])
         sig_th = float(np.sqrt(max(cov[2, 2], 0.0)))
         self.rec.log(
@@ -144,6 +158,8 @@ class Recorder(NullRecorder):
         )
 
     def log_landmarks(self, xy, cov, ids) -> None:
+        if self._skip():
+            return
         xy = np.asarray(xy, float).reshape(-1, 2)
         cov = np.asarray(cov, float).reshape(-1, 2, 2)
         labels = [f"L{int(i)}" for i in ids]
@@ -160,10 +176,14 @@ class Recorder(NullRecorder):
         )
 
     def log_tentatives(self, xy) -> None:
+        if self._skip():
+            return
         xy = np.asarray(xy, float).reshape(-1, 2)
         self.rec.log("world/tentative", rr.Points2D(xy, radii=0.06, colors=[[255, 200, 0]]))
 
     def log_associations(self, from_xy, to_xy) -> None:
+        if self._skip():
+            return
         a = np.asarray(from_xy, float).reshape(-1, 2)
         b = np.asarray(to_xy, float).reshape(-1, 2)
         self.rec.log(
@@ -178,6 +198,8 @@ class Recorder(NullRecorder):
         pose = np.asarray(pose, float)
         path = self.__dict__.setdefault("_truth_path", [])
         path.append(pose[:2].copy())
+        if self._skip():
+            return
         self.rec.log(
             "world/truth/vehicle",
             rr.Arrows2D(
@@ -195,6 +217,7 @@ class Recorder(NullRecorder):
         self.rec.flush()
 
 
-def open_recording(path: Path | str | None) -> NullRecorder:
-    """A Recorder writing to `path`, or a NullRecorder when path is None."""
-    return NullRecorder() if path is None else Recorder(path)
+def open_recording(path: Path | str | None, decimate: int = 1) -> NullRecorder:
+    """A Recorder writing to `path` (see `Recorder` for decimate), or a NullRecorder when path
+    is None."""
+    return NullRecorder() if path is None else Recorder(path, decimate=decimate)

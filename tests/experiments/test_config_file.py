@@ -1,0 +1,112 @@
+"""SLAM configuration files: round trips, presets, and errors that name the key."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+
+import pytest
+from typer.testing import CliRunner
+
+from experiments.cli import app
+from experiments.errors import ConfigError, DataError
+from experiments.io.config_file import PRESETS_DIR, config_toml, load_slam_config
+from slam import MapPolicy, OdometryNoise, SlamConfig
+from slam.measurement import DEFAULT_CONSTANT_NOISE, NoiseModel
+
+runner = CliRunner()
+
+CUSTOM = SlamConfig(
+    odometry_noise=OdometryNoise(0.5, 0.07),
+    measurement_noise="constant",
+    constant_noise={"bailey": NoiseModel(0.03, 0.002, 0.004, 0.0)},
+    laser_pose=(3.78, 0.5, -0.02),
+    gate_prob=0.99,
+    map_policy=MapPolicy(confirm_scans=2, drop_after_missed=3),
+    first_estimates_jacobians=True,
+    association_params={"p_detect": 0.8},
+    max_feature_range_m=40.0,
+)
+
+
+def test_a_configuration_round_trips_through_toml(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text(config_toml(CUSTOM, "a header\nover two lines"))
+    back = load_slam_config(path)
+    assert back == CUSTOM
+    assert back.constant_noise["bailey"] == NoiseModel(0.03, 0.002, 0.004, 0.0)
+    assert back.constant_noise["paper"] == DEFAULT_CONSTANT_NOISE["paper"]  # defaults kept
+    assert back.noise_for("bailey") == ("constant", NoiseModel(0.03, 0.002, 0.004, 0.0))
+    assert path.read_text().startswith("# a header\n# over two lines\n")
+    # infinity survives TOML too
+    inf = tmp_path / "inf.toml"
+    inf.write_text(config_toml(SlamConfig()))
+    assert load_slam_config(inf).max_feature_range_m == math.inf
+
+
+def test_partial_files_keep_the_defaults(tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_text("gate_prob = 0.95\n[odometry_noise]\nspeed_sigma_mps = 1\n")
+    cfg = load_slam_config(path)
+    assert cfg == dataclasses.replace(
+        SlamConfig(), gate_prob=0.95, odometry_noise=OdometryNoise(speed_sigma_mps=1.0)
+    )
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("gate_prbo = 0.9\n", ["gate_prbo", "unknown setting"]),
+        ("[odometry_noise]\nspeed_sigma = 1.0\n", ["odometry_noise.speed_sigma", "unknown"]),
+        ('gate_prob = "high"\n', ["gate_prob", "expected a number"]),
+        ("gate_prob = 1.5\n", ["gate_prob", "(0, 1)"]),
+        ("[odometry_noise]\nspeed_sigma_mps = -0.1\n", ["speed_sigma_mps", ">= 0"]),
+        ("[map_policy]\nconfirm_scans = 2.5\n", ["map_policy.confirm_scans", "whole number"]),
+        ("laser_pose = [1.0, 2.0]\n", ["laser_pose", "3 numbers"]),
+        ("first_estimates_jacobians = 1\n", ["first_estimates_jacobians", "true or false"]),
+        ("[constant_noise.bailey]\nrange_sigma_m = 0.1\n", ["constant_noise.bailey", "missing"]),
+        ("odometry_noise = 3\n", ["odometry_noise", "table"]),
+    ],
+)
+def test_bad_settings_name_the_key(tmp_path, text, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError) as info:
+        load_slam_config(path)
+    msg = str(info.value)
+    assert "bad.toml" in msg and all(w in msg for w in words), msg
+
+
+def test_unreadable_files_are_data_errors(tmp_path):
+    with pytest.raises(DataError, match="not found"):
+        load_slam_config(tmp_path / "none.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("gate_prob = = 1\n")
+    with pytest.raises(DataError, match="not valid TOML"):
+        load_slam_config(bad)
+    with pytest.raises(ConfigError, match="victoria_park_ute"):
+        load_slam_config("no_such_preset")
+
+
+def test_presets():
+    assert {p.stem for p in PRESETS_DIR.glob("*.toml")} >= {"cycab", "victoria_park_ute"}
+    assert load_slam_config("cycab") == SlamConfig()
+    vp = load_slam_config("victoria_park_ute")
+    assert vp.first_estimates_jacobians and vp.laser_pose[:2] == (3.78, 0.5)
+    assert 0.1 < vp.odometry_noise.speed_sigma_mps < 2.0
+    assert vp.noise_for("bailey")[0] == "constant"
+
+
+def test_cli_dump_config_reads_back(tmp_path):
+    res = runner.invoke(app, ["slam", "--config", "victoria_park_ute", "--dump-config"])
+    assert res.exit_code == 0, res.output
+    assert SlamConfig.from_dict(tomllib.loads(res.output)) == load_slam_config("victoria_park_ute")
+    res = runner.invoke(app, ["slam", "--dump-config"])
+    assert SlamConfig.from_dict(tomllib.loads(res.output)) == SlamConfig()
+    res = runner.invoke(app, ["slam"])
+    assert res.exit_code == 2 and "INPUT" in res.output
+    bad = tmp_path / "bad.toml"
+    bad.write_text("gate_prbo = 0.9\n")
+    res = runner.invoke(app, ["slam", "x.npz", "--config", str(bad)])
+    assert res.exit_code == 1 and "gate_prbo" in res.output and "Traceback" not in res.output
