@@ -351,10 +351,17 @@ def bench_slam(
     association: Annotated[Association, typer.Option(help="data association")] = Association.ihgr,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
 ) -> None:
-    """EKF-SLAM time per scan against the size of the map."""
-    from experiments.bench.slam import bench, format_table
+    """EKF-SLAM time per scan against the size of the map: an avenue of trees, and the full
+    Victoria Park run when its data is there."""
+    from experiments.bench.slam import bench, bench_victoria_park, format_table
+    from experiments.errors import DataError
 
-    typer.echo(format_table(bench(n_trees=trees, association=association.value, seed=seed)))
+    rows = bench(n_trees=trees, association=association.value, seed=seed)
+    try:
+        rows += bench_victoria_park(association.value)
+    except DataError as exc:
+        typer.echo(f"Victoria Park rows skipped: {exc}", err=True)
+    typer.echo(format_table(rows))
 
 
 @bench_app.command("raycast")

@@ -50,7 +50,7 @@ from features.fitting import (
     fit_line_tls,
 )
 from features.segmentation import END_NO_RETURN, END_SCAN, max_growth_ratio, segment_kernel
-from features.types import Features, Scan
+from features.types import KIND_CIRCLE, KIND_CLUTTER, Features, Scan
 
 __all__ = ["ExtractorParams", "extract_features", "METHODS"]
 
@@ -81,11 +81,17 @@ class ExtractorParams:
     lambda0: float = 0.01  # paper's modified Gauss-Newton (section 2.2)
     max_iter: int = 100
     tol: float = 1e-10  # relative change of E(p) that stops the iteration
+    # Short trunks (off by default: the paper's extractor needs min_circle_points beams). On:
+    # an isolated segment of 1 to min_circle_points - 1 beams whose chord is under 2 r_max_m
+    # and whose end ranges agree within its width becomes a circle (`_short_trunks`).
+    short_trunks: bool = False
+    short_trunk_radius_m: float = 0.2  # prior radius of a trunk (Victoria Park: median 0.21 m)
+    short_trunk_radius_sigma_m: float = 0.1  # its spread
 
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name in ("merge_arcs", "isolated_circles"):
+            if f.name in ("merge_arcs", "isolated_circles", "short_trunks"):
                 if not isinstance(v, bool):
                     raise FeaturesError(f"{f.name}: must be True or False, got {v!r}")
                 continue
@@ -105,6 +111,9 @@ class ExtractorParams:
                 object.__setattr__(self, f.name, float(v))
         positive = ("sigma_r_m", "gate", "lrt_threshold", "r_max_m", "lambda0", "max_iter")
         for name in positive:
+            if getattr(self, name) <= 0:
+                raise FeaturesError(f"{name}: must be > 0, got {getattr(self, name)!r}")
+        for name in ("short_trunk_radius_m", "short_trunk_radius_sigma_m"):
             if getattr(self, name) <= 0:
                 raise FeaturesError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         for name in ("q_m2", "roughness_m", "r_min_m", "edge_min_jump_m", "tol"):
@@ -421,14 +430,80 @@ def _extract_kernel(
     )
 
 
+def _short_trunks(ranges, angle_min, gamma, bounds, kind, p: ExtractorParams):
+    """Circles for trunks too narrow to fit (1 to min_circle_points - 1 beams).
+
+    A segment qualifies when it is not already a line or circle, its neighbours on both sides
+    are no-returns or farther by more than edge_min_jump_m (an occluding, isolated object), its
+    chord is under 2 r_max_m, and its end ranges differ by less than a third of its width (a
+    convex face, Bailey's test). Its radius combines the width estimate w / 2, w = (span + one
+    beam) x mean range, with the prior N(short_trunk_radius_m, sigma^2) (variance of the width
+    estimate: half a beam of range-width on each side, (r gamma / 2)^2 / 3); the centre lies that
+    radius behind the segment's mean range, on its mean bearing. Covariance of (x0, y0, r): the
+    mean range's noise sigma_r^2 / m plus the radius variance along the beam, a uniform one-beam
+    bearing error across it, and the radius variance.
+    Returns (params (k, 3), cov (k, 3, 3), beams (k, 2), segment indices (k,)).
+    """
+    n = ranges.shape[0]
+    out_p, out_c, out_b, out_k = [], [], [], []
+    r0, s0 = p.short_trunk_radius_m, p.short_trunk_radius_sigma_m
+    for k, (a, b) in enumerate(bounds):
+        m = b - a + 1
+        if kind[k] != KIND_CLUTTER or m >= p.min_circle_points:
+            continue
+        left = ranges[a - 1] if a > 0 else np.nan
+        right = ranges[b + 1] if b + 1 < n else np.nan
+        if not (_farther(left, ranges[a], p) and _farther(right, ranges[b], p)):
+            continue
+        seg = ranges[a : b + 1]
+        rm = float(np.mean(seg))
+        th_a, th_b = angle_min + gamma * a, angle_min + gamma * b
+        dx = ranges[b] * math.cos(th_b) - ranges[a] * math.cos(th_a)
+        chord = math.hypot(dx, ranges[b] * math.sin(th_b) - ranges[a] * math.sin(th_a))
+        width = (th_b - th_a + gamma) * rm
+        if chord >= 2 * p.r_max_m or abs(ranges[b] - ranges[a]) >= width / 3.0:
+            continue
+        var_w = (rm * gamma / 2.0) ** 2 / 3.0 / 4.0  # of the half width
+        w_r = 1.0 / var_w + 1.0 / s0**2
+        r = (0.5 * width / var_w + r0 / s0**2) / w_r
+        var_r = 1.0 / w_r
+        th = 0.5 * (th_a + th_b)
+        rng = rm + r
+        c, s = math.cos(th), math.sin(th)
+        var_rng = p.sigma_r_m**2 / m + var_r
+        var_th = gamma * gamma / 12.0
+        J = np.array([[c, -rng * s], [s, rng * c]])
+        cov = np.zeros((3, 3))
+        cov[:2, :2] = J @ np.diag([var_rng, var_th]) @ J.T
+        cov[:2, 2] = cov[2, :2] = np.array([c, s]) * var_r  # the centre moves back with r
+        cov[2, 2] = var_r
+        out_p.append([rng * c, rng * s, r])
+        out_c.append(cov)
+        out_b.append([a, b])
+        out_k.append(k)
+    return (
+        np.array(out_p).reshape(-1, 3),
+        np.array(out_c).reshape(-1, 3, 3),
+        np.array(out_b, np.int64).reshape(-1, 2),
+        np.array(out_k, np.int64),
+    )
+
+
+def _farther(neighbour: float, own: float, p: ExtractorParams) -> bool:
+    """A segment end is cut off: no return beside it, or the neighbour is behind a depth jump."""
+    return not (neighbour == neighbour) or neighbour - own > p.edge_min_jump_m
+
+
 @lru_cache(maxsize=32)
 def _cached_params(items: tuple) -> ExtractorParams:
-    return ExtractorParams.from_kwargs(**dict(items))
+    """ExtractorParams from ((name, type name, value), ...)."""
+    return ExtractorParams.from_kwargs(**{k: v for k, _, v in items})
 
 
 def _params(params: dict) -> ExtractorParams:
     """ExtractorParams from keyword arguments, cached (building one costs ~10 us per scan)."""
-    items = tuple(sorted(params.items()))
+    # the value's type is part of the key: 1 == True and 0.5 == Fraction(1, 2) hash alike
+    items = tuple(sorted((k, type(v).__name__, v) for k, v in params.items()))
     try:
         hash(items)
     except TypeError:
@@ -511,6 +586,15 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
         edge_cov,
         edge_beam,
     ) = out
+    if p.short_trunks:
+        short = _short_trunks(ranges, angle_min, gamma, bounds, kind, p)
+        if short[0].shape[0]:
+            circ = np.concatenate([circ, short[0]])
+            circ_cov = np.concatenate([circ_cov, short[1]])
+            circ_beams = np.concatenate([circ_beams, short[2]])
+            circ_rms = np.concatenate([circ_rms, np.full(short[0].shape[0], np.nan)])
+            kind = kind.copy()
+            kind[short[3]] = KIND_CIRCLE
     if shift:  # back to the scan's own beam numbers; a run across the seam keeps last >= n
         for runs in (bounds, circ_beams, line_beams):
             runs += shift

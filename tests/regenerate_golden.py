@@ -20,7 +20,11 @@ from experiments.paper.runner import experiment_seed
 from experiments.paper.slam import Exp2Config, key_figures, monte_carlo
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
-FILES = {"circles": GOLDEN / "circles_quick.json", "slam": GOLDEN / "exp_slam_quick.json"}
+FILES = {
+    "circles": GOLDEN / "circles_quick.json",
+    "slam": GOLDEN / "exp_slam_quick.json",
+    "victoria_park": GOLDEN / "victoria_park_1000.json",
+}
 
 
 def circles_quick() -> dict:
@@ -49,7 +53,33 @@ def slam_quick() -> dict:
     return figs
 
 
-COMPUTE = {"circles": circles_quick, "slam": slam_quick}
+def victoria_park_1000() -> dict:
+    """The first 1000 scans of the full Victoria Park run (published detections, IHGR, preset
+    victoria_park_ute): landmarks, GPS figures, NIS inside its bounds. Needs the data."""
+    from experiments.eval.gps import score_sequence
+    from experiments.io.config_file import load_slam_config
+    from experiments.io.victoria_park import load_victoria_park
+    from experiments.paper.victoria_park import nis_inside
+    from slam import run
+
+    seq = load_victoria_park(full=True, n_scans=1000)
+    cfg = load_slam_config("victoria_park_ute")
+    lg = run(seq, features="detections", association="ihgr", config=cfg)
+    sc = score_sequence(seq, lg.scan_t, lg.pose, np.asarray(cfg.laser_pose))
+    return {
+        "landmarks": int(lg.landmark_xy.shape[0]),
+        "rmse_m": round(sc.all_rmse, 4),
+        "median_m": round(sc.all_median, 4),
+        "rmse_aligned_m": round(sc.clean_rmse_aligned, 4),
+        "nis_inside": round(float(np.mean(nis_inside(lg))), 4),
+        "fixes": sc.matched,
+        "jumps": sc.jumps,
+        "_note": "written by `python tests/regenerate_golden.py victoria_park` after the preset "
+        "changed; compared by tests/experiments/test_victoria_park.py",
+    }
+
+
+COMPUTE = {"circles": circles_quick, "slam": slam_quick, "victoria_park": victoria_park_1000}
 
 
 def main(names: list[str]) -> None:

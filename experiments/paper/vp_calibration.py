@@ -16,7 +16,9 @@ Fixed before the fit (not fitted):
   20 and 150 m) and 0.3 m on the position;
 - the published detections (`det_method` "bailey") with the constant noise model
   sigma_range = a + b r, sigma_bearing = c (t = 0: the detections' bearing error does not grow
-  at short range), IHGR association, the default gates and map policy.
+  at short range), IHGR association, the default gates and map policy. The preset gives the
+  same model to every extractor (measurement_noise "constant"): real trunks, not the fits'
+  idealised circles, set the error.
 
 Fitted (Nelder-Mead on log-parameters, 150 evaluations from the Zaragoza SLAM-school model and
 an odometry noise of 0.5 m/s and 3 degrees): the laser's yaw on the vehicle, the odometry noise
@@ -76,10 +78,12 @@ NAMES = (
 def config_from(theta, base: SlamConfig = BASE, laser=(3.78, 0.50)) -> SlamConfig:
     """The configuration of parameter vector theta (see START for its layout)."""
     yaw, lsv, lsa, la, lb, lc = (float(v) for v in theta)
+    model = NoiseModel(math.exp(la), math.exp(lb), math.exp(lc), 0.0)
     return dataclasses.replace(
         base,
         odometry_noise=OdometryNoise(math.exp(lsv), math.exp(lsa)),
-        constant_noise={"bailey": NoiseModel(math.exp(la), math.exp(lb), math.exp(lc), 0.0)},
+        measurement_noise="constant",
+        constant_noise={m: model for m in ("bailey", "paper", "geometric", "other")},
         laser_pose=(laser[0], laser[1], yaw),
     )
 

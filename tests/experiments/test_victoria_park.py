@@ -209,3 +209,44 @@ def test_default_folder_when_the_environment_is_unset(tmp_path, monkeypatch):
     monkeypatch.delenv(data.DATA_ENV, raising=False)
     monkeypatch.setattr(data, "DEFAULT_DATA_ROOT", tmp_path)
     assert data.data_root() == tmp_path.resolve()
+
+
+def test_full_run_loader(vp_dir):
+    from experiments.io.victoria_park import load_victoria_park
+
+    seq = load_victoria_park(vp_dir, full=True)
+    assert seq.n_scans == 7249 and not seq.has_ranges and seq.n_beams == 361
+    assert seq.det_scan.size == 52974 and seq.det_method == "bailey"
+    assert np.all(np.abs(seq.det_bearing) <= np.pi / 2)
+    raw = load_victoria_park(vp_dir, n_scans=10)
+    assert raw.has_ranges and raw.has_detections
+    z, r, cov = raw.detections(0)
+    _, dets = load_reference_detections(vp_dir)
+    np.testing.assert_allclose(z[:, 0], dets[0][0])
+    np.testing.assert_allclose(z[:, 1], dets[0][1] - np.pi / 2)
+    np.testing.assert_allclose(r, dets[0][2] / 2)
+    assert cov is None
+
+
+def test_first_1000_scans_match_the_golden_figures(vp_dir):
+    """Landmarks within 5 of the golden count, GPS RMSE and NIS within 10%: the run depends on
+    the LP solver and BLAS rounding through the association, not on randomness."""
+    import json
+
+    from regenerate_golden import FILES, victoria_park_1000
+
+    gold = json.loads(FILES["victoria_park"].read_text())
+    got = victoria_park_1000()
+    assert abs(got["landmarks"] - gold["landmarks"]) <= 5
+    assert got["fixes"] == gold["fixes"] and got["jumps"] == gold["jumps"]
+    for k in ("rmse_m", "median_m", "rmse_aligned_m", "nis_inside"):
+        assert got[k] == pytest.approx(gold[k], rel=0.10), k
+
+
+def test_ss2002_reference_is_read(vp_dir):
+    from experiments.io.victoria_park import load_ss2002_reference
+
+    ground, trees = load_ss2002_reference(vp_dir)
+    assert ground.shape == (2000, 3) and trees.shape == (145, 3)
+    np.testing.assert_allclose(ground[0], 0.0, atol=1e-12)
+    assert 0.05 < np.median(trees[:, 2]) < 0.5

@@ -398,3 +398,39 @@ def test_360_scan_keeps_a_trunk_on_the_seam_whole(bearing_deg):
     f = extract_features(scan, "geometric", sigma_r_m=0.0104)
     n_edges = sum(labels[e] == 0 for e in f.edge_beam)
     assert n_edges == (2 if abs(bearing_deg) > 150 else 0)
+
+
+def test_short_trunks_become_circles_only_when_asked():
+    """A 0.2 m trunk 18 m away spans 2-3 beams of a 0.5 deg scanner: too few to fit. With
+    short_trunks it becomes a circle within a few centimetres of the truth, with a covariance
+    that covers the error; a wall beside it does not."""
+    from experiments.sim import scene_from_dict, sensor_preset, simulate_scan
+
+    scene = scene_from_dict(
+        {
+            "circles": [{"name": "t", "kind": "trunk", "center_xy": [18.0, 1.0], "radius_m": 0.2}],
+            "walls": [{"name": "w", "points_xy": [[6.0, -8.0], [6.0, -3.0]]}],
+        }
+    )
+    sensor = sensor_preset("lms200", range_sigma_m=0.01)
+    rng = np.random.default_rng(4)
+    errs, sigmas = [], []
+    for _ in range(30):
+        ranges, labels = simulate_scan(scene, (0.0, 0.0, 0.0), sensor, rng)
+        scan = sensor.scan(ranges)
+        assert 2 <= np.sum(labels == 0) <= 3
+        assert extract_features(scan, "geometric").n_circles == 0
+        f = extract_features(scan, "geometric", short_trunks=True)
+        assert f.n_circles == 1  # the trunk, not the wall
+        c, cov = f.circle_params[0], f.circle_cov[0]
+        assert np.all(np.linalg.eigvalsh(cov) > 0)
+        errs.append(c[:2] - [18.0, 1.0])
+        sigmas.append(np.sqrt(np.diag(cov)[:2]))
+        assert abs(c[2] - 0.2) < 0.05 and np.all(labels[f.beams(*f.circle_beams[0])] == 0)
+    errs, sigmas = np.abs(np.array(errs)), np.array(sigmas)
+    assert np.max(errs) < 0.1
+    assert np.mean(errs <= 3 * sigmas) > 0.95  # the covariance is honest
+    with pytest.raises(ValueError, match="short_trunk_radius_m"):
+        extract_features(scan, "paper", short_trunks=True, short_trunk_radius_m=0.0)
+    with pytest.raises(ValueError, match="short_trunks"):
+        extract_features(scan, "paper", short_trunks=1)
