@@ -13,11 +13,15 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
+if __name__ == "__main__":  # as a script, tests/ is sys.path[0] and its folders shadow the packages
+    here = Path(__file__).resolve().parent
+    sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != here]
 
-from experiments.paper.circles import METHODS, TABLE_PILLARS, pillar_monte_carlo, summarise
-from experiments.paper.runner import experiment_seed
-from experiments.paper.slam import Exp2Config, key_figures, monte_carlo
+import numpy as np  # noqa: E402
+
+from experiments.paper.circles import METHODS, TABLE_PILLARS, pillar_monte_carlo, summarise  # noqa: E402
+from experiments.paper.runner import experiment_seed  # noqa: E402
+from experiments.paper.slam import Exp2Config, key_figures, monte_carlo  # noqa: E402
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 FILES = {

@@ -20,8 +20,9 @@ Fixed before the fit (not fitted):
   same model to every extractor (measurement_noise "constant"): real trunks, not the fits'
   idealised circles, set the error.
 
-Fitted (Nelder-Mead on log-parameters, 150 evaluations from the Zaragoza SLAM-school model and
-an odometry noise of 0.5 m/s and 3 degrees): the laser's yaw on the vehicle, the odometry noise
+Fitted (Nelder-Mead on the yaw and the sigmas' logarithms, 200 evaluations from the Zaragoza
+SLAM-school model and an odometry noise of 0.5 m/s and 3 degrees, initial steps 0.02 rad and
+x1.35): the laser's yaw on the vehicle, the odometry noise
 (speed, steering) and the measurement noise (a, b, c). The objective is the negative
 log-likelihood of the run:
 
@@ -65,6 +66,7 @@ BASE = SlamConfig(
 )
 # laser yaw (rad), ln speed sigma (m/s), ln steer sigma (rad), ln a (m), ln b (-), ln c (rad)
 START = np.array([0.0, *np.log([0.5, math.radians(3.0), 0.05, 0.01, math.radians(0.5)])])
+STEPS = np.array([0.02, 0.3, 0.3, 0.3, 0.3, 0.3])
 NAMES = (
     "laser_yaw_rad",
     "speed_sigma_mps",
@@ -118,11 +120,19 @@ def calibrate(seq, max_evaluations: int = 150, progress=None) -> dict:
             progress("Victoria Park calibration", len(evals), max_evaluations)
         return J
 
+    # the initial simplex: +0.02 rad of yaw (about 1 deg) and x1.35 on each sigma; scipy's
+    # default (+0.00025 for a parameter at 0) would leave the yaw where it starts
+    simplex = np.vstack([START, START + np.diag(STEPS)])
     res = minimize(
         f,
         START,
         method="Nelder-Mead",
-        options={"maxfev": max_evaluations, "xatol": 1e-3, "fatol": 1.0},
+        options={
+            "maxfev": max_evaluations,
+            "xatol": 1e-3,
+            "fatol": 1.0,
+            "initial_simplex": simplex,
+        },
     )
     J, info = objective(seq, res.x)
     theta = res.x
@@ -139,7 +149,7 @@ def run(ctx) -> None:
         ctx.config["victoria-park-calibration"] = f"skipped: {exc}"
         return
     t0 = time.perf_counter()
-    n = 10 if ctx.quick else 150
+    n = 10 if ctx.quick else 200
     fit = calibrate(seq, n, ctx.progress)
     start_J, start_info = objective(seq, START)
     cfg = config_from(fit["theta"])
