@@ -14,7 +14,7 @@ from pathlib import Path
 import tomli_w
 
 from experiments.errors import ConfigError, DataError
-from experiments.io.paths import REPO_ROOT
+from experiments.io.paths import REPO_ROOT, read_text_file
 from slam import SlamConfig, SlamError
 
 __all__ = ["PRESETS_DIR", "config_toml", "load_slam_config", "preset_path"]
@@ -38,12 +38,7 @@ def load_slam_config(path: str | Path) -> SlamConfig:
     """The `SlamConfig` in a TOML file (or preset name); `DataError`/`ConfigError` naming the
     file and what is wrong."""
     path = preset_path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DataError(f"config file not found: {path}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot be read ({exc})") from None
+    text = read_text_file(path, "config file")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import DataError
+from experiments.io.paths import read_text_file
 from experiments.io.writers import FEATURES_SCHEMA
 from features.types import Features
 
@@ -34,12 +35,7 @@ def load_features_json(path: str | Path, n_scans: int, n_beams: int = 0) -> list
     """One `Features` per scan (circles only) from a features JSON with exactly n_scans scans
     numbered 0..n_scans - 1 (the scans of the sequence it will drive)."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DataError(f"features file not found: {path}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot be read ({exc})") from None
+    text = read_text_file(path, "features file")
     try:
         doc = json.loads(text)
     except (json.JSONDecodeError, RecursionError) as exc:

@@ -13,7 +13,14 @@ from pathlib import Path
 
 from experiments.errors import DataError
 
-__all__ = ["DATA_ENV", "REPO_ROOT", "DEFAULT_DATA_ROOT", "data_root", "victoria_park_dir"]
+__all__ = [
+    "DATA_ENV",
+    "REPO_ROOT",
+    "DEFAULT_DATA_ROOT",
+    "data_root",
+    "read_text_file",
+    "victoria_park_dir",
+]
 
 DATA_ENV = "TRUNKSLAM_DATA"
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -53,3 +60,13 @@ def victoria_park_dir() -> Path:
     if not d.is_dir():
         raise DataError(f"Victoria Park folder not found: {d}. {_HOW_TO_GET}")
     return d
+
+
+def read_text_file(path: Path, what: str) -> str:
+    """The UTF-8 text of `path`; `DataError` "<what> not found" or naming why it cannot be read."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DataError(f"{what} not found: {path}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: cannot be read ({exc})") from None
