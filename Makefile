@@ -33,6 +33,7 @@ bench: $(STAMP)
 	$(BIN)/trunkslam bench association
 	$(BIN)/trunkslam bench slam
 	$(BIN)/trunkslam bench raycast
+	$(BIN)/trunkslam bench smoother
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -53,6 +53,22 @@ class Association(StrEnum):
     nn = "nn"
 
 
+class SmootherSolver(StrEnum):
+    batch = "batch"
+    isam2 = "isam2"
+
+
+class Robust(StrEnum):
+    none = "none"
+    huber = "huber"
+    cauchy = "cauchy"
+
+
+class SmootherMeasurements(StrEnum):
+    ekf = "ekf"
+    all = "all"
+
+
 class LineTest(StrEnum):
     lrt = "lrt"
     paper = "paper"
@@ -72,6 +88,7 @@ class ExperimentName(StrEnum):
     table4 = "table4"
     association = "association"
     victoria_park = "victoria-park"
+    smoother = "smoother"
     noise_calibration = "noise-calibration"
     victoria_park_calibration = "victoria-park-calibration"
 
@@ -270,8 +287,12 @@ def slam_cmd(
     initial_heading: Annotated[
         float | None, typer.Option(help="start heading, rad, when starting from GPS")
     ] = None,
+    smooth: Annotated[
+        bool, typer.Option(help="then re-solve the run with the GTSAM smoother (batch)")
+    ] = False,
 ) -> None:
-    """EKF-SLAM over a sequence: trajectory (TUM and CSV with covariance), map, config, summary."""
+    """EKF-SLAM over a sequence: trajectory (TUM and CSV with covariance), map, config, summary,
+    and the run log the smoother reads (`trunkslam smooth`)."""
     from experiments.io.config_file import config_toml, load_slam_config
     from experiments.pipeline.slam import run_slam
     from experiments.render.progress import Progress
@@ -302,6 +323,58 @@ def slam_cmd(
     typer.echo(
         f"{s['n_scans']} scans, {s['landmarks']} landmarks{err}, {s['seconds']:.1f} s -> {out}/"
     )
+    if smooth:
+        from experiments.pipeline.smooth import smooth_run
+
+        _echo_smoothed(smooth_run(out))
+
+
+def _echo_smoothed(s: dict) -> None:
+    gps = s.get("gps")
+    err = f", {gps['all_rmse']:.2f} m RMS from GPS" if gps else ""
+    typer.echo(
+        f"smoothed ({s['solver']}): chi2/dof {s['chi2_per_dof']:.3f} after {s['iterations']} "
+        f"iterations{err}, {s['seconds']:.1f} s + {s['seconds_marginals']:.1f} s covariances "
+        f"-> {s['run_dir']}/"
+    )
+
+
+@app.command("smooth")
+@handle_errors
+def smooth_cmd(
+    run_dir: Annotated[Path, typer.Argument(help="output folder of `trunkslam slam`")],
+    solver: Annotated[
+        SmootherSolver, typer.Option(help="batch Levenberg-Marquardt, or iSAM2 fed scan by scan")
+    ] = SmootherSolver.batch,
+    polish: Annotated[bool, typer.Option(help="batch Levenberg-Marquardt after iSAM2")] = False,
+    robust: Annotated[
+        Robust, typer.Option(help="robust kernel on the measurement factors")
+    ] = Robust.none,
+    measurements: Annotated[
+        SmootherMeasurements,
+        typer.Option(
+            help="ekf: the measurements the filter used; all: also the tentative sightings of "
+            "mapped landmarks"
+        ),
+    ] = SmootherMeasurements.ekf,
+    isam2_every: Annotated[int, typer.Option(min=1, help="scans per iSAM2 update")] = 1,
+    covariances: Annotated[
+        bool, typer.Option(help="marginal covariances of every pose and landmark")
+    ] = True,
+) -> None:
+    """Re-solve a `trunkslam slam` run with the GTSAM smoother (same odometry, measurements and
+    associations): trajectory_smoothed.tum/.csv, map_smoothed.csv, smoother.json."""
+    from experiments.pipeline.smooth import smooth_run
+    from slam.smoother import SmootherOptions
+
+    options = SmootherOptions(
+        solver=solver.value,
+        polish=polish,
+        robust=None if robust is Robust.none else robust.value,
+        isam2_every=isam2_every,
+        marginals=covariances,
+    )
+    _echo_smoothed(smooth_run(run_dir, options, measurements.value))
 
 
 @app.command("export-reference")
@@ -362,6 +435,29 @@ def bench_slam(
     except DataError as exc:
         typer.echo(f"Victoria Park rows skipped: {exc}", err=True)
     typer.echo(format_table(rows))
+
+
+@bench_app.command("smoother")
+@handle_errors
+def bench_smoother(
+    chunks: Annotated[
+        str, typer.Option(help="comma-separated poses per iSAM2 update on GTSAM's graph")
+    ] = "25",
+    per_pose: Annotated[
+        bool, typer.Option(help="also iSAM2 one pose at a time on GTSAM's graph (about 30 s)")
+    ] = True,
+    data: Annotated[Path | None, typer.Option(help="victoria_park folder")] = None,
+    seed: Annotated[int, typer.Option(min=0, help="random seed of the tree-park run")] = 0,
+) -> None:
+    """Seconds of the GTSAM smoother (batch, iSAM2, iSAM2 + polish) on a tree-park run, the
+    full Victoria Park run and GTSAM's own Victoria Park graph."""
+    from experiments.bench.smoother import bench_smoother as bench
+    from experiments.bench.smoother import format_table
+
+    sizes = [int(v) for v in _numbers("--chunks", chunks, len(chunks.split(",")))]
+    if any(v < 1 for v in sizes):
+        raise typer.BadParameter("poses per update must be >= 1", param_hint="--chunks")
+    typer.echo(format_table(bench(data, tuple(sizes), per_pose, seed)))
 
 
 @bench_app.command("raycast")

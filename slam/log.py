@@ -48,6 +48,14 @@ class SlamLog:
         freedom (NaN, 0 without an update); scan_logdet (N,): ln |S| of that batch (NaN without).
     n_features, n_associated, n_tentative, n_map: (N,) per scan.
     timing_s: {"predict", "features", "associate", "update", "manage", "total"} -> (N,) s.
+    meas_track (K,): the landmark or tentative id each measurement was paired with or started
+        (the id a tentative keeps if it joins the map), -1 for ambiguous and out-of-range ones.
+    start_pose (3,), start_cov (3, 3): the filter's prior at the first scan (world frame).
+    laser_pose (3,): the laser's pose in the vehicle frame that the run used.
+    odo_delta (N, 3), odo_cov (N, 3, 3): row k (k >= 1) is the odometry increment from scan
+        k - 1 to scan k in the frame of the pose at k - 1 (x forward, y left, theta), and its
+        covariance in that frame (the prediction's Q rotated into it, floor noise included);
+        row 0 is zeros. The EKF's prediction is pose[k - 1] composed with odo_delta[k].
     final_x, final_P: the final state. landmark ids index `final_x` via landmark_id order.
     start: "truth", "gps" or "origin". features_method, association_method: names used.
     config: the resolved configuration (plain types).
@@ -74,6 +82,7 @@ class SlamLog:
     meas_z: np.ndarray
     meas_R: np.ndarray
     meas_status: np.ndarray
+    meas_track: np.ndarray
     scan_nis: np.ndarray
     scan_nis_dof: np.ndarray
     scan_logdet: np.ndarray
@@ -82,6 +91,11 @@ class SlamLog:
     n_tentative: np.ndarray
     n_map: np.ndarray
     timing_s: dict
+    start_pose: np.ndarray
+    start_cov: np.ndarray
+    laser_pose: np.ndarray
+    odo_delta: np.ndarray
+    odo_cov: np.ndarray
     final_x: np.ndarray
     final_P: np.ndarray
     start: str
@@ -118,9 +132,27 @@ class LogBuilder:
         self.obs: dict[str, list] = {
             k: [] for k in ("scan", "feature", "landmark", "z", "innov", "S")
         }
-        self.meas: dict[str, list] = {k: [] for k in ("scan", "feature", "z", "R", "status")}
+        self.meas: dict[str, list] = {
+            k: [] for k in ("scan", "feature", "z", "R", "status", "track")
+        }
+        self.odo_delta = np.zeros((n, 3))
+        self.odo_cov = np.zeros((n, 3, 3))
+        self.start_pose = np.zeros(3)
+        self.start_cov = np.zeros((3, 3))
+        self.laser_pose = np.zeros(3)
         self.n_obs: dict[int, int] = {}
         self.first_scan: dict[int, int] = {}
+
+    def started(self, pose: np.ndarray, cov: np.ndarray, laser_pose: np.ndarray) -> None:
+        """The filter's prior at the first scan and the laser pose used."""
+        self.start_pose = np.array(pose, dtype=np.float64)
+        self.start_cov = np.array(cov, dtype=np.float64)
+        self.laser_pose = np.array(laser_pose, dtype=np.float64)
+
+    def odometry(self, k: int, delta: np.ndarray, cov: np.ndarray) -> None:
+        """The odometry increment from scan k - 1 to k (frame of k - 1) and its covariance."""
+        self.odo_delta[k] = delta
+        self.odo_cov[k] = cov
 
     def predicted(self, k: int, pose: np.ndarray, cov: np.ndarray) -> None:
         self.pred_pose[k] = pose
@@ -144,6 +176,7 @@ class LogBuilder:
         z,
         R,
         status,
+        track,
         n_associated: int,
         nis: float,
         nis_dof: int,
@@ -166,6 +199,7 @@ class LogBuilder:
             self.meas["z"].append(z[i])
             self.meas["R"].append(R[i])
             self.meas["status"].append(int(status[i]))
+            self.meas["track"].append(int(track[i]))
         for key, a, b in zip(TIMING_KEYS[:5], times[:-1], times[1:]):
             self.timing[key][k] = b - a
         self.timing["total"][k] = times[-1] - times[0]
@@ -197,11 +231,17 @@ class LogBuilder:
             meas_z=np.array(meas["z"]).reshape(-1, 2),
             meas_R=np.array(meas["R"]).reshape(-1, 2, 2),
             meas_status=np.array(meas["status"], np.int64),
+            meas_track=np.array(meas["track"], np.int64),
             scan_nis=self.nis,
             scan_nis_dof=self.nis_dof,
             scan_logdet=self.logdet,
             **self.counts,
             timing_s=self.timing,
+            start_pose=self.start_pose,
+            start_cov=self.start_cov,
+            laser_pose=self.laser_pose,
+            odo_delta=self.odo_delta,
+            odo_cov=self.odo_cov,
             final_x=state.x.copy(),
             final_P=state.P.copy(),
             start=start,

@@ -135,10 +135,11 @@ def run(
     tent = Tentatives.empty()
     next_id = 0
     book = LogBuilder(np.asarray(sequence.scan_t, dtype=np.float64))
+    book.started(pose0, cov0, s.laser)
     N = sequence.n_scans
     for k in range(N):
         t = [time.perf_counter()]
-        _predict(s, state, k)
+        _predict(s, state, k, book)
         book.predicted(k, state.pose, state.pose_cov)
         t.append(time.perf_counter())
         scan, f, z, R, status = _measure(s, k)
@@ -147,9 +148,10 @@ def run(
         t.append(time.perf_counter())
         nis, n_used = _update(s, state, z, R, a, status, book, k)
         t.append(time.perf_counter())
-        tent, next_id = _manage(s, state, tent, z, R, a, status, book, k, next_id)
+        track = np.where(status >= 0, status, -1)
+        tent, next_id = _manage(s, state, tent, z, R, a, status, track, book, k, next_id)
         t.append(time.perf_counter())
-        book.scan_done(k, state, len(tent), z, R, status, n_used, nis, 2 * n_used, t)
+        book.scan_done(k, state, len(tent), z, R, status, track, n_used, nis, 2 * n_used, t)
         _visualise(vis, k, sequence, scan, f, state, tent, s.laser, z, status)
         if progress is not None:
             progress(k + 1, N)
@@ -212,12 +214,22 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
 # ---- the five steps -----------------------------------------------------------------------------
 
 
-def _predict(s: _Setup, state: Filter, k: int) -> None:
-    """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan)."""
+def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> None:
+    """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan).
+
+    The increment and its covariance in the frame of the pose at k - 1 go to the log (the
+    smoother's odometry factors): the motion model is invariant to where the car is, so the
+    world-frame Q is that covariance rotated by the heading."""
     if k == 0:
         return
     t = s.seq.scan_t
-    p1, F, Q = integrate(s.model, state.pose, s.odometry, t[k - 1], t[k], s.cfg.odometry_noise)
+    p0 = state.pose.copy()
+    p1, F, Q = integrate(s.model, p0, s.odometry, t[k - 1], t[k], s.cfg.odometry_noise)
+    delta = se2.compose(se2.inverse(p0), p1)
+    delta[2] = float(se2.wrap_angle(delta[2]))
+    c, sn = math.cos(p0[2]), math.sin(p0[2])
+    A = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])  # world -> frame of p0
+    book.odometry(k, delta, A @ Q @ A.T)
     state.predict(p1, F, Q)
 
 
@@ -306,11 +318,12 @@ def _update(s: _Setup, state: Filter, z, R, a: _Association, status, book: LogBu
     return res.nis, int(to_map.size)
 
 
-def _manage(s: _Setup, state: Filter, tent, z, R, a: _Association, status, book, k, next_id):
+def _manage(s: _Setup, state: Filter, tent, z, R, a: _Association, status, track, book, k, next_id):
     """Step 5: tentatives seen again count a sighting (and join the map at the policy's count),
     new measurements start tentatives, ambiguous ones are ignored, unseen tentatives drop out.
 
-    Returns the new tentatives and next free landmark id; sets each measurement's status.
+    Returns the new tentatives and next free landmark id; sets each measurement's status and
+    track (the id of the tentative it was paired with or started).
     """
     policy = s.cfg.map_policy
     n_l = a.lm_idx.size
@@ -323,6 +336,7 @@ def _manage(s: _Setup, state: Filter, tent, z, R, a: _Association, status, book,
         matched[ti] = sighting(state.pose, state.pose_cov, z[i], R[i], s.laser)
         matched_meas[ti] = int(i)
         status[i] = TENTATIVE_HIT
+        track[i] = int(tent.ids[ti])
     for i in np.flatnonzero((a.assign < 0) & (status != OUT_OF_RANGE)):
         if a.ambiguous[i]:
             status[i] = AMBIGUOUS
@@ -330,6 +344,7 @@ def _manage(s: _Setup, state: Filter, tent, z, R, a: _Association, status, book,
         mxy, C = sighting(state.pose, state.pose_cov, z[i], R[i], s.laser)
         new.append((mxy, C, next_id))
         new_meas.append(int(i))
+        track[i] = next_id
         next_id += 1
     if policy.confirm_scans == 1:  # every sighting joins the map at once
         for (_, _, lid), i in zip(new, new_meas):

@@ -86,6 +86,10 @@ EXPERIMENTS: dict[str, Experiment] = {
         "experiments.paper.victoria_park:run",
         about="EKF-SLAM on the real run against GPS (needs the data; skipped without)",
     ),
+    "smoother": Experiment(
+        "experiments.paper.smoother:run",
+        about="GTSAM smoother: GTSAM's Victoria Park graph; the EKF's full run re-solved",
+    ),
     "noise-calibration": Experiment(
         "experiments.paper.calibration:run", about="fit of the constant measurement-noise model"
     ),

@@ -57,6 +57,7 @@ from experiments.sim.trajectory import CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import SlamConfig, interpolate_poses, se2
 from slam import run as slam_run
+from slam.smoother import problem_from_log, smooth
 
 __all__ = [
     "METHODS",
@@ -93,6 +94,9 @@ class Exp2Config:
     false_match_m: a circle on a trunk's beams farther than this from its centre is false.
     sensitivity: also run the consistency variants listed in `SENSITIVITY`, on the first
         `sensitivity_runs` runs (fewer than n_runs to keep the default under 3 minutes).
+    smoother: also solve every run with the GTSAM smoother (`slam.smoother`, batch, from the
+        run's own log: same odometry, measurements and associations) for its pose errors and
+        NEES.
     """
 
     n_runs: int = 50
@@ -104,6 +108,7 @@ class Exp2Config:
     false_match_m: float = 0.5
     sensitivity: bool = True
     sensitivity_runs: int = 20
+    smoother: bool = True
 
     @classmethod
     def quick(cls) -> Exp2Config:
@@ -199,6 +204,8 @@ class Exp2Results:
     (R, N): circles per scan. map_size, map_on_trees (R,): final landmarks, and how many lie
     within false_match_m of a tree. time_slam, time_extract (R,): mean seconds per scan.
     logs0: the SlamLog of run 0 per method; seq0: run 0's sequence.
+    sm_abs_err (R, 3), sm_nees (R, N), time_smoother (R,): the same for the GTSAM smoother of
+    each run (empty when `config.smoother` is off); sm_pose0: its path of run 0 per method.
     """
 
     config: Exp2Config
@@ -213,6 +220,10 @@ class Exp2Results:
     time_slam: dict = field(default_factory=dict)
     time_extract: dict = field(default_factory=dict)
     logs0: dict = field(default_factory=dict)
+    sm_abs_err: dict = field(default_factory=dict)
+    sm_nees: dict = field(default_factory=dict)
+    time_smoother: dict = field(default_factory=dict)
+    sm_pose0: dict = field(default_factory=dict)
     seq0: object = None
     seconds: float = 0.0
 
@@ -239,6 +250,10 @@ def monte_carlo(cfg: Exp2Config, rng: np.random.Generator, progress=None) -> Exp
             d[name] = np.zeros(R, np.int64)
         res.time_slam[name] = np.zeros(R)
         res.time_extract[name] = np.zeros(R)
+        if cfg.smoother:
+            res.sm_abs_err[name] = np.zeros((R, 3))
+            res.sm_nees[name] = np.full((R, N), np.nan)
+            res.time_smoother[name] = np.zeros(R)
     R = cfg.n_runs
     gens = rng.spawn(R)
     for r in range(R):
@@ -273,6 +288,14 @@ def monte_carlo(cfg: Exp2Config, rng: np.random.Generator, progress=None) -> Exp
             res.nees[name][r, 1:] = nees(e[1:], lg.pose_cov[1:])
             res.nis[name][r] = lg.scan_nis
             res.nis_dof[name][r] = lg.scan_nis_dof
+            if cfg.smoother:
+                sm = smooth(problem_from_log(lg))
+                es = pose_errors(sm.pose, truth)
+                res.sm_abs_err[name][r] = np.mean(np.abs(es[1:]), axis=0)
+                res.sm_nees[name][r, 1:] = nees(es[1:], sm.pose_cov[1:])
+                res.time_smoother[name][r] = sm.seconds + sm.seconds_marginals
+                if r == 0 and name == m:
+                    res.sm_pose0[m] = sm.pose
             if name == m:
                 for k, f in enumerate(feats[m]):
                     res.detected[name][r, k], res.false[name][r, k] = false_detections(
@@ -303,6 +326,13 @@ def consistency(res: Exp2Results, name: str) -> dict:
     return consistency_figures(res.nees[name], res.nis[name], res.nis_dof[name])
 
 
+def _smoother_nees(res: Exp2Results, name: str) -> list:
+    if not res.sm_nees:
+        return []
+    c = consistency_figures(res.sm_nees[name], res.nis[name], res.nis_dof[name])
+    return [round(c["nees_mean"], 3), round(c["nees_in"], 3)]
+
+
 def table4_rates(res: Exp2Results, method: str) -> list[float]:
     """The paper's false-detection rate: per scan, false features / detected features; averaged
     over the scans of each set (indices as the paper's scan numbers, inclusive) that have a
@@ -329,6 +359,11 @@ def key_figures(res: Exp2Results) -> dict:
             "map_size_mean": float(res.map_size[m].mean()),
             "map_on_trees_mean": float(res.map_on_trees[m].mean()),
         }
+        if res.sm_abs_err:
+            out[m]["smoother_table3_mean"] = [
+                round(float(v), 6) for v in res.sm_abs_err[m].mean(axis=0)
+            ]
+            out[m]["smoother_nees_mean"] = round(float(np.nanmean(res.sm_nees[m])), 4)
     return out
 
 
@@ -339,8 +374,9 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
     paths: list[Path] = []
     # Table 3
     header = ["quantity", "unit"]
+    smoothed = bool(res.sm_abs_err)
     for m in methods:
-        header += [f"{m} mean", f"{m} std"]
+        header += [f"{m} mean", f"{m} std"] + ([f"{m} smoother mean"] if smoothed else [])
     header += ["paper's proposed", "paper's Bailey"]
     rows = []
     for i, (q, unit) in enumerate((("dx", "m"), ("dy", "m"), ("dtheta", "rad"))):
@@ -350,6 +386,8 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
                 round(float(res.abs_err[m][:, i].mean()), 4),
                 round(float(res.abs_err[m][:, i].std(ddof=1)) if R > 1 else math.nan, 4),
             ]
+            if smoothed:
+                row.append(round(float(res.sm_abs_err[m][:, i].mean()), 4))
         row += [PAPER_TABLE3["paper"][i], PAPER_TABLE3["bailey"][i]]
         rows.append(row)
     mean = {m: res.abs_err[m].mean(axis=0) for m in methods}
@@ -370,6 +408,17 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
     if "paper" in mean and "geometric" in mean:
         geo = [bool(mean["geometric"][i] <= mean["paper"][i]) for i in range(3)]
         notes.append(f"geometric <= paper in dx, dy, dtheta: {geo}.")
+    if smoothed:
+        below = {
+            m: [bool(res.sm_abs_err[m][:, i].mean() <= mean[m][i]) for i in range(3)]
+            for m in methods
+        }
+        notes.append(
+            "smoother: the GTSAM smoother of each run (`slam.smoother`, batch Levenberg-"
+            "Marquardt) with the run's own odometry, measurements and associations; its pose at "
+            "each scan uses the whole run, the EKF's only the scans up to it. Smoother <= EKF in "
+            f"dx, dy, dtheta: {below}."
+        )
     paths += write_table(
         out_dir / "table3",
         header,
@@ -410,6 +459,7 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
         "bounds",
         "NIS per dof",
         "NIS in 95% bounds",
+        *(["smoother NEES mean", "smoother NEES in 95% bounds"] if res.sm_nees else []),
         "landmarks",
         "on trees",
         "ms per scan",
@@ -428,6 +478,7 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
                 f"[{c['nees_lo']:.2f}, {c['nees_hi']:.2f}]",
                 round(c["nis_per_dof"], 3),
                 round(c["nis_in"], 3),
+                *_smoother_nees(res, name),
                 round(float(res.map_size[name].mean()), 2),
                 round(float(res.map_on_trees[name].mean()), 2),
                 round(1e3 * float(res.time_slam[name].mean()), 3),
@@ -444,6 +495,11 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
         "three methods are variants that explain the figures (see the README), on the first "
         f"{cfg.sensitivity_runs} runs."
     )
+    if res.sm_nees:
+        notes_c += (
+            " Smoother NEES: the same statistic for the GTSAM smoother's poses with their "
+            "marginal covariances (same runs, same associations)."
+        )
     paths += write_table(
         out_dir / "consistency",
         header,

@@ -38,7 +38,7 @@ from slam import SlamLog, se2
 from slam import run as slam_run
 from slam.start import procrustes_2d
 
-__all__ = ["PRESET", "PUBLISHED", "nis_inside", "reference_match", "run"]
+__all__ = ["PRESET", "PUBLISHED", "head", "nis_inside", "reference_match", "run"]
 
 log = logging.getLogger(__name__)
 
@@ -146,8 +146,8 @@ def run(ctx) -> None:
 
     cfg = load_slam_config(PRESET)
     n_full, n_raw = (1500, 400) if ctx.quick else (full.n_scans, raw.n_scans)
-    full = _head(full, n_full)
-    raw = _head(raw, n_raw)
+    full = head(full, n_full)
+    raw = head(raw, n_raw)
     cfg_out.update(
         preset=PRESET, config=json_types(cfg.to_dict()), scans_full=n_full, scans_raw=n_raw
     )
@@ -170,7 +170,7 @@ def run(ctx) -> None:
     _write(ctx, rows, logs, full, cfg)
 
 
-def _head(seq, n: int):
+def head(seq, n: int):
     if n >= seq.n_scans:
         return seq
     keep = seq.det_scan < n

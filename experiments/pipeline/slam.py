@@ -12,6 +12,7 @@ from experiments.eval.poses import nees, pose_errors
 from experiments.io.config_file import config_toml
 from experiments.io.features_json import load_features_json
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
+from experiments.io.run_log import RUN_LOG_NAME, write_run_log
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import dumps_json, json_types, write_atomic
 from experiments.render.viz import open_recording
@@ -46,6 +47,7 @@ def run_slam(
     trajectory.csv   t, x, y, theta and the upper triangle of the pose covariance
     map.csv          id, x, y, covariance (xx, xy, yy), scan it joined the map, scans seen in
     config.toml      the resolved configuration (`--config` reads it back)
+    run_log.npz      what the GTSAM smoother needs (`trunkslam smooth`; experiments.io.run_log)
     summary.json     input, methods, start, counts, timings (mean, median, p95, max per phase),
                      errors against GPS (`experiments.eval.gps`) when the sequence has GPS, and
                      against the truth (Table-3 errors, mean NEES) when it has truth
@@ -89,6 +91,7 @@ def run_slam(
         ),
     )
     write_atomic(out / "config.toml", config_toml(cfg, f"trunkslam slam {input_path}"))
+    write_run_log(out / RUN_LOG_NAME, lg)
     summary = summarise(lg, seq, seconds, laser_pose=_laser(seq, cfg))
     summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
     write_atomic(out / "summary.json", dumps_json(summary))

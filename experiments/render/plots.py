@@ -463,3 +463,24 @@ def plot_vp_timeseries(
     for ax in axes:
         ax.grid(alpha=0.3)
     return save(fig, path)
+
+
+def plot_gps_errors(
+    series: dict[str, tuple[np.ndarray, np.ndarray]], jumps: np.ndarray, title: str, path: Path
+) -> Path:
+    """Distance of each estimated antenna path to the GPS fixes against time: series label ->
+    (fix times (s), distances (m)), all on the same fixes; fixes flagged as jumps marked x."""
+    fig, ax = plt.subplots(figsize=(10, 4))
+    colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
+    for (label, (t, e)), c in zip(series.items(), colors):
+        rmse = float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
+        ax.plot(t, e, "-", lw=0.7, color=c, label=f"{label} (RMSE {rmse:.2f} m)")
+        if np.any(jumps):
+            ax.plot(t[jumps], e[jumps], "x", ms=4, color=c)
+    ax.set_yscale("log")  # metre-level errors beside GPS jumps of 100 m and more
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("distance to GPS fix (m, log scale)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="upper left")
+    return save(fig, path)

@@ -6,10 +6,12 @@ import json
 import math
 
 import numpy as np
+import pytest
 from support import simulated_scan_file
 from typer.testing import CliRunner
 
 from experiments.cli import app
+from experiments.errors import DataError
 from experiments.io.sequence_file import load_sequence
 
 runner = CliRunner()
@@ -188,3 +190,81 @@ def test_simulate_drive_then_slam(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert s["start"] == "truth" and s["landmarks"] >= 3
     assert max(s["truth"]["mean_abs_error"].values()) < 0.05
+
+
+def test_slam_smooth_and_smooth_after_the_fact(tmp_path):
+    run = tmp_path / "run.npz"
+    res = runner.invoke(app, ["simulate-drive", "--scans", "80", "--seed", "4", "--out", str(run)])
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["slam", str(run), "--out", str(out), "--smooth"])
+    assert res.exit_code == 0, res.output
+    assert "smoothed (batch): chi2/dof" in res.output
+    for name in (
+        "run_log.npz",
+        "trajectory_smoothed.tum",
+        "trajectory_smoothed.csv",
+        "map_smoothed.csv",
+        "smoother.json",
+    ):
+        assert (out / name).stat().st_size > 100, name
+    ekf, sm = (json.loads((out / n).read_text()) for n in ("summary.json", "smoother.json"))
+    assert sm["solver"] == "batch" and sm["landmarks"] == ekf["landmarks"]
+    assert 0.2 < sm["chi2_per_dof"] < 3 and sm["chi2_per_dof"] < sm["initial_chi2_per_dof"]
+    assert sm["scored"] == str(run) and sm["truth"]["scans_scored"] == 79
+    # smoothed errors at or below the EKF's on this run (the whole run informs every pose)
+    assert sum(sm["truth"]["mean_abs_error"].values()) <= sum(
+        ekf["truth"]["mean_abs_error"].values()
+    )
+    rows = (out / "trajectory_smoothed.csv").read_text().splitlines()
+    assert len(rows) == 81 and rows[0].startswith("t_s,x_m,y_m,theta_rad,cov_xx")
+    # after the fact, with the other solver and all measurements
+    res = runner.invoke(
+        app, ["smooth", str(out), "--solver", "isam2", "--polish", "--measurements", "all"]
+    )
+    assert res.exit_code == 0, res.output
+    again = json.loads((out / "smoother.json").read_text())
+    assert again["solver"] == "isam2+polish" and again["measurements"] == "all"
+    assert again["n_measurements"] > sm["n_measurements"]
+
+
+def test_smooth_without_or_with_a_corrupt_run_log_is_a_clear_error(tmp_path):
+    res = runner.invoke(app, ["smooth", str(tmp_path / "nowhere")])
+    assert res.exit_code == 1 and "not a folder" in res.output
+    res = runner.invoke(app, ["smooth", str(tmp_path)])
+    assert res.exit_code == 1 and "no run log" in res.output
+    (tmp_path / "run_log.npz").write_bytes(b"PK\x03\x04 not really a zip")
+    res = runner.invoke(app, ["smooth", str(tmp_path)])
+    assert res.exit_code == 1 and "not a readable run log" in res.output
+    np.savez(tmp_path / "run_log.npz", format=np.array("something else"))
+    res = runner.invoke(app, ["smooth", str(tmp_path)])
+    assert res.exit_code == 1 and "not a run log" in res.output
+    np.savez(tmp_path / "run_log.npz", format=np.array("trunkslam.run_log/1"), scan_t=np.ones(3))
+    res = runner.invoke(app, ["smooth", str(tmp_path)])
+    assert res.exit_code == 1 and "missing variable(s)" in res.output
+    res = runner.invoke(app, ["smooth", str(tmp_path), "--robust", "tukey"])
+    assert res.exit_code == 2
+
+
+def test_run_log_round_trip_and_inconsistent_content(tmp_path):
+    from experiments.io.run_log import read_run_log, write_run_log
+    from slam import run as slam_run
+    from slam.smoother import MEAS_TENTATIVE
+
+    path = tmp_path / "run.npz"
+    res = runner.invoke(app, ["simulate-drive", "--scans", "40", "--seed", "1", "--out", str(path)])
+    assert res.exit_code == 0, res.output
+    log = slam_run(load_sequence(path), features="geometric")
+    write_run_log(tmp_path / "run_log.npz", log)
+    ekf, names = read_run_log(tmp_path)
+    everything, _ = read_run_log(tmp_path / "run_log.npz", measurements="all")
+    assert names == {"features": "geometric", "association": "ihgr"}
+    assert not np.any(ekf.meas_kind == MEAS_TENTATIVE)
+    assert everything.n_measurements > ekf.n_measurements
+    np.testing.assert_array_equal(ekf.init_pose, log.pose)
+    np.testing.assert_array_equal(ekf.odo_cov, log.odo_cov)
+    data = dict(np.load(tmp_path / "run_log.npz"))
+    data["meas_landmark"] = data["meas_landmark"] + 10_000
+    np.savez(tmp_path / "run_log.npz", **data)
+    with pytest.raises(DataError, match="meas_landmark"):
+        read_run_log(tmp_path)

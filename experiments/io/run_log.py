@@ -1,0 +1,87 @@
+"""The run log `run_log.npz` that `trunkslam slam` writes beside its results: what the GTSAM
+smoother needs to re-solve the run after the fact (`trunkslam smooth RUN_DIR`).
+
+Format (datasets/FORMAT.md, "Run log"): one compressed `.npz` with `format` =
+"trunkslam.run_log/1", the strings `features` and `association`, and the arrays of
+`slam.smoother.Problem` (N scans, M measurements, L landmarks):
+
+    scan_t (N,) s; prior_pose (3,), prior_cov (3, 3): the EKF's start (rear axle, world);
+    odo_delta (N, 3), odo_cov (N, 3, 3): odometry increment k-1 -> k in the frame of pose
+        k-1 and its covariance (row 0 zeros); laser_pose (3,): laser in the vehicle frame;
+    meas_scan, meas_landmark, meas_kind (M,) int; meas_z (M, 2) [range m, bearing rad];
+        meas_R (M, 2, 2); kind 0 = used in an EKF update, 1 = initialised its landmark,
+        2 = a tentative sighting of a landmark that later joined the map (unused by the EKF);
+    init_pose (N, 3): the EKF's path; landmark_id (L,), init_landmark (L, 2): its map.
+"""
+
+from __future__ import annotations
+
+import zipfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from experiments.errors import DataError
+from experiments.io.writers import write_atomic
+from slam import SlamError, SlamLog
+from slam.smoother import MEAS_TENTATIVE, Problem, problem_from_log
+
+__all__ = ["RUN_LOG_FORMAT", "RUN_LOG_NAME", "read_run_log", "write_run_log"]
+
+RUN_LOG_FORMAT = "trunkslam.run_log/1"
+RUN_LOG_NAME = "run_log.npz"
+_STRINGS = ("format", "features", "association")
+
+
+def write_run_log(path: Path | str, log: SlamLog) -> Path:
+    """Write the smoother's inputs of `log` (every candidate measurement, kinds 0-2)."""
+    p = problem_from_log(log, measurements="all")
+    arrays = {
+        "format": np.array(RUN_LOG_FORMAT),
+        "features": np.array(log.features_method),
+        "association": np.array(log.association_method),
+        **p.arrays(),
+    }
+    return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays))
+
+
+def read_run_log(path: Path | str, measurements: str = "ekf") -> tuple[Problem, dict]:
+    """(Problem, {"features": ..., "association": ...}) from a run log, or a `DataError`
+    naming the file and what is wrong. measurements: "ekf" (kinds 0 and 1, what the filter
+    used) or "all" (also kind 2)."""
+    if measurements not in ("ekf", "all"):
+        raise DataError(f"measurements: expected 'ekf' or 'all', got {measurements!r}")
+    path = Path(path)
+    if path.is_dir():
+        path = path / RUN_LOG_NAME
+    if not path.is_file():
+        raise DataError(
+            f"{path}: no run log (written by `trunkslam slam` since trunkslam 0.1; re-run it)"
+        )
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            data = {k: npz[k] for k in npz.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise DataError(f"{path}: not a readable run log ({exc})") from None
+    fmt = data.get("format")
+    if fmt is None or fmt.dtype.kind != "U" or str(fmt) != RUN_LOG_FORMAT:
+        raise DataError(f"{path}: not a run log (format {RUN_LOG_FORMAT!r} expected)")
+    fields = Problem.__dataclass_fields__
+    missing = [k for k in fields if k not in data]
+    if missing:
+        raise DataError(f"{path}: missing variable(s) {missing}")
+    names = {k: str(data[k]) for k in _STRINGS[1:] if k in data}
+    arrays = {k: data[k] for k in fields}
+    if measurements == "ekf" and arrays["meas_kind"].ndim == 1:
+        keep = arrays["meas_kind"] != MEAS_TENTATIVE
+        for k in ("meas_scan", "meas_landmark", "meas_z", "meas_R", "meas_kind"):
+            if arrays[k].shape[:1] != keep.shape:
+                raise DataError(
+                    f"{path}: {k} has {arrays[k].shape[:1]} rows, meas_kind {keep.shape}"
+                )
+            arrays[k] = arrays[k][keep]
+    try:
+        return Problem(**arrays), names
+    except SlamError as exc:
+        raise DataError(f"{path}: {exc}") from None

@@ -1,0 +1,118 @@
+"""`trunkslam smooth RUN_DIR`: re-solve a `trunkslam slam` run with the GTSAM smoother."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from experiments.errors import DataError
+from experiments.eval.gps import score_sequence
+from experiments.eval.poses import nees, pose_errors
+from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
+from experiments.io.run_log import read_run_log
+from experiments.io.sequence_file import load_sequence
+from experiments.io.writers import dumps_json, write_atomic
+from slam import interpolate_poses
+from slam.smoother import MEAS_INIT, Problem, SmootherOptions, SmootherResult, smooth
+
+__all__ = ["smooth_run", "smoother_summary"]
+
+
+def smooth_run(
+    run_dir: Path | str, options: SmootherOptions | None = None, measurements: str = "ekf"
+) -> dict:
+    """Solve the run in `run_dir` (its `run_log.npz`) and write beside it
+
+    trajectory_smoothed.tum   the smoothed rear-axle path (TUM, like trajectory.tum)
+    trajectory_smoothed.csv   the same with each pose's marginal covariance (world frame)
+    map_smoothed.csv          the smoothed map with marginal covariances (map.csv's columns;
+                              first_scan: the scan of its initialising measurement, n_obs: its
+                              measurements in the graph)
+    smoother.json             solver, chi-square, degrees of freedom, chi-square per degree of
+                              freedom, iterations, seconds; errors against GPS and the truth
+                              (as summary.json's) when the run's input file is still there
+
+    Returns the smoother.json summary. measurements: "ekf" or "all" (`slam.smoother`).
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise DataError(f"{run_dir}: not a folder (expected the output folder of trunkslam slam)")
+    problem, names = read_run_log(run_dir, measurements)
+    result = smooth(problem, options)
+    write_atomic(run_dir / "trajectory_smoothed.tum", trajectory_tum(problem.scan_t, result.pose))
+    write_atomic(
+        run_dir / "trajectory_smoothed.csv",
+        trajectory_csv(problem.scan_t, result.pose, result.pose_cov),
+    )
+    write_atomic(run_dir / "map_smoothed.csv", _map(problem, result))
+    summary = {
+        "run_dir": str(run_dir),
+        **names,
+        "measurements": measurements,
+        **smoother_summary(problem, result),
+        **_scores(run_dir, problem, result),
+    }
+    write_atomic(run_dir / "smoother.json", dumps_json(summary))
+    return summary
+
+
+def smoother_summary(problem: Problem, r: SmootherResult) -> dict:
+    """The solve's figures: solver, counts, chi-square per degree of freedom, time."""
+    return {
+        "solver": r.solver,
+        "robust": r.robust,
+        "n_scans": problem.n_scans,
+        "n_measurements": problem.n_measurements,
+        "landmarks": int(problem.landmark_id.size),
+        "chi2": r.chi2,
+        "dof": r.dof,
+        "chi2_per_dof": r.chi2_per_dof,
+        "initial_chi2_per_dof": r.initial_chi2 / r.dof if r.dof > 0 else None,
+        "iterations": r.iterations,
+        "seconds": r.seconds,
+        "seconds_marginals": r.seconds_marginals,
+    }
+
+
+def _map(problem: Problem, r: SmootherResult) -> str:
+    first = np.full(r.landmark_id.size, -1, np.int64)
+    n_obs = np.zeros(r.landmark_id.size, np.int64)
+    pos = {int(i): j for j, i in enumerate(r.landmark_id)}
+    for k, lid, kind in zip(problem.meas_scan, problem.meas_landmark, problem.meas_kind):
+        j = pos[int(lid)]
+        n_obs[j] += 1
+        if kind == MEAS_INIT:
+            first[j] = k
+    return map_csv(r.landmark_id, r.landmark_xy, r.landmark_cov, first, n_obs)
+
+
+def _scores(run_dir: Path, problem: Problem, r: SmootherResult) -> dict:
+    """Errors against the GPS and the truth of the run's input file, when it can be read."""
+    try:
+        summary = json.loads((run_dir / "summary.json").read_text())
+        seq = load_sequence(summary["input"])
+    except (OSError, ValueError, KeyError, TypeError, DataError):
+        return {"scored": "no: the run's summary.json or its input sequence is not readable"}
+    if seq.n_scans != problem.n_scans or not np.allclose(seq.scan_t, problem.scan_t):
+        return {"scored": f"no: {summary['input']} is not the sequence of this run"}
+    out: dict = {"scored": summary["input"]}
+    if seq.gps_t is not None:
+        out["gps"] = score_sequence(seq, problem.scan_t, r.pose, problem.laser_pose).to_dict()
+    if seq.truth_t is not None:
+        inside = (seq.scan_t >= seq.truth_t[0]) & (seq.scan_t <= seq.truth_t[-1])
+        inside[0] = False
+        if inside.any():
+            truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+            e = pose_errors(r.pose, truth)[inside]
+            out["truth"] = {
+                "mean_abs_error": dict(
+                    zip(("dx_m", "dy_m", "dtheta_rad"), np.mean(np.abs(e), 0).tolist())
+                ),
+                "nees_mean": float(np.mean(nees(e, r.pose_cov[inside])))
+                if np.isfinite(r.pose_cov).all()
+                else None,
+                "scans_scored": int(inside.sum()),
+            }
+    return out

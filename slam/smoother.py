@@ -1,0 +1,669 @@
+"""The GTSAM smoother: the full nonlinear least-squares solution of what an EKF run did.
+
+With the same odometry, the same measurements and the same associations as the filter, the
+smoother shows how much of an EKF's error is linearisation and how much is data. This is the
+only module of trunkslam that imports `gtsam`.
+
+The graph (`Problem` holds its inputs; `problem_from_log` takes them from a `SlamLog`):
+- one `Pose2` per scan, a prior on the first equal to the EKF's start (mean and covariance, the
+  covariance raised by `PRIOR_FLOOR` so that a start with zero covariance stays invertible);
+- between consecutive scans the odometry increment of the EKF's prediction (the same Ackermann
+  integration, `slam.vehicle.integrate`: mean and covariance, floor noise included);
+- one bearing-range factor per associated measurement with the EKF's covariance: by default the
+  measurements the EKF used (its updates and the measurement that initialised each landmark),
+  optionally also the tentative sightings of landmarks that later joined the map.
+
+**How the laser offset is modelled.** GTSAM's `BearingRangeFactor2D` observes from the pose it
+is attached to, and the laser sits ahead of the rear axle (3.78 m on the Victoria Park ute).
+Rather than a Python factor per measurement (a callback per factor and iteration), the graph's
+variables are the laser's poses L_k = X_k T (X_k the rear-axle pose, T the laser's pose in the
+vehicle frame), so every measurement is a native bearing-range factor from the laser itself.
+The odometry X_{k-1}^-1 X_k = D becomes L_{k-1}^-1 L_k = T^-1 D T, and the prior on X_0 a prior
+on X_0 T; their covariances move by the adjoint of T^-1 (Log(T^-1 M T) = Ad(T^-1) Log(M)). In
+GTSAM's Pose2 chart (x, y, theta of the relative pose) this is exact to first order in the
+factor's residual; the second-order difference is |l| theta^2 / 2 for a lever arm l and a
+heading residual theta (2e-6 m for 3.8 m and 1 mrad), far below any noise here. The results are
+returned for the rear-axle poses X_k = L_k T^-1, with covariances in the world frame (x, y,
+theta), directly comparable with the EKF's. tests/slam/test_smoother.py checks the graph
+against a hand-built one with the factors written on the rear-axle poses.
+
+Solvers (`SmootherOptions.solver`): "batch" (Levenberg-Marquardt from the EKF's path and map),
+"isam2" (the online smoother: iSAM2 fed scan by scan, new poses started from the previous
+estimate composed with the odometry and new landmarks from their first measurement), with an
+optional batch polish after iSAM2. Robust measurement factors (Huber or Cauchy) are an option,
+off by default. `solve_graph_file` solves GTSAM's own Victoria Park graph.
+
+chi2 is twice GTSAM's graph error (the sum of squared whitened residuals, of the Gaussian
+factors even when robust kernels were used to solve) and dof the number of residuals minus the
+number of unknowns: 2 M - 2 L for M measurements and L landmarks (the prior and odometry supply
+exactly the poses' 3 N).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import gtsam
+import numpy as np
+
+from slam.errors import SlamError
+from slam.log import CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT, SlamLog
+
+__all__ = [
+    "MEAS_INIT",
+    "MEAS_TENTATIVE",
+    "MEAS_UPDATE",
+    "GraphResult",
+    "Problem",
+    "SmootherOptions",
+    "SmootherResult",
+    "problem_from_log",
+    "smooth",
+    "solve_graph_file",
+]
+
+# Problem.meas_kind: what the EKF did with each measurement.
+MEAS_UPDATE = 0  # used in an update of a mapped landmark
+MEAS_INIT = 1  # initialised the landmark when it joined the map
+MEAS_TENTATIVE = 2  # a sighting while the landmark was still tentative (the EKF ignores it)
+
+# Added to the prior's covariance (m^2, rad^2): a run that starts from the truth with zero
+# covariance gets a prior of 1e-6 m and 1e-6 rad, which GTSAM's Gaussian can invert.
+PRIOR_FLOOR = 1e-12
+ROBUST_DEFAULT_K = {"huber": 1.345, "cauchy": 2.3849}  # 95% efficiency under Gaussian noise
+
+
+def _pose_key(k: int) -> int:
+    return gtsam.symbol("x", k)
+
+
+def _landmark_key(lid: int) -> int:
+    return gtsam.symbol("l", lid)
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """The smoother's inputs. N scans, M measurements, L landmarks; world frame; m, rad, s.
+
+    scan_t (N,): scan times. prior_pose (3,), prior_cov (3, 3): the EKF's start (rear axle).
+    odo_delta (N, 3), odo_cov (N, 3, 3): row k >= 1 the odometry increment from scan k - 1 to
+        k in the frame of pose k - 1, and its covariance in that frame (row 0 unused).
+    laser_pose (3,): the laser in the vehicle frame.
+    meas_scan (M,), meas_landmark (M,): scan index and landmark id of each measurement;
+        meas_z (M, 2) [range, bearing] in the laser frame; meas_R (M, 2, 2) its covariance;
+        meas_kind (M,): MEAS_UPDATE, MEAS_INIT or MEAS_TENTATIVE.
+    init_pose (N, 3): starting values of the poses (the EKF's path).
+    landmark_id (L,), init_landmark (L, 2): the landmarks and their starting values.
+    """
+
+    scan_t: np.ndarray
+    prior_pose: np.ndarray
+    prior_cov: np.ndarray
+    odo_delta: np.ndarray
+    odo_cov: np.ndarray
+    laser_pose: np.ndarray
+    meas_scan: np.ndarray
+    meas_landmark: np.ndarray
+    meas_z: np.ndarray
+    meas_R: np.ndarray
+    meas_kind: np.ndarray
+    init_pose: np.ndarray
+    landmark_id: np.ndarray
+    init_landmark: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = _shape(self, "scan_t", (None,), np.float64)[0]
+        if n < 1:
+            raise SlamError("Problem.scan_t: no scans")
+        m = _shape(self, "meas_scan", (None,), np.int64)[0]
+        n_lm = _shape(self, "landmark_id", (None,), np.int64)[0]
+        for name, shape, dtype in (
+            ("prior_pose", (3,), np.float64),
+            ("prior_cov", (3, 3), np.float64),
+            ("odo_delta", (n, 3), np.float64),
+            ("odo_cov", (n, 3, 3), np.float64),
+            ("laser_pose", (3,), np.float64),
+            ("meas_landmark", (m,), np.int64),
+            ("meas_z", (m, 2), np.float64),
+            ("meas_R", (m, 2, 2), np.float64),
+            ("meas_kind", (m,), np.int64),
+            ("init_pose", (n, 3), np.float64),
+            ("init_landmark", (n_lm, 2), np.float64),
+        ):
+            _shape(self, name, shape, dtype)
+        if np.unique(self.landmark_id).size != n_lm:
+            raise SlamError("Problem.landmark_id: an id appears twice")
+        if m and not (0 <= self.meas_scan.min() and self.meas_scan.max() < n):
+            raise SlamError(f"Problem.meas_scan: scan indices must lie in [0, {n})")
+        if m and not np.isin(self.meas_kind, (MEAS_UPDATE, MEAS_INIT, MEAS_TENTATIVE)).all():
+            raise SlamError("Problem.meas_kind: expected 0 (update), 1 (init) or 2 (tentative)")
+        known = np.isin(self.meas_landmark, self.landmark_id)
+        if not known.all():
+            i = int(np.flatnonzero(~known)[0])
+            raise SlamError(
+                f"Problem.meas_landmark[{i}]: landmark {int(self.meas_landmark[i])} is not in "
+                "landmark_id"
+            )
+        seen = np.isin(self.landmark_id, self.meas_landmark)
+        if not seen.all():
+            lid = int(self.landmark_id[np.flatnonzero(~seen)[0]])
+            raise SlamError(f"Problem.landmark_id: landmark {lid} has no measurement")
+        _positive_definite("Problem.prior_cov", self.prior_cov[None], semi=True)
+        _positive_definite("Problem.odo_cov", self.odo_cov[1:], first=1)
+        _positive_definite("Problem.meas_R", self.meas_R)
+        if m and not (self.meas_z[:, 0] > 0).all():
+            raise SlamError("Problem.meas_z: ranges must be > 0")
+
+    @property
+    def n_scans(self) -> int:
+        return int(self.scan_t.shape[0])
+
+    @property
+    def n_measurements(self) -> int:
+        return int(self.meas_scan.shape[0])
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The fields as a dict of arrays (what the run-log file stores)."""
+        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+
+
+def _shape(obj, name: str, shape: tuple, dtype) -> tuple[int, ...]:
+    """Check and coerce obj.name to `dtype` with `shape` (None: any length); finite floats."""
+    v = getattr(obj, name)
+    try:
+        a = np.asarray(v, dtype=dtype)
+    except (TypeError, ValueError, OverflowError) as e:
+        raise SlamError(f"Problem.{name}: expected numbers, got {type(v).__name__}") from e
+    if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
+        want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+        raise SlamError(f"Problem.{name}: expected shape {want}, got {a.shape}")
+    if dtype is np.float64 and not np.isfinite(a).all():
+        raise SlamError(f"Problem.{name}: contains NaN or infinite values")
+    if dtype is np.int64 and np.asarray(v).dtype.kind == "f" and not np.array_equal(a, v):
+        raise SlamError(f"Problem.{name}: expected integers")
+    object.__setattr__(obj, name, a)
+    return a.shape
+
+
+def _positive_definite(name: str, covs: np.ndarray, first: int = 0, semi: bool = False) -> None:
+    if not covs.shape[0]:
+        return
+    sym = np.abs(covs - np.swapaxes(covs, -1, -2)).max(axis=(-1, -2))
+    scale = np.abs(covs).max(axis=(-1, -2))
+    bad = sym > 1e-9 * np.maximum(scale, 1e-300)
+    ok = ~bad
+    low = np.linalg.eigvalsh(covs[ok]).min(axis=-1)
+    ok[ok] = low >= -1e-12 * scale[ok] if semi else low > 0
+    if not ok.all():
+        i = int(np.flatnonzero(~ok)[0])
+        what = "semi-definite" if semi else "definite"
+        raise SlamError(f"{name}[{i + first}]: not a symmetric positive {what} covariance")
+
+
+def problem_from_log(log: SlamLog, measurements: str = "ekf") -> Problem:
+    """The smoother's inputs from what an EKF run did.
+
+    measurements: "ekf" (the measurements the filter used: its updates and each landmark's
+        initialising measurement) or "all" (also the tentative sightings of the landmarks that
+        joined the map, which the filter never uses).
+    """
+    if measurements not in ("ekf", "all"):
+        raise SlamError(f"measurements: expected 'ekf' or 'all', got {measurements!r}")
+    st = log.meas_status
+    kind = np.full(st.shape, -1, np.int64)
+    kind[st >= 0] = MEAS_UPDATE
+    kind[st == CONFIRMED] = MEAS_INIT
+    if measurements == "all":
+        tentative = ((st == NEW_TENTATIVE) | (st == TENTATIVE_HIT)) & np.isin(
+            log.meas_track, log.landmark_id
+        )
+        kind[tentative] = MEAS_TENTATIVE
+    use = kind >= 0
+    return Problem(
+        scan_t=log.scan_t,
+        prior_pose=log.start_pose,
+        prior_cov=log.start_cov,
+        odo_delta=log.odo_delta,
+        odo_cov=log.odo_cov,
+        laser_pose=log.laser_pose,
+        meas_scan=log.meas_scan[use],
+        meas_landmark=log.meas_track[use],
+        meas_z=log.meas_z[use],
+        meas_R=log.meas_R[use],
+        meas_kind=kind[use],
+        init_pose=log.pose,
+        landmark_id=log.landmark_id,
+        init_landmark=log.landmark_xy,
+    )
+
+
+@dataclass(frozen=True)
+class SmootherOptions:
+    """How to solve.
+
+    solver: "batch" (Levenberg-Marquardt from the problem's starting values) or "isam2" (fed
+        scan by scan, `isam2_every` scans per update). polish: after iSAM2, a batch
+        Levenberg-Marquardt from its estimate. robust: None, "huber" or "cauchy" on the
+        measurement factors, with threshold `robust_k` (whitened units; None: 1.345 for Huber,
+        2.3849 for Cauchy). max_iterations, relative_error_tol: the Levenberg-Marquardt stops
+        (GTSAM's defaults but 100 iterations). relinearize_threshold, relinearize_skip: iSAM2's
+        (GTSAM's defaults). marginals: compute the poses' and landmarks' marginal covariances.
+    """
+
+    solver: str = "batch"
+    polish: bool = False
+    robust: str | None = None
+    robust_k: float | None = None
+    max_iterations: int = 100
+    relative_error_tol: float = 1e-5
+    isam2_every: int = 1
+    relinearize_threshold: float = 0.1
+    relinearize_skip: int = 10
+    marginals: bool = True
+
+    def __post_init__(self) -> None:
+        if self.solver not in ("batch", "isam2"):
+            raise SlamError(
+                f"SmootherOptions.solver: expected 'batch' or 'isam2', got {self.solver!r}"
+            )
+        if self.robust not in (None, "huber", "cauchy"):
+            raise SlamError(
+                f"SmootherOptions.robust: expected None, 'huber' or 'cauchy', got {self.robust!r}"
+            )
+        for name in ("polish", "marginals"):
+            if not isinstance(getattr(self, name), bool):
+                raise SlamError(f"SmootherOptions.{name}: expected true or false")
+        for name in ("max_iterations", "isam2_every", "relinearize_skip"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 1 <= v < 2**31:
+                raise SlamError(f"SmootherOptions.{name}: expected an integer >= 1, got {v!r}")
+        for name in ("relative_error_tol", "relinearize_threshold", "robust_k"):
+            v = getattr(self, name)
+            if v is None and name == "robust_k":
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < math.inf:
+                raise SlamError(f"SmootherOptions.{name}: expected a number > 0, got {v!r}")
+
+    def kernel_k(self) -> float:
+        return ROBUST_DEFAULT_K[self.robust] if self.robust_k is None else float(self.robust_k)
+
+
+@dataclass(frozen=True, eq=False)
+class SmootherResult:
+    """The smoothed run. N scans, L landmarks; world frame; m, rad.
+
+    pose (N, 3), pose_cov (N, 3, 3): the rear-axle poses and their marginal covariances in
+        (x, y, theta) (NaN when marginals were not asked for).
+    landmark_id (L,), landmark_xy (L, 2), landmark_cov (L, 2, 2): the map.
+    chi2, dof: final chi-square (Gaussian factors) and degrees of freedom; initial_chi2 at the
+        starting values (batch) or of the iSAM2 estimate before a polish.
+    iterations: Levenberg-Marquardt iterations (batch or polish) or iSAM2 updates.
+    seconds: building the graph and solving; seconds_marginals: the covariances.
+    """
+
+    pose: np.ndarray
+    pose_cov: np.ndarray
+    landmark_id: np.ndarray
+    landmark_xy: np.ndarray
+    landmark_cov: np.ndarray
+    chi2: float
+    dof: int
+    initial_chi2: float
+    iterations: int
+    seconds: float
+    seconds_marginals: float
+    solver: str
+    robust: str | None
+
+    @property
+    def chi2_per_dof(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else math.nan
+
+
+# ---- the graph ----------------------------------------------------------------------------------
+
+
+class _Graph:
+    """The factors of a `Problem` on the laser poses, grouped by the scan that brings them."""
+
+    def __init__(self, p: Problem, robust: str | None, robust_k: float) -> None:
+        self.p = p
+        self.T = gtsam.Pose2(*p.laser_pose)
+        self.T_inv = self.T.inverse()
+        self.ad_inv = self.T_inv.AdjointMap()
+        n = p.n_scans
+        self.by_scan: list[list] = [[] for _ in range(n)]
+        self.gaussian = gtsam.NonlinearFactorGraph()  # for chi2 when robust kernels are used
+        self.robust = robust is not None
+        # prior on L_0 = X_0 T
+        x0 = p.prior_pose
+        B = _frame_rotation(-x0[2])
+        cov0 = self.ad_inv @ B @ (p.prior_cov + PRIOR_FLOOR * np.eye(3)) @ B.T @ self.ad_inv.T
+        self._add(0, gtsam.PriorFactorPose2(_pose_key(0), self.laser_of(x0), _gauss(cov0)), None)
+        for k in range(1, n):
+            d = p.odo_delta[k]
+            A = _frame_rotation(-d[2])
+            cov = self.ad_inv @ (A @ p.odo_cov[k] @ A.T) @ self.ad_inv.T
+            meas = self.T_inv.compose(gtsam.Pose2(*d)).compose(self.T)
+            f = gtsam.BetweenFactorPose2(_pose_key(k - 1), _pose_key(k), meas, _gauss(cov))
+            self._add(k, f, None)
+        swap = np.array([[0.0, 1.0], [1.0, 0.0]])  # (range, bearing) -> (bearing, range)
+        for k, lid, z, R in zip(p.meas_scan, p.meas_landmark, p.meas_z, p.meas_R):
+            keys = (_pose_key(int(k)), _landmark_key(int(lid)))
+            noise = _gauss(swap @ R @ swap)
+            model = noise
+            if robust is not None:
+                est = (
+                    gtsam.noiseModel.mEstimator.Huber
+                    if robust == "huber"
+                    else gtsam.noiseModel.mEstimator.Cauchy
+                ).Create(robust_k)
+                model = gtsam.noiseModel.Robust.Create(est, noise)
+            bearing = gtsam.Rot2(float(z[1]))
+            f = gtsam.BearingRangeFactor2D(*keys, bearing, float(z[0]), model)
+            g = gtsam.BearingRangeFactor2D(*keys, bearing, float(z[0]), noise)
+            self._add(int(k), f, g)
+
+    def _add(self, k: int, factor, gaussian) -> None:
+        self.by_scan[k].append(factor)
+        self.gaussian.add(factor if gaussian is None else gaussian)
+
+    def laser_of(self, pose) -> gtsam.Pose2:
+        return gtsam.Pose2(*pose).compose(self.T)
+
+    def all(self) -> gtsam.NonlinearFactorGraph:
+        g = gtsam.NonlinearFactorGraph()
+        for fs in self.by_scan:
+            for f in fs:
+                g.add(f)
+        return g
+
+    def chi2(self, values: gtsam.Values) -> float:
+        return 2.0 * self.gaussian.error(values)
+
+
+def _gauss(cov: np.ndarray):
+    return gtsam.noiseModel.Gaussian.Covariance(0.5 * (cov + cov.T))
+
+
+def _frame_rotation(theta: float) -> np.ndarray:
+    """(3, 3) blockdiag(R(theta), 1)."""
+    c, s = math.cos(theta), math.sin(theta)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _lm_params(o: SmootherOptions) -> gtsam.LevenbergMarquardtParams:
+    prm = gtsam.LevenbergMarquardtParams()
+    prm.setMaxIterations(int(o.max_iterations))
+    prm.setRelativeErrorTol(float(o.relative_error_tol))
+    return prm
+
+
+def smooth(problem: Problem, options: SmootherOptions | None = None) -> SmootherResult:
+    """Solve the smoothing problem; see the module doc for the graph and the solvers."""
+    if not isinstance(problem, Problem):
+        raise SlamError(f"problem: expected a slam.smoother.Problem, got {type(problem).__name__}")
+    o = options or SmootherOptions()
+    if not isinstance(o, SmootherOptions):
+        raise SlamError(f"options: expected SmootherOptions, got {type(o).__name__}")
+    t0 = time.perf_counter()
+    g = _Graph(problem, o.robust, o.kernel_k() if o.robust else 0.0)
+    if o.solver == "batch":
+        values = gtsam.Values()
+        for k in range(problem.n_scans):
+            values.insert(_pose_key(k), g.laser_of(problem.init_pose[k]))
+        for lid, xy in zip(problem.landmark_id, problem.init_landmark):
+            values.insert(_landmark_key(int(lid)), np.asarray(xy, dtype=np.float64))
+        initial = g.chi2(values)
+        opt = gtsam.LevenbergMarquardtOptimizer(g.all(), values, _lm_params(o))
+        values = opt.optimize()
+        iterations = int(opt.iterations())
+    else:
+        values, iterations = _isam2(g, o)
+        initial = g.chi2(values)
+        if o.polish:
+            opt = gtsam.LevenbergMarquardtOptimizer(g.all(), values, _lm_params(o))
+            values = opt.optimize()
+            iterations = int(opt.iterations())
+    seconds = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    pose, pose_cov, lm_xy, lm_cov = _read(g, values, o.marginals)
+    return SmootherResult(
+        pose=pose,
+        pose_cov=pose_cov,
+        landmark_id=problem.landmark_id.copy(),
+        landmark_xy=lm_xy,
+        landmark_cov=lm_cov,
+        chi2=g.chi2(values),
+        dof=2 * problem.n_measurements - 2 * int(problem.landmark_id.size),
+        initial_chi2=initial,
+        iterations=iterations,
+        seconds=seconds,
+        seconds_marginals=time.perf_counter() - t1,
+        solver=o.solver + ("+polish" if o.solver == "isam2" and o.polish else ""),
+        robust=o.robust,
+    )
+
+
+def _isam2(g: _Graph, o: SmootherOptions) -> tuple[gtsam.Values, int]:
+    """iSAM2 fed scan by scan (`isam2_every` scans per update): a new pose starts at the
+    previous estimate composed with the odometry, a new landmark at its first measurement."""
+    prm = gtsam.ISAM2Params()
+    prm.setRelinearizeThreshold(float(o.relinearize_threshold))
+    prm.relinearizeSkip = int(o.relinearize_skip)
+    isam = gtsam.ISAM2(prm)
+    p = g.p
+    known: set[int] = set()
+    prev = g.laser_of(p.prior_pose)
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    updates = 0
+    order = np.argsort(p.meas_scan, kind="stable")
+    meas_at = np.split(order, np.searchsorted(p.meas_scan[order], np.arange(1, p.n_scans)))
+    for k in range(p.n_scans):
+        if k > 0:  # L_k = L_{k-1} (T^-1 D_k T)
+            prev = prev.compose(g.T_inv.compose(gtsam.Pose2(*p.odo_delta[k])).compose(g.T))
+        cur = prev
+        values.insert(_pose_key(k), cur)
+        for f in g.by_scan[k]:
+            graph.add(f)
+        for i in meas_at[k]:
+            lid = int(p.meas_landmark[i])
+            if lid not in known:
+                known.add(lid)
+                r, b = p.meas_z[i]
+                values.insert(
+                    _landmark_key(lid),
+                    cur.transformFrom(np.array([r * math.cos(b), r * math.sin(b)])),
+                )
+        prev = cur
+        if (k + 1) % o.isam2_every == 0 or k == p.n_scans - 1:
+            isam.update(graph, values)
+            updates += 1
+            graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+            prev = isam.calculateEstimatePose2(_pose_key(k))
+    return isam.calculateEstimate(), updates
+
+
+def _read(g: _Graph, values: gtsam.Values, marginals: bool):
+    """Rear-axle poses, world-frame covariances, and the map from a solution on laser poses."""
+    p = g.p
+    n, n_lm = p.n_scans, p.landmark_id.size
+    pose = np.empty((n, 3))
+    pose_cov = np.full((n, 3, 3), np.nan)
+    lm_xy = np.empty((n_lm, 2))
+    lm_cov = np.full((n_lm, 2, 2), np.nan)
+    for k in range(n):
+        x = values.atPose2(_pose_key(k)).compose(g.T_inv)
+        pose[k] = (x.x(), x.y(), x.theta())
+    for j, lid in enumerate(p.landmark_id):
+        lm_xy[j] = values.atPoint2(_landmark_key(int(lid)))
+    if marginals:
+        m = gtsam.Marginals(g.all(), values)
+        ad = g.T.AdjointMap()
+        for k in range(n):
+            J = _frame_rotation(pose[k, 2]) @ ad  # laser tangent -> rear-axle tangent -> world
+            C = J @ m.marginalCovariance(_pose_key(k)) @ J.T
+            pose_cov[k] = 0.5 * (C + C.T)
+        for j, lid in enumerate(p.landmark_id):
+            lm_cov[j] = m.marginalCovariance(_landmark_key(int(lid)))
+    return pose, pose_cov, lm_xy, lm_cov
+
+
+# ---- GTSAM's own Victoria Park graph ------------------------------------------------------------
+
+
+@dataclass(frozen=True, eq=False)
+class GraphResult:
+    """A solve of a graph file in GTSAM's 2D dataset format.
+
+    n_factors, n_values: what `gtsam.load2D` read (the gauge prior not counted); n_poses,
+    n_landmarks. chi2, dof: final chi-square and residuals minus unknowns (the 3 gauge
+    freedoms fixed by the prior); initial_chi2: at the file's values. seconds: the solve
+    (reading the file not included); iterations: LM iterations of the last stage.
+    pose (n_poses, 3), pose_id; landmark_xy (n_landmarks, 2), landmark_id: the solution.
+    """
+
+    method: str
+    n_factors: int
+    n_values: int
+    n_poses: int
+    n_landmarks: int
+    chi2: float
+    dof: int
+    initial_chi2: float
+    seconds: float
+    iterations: int
+    pose_id: np.ndarray
+    pose: np.ndarray
+    landmark_id: np.ndarray
+    landmark_xy: np.ndarray
+
+    @property
+    def chi2_per_dof(self) -> float:
+        return self.chi2 / self.dof
+
+
+GRAPH_METHODS = ("isam2-chunks", "isam2", "batch")
+
+
+def solve_graph_file(
+    path: str | Path, method: str = "isam2-chunks", chunk_poses: int = 25, polish: bool = True
+) -> GraphResult:
+    """Solve a 2D pose-landmark graph file (e.g. GTSAM's `victoria_park.txt`).
+
+    method: "batch" (Levenberg-Marquardt from the file's dead-reckoned values), "isam2"
+    (iSAM2 one pose at a time) or "isam2-chunks" (iSAM2 fed `chunk_poses` poses per update;
+    each new pose starts at the previous estimate composed with its odometry and each new
+    landmark at its first bearing-range measurement). polish: a batch Levenberg-Marquardt after
+    iSAM2. The first pose gets a prior (sigma 1e-6) that fixes the gauge and adds no error.
+    """
+    if method not in GRAPH_METHODS:
+        raise SlamError(f"method: expected one of {list(GRAPH_METHODS)}, got {method!r}")
+    if isinstance(chunk_poses, bool) or not isinstance(chunk_poses, int) or chunk_poses < 1:
+        raise SlamError(f"chunk_poses: expected an integer >= 1, got {chunk_poses!r}")
+    path = Path(path)
+    if not path.is_file():
+        raise SlamError(f"{path}: no such graph file")
+    graph, values = gtsam.load2D(str(path))
+    n_factors, n_values = int(graph.size()), int(values.size())
+    poses = sorted(k for k in values.keys() if _is_pose(values, k))
+    landmarks = sorted(k for k in values.keys() if not _is_pose(values, k))
+    if not poses or not n_factors:
+        raise SlamError(f"{path}: no poses or no factors read (not a GTSAM 2D graph file?)")
+    dims = sum(graph.at(i).dim() for i in range(n_factors))
+    dof = dims - 3 * len(poses) - 2 * len(landmarks) + 3
+    initial_chi2 = 2.0 * graph.error(values)
+    prior = gtsam.PriorFactorPose2(
+        poses[0], values.atPose2(poses[0]), gtsam.noiseModel.Isotropic.Sigma(3, 1e-6)
+    )
+    full = gtsam.NonlinearFactorGraph(graph)
+    full.add(prior)
+    t0 = time.perf_counter()
+    iterations = 0
+    if method == "batch":
+        opt = gtsam.LevenbergMarquardtOptimizer(full, values, gtsam.LevenbergMarquardtParams())
+        result = opt.optimize()
+        iterations = int(opt.iterations())
+    else:
+        result = _isam2_graph(graph, values, poses, prior, 1 if method == "isam2" else chunk_poses)
+        if polish:
+            opt = gtsam.LevenbergMarquardtOptimizer(full, result, gtsam.LevenbergMarquardtParams())
+            result = opt.optimize()
+            iterations = int(opt.iterations())
+    seconds = time.perf_counter() - t0
+    name = method + (f"({chunk_poses})" if method == "isam2-chunks" else "")
+    return GraphResult(
+        method=name + ("+polish" if polish and method != "batch" else ""),
+        n_factors=n_factors,
+        n_values=n_values,
+        n_poses=len(poses),
+        n_landmarks=len(landmarks),
+        chi2=2.0 * graph.error(result),
+        dof=dof,
+        initial_chi2=initial_chi2,
+        seconds=seconds,
+        iterations=iterations,
+        pose_id=np.array(poses, np.int64),
+        pose=np.array([_xyt(result.atPose2(k)) for k in poses]).reshape(-1, 3),
+        landmark_id=np.array(landmarks, np.int64),
+        landmark_xy=np.array([result.atPoint2(k) for k in landmarks]).reshape(-1, 2),
+    )
+
+
+def _is_pose(values: gtsam.Values, key: int) -> bool:
+    try:
+        values.atPose2(key)
+    except RuntimeError:
+        return False
+    return True
+
+
+def _xyt(p: gtsam.Pose2) -> tuple[float, float, float]:
+    return p.x(), p.y(), p.theta()
+
+
+def _isam2_graph(graph, values, poses, prior, chunk: int) -> gtsam.Values:
+    """iSAM2 over a pose-landmark graph, `chunk` poses per update, in pose order."""
+    rank = {k: i for i, k in enumerate(poses)}
+    buckets: list[list] = [[] for _ in poses]
+    odometry: dict[int, tuple[int, gtsam.Pose2]] = {}
+    for i in range(graph.size()):
+        f = graph.at(i)
+        keys = f.keys()
+        buckets[max(rank[k] for k in keys if k in rank)].append(f)
+        if isinstance(f, gtsam.BetweenFactorPose2) and all(k in rank for k in keys):
+            odometry[keys[1]] = (keys[0], f.measured())
+    buckets[0].append(prior)
+    isam = gtsam.ISAM2(gtsam.ISAM2Params())
+    current = {poses[0]: values.atPose2(poses[0])}
+    known = set()
+    for start in range(0, len(poses), chunk):
+        new_graph, new_values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        for j in range(start, min(start + chunk, len(poses))):
+            key = poses[j]
+            if j > 0:
+                if key not in odometry:
+                    raise SlamError(f"graph: pose {key} has no odometry from an earlier pose")
+                a, d = odometry[key]
+                current[key] = current[a].compose(d)
+            new_values.insert(key, current[key])
+            known.add(key)
+            for f in buckets[j]:
+                new_graph.add(f)
+                for k in f.keys():
+                    if k in known:
+                        continue
+                    known.add(k)
+                    br = f.measured()
+                    b, r = br.bearing().theta(), br.range()
+                    pose = current[f.keys()[0]]
+                    new_values.insert(
+                        k, pose.transformFrom(np.array([r * math.cos(b), r * math.sin(b)]))
+                    )
+        isam.update(new_graph, new_values)
+        last = poses[min(start + chunk, len(poses)) - 1]
+        current[last] = isam.calculateEstimatePose2(last)
+    return isam.calculateEstimate()
