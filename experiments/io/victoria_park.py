@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.errors import ConfigError, DataError
+from experiments.errors import ConfigError, DataError, MissingDataError
 from experiments.io.paths import victoria_park_dir
 from slam import Sequence
 
@@ -76,7 +76,7 @@ def load_mat(root: Path, key: str, variables: tuple[str, ...]) -> dict[str, np.n
 
     path = root / VP_FILES[key]
     if not path.is_file():
-        raise DataError(f"Victoria Park file missing: {path}; {_HOW_TO_GET}")
+        raise MissingDataError(f"Victoria Park file missing: {path}; {_HOW_TO_GET}")
     try:
         mat = loadmat(path)
     except Exception as exc:  # scipy raises assorted errors on corrupt files
@@ -238,7 +238,7 @@ def load_ss2002_reference(root: Path | str | None = None) -> tuple[np.ndarray, n
         try:
             mat = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
         except FileNotFoundError:
-            raise DataError(f"{path}: not found; {_HOW_TO_GET}") from None
+            raise MissingDataError(f"{path}: not found; {_HOW_TO_GET}") from None
         except Exception as exc:  # scipy raises many types for a corrupt file
             raise DataError(f"{path}: cannot be read as a MATLAB file ({exc})") from None
         if var not in mat:
