@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import zipfile
 import zlib
@@ -54,6 +55,32 @@ def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
     return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays))
 
 
+def _check_declared_size(npz, k: str, path: Path) -> None:
+    """The header of variable k declares no more data than its archive member holds, so a
+    corrupt or hostile header (shape (2**33,)) is an error naming the variable, not an attempt
+    to allocate tens of gigabytes."""
+    try:
+        info = npz.zip.getinfo(f"{k}.npy")
+        with npz.zip.open(info) as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            header = fh.tell()
+    except (KeyError, OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise DataError(f"{path}: variable {k!r} is corrupt or unreadable ({exc})") from None
+    if dtype.hasobject:
+        return  # pickled objects: np.load refuses them (allow_pickle=False), which says so
+    need = math.prod(shape) * dtype.itemsize
+    have = info.file_size - header
+    if need != have:
+        raise DataError(
+            f"{path}: variable {k!r} is corrupt: its header declares shape {shape} of {dtype} "
+            f"({need} bytes) but it holds {have} bytes"
+        )
+
+
 def load_sequence(path: str | os.PathLike) -> Sequence:
     """Read a sequence file written by `save_sequence` (format: datasets/FORMAT.md).
 
@@ -94,6 +121,7 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
         for k in (*REQUIRED, *OPTIONAL):
             if k not in keys:
                 continue
+            _check_declared_size(npz, k, path)
             try:
                 a = npz[k]
             except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
