@@ -103,13 +103,16 @@ class Recorder(NullRecorder):
             raise DataError(f"recording {self.path}: cannot be written ({exc.strerror})") from None
         os.close(fd)
         self._tmp = Path(tmp)
-        self.rec = rr.RecordingStream(app_id)
         try:
+            self.rec = rr.RecordingStream(app_id)
             self.rec.save(str(self._tmp))
+            self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
         except RuntimeError as exc:  # rerun's error when it cannot create the file
             self._tmp.unlink(missing_ok=True)
             raise DataError(f"recording {self.path}: cannot be written ({exc})") from None
-        self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+        except BaseException:  # interrupted while opening: leave nothing behind
+            self._tmp.unlink(missing_ok=True)
+            raise
 
     def _skip(self) -> bool:
         return self._k % self.decimate != 0
