@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import lzma
 import math
 import os
 import zipfile
@@ -27,6 +28,17 @@ __all__ = ["load_sequence", "save_sequence"]
 
 log = logging.getLogger(__name__)
 
+# what reading a damaged archive raises: zipfile, zlib and the other decompressors a flipped
+# compression-method byte selects (NotImplementedError for an unknown method, lzma, bz2's OSError)
+_ZIP_ERRORS = (
+    OSError,
+    ValueError,
+    EOFError,
+    NotImplementedError,
+    zipfile.BadZipFile,
+    zlib.error,
+    lzma.LZMAError,
+)
 _SCALARS = ("scan_angle_min", "scan_angle_increment", "scan_max_range", "scan_n_beams")
 _STRINGS = ("vehicle", "name", "det_method")
 
@@ -68,7 +80,7 @@ def _check_declared_size(npz, k: str, path: Path) -> None:
             else:
                 shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
             header = fh.tell()
-    except (KeyError, OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+    except (KeyError, *_ZIP_ERRORS) as exc:
         raise DataError(f"{path}: variable {k!r} is corrupt or unreadable ({exc})") from None
     if dtype.hasobject:
         return  # pickled objects: np.load refuses them (allow_pickle=False), which says so
@@ -104,7 +116,7 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
         raise DataError(f"{path}: not a readable .npz sequence file (not a zip archive)")
     try:
         npz = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+    except _ZIP_ERRORS as exc:
         raise DataError(f"{path}: not a readable .npz sequence file ({exc})") from None
     values: dict[str, object] = {}
     with npz:
@@ -124,7 +136,7 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
             _check_declared_size(npz, k, path)
             try:
                 a = npz[k]
-            except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+            except _ZIP_ERRORS as exc:
                 raise DataError(
                     f"{path}: variable {k!r} is corrupt or unreadable ({exc})"
                 ) from None
