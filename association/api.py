@@ -11,13 +11,14 @@ from association.errors import AssociationError
 from association.inputs import prepare
 from association.jcbb import DEFAULT_MAX_NODES, jcbb_assign
 from association.nn import nn_assign
+from association.rounding import ROUNDING_OPTIONS, check_rounding_options
 from association.single import CostModel, ihgr_single
 
 __all__ = ["Association", "associate", "associate_detailed", "METHODS"]
 
 METHODS = ("ihgr", "jcbb", "nn")
 _COST_KEYS = tuple(f.name for f in fields(CostModel))
-_ROUNDING_KEYS = ("eps", "fix_ones", "presolve")
+_ROUNDING_KEYS = ROUNDING_OPTIONS
 _PARAMS = {"ihgr": _COST_KEYS + _ROUNDING_KEYS, "jcbb": ("max_nodes",), "nn": ()}
 
 
@@ -48,15 +49,8 @@ class Association:
 
 
 def _rounding_options(params: dict) -> dict:
-    """The IHGR rounding options among `params`, checked: eps in (0, 0.5), flags booleans."""
-    out = {k: params[k] for k in _ROUNDING_KEYS if k in params}
-    eps = out.get("eps", 1e-6)
-    if isinstance(eps, bool) or not isinstance(eps, (int, float)) or not 0.0 < eps < 0.5:
-        raise AssociationError(f"eps: must be a number in (0, 0.5), got {eps!r}")
-    for flag in ("fix_ones", "presolve"):
-        if flag in out and not isinstance(out[flag], (bool, np.bool_)):
-            raise AssociationError(f"{flag}: must be True or False, got {out[flag]!r}")
-    return out
+    """The IHGR rounding options among `params`, checked (`check_rounding_options`)."""
+    return check_rounding_options({k: params[k] for k in _ROUNDING_KEYS if k in params})
 
 
 def associate_detailed(

@@ -406,6 +406,7 @@ def prepare(z, R, z_hat, H, P, gate_prob: float) -> Prepared:
                 f"P, R: innovation covariance S[{i}, {j}] is not positive definite"
             )
         ii, jj = np.nonzero(d2 <= gate)  # eq. individual compatibility gate
+        _check_joint_psd(H, P, np.unique(jj))
         order = np.lexsort((rank_feat[jj], rank_meas[ii]))
         ii, jj = ii[order], jj[order]
         pairs = (ii, jj, nu[ii, jj], S[ii, jj], d2[ii, jj], logdet[ii, jj])
@@ -413,6 +414,29 @@ def prepare(z, R, z_hat, H, P, gate_prob: float) -> Prepared:
         e = np.zeros(0, np.int64)
         pairs = (e, e, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0))
     return Prepared(z, R, z_hat, S_feat, H, P, gate, rank_meas, rank_feat, *pairs)
+
+
+def _check_joint_psd(H: np.ndarray, P: np.ndarray, feats: np.ndarray) -> None:
+    """P on the state columns of the gated features, taken together, is positive semi-definite.
+
+    The per-feature checks above see each feature's block alone; a defect in the cross terms
+    between features shows only in their joint block, which JCBB and the window use (the joint
+    innovation covariance). Only the gated features count: the block stays small (the state of
+    the candidates of one scan), so an eigenvalue check is cheap."""
+    if feats.size < 2:
+        return
+    cols = np.flatnonzero(np.any(H[feats] != 0.0, axis=(0, 1)))
+    if cols.size < 2:
+        return
+    block = P[np.ix_(cols, cols)]
+    scale = max(float(np.max(np.diag(block))), 1e-300)
+    low = float(np.linalg.eigvalsh(0.5 * (block + block.T))[0])
+    if low < -_PSD_RTOL * scale * cols.size:
+        raise AssociationError(
+            f"P: not positive semi-definite on the joint block of the gated features "
+            f"{feats.tolist()} (smallest eigenvalue {low:.3g}; the cross-covariances between "
+            "them are inconsistent)"
+        )
 
 
 def _ranks(keys: np.ndarray) -> np.ndarray:

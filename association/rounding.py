@@ -45,7 +45,37 @@ from scipy.sparse.csgraph import connected_components
 
 from association.errors import AssociationError
 
-__all__ = ["RoundingResult", "ihgr_round", "solve_set_partition", "check_problem"]
+__all__ = [
+    "ROUNDING_OPTIONS",
+    "RoundingResult",
+    "check_problem",
+    "check_rounding_options",
+    "ihgr_round",
+    "solve_set_partition",
+]
+
+ROUNDING_OPTIONS = ("eps", "fix_ones", "presolve")  # the keyword options of `ihgr_round`
+
+
+def check_rounding_options(options: dict) -> dict:
+    """The options of `ihgr_round` in `options`, checked: no other names, eps a number in
+    (0, 0.5), fix_ones and presolve True or False (a string such as "no" is refused, not read
+    as true). `AssociationError` naming the option otherwise."""
+    unknown = sorted(set(options) - set(ROUNDING_OPTIONS))
+    if unknown:
+        raise AssociationError(f"{unknown}: not options of ihgr_round ({list(ROUNDING_OPTIONS)})")
+    eps = options.get("eps", 1e-6)
+    if (
+        isinstance(eps, bool)
+        or not isinstance(eps, (int, float, np.floating))
+        or not (0.0 < eps < 0.5)
+    ):
+        raise AssociationError(f"eps: must be a number in (0, 0.5), got {eps!r}")
+    for flag in ("fix_ones", "presolve"):
+        if flag in options and not isinstance(options[flag], (bool, np.bool_)):
+            raise AssociationError(f"{flag}: must be True or False, got {options[flag]!r}")
+    return dict(options)
+
 
 _DENSE_MAX_ENTRIES = 40_000  # below this, a dense A is faster through linprog than a sparse one
 
@@ -189,8 +219,7 @@ def ihgr_round(
     costs: (N,) column costs; A: (rows, N) 0/1 matrix, dense or scipy.sparse; exact: (rows,) bool,
     True for "covered exactly once", False for "at most once". See the module docstring.
     """
-    if not 0.0 < eps < 0.5:
-        raise AssociationError(f"eps: must be in (0, 0.5), got {eps!r}")
+    check_rounding_options({"eps": eps, "fix_ones": fix_ones, "presolve": presolve})
     c, n_rows, indptr, indices, exact = _check(costs, A, exact)
     return ihgr_round_csc(
         c, n_rows, indptr, indices, exact, eps=eps, fix_ones=fix_ones, presolve=presolve

@@ -82,7 +82,7 @@ from association.inputs import (
     prepare,
     wrap_angle,
 )
-from association.rounding import RoundingResult, ihgr_round
+from association.rounding import RoundingResult, check_rounding_options, ihgr_round
 from association.single import CostModel, single_scan_problem
 
 __all__ = ["SlidingWindowAssociator", "WindowDecision"]
@@ -193,9 +193,7 @@ class SlidingWindowAssociator:
             raise AssociationError(
                 f"max_tracks: must be a non-negative integer, got {max_tracks!r}"
             )
-        unknown = set(rounding) - {"eps", "fix_ones", "presolve"}
-        if unknown:
-            raise AssociationError(f"{sorted(unknown)}: not options of ihgr_round")
+        rounding = check_rounding_options(rounding)
         self.K = int(K)
         self.gate_prob = float(gate_prob)
         self.model = model if model is not None else CostModel()

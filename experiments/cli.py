@@ -95,12 +95,9 @@ class ExperimentName(StrEnum):
 
 def project_errors() -> tuple[type[BaseException], ...]:
     """The exception types that mean bad input, not a bug: shown as one line, exit code 1."""
-    from association import AssociationError
-    from experiments.errors import TrunkslamError
-    from features import FeaturesError
-    from slam import SlamError
+    from experiments.errors import input_errors
 
-    return (TrunkslamError, FeaturesError, AssociationError, SlamError, OSError)
+    return input_errors()
 
 
 def handle_errors(fn):
@@ -185,10 +182,14 @@ def convert_victoria_park(
     ] = None,
 ) -> None:
     """Victoria Park (odometry, GPS, raw scans and/or published detections) as one sequence file."""
+    from experiments.io.paths import victoria_park_dir
     from experiments.io.sequence_file import save_sequence
-    from experiments.io.victoria_park import load_victoria_park
+    from experiments.io.victoria_park import VP_FILES, load_victoria_park
+    from experiments.io.writers import check_output_file
 
-    seq = load_victoria_park(data, full=full)
+    root = data if data is not None else victoria_park_dir()
+    check_output_file(out, "--out", inputs=[root / f for f in VP_FILES.values()])
+    seq = load_victoria_park(root, full=full)
     save_sequence(seq, out)
     kind = "detections only" if full else "raw scans and detections"
     typer.echo(f"{seq.n_scans} scans ({kind}, {seq.det_scan.size} detections) -> {out}")
@@ -207,8 +208,10 @@ def simulate(
 ) -> None:
     """Simulate one scan of a scene from a pose and write it as a sequence file."""
     from experiments.io.sequence_file import save_sequence
+    from experiments.io.writers import check_output_file
     from experiments.sim import simulate_to_sequence
 
+    check_output_file(out, "--out", inputs=[Path(scene)])
     seq = simulate_to_sequence(
         scene,
         [_numbers("--pose", pose, 3)],
@@ -234,8 +237,10 @@ def simulate_drive(
     import numpy as np
 
     from experiments.io.sequence_file import save_sequence
+    from experiments.io.writers import check_output_file
     from experiments.sim import CycabParams, simulate_cycab_run
 
+    check_output_file(out, "--out", inputs=[Path(scene)])
     seq = simulate_cycab_run(np.random.default_rng(seed), scene, CycabParams(n_scans=scans))
     save_sequence(seq, out)
     typer.echo(f"{seq.n_scans} scans of {scene} ({seq.scan_t[-1]:.1f} s) -> {out}")
@@ -427,12 +432,12 @@ def bench_slam(
     """EKF-SLAM time per scan against the size of the map: an avenue of trees, and the full
     Victoria Park run when its data is there."""
     from experiments.bench.slam import bench, bench_victoria_park, format_table
-    from experiments.errors import DataError
+    from experiments.errors import MissingDataError
 
     rows = bench(n_trees=trees, association=association.value, seed=seed)
     try:
         rows += bench_victoria_park(association.value)
-    except DataError as exc:
+    except MissingDataError as exc:
         typer.echo(f"Victoria Park rows skipped: {exc}", err=True)
     typer.echo(format_table(rows))
 

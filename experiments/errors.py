@@ -13,3 +13,22 @@ class DataError(TrunkslamError, ValueError):
 
 class ConfigError(TrunkslamError, ValueError):
     """A parameter, option or configuration value that cannot be used; the message names it."""
+
+
+class MissingDataError(DataError):
+    """A dataset that is not there at all (no folder, a file missing): experiments that need it
+    are skipped with a note. A file that is there but corrupt is a plain `DataError`."""
+
+
+class ExperimentFailed(TrunkslamError):
+    """One or more experiments of a `trunkslam reproduce` run failed; the message names them."""
+
+
+def input_errors() -> tuple[type[BaseException], ...]:
+    """The exception types that mean bad input (files, data, parameters), not a bug: the
+    project's own errors of every package, and OSError. Imported lazily: `--help` stays fast."""
+    from association.errors import AssociationError
+    from features.errors import FeaturesError
+    from slam.errors import SlamError
+
+    return (TrunkslamError, FeaturesError, AssociationError, SlamError, OSError)

@@ -42,7 +42,7 @@ from numba import njit
 from features.errors import FeaturesError
 from features.types import KIND_CIRCLE, KIND_CLUTTER, Features, Scan
 
-__all__ = ["BaileyParams", "detect_trees", "extract_bailey", "BAILEY_BEAM_RAD"]
+__all__ = ["BAILEY_OPTIONS", "BaileyParams", "detect_trees", "extract_bailey", "BAILEY_BEAM_RAD"]
 
 BAILEY_BEAM_RAD = math.pi / 360  # the original's beam spacing (0.5 deg), 361 beams over 0..pi
 _ANGLE_TIE_RAD = 1e-9  # angle differences this close to a threshold count as equal to it
@@ -68,8 +68,8 @@ class BaileyParams:
             v = getattr(self, f.name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise FeaturesError(f"BaileyParams.{f.name}: must be a finite number, got {v!r}")
-            if v < 0:
-                raise FeaturesError(f"BaileyParams.{f.name}: must be >= 0, got {v!r}")
+            if not 0 <= v <= 1e9:
+                raise FeaturesError(f"BaileyParams.{f.name}: must be in [0, 1e9], got {v!r}")
 
 
 _DEFAULT = BaileyParams()
@@ -404,6 +404,15 @@ def detect_trees(ranges_m, angles_rad=None, params: BaileyParams | None = None) 
     return _detect(r, ang, p)[0]
 
 
+BAILEY_OPTIONS = (
+    "range_sigma_m",
+    "range_sigma_per_m",
+    "bearing_sigma_rad",
+    "radius_sigma_m",
+    "params",
+)  # the keyword arguments of `extract_bailey`
+
+
 def extract_bailey(
     scan: Scan,
     *,
@@ -440,8 +449,13 @@ def extract_bailey(
         ("bearing_sigma_rad", bearing_sigma_rad),
         ("radius_sigma_m", radius_sigma_m),
     ):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-            raise FeaturesError(f"{name}: must be a finite number >= 0, got {v!r}")
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, (int, float))
+            or not math.isfinite(v)
+            or not 0 <= v <= 1e9
+        ):
+            raise FeaturesError(f"{name}: must be a number in [0, 1e9], got {v!r}")
     p = params or _DEFAULT
     if not isinstance(p, BaileyParams):
         raise FeaturesError(f"params: expected BaileyParams, got {type(params).__name__}")

@@ -55,6 +55,7 @@ from features.types import KIND_CIRCLE, KIND_CLUTTER, Features, Scan
 __all__ = ["ExtractorParams", "extract_features", "METHODS"]
 
 METHODS = ("paper", "geometric", "kasa", "taubin", "bailey")
+PARAM_LIMIT = 1e9  # no extractor parameter is larger in size (metres, counts, thresholds)
 _METHOD_CODE = {"paper": 0, "geometric": 1, "kasa": 2, "taubin": 3}
 _LINE_TESTS = {"paper": 0, "lrt": 1}
 
@@ -103,6 +104,8 @@ class ExtractorParams:
                 continue
             if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
                 raise FeaturesError(f"{f.name}: must be a finite number, got {v!r}")
+            if abs(v) > PARAM_LIMIT:  # squares and int64 kernels must not overflow
+                raise FeaturesError(f"{f.name}: must be at most {PARAM_LIMIT:g}, got {v!r}")
             if f.type == "int":
                 if v != int(v):
                     raise FeaturesError(f"{f.name}: must be a whole number, got {v!r}")
@@ -522,8 +525,13 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
     if not isinstance(scan, Scan):
         raise FeaturesError(f"scan: expected a features.Scan, got {type(scan).__name__}")
     if method == "bailey":
-        from features.bailey import extract_bailey
+        from features.bailey import BAILEY_OPTIONS, extract_bailey
 
+        unknown = sorted(set(params) - set(BAILEY_OPTIONS))
+        if unknown:
+            raise FeaturesError(
+                f"{unknown}: not parameters of method 'bailey' (allowed: {list(BAILEY_OPTIONS)})"
+            )
         return extract_bailey(scan, **params)
     if method not in _METHOD_CODE:
         raise FeaturesError(f"method: must be one of {list(METHODS)}, got {method!r}")

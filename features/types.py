@@ -37,7 +37,8 @@ class Scan:
         return (NaN, +-inf, zero, negative, or at or beyond `max_range_m`) becomes NaN, so
         `ranges_m` holds either a valid range or NaN; `raw_ranges_m` keeps what was given.
     angle_min_rad: bearing of beam 0 in the laser frame (0 = laser x-axis, CCW positive).
-    angle_increment_rad: bearing step between beams, > 0.
+    angle_increment_rad: bearing step between beams, > 0; the B beams span less than 360
+        degrees ((B - 1) * increment < 2 pi).
     stamp_s: acquisition time, seconds.
     max_range_m: readings at or beyond this are "no return" (inf = no limit).
     """
@@ -71,6 +72,12 @@ class Scan:
         if self.angle_increment_rad <= 0.0:
             raise FeaturesError(
                 f"Scan.angle_increment_rad: must be > 0, got {self.angle_increment_rad!r}"
+            )
+        span = (raw.size - 1) * self.angle_increment_rad
+        if span >= 2.0 * math.pi:  # the sequence file's rule (datasets/FORMAT.md)
+            raise FeaturesError(
+                f"Scan.angle_increment_rad: {raw.size} beams of {self.angle_increment_rad!r} rad "
+                f"span {span:.4g} rad, 360 degrees or more (a beam would be seen twice)"
             )
         mr = self.max_range_m
         if not isinstance(mr, (int, float, np.integer, np.floating)) or not mr > 0:

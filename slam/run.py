@@ -128,6 +128,14 @@ def run(
     Raises `SlamError` (a ValueError) for a run that cannot be made: not a `Sequence`, missing
     odometry or vehicle, odometry gaps, a mismatched list of features.
     """
+    if initial_heading_rad is not None and (
+        isinstance(initial_heading_rad, bool)
+        or not isinstance(initial_heading_rad, (int, float, np.integer, np.floating))
+        or not math.isfinite(initial_heading_rad)
+    ):
+        raise SlamError(
+            f"initial_heading_rad: must be a finite number of radians, got {initial_heading_rad!r}"
+        )
     s = _setup(sequence, features, association, config, feature_params)
     vis = visualiser or NullVisualiser()
     pose0, cov0, start = _start(s, initial_heading_rad)
@@ -518,6 +526,10 @@ def _from_features(feat_fn: Callable, noise, floor) -> Callable:
 
     def measure(k, scan):
         f = feat_fn(k, scan)
+        if not isinstance(f, Features):
+            raise SlamError(
+                f"features: scan {k} gave {type(f).__name__}, expected a features.Features"
+            )
         z, R = measurements_from_features(f, noise, floor)
         return f, z, R
 
@@ -569,7 +581,18 @@ def _resolve_features(features, feature_params: dict) -> tuple[Callable, int | N
 
         call.method = getattr(features, "method", "custom")
         return call, None
+    if not isinstance(features, (list, tuple)):
+        raise SlamError(
+            "features: expected a method name, 'detections', a callable (k, scan) -> Features "
+            f"or a list of Features, got {type(features).__name__}"
+        )
     feats = list(features)
+    bad = [k for k, f in enumerate(feats) if not isinstance(f, Features)]
+    if bad:
+        raise SlamError(
+            f"features: item {bad[0]} is {type(feats[bad[0]]).__name__}, expected a "
+            "features.Features"
+        )
 
     def given(k, scan):
         return feats[k]

@@ -107,12 +107,37 @@ def _pose(name: str, value) -> np.ndarray:
     return p
 
 
+MAX_ODO_SPEED_MPS = 100.0  # |odo_speed| above this is a unit error, not a ground vehicle
+# |odo_steer| limit: a car's front wheels turn far less (Victoria Park: 0.6 rad); near pi/2 the
+# turn rate v tan(alpha) / L and its Jacobian blow up and the filter's covariances with them
+MAX_STEER_RAD = 1.4
+
+
+def json_int(text: str) -> int | float:
+    """`parse_int` for json.loads: an integer too long for a float is read as inf (and then
+    refused as not finite), not as a 400-digit int that overflows later."""
+    return int(text) if len(text) < 300 else float(text)
+
+
+def _number(v) -> float | None:
+    """v as a finite float, or None when it is not a finite real number."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
+
+
 def _vehicle(value) -> dict:
     if isinstance(value, (str, bytes)):
         try:
-            value = json.loads(value)
+            value = json.loads(value, parse_int=json_int)
         except json.JSONDecodeError as exc:
             raise SlamError(f"Sequence.vehicle: not valid JSON ({exc})") from None
+        except RecursionError:
+            raise SlamError("Sequence.vehicle: JSON nested too deeply to be a vehicle") from None
     if not isinstance(value, dict):
         raise SlamError(f"Sequence.vehicle: expected a dict (JSON object), got {value!r}")
     model = value.get("model")
@@ -131,9 +156,11 @@ def _vehicle(value) -> dict:
             raise SlamError(f"Sequence.vehicle: model {model!r} needs {key!r}")
     for key in (*required, *optional):
         v = value.get(key, optional.get(key))
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise SlamError(f"Sequence.vehicle[{key!r}]: must be a finite number, got {v!r}")
-        out[key] = float(v)
+        f = _number(v)
+        if f is None:
+            shown = v if not isinstance(v, int) or abs(v) < 10**20 else f"{str(v)[:12]}..."
+            raise SlamError(f"Sequence.vehicle[{key!r}]: must be a finite number, got {shown!r}")
+        out[key] = f
     if out.get("wheelbase_m", 1.0) <= 0:
         raise SlamError(f"Sequence.vehicle['wheelbase_m']: must be > 0, got {out['wheelbase_m']}")
     return out
@@ -240,7 +267,7 @@ class Sequence:
         B beams from scan_angle_min), checked against scan_ranges otherwise.
       scan_max_range: m; readings at or beyond it are no return (inf when absent).
       odo_t (M,) s, odo_speed (M,) m/s as measured by the encoder, odo_steer (M,) rad front wheel
-        (|steer| <= pi/2); all three or none.
+        (|steer| <= 1.4 rad, |speed| <= 100 m/s); all three or none.
       vehicle: dict, e.g. {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
         (a JSON string is accepted and parsed; encoder_offset_m defaults to 0).
       gps_t (G,) s, gps_xy (G, 2) m world, both or neither; gps_pose (3,) antenna in the vehicle
@@ -347,13 +374,34 @@ class Sequence:
                     )
                 _fin(k, a)
                 put(k, a)
-            if np.any(np.abs(self.odo_steer) > math.pi / 2):
+            if np.any(np.abs(self.odo_steer) > MAX_STEER_RAD):
+                k = int(np.argmax(np.abs(self.odo_steer)))
                 raise SlamError(
-                    f"Sequence.odo_steer: front-wheel angles must be within +-pi/2 rad, found "
-                    f"{float(np.max(np.abs(self.odo_steer))):.4g} (degrees instead of radians?)"
+                    f"Sequence.odo_steer: front-wheel angles must be within +-{MAX_STEER_RAD} rad "
+                    f"(80 degrees), found {float(self.odo_steer[k]):.6g} at sample {k} (degrees "
+                    "instead of radians?)"
+                )
+            if np.any(np.abs(self.odo_speed) > MAX_ODO_SPEED_MPS):
+                k = int(np.argmax(np.abs(self.odo_speed)))
+                raise SlamError(
+                    f"Sequence.odo_speed: must be within +-{MAX_ODO_SPEED_MPS:g} m/s (a ground "
+                    f"vehicle), found {float(self.odo_speed[k]):.4g} at sample {k} (wrong unit?)"
                 )
         if self.vehicle is not None:
             put("vehicle", _vehicle(self.vehicle))
+            h_over_l = self.vehicle.get("encoder_offset_m", 0.0) / self.vehicle["wheelbase_m"]
+            if self.odo_steer is not None and h_over_l != 0.0:
+                # v_c = v_e / (1 - (H / L) tan(alpha)) needs a positive denominator
+                denom = 1.0 - h_over_l * np.tan(self.odo_steer)
+                if np.any(denom <= 1e-3):
+                    k = int(np.argmin(denom))
+                    h = self.vehicle["encoder_offset_m"]
+                    raise SlamError(
+                        f"Sequence.odo_steer: {float(self.odo_steer[k]):.6g} rad at sample {k} "
+                        f"turns so sharply that the speed encoder (vehicle encoder_offset_m = "
+                        f"{h} m) would stand still or run backwards (1 - (H / L) tan(alpha) "
+                        "must stay above 0.001, datasets/FORMAT.md)"
+                    )
 
         # GPS.
         for name, v in _timed_pair("gps_t", self.gps_t, "gps_xy", self.gps_xy, 2):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from experiments.errors import DataError
+from experiments.errors import DataError, MissingDataError
 
 __all__ = [
     "DATA_ENV",
@@ -36,7 +36,8 @@ _HOW_TO_GET = (
 
 
 def data_root() -> Path:
-    """The folder holding the datasets (one sub-folder each); `DataError` if there is none."""
+    """The folder holding the datasets (one sub-folder each); `MissingDataError` if there is
+    none."""
     value = os.environ.get(DATA_ENV, "").strip()
     if value:
         p = Path(value).expanduser()
@@ -45,20 +46,22 @@ def data_root() -> Path:
             if c.is_dir():
                 return c.resolve()
         tried = ", ".join(str(c) for c in candidates)
-        raise DataError(f"{DATA_ENV}={value!r} is not a folder (tried {tried}). {_HOW_TO_GET}")
+        raise MissingDataError(
+            f"{DATA_ENV}={value!r} is not a folder (tried {tried}). {_HOW_TO_GET}"
+        )
     if DEFAULT_DATA_ROOT.is_dir():
         return DEFAULT_DATA_ROOT.resolve()
-    raise DataError(
+    raise MissingDataError(
         f"no dataset folder: {DATA_ENV} is not set and the default {DEFAULT_DATA_ROOT} does not "
         f"exist. {_HOW_TO_GET}"
     )
 
 
 def victoria_park_dir() -> Path:
-    """`data_root() / "victoria_park"`; `DataError` if it is missing."""
+    """`data_root() / "victoria_park"`; `MissingDataError` if it is missing."""
     d = data_root() / "victoria_park"
     if not d.is_dir():
-        raise DataError(f"Victoria Park folder not found: {d}. {_HOW_TO_GET}")
+        raise MissingDataError(f"Victoria Park folder not found: {d}. {_HOW_TO_GET}")
     return d
 
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 import logging
+import lzma
+import math
 import os
 import zipfile
 import zlib
@@ -26,6 +28,17 @@ __all__ = ["load_sequence", "save_sequence"]
 
 log = logging.getLogger(__name__)
 
+# what reading a damaged archive raises: zipfile, zlib and the other decompressors a flipped
+# compression-method byte selects (NotImplementedError for an unknown method, lzma, bz2's OSError)
+_ZIP_ERRORS = (
+    OSError,
+    ValueError,
+    EOFError,
+    NotImplementedError,
+    zipfile.BadZipFile,
+    zlib.error,
+    lzma.LZMAError,
+)
 _SCALARS = ("scan_angle_min", "scan_angle_increment", "scan_max_range", "scan_n_beams")
 _STRINGS = ("vehicle", "name", "det_method")
 
@@ -54,6 +67,32 @@ def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
     return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays))
 
 
+def _check_declared_size(npz, k: str, path: Path) -> None:
+    """The header of variable k declares no more data than its archive member holds, so a
+    corrupt or hostile header (shape (2**33,)) is an error naming the variable, not an attempt
+    to allocate tens of gigabytes."""
+    try:
+        info = npz.zip.getinfo(f"{k}.npy")
+        with npz.zip.open(info) as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            header = fh.tell()
+    except (KeyError, *_ZIP_ERRORS) as exc:
+        raise DataError(f"{path}: variable {k!r} is corrupt or unreadable ({exc})") from None
+    if dtype.hasobject:
+        return  # pickled objects: np.load refuses them (allow_pickle=False), which says so
+    need = math.prod(shape) * dtype.itemsize
+    have = info.file_size - header
+    if need != have:
+        raise DataError(
+            f"{path}: variable {k!r} is corrupt: its header declares shape {shape} of {dtype} "
+            f"({need} bytes) but it holds {have} bytes"
+        )
+
+
 def load_sequence(path: str | os.PathLike) -> Sequence:
     """Read a sequence file written by `save_sequence` (format: datasets/FORMAT.md).
 
@@ -77,7 +116,7 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
         raise DataError(f"{path}: not a readable .npz sequence file (not a zip archive)")
     try:
         npz = np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+    except _ZIP_ERRORS as exc:
         raise DataError(f"{path}: not a readable .npz sequence file ({exc})") from None
     values: dict[str, object] = {}
     with npz:
@@ -94,9 +133,10 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
         for k in (*REQUIRED, *OPTIONAL):
             if k not in keys:
                 continue
+            _check_declared_size(npz, k, path)
             try:
                 a = npz[k]
-            except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+            except _ZIP_ERRORS as exc:
                 raise DataError(
                     f"{path}: variable {k!r} is corrupt or unreadable ({exc})"
                 ) from None

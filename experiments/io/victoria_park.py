@@ -16,12 +16,14 @@ Only the first 2000 raw scans exist (`partial_raw_scans_ss2002/sick.mat`); their
 
 from __future__ import annotations
 
+import hashlib
 import math
+import re
 from pathlib import Path
 
 import numpy as np
 
-from experiments.errors import ConfigError, DataError
+from experiments.errors import ConfigError, DataError, MissingDataError
 from experiments.io.paths import victoria_park_dir
 from slam import Sequence
 
@@ -32,6 +34,9 @@ __all__ = [
     "VP_MAX_RANGE_M",
     "VP_N_RAW_SCANS",
     "VP_FILES",
+    "VP_SHA256",
+    "readme_sha256",
+    "verify_file",
     "load_victoria_park",
     "load_reference_detections",
     "load_raw_sick_ranges",
@@ -66,6 +71,68 @@ _HOW_TO_GET = (
 )
 
 
+# sha256 of the published files (the data folder's README.md lists the same sums, with sources)
+VP_SHA256 = {
+    "aa3_dr.mat": "6ce2c4f757023b7d275cc14f24ff2ffcca21ea68cfa360bc854e620a706eb358",
+    "aa3_gpsx.mat": "521fc4c6e0ea3851ffb463c3d9c0578044e9178c4fb87f37c703bb587f38c755",
+    "partial_raw_scans_ss2002/sick.mat": (
+        "9853c3e000378d3963d31230ba5985a14487058409d1324743bf23149c4874f9"
+    ),
+    "partial_raw_scans_ss2002/vehicle.mat": (
+        "31ed0abc45dbb1ce3bd9147a7c150e65f175fb7ec81864688aa6feeac81c520c"
+    ),
+    "partial_raw_scans_ss2002/features.mat": (
+        "2b6a85d4ada482df2fdfd119258d4040e14ae2706d3455befda8bbd6247d8c14"
+    ),
+    "reference_detections/VictoriaParkSinSincronizar.mat": (
+        "8e5212b3028d40f64dcf7b43f68f89e67ea4b0c0b3ec01835997381fe9d96997"
+    ),
+}
+_SHA_ROW = re.compile(r"^\|\s*`([^`]+)`\s*\|[^|]*\|\s*`([0-9a-f]{64})`", re.MULTILINE)
+_verified: dict[tuple[str, int, int], str] = {}  # (path, size, mtime_ns) -> sha256 seen
+
+
+def readme_sha256(root: Path) -> dict[str, str]:
+    """The sha256 sums the data folder's README.md lists ({relative path: sum}); {} without
+    a README."""
+    try:
+        text = (root / "README.md").read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return {}
+    return dict(_SHA_ROW.findall(text))
+
+
+def verify_file(root: Path, rel: str) -> Path:
+    """`root / rel`, after checking its sha256 against the sum the data README lists (or, with
+    no README or no row for it, `VP_SHA256`): `DataError` naming the file that differs. The
+    sum of a file already checked (same size and modification time) is not recomputed."""
+    path = root / rel
+    expected = readme_sha256(root).get(rel) or VP_SHA256.get(rel)
+    if expected is None:
+        return path
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise MissingDataError(f"Victoria Park file missing: {path}; {_HOW_TO_GET}") from None
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    got = _verified.get(key)
+    if got is None:
+        h = hashlib.sha256()
+        try:
+            with open(path, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
+        except OSError as exc:
+            raise DataError(f"{path}: cannot be read ({exc})") from None
+        got = _verified[key] = h.hexdigest()
+    if got != expected:
+        raise DataError(
+            f"{path}: sha256 {got} differs from the published file's {expected}: the file is "
+            f"corrupt or another version; {_HOW_TO_GET}"
+        )
+    return path
+
+
 def _root(root: Path | str | None) -> Path:
     return victoria_park_dir() if root is None else Path(root)
 
@@ -76,7 +143,8 @@ def load_mat(root: Path, key: str, variables: tuple[str, ...]) -> dict[str, np.n
 
     path = root / VP_FILES[key]
     if not path.is_file():
-        raise DataError(f"Victoria Park file missing: {path}; {_HOW_TO_GET}")
+        raise MissingDataError(f"Victoria Park file missing: {path}; {_HOW_TO_GET}")
+    verify_file(root, VP_FILES[key])
     try:
         mat = loadmat(path)
     except Exception as exc:  # scipy raises assorted errors on corrupt files
@@ -235,10 +303,12 @@ def load_ss2002_reference(root: Path | str | None = None) -> tuple[np.ndarray, n
     out = []
     for key, var in (("vehicle", "vehicle"), ("features", "features")):
         path = root / SS2002_FILES[key]
+        if path.is_file():
+            verify_file(root, SS2002_FILES[key])
         try:
             mat = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
         except FileNotFoundError:
-            raise DataError(f"{path}: not found; {_HOW_TO_GET}") from None
+            raise MissingDataError(f"{path}: not found; {_HOW_TO_GET}") from None
         except Exception as exc:  # scipy raises many types for a corrupt file
             raise DataError(f"{path}: cannot be read as a MATLAB file ({exc})") from None
         if var not in mat:

@@ -1,14 +1,30 @@
-"""Writing results: the features JSON of `trunkslam extract`, Markdown/CSV tables, atomic files."""
+"""Writing results: the features JSON of `trunkslam extract`, Markdown/CSV tables, atomic files
+and atomic result folders.
+
+Every result is written so that an interruption (Ctrl-C, a full disk, a crash) leaves either the
+old complete result or the new complete one, never a mix:
+- `write_atomic`: one file, through a temporary file in the same folder and a rename;
+- `atomic_folder`: a set of files (a `trunkslam reproduce` or `trunkslam slam` output folder),
+  written into a temporary folder beside the target and swapped into place only when complete.
+`check_output_file` and `check_output_folder` refuse an output path that is one of the inputs,
+or that is not a regular file or folder (a symlink, a FIFO, a device), before any work is done.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import ctypes
+import ctypes.util
+import errno
 import io
 import json
 import math
 import os
+import shutil
+import stat
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
@@ -19,6 +35,9 @@ from features.types import Features
 
 __all__ = [
     "FEATURES_SCHEMA",
+    "atomic_folder",
+    "check_output_file",
+    "check_output_folder",
     "dumps_json",
     "features_to_dict",
     "json_types",
@@ -35,17 +54,28 @@ def _f(x) -> float | None:
     return x if math.isfinite(x) else None
 
 
+def _nums(a, decimals: int):
+    """An array as nested lists of rounded floats, non-finite values as None (JSON null)."""
+    a = np.asarray(a, dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        r = np.round(a, decimals)
+    r = np.where(np.isfinite(r), r, a)  # rounding a huge value overflows: keep it as it is
+    out = r.astype(object)
+    out[~np.isfinite(r)] = None
+    return out.tolist()
+
+
 def features_to_dict(f: Features, scan_index: int) -> dict:
     """One scan's features as plain JSON types (laser frame, metres, radians)."""
     return {
         "scan": scan_index,
-        "stamp_s": f.stamp_s,
+        "stamp_s": _f(f.stamp_s),
         "method": f.method,
         "circles": [
             {
                 "center_xy": [_f(p[0]), _f(p[1])],
                 "radius_m": _f(p[2]),
-                "cov": np.asarray(c).round(12).tolist(),
+                "cov": _nums(c, 12),
                 "beams": [int(b[0]), int(b[1])],
                 "rms_residual_m": _f(s),
             }
@@ -55,8 +85,8 @@ def features_to_dict(f: Features, scan_index: int) -> dict:
             {
                 "alpha_rad": _f(p[0]),
                 "rho_m": _f(p[1]),
-                "cov": np.asarray(c).round(12).tolist(),
-                "endpoints_xy": np.asarray(e).round(6).tolist(),
+                "cov": _nums(c, 12),
+                "endpoints_xy": _nums(e, 6),
                 "beams": [int(b[0]), int(b[1])],
                 "rms_residual_m": _f(s),
             }
@@ -65,11 +95,7 @@ def features_to_dict(f: Features, scan_index: int) -> dict:
             )
         ],
         "edges": [
-            {
-                "point_xy": [_f(p[0]), _f(p[1])],
-                "cov": np.asarray(c).round(12).tolist(),
-                "beam": int(b),
-            }
+            {"point_xy": [_f(p[0]), _f(p[1])], "cov": _nums(c, 12), "beam": int(b)}
             for p, c, b in zip(f.edge_xy, f.edge_cov, f.edge_beam)
         ],
         "clutter": [
@@ -83,11 +109,14 @@ def features_to_dict(f: Features, scan_index: int) -> dict:
 def write_atomic(path: Path | str, data: str | bytes | Callable[[BinaryIO], object]) -> Path:
     """Write `data` (text, bytes, or a function writing to a binary file) to `path` atomically:
     into a temporary file in the same folder, flushed to disk, made readable by all (0644), then
-    renamed over `path`; a crash never leaves a half-written file. The folder must exist."""
+    renamed over `path`; a crash never leaves a half-written file. The folder must exist, and
+    `path` must not be anything but a regular file (`DataError` for a folder, a symlink, a FIFO,
+    a device: the rename would replace it)."""
     path = Path(path)
     folder = path.parent
     if not folder.is_dir():
         raise DataError(f"cannot write {path}: folder {folder} does not exist")
+    _refuse_non_regular(path, "output")
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
@@ -103,6 +132,191 @@ def write_atomic(path: Path | str, data: str | bytes | Callable[[BinaryIO], obje
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _kind(mode: int) -> str:
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
+
+
+def _refuse_non_regular(path: Path, option: str) -> None:
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise DataError(f"{option} {path}: cannot be checked ({exc})") from None
+    if not stat.S_ISREG(mode):
+        raise DataError(
+            f"{option} {path}: exists and is {_kind(mode)}, not a regular file; refusing to "
+            "replace it (choose another path)"
+        )
+
+
+def _same_path(a: Path, b: Path) -> bool:
+    """True when a and b name the same file (same resolved path, or the same inode)."""
+    try:
+        if a.resolve() == b.resolve():
+            return True
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    try:
+        return path.resolve().is_relative_to(folder.resolve())
+    except OSError:
+        return False
+
+
+def check_output_file(
+    path: Path | str, option: str, inputs: Iterable[Path | str | None] = ()
+) -> Path:
+    """Check an output file path before any work: its folder exists, it is not one of `inputs`
+    (the files the command reads), and it is absent or a regular file. `DataError` naming the
+    option and the path otherwise."""
+    path = Path(path)
+    for inp in inputs:
+        if inp is not None and _same_path(path, Path(inp)):
+            raise DataError(
+                f"{option} {path}: is an input of this command; refusing to overwrite it"
+            )
+    _refuse_non_regular(path, option)
+    if not path.parent.is_dir():
+        raise DataError(f"{option} {path}: folder {path.parent} does not exist")
+    return path
+
+
+def check_output_folder(
+    path: Path | str, option: str, markers: Sequence[str], inputs: Iterable[Path | str | None] = ()
+) -> Path:
+    """Check an output folder before any work. It is replaced as a whole (`atomic_folder`), so
+    it must be absent, an empty folder, or a folder this command wrote before (holding one of
+    `markers`, e.g. manifest.json); not a symlink, a file, a FIFO; and no input may be inside.
+    `DataError` naming the option and the path otherwise."""
+    path = Path(path)
+    for inp in inputs:
+        if inp is not None and _same_path(path, Path(inp)):
+            raise DataError(f"{option} {path}: is an input of this command; refusing to replace it")
+        if inp is not None and _inside(Path(inp), path):
+            raise DataError(
+                f"{option} {path}: holds the input {inp}; refusing to replace it (choose another "
+                "folder)"
+            )
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return path
+    except OSError as exc:
+        raise DataError(f"{option} {path}: cannot be checked ({exc})") from None
+    if not stat.S_ISDIR(mode):
+        raise DataError(
+            f"{option} {path}: exists and is {_kind(mode)}, not a folder; refusing to replace it"
+        )
+    try:
+        entries = {p.name for p in path.iterdir()}
+    except OSError as exc:
+        raise DataError(f"{option} {path}: cannot be read ({exc})") from None
+    if entries and not entries & set(markers):
+        raise DataError(
+            f"{option} {path}: exists and is not an earlier output of this command (no "
+            f"{' or '.join(markers)} in it); it would be replaced as a whole, so choose another "
+            "folder or empty it"
+        )
+    return path
+
+
+_RENAME_EXCHANGE = 2  # linux/fs.h
+_AT_FDCWD = -100
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths in one step (Linux renameat2 RENAME_EXCHANGE); False where unsupported."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.ENOTSUP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+def _fsync_dir(folder: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _remove_stale(target: Path) -> None:
+    """Temporary folders of `target` left by runs that were killed (their process is gone)."""
+    for p in target.parent.glob(f".{target.name}.partial-*"):
+        try:
+            pid = int(p.name.rsplit(".partial-", 1)[1].split("-")[0])
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            shutil.rmtree(p, ignore_errors=True)
+        except (ValueError, IndexError, OSError):
+            continue
+
+
+@contextlib.contextmanager
+def atomic_folder(target: Path | str) -> Iterator[Path]:
+    """Write a set of files as one: yields a new temporary folder beside `target`
+    (`.NAME.partial-PID-XXXX`); when the block ends without an exception, the folder is made
+    readable by all and put in `target`'s place (a previous `target` is swapped out in one step
+    where the system allows it, Linux renameat2, else by two renames, and then deleted). On an
+    exception or interruption the temporary folder is deleted and `target` is left as it was.
+    Check `target` with `check_output_folder` first: it is replaced as a whole."""
+    target = Path(target)
+    parent = target.parent
+    if not parent.is_dir():
+        raise DataError(f"cannot write {target}: folder {parent} does not exist")
+    _remove_stale(target)
+    staging = Path(tempfile.mkdtemp(dir=parent, prefix=f".{target.name}.partial-{os.getpid()}-"))
+    try:
+        yield staging
+        os.chmod(staging, 0o755)  # mkdtemp makes folders owner-only
+        _fsync_dir(staging)
+        _swap_into_place(staging, target)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    _fsync_dir(parent)
+
+
+def _swap_into_place(staging: Path, target: Path) -> None:
+    """Put the complete folder `staging` at `target`; delete what was there."""
+    try:
+        os.rename(staging, target)  # no target, or an empty folder: replaced in one step
+        return
+    except OSError as exc:
+        if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY):
+            raise
+    if _exchange(staging, target):
+        shutil.rmtree(staging, ignore_errors=True)  # staging now holds the old set
+        return
+    old = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.old-"))
+    os.rename(target, old / target.name)
+    os.rename(staging, target)
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def _cell(v) -> str:

@@ -253,12 +253,9 @@ def run_tables(ctx) -> None:
             "methods": list(METHODS),
         }
     )
-    rec = open_recording(ctx.path("circles.rrd"))
-    try:
+    with open_recording(ctx.path("circles.rrd")) as rec:
         mc = pillar_monte_carlo(n, ctx.rng("table1"), progress=ctx.progress, rec=rec)
         pillar_figures(ctx, rec)
-    finally:
-        rec.close()
     s = summarise(mc)
     cfg["extractor_sigma_r_m"] = mc.sigma_m
     note = (

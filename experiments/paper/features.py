@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import logging
 
-from experiments.errors import DataError
+from experiments.errors import MissingDataError
 from experiments.io.writers import write_table
 from experiments.paper.classification import RADII_M, RANGES_M, classification_study
 from experiments.render import plots
@@ -75,7 +75,7 @@ def victoria_park_figure(ctx, rec) -> None:
 
     try:
         seq = load_victoria_park()
-    except DataError as exc:
+    except MissingDataError as exc:
         log.warning("Victoria Park figure skipped: %s", exc)
         ctx.config["features"]["victoria_park"] = f"skipped: {exc}"
         return
@@ -124,8 +124,5 @@ def run(ctx) -> None:
     ctx.config["features"]["extractor_defaults"] = ExtractorParams().to_dict()
     ctx.config["features"]["bailey"] = asdict(BaileyParams())
     classification(ctx)
-    rec = open_recording(ctx.path("features.rrd"))
-    try:
+    with open_recording(ctx.path("features.rrd")) as rec:
         victoria_park_figure(ctx, rec)
-    finally:
-        rec.close()

@@ -1,4 +1,15 @@
-"""`trunkslam reproduce`: run experiments from the registry and write manifest.json."""
+"""`trunkslam reproduce`: run experiments from the registry into one result set.
+
+The result set is written atomically (`experiments.io.writers.atomic_folder`): every experiment
+writes into a temporary folder beside the output folder, `manifest.json` is written last and
+lists exactly the files of that folder, and only then does the folder replace the previous one
+as a whole. An interruption or a write error (a full disk) leaves the previous set untouched.
+An experiment that fails on bad input (corrupt data, an impossible parameter: the project's own
+errors) is recorded under "failed" in the manifest, its partial files are removed, the others
+still run, and the run ends with `ExperimentFailed` (exit code 1); the previous set, including
+that experiment's old outputs, is replaced, so nothing stale looks current. A bug (any other
+exception) or an OSError stops the run at once and leaves the previous set untouched.
+"""
 
 from __future__ import annotations
 
@@ -7,13 +18,29 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from experiments.errors import ExperimentFailed, input_errors
 from experiments.io.provenance import git_commit, versions
-from experiments.io.writers import dumps_json, write_atomic
+from experiments.io.writers import atomic_folder, check_output_folder, dumps_json, write_atomic
 from experiments.paper.runner import DEFAULT_EXPERIMENTS, RunContext, get_experiment
 
-__all__ = ["run_experiments"]
+__all__ = ["MANIFEST", "run_experiments"]
 
 log = logging.getLogger(__name__)
+
+MANIFEST = "manifest.json"
+
+
+def _files(folder: Path) -> set[str]:
+    """Every file under folder, as paths relative to it."""
+    return {str(p.relative_to(folder)) for p in folder.rglob("*") if not p.is_dir()}
+
+
+def _remove(folder: Path, names: set[str]) -> None:
+    for name in names:
+        (folder / name).unlink(missing_ok=True)
+    for d in sorted((p for p in folder.rglob("*") if p.is_dir()), reverse=True):
+        if not any(d.iterdir()):
+            d.rmdir()
 
 
 def run_experiments(
@@ -23,38 +50,62 @@ def run_experiments(
     seed: int = 0,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> list[Path]:
-    """Run the named experiments (all when empty) into out_dir; returns the files written."""
+    """Run the named experiments (all when empty) into out_dir, replacing what was there as one
+    set (see the module doc); returns the files written. out_dir must be absent, empty or an
+    earlier result set (it has a manifest.json). Raises `ExperimentFailed` after the run when
+    an experiment failed."""
     names = list(dict.fromkeys(names)) or list(DEFAULT_EXPERIMENTS)
     groups: dict[Callable, list[str]] = {}  # names that share a function are one run
     for n in names:  # unknown names fail before any work
         groups.setdefault(get_experiment(n), []).append(n)
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    ctx = RunContext(out_dir=out_dir, quick=quick, seed=seed)
-    if progress is not None:
-        ctx.progress = progress
-    timings = {}
-    for fn, group in groups.items():
-        t0 = time.perf_counter()
-        before = set(ctx.config)
-        fn(ctx)
-        name = " ".join(group)
-        timings[name] = round(time.perf_counter() - t0, 2)
-        # the resolved parameters, under every name the run stands for
-        written = [k for k in ctx.config if k not in before and ctx.config[k]]
-        shared = ctx.config[written[0]] if written else {}
-        for n in group:
-            ctx.config[n] = ctx.config.get(n) or shared
-        log.info("%s done in %.1f s", name, timings[name])
-    manifest = {
-        "experiments": names,
-        "quick": quick,
-        "seed": seed,
-        "git_commit": git_commit(),
-        "versions": versions(),
-        "config": ctx.config,
-        "seconds": timings,
-        "outputs": sorted(str(p.relative_to(out_dir)) for p in set(ctx.outputs)),
-    }
-    path = write_atomic(out_dir / "manifest.json", dumps_json(manifest))
-    return sorted(set(ctx.outputs)) + [path]
+    check_output_folder(out_dir, "--out", markers=(MANIFEST,))
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    # errors that fail one experiment; OSError (a full disk, ...) and bugs stop the whole run
+    failures = tuple(e for e in input_errors() if e is not OSError)
+    failed: dict[str, str] = {}
+    timings: dict[str, float] = {}
+    with atomic_folder(out_dir) as stage:
+        ctx = RunContext(out_dir=stage, quick=quick, seed=seed)
+        if progress is not None:
+            ctx.progress = progress
+        for fn, group in groups.items():
+            name = " ".join(group)
+            t0 = time.perf_counter()
+            before_files, before_config = _files(stage), set(ctx.config)
+            try:
+                fn(ctx)
+            except failures as exc:
+                log.error("experiment %s failed: %s", name, exc)
+                failed[name] = f"{type(exc).__name__}: {exc}"
+                _remove(stage, _files(stage) - before_files)
+                for k in set(ctx.config) - before_config:
+                    del ctx.config[k]
+                continue
+            timings[name] = round(time.perf_counter() - t0, 2)
+            # the resolved parameters, under every name the run stands for
+            written = [k for k in ctx.config if k not in before_config and ctx.config[k]]
+            shared = ctx.config[written[0]] if written else {}
+            for n in group:
+                ctx.config[n] = ctx.config.get(n) or shared
+            log.info("%s done in %.1f s", name, timings[name])
+        outputs = sorted(_files(stage))
+        manifest = {
+            "experiments": names,
+            "quick": quick,
+            "seed": seed,
+            "git_commit": git_commit(),
+            "versions": versions(),
+            "config": ctx.config,
+            "seconds": timings,
+            "failed": failed,
+            "outputs": outputs,
+        }
+        write_atomic(stage / MANIFEST, dumps_json(manifest))  # last: the set is complete
+    if failed:
+        what = "; ".join(f"{k}: {v}" for k, v in failed.items())
+        raise ExperimentFailed(
+            f"{len(failed)} experiment(s) failed ({what}). The other results are in {out_dir}/ "
+            f"({MANIFEST} lists the failure); nothing of the earlier run was kept."
+        )
+    return [out_dir / p for p in outputs] + [out_dir / MANIFEST]

@@ -621,20 +621,19 @@ def _write_recording(res: Exp2Results, path: Path) -> Path:
 
     cfg = res.config
     seq = res.seq0
-    rec = Recorder(path)
-    rec.set_scan(0)
-    rec.log_circles("world/truth/trees", seq.truth_landmarks, method="truth")
     m = "paper" if "paper" in cfg.methods else cfg.methods[0]
     params = extractor_params(m, cfg.cycab)
-    slam_run(
-        seq,
-        features=m,
-        feature_params=params,
-        association=cfg.association,
-        config=cfg.slam,
-        visualiser=rec,
-    )
-    rec.close()
+    with Recorder(path) as rec:
+        rec.set_scan(0)
+        rec.log_circles("world/truth/trees", seq.truth_landmarks, method="truth")
+        slam_run(
+            seq,
+            features=m,
+            feature_params=params,
+            association=cfg.association,
+            config=cfg.slam,
+            visualiser=rec,
+        )
     return path
 
 

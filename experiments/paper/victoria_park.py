@@ -29,7 +29,7 @@ import time
 import numpy as np
 from scipy.stats import chi2
 
-from experiments.errors import DataError
+from experiments.errors import MissingDataError
 from experiments.eval.gps import score_sequence
 from experiments.io.config_file import load_slam_config
 from experiments.io.victoria_park import VP_N_RAW_SCANS, load_ss2002_reference, load_victoria_park
@@ -138,7 +138,7 @@ def run(ctx) -> None:
         full = load_victoria_park(full=True)
         raw = load_victoria_park()
         ref = load_ss2002_reference()
-    except DataError as exc:
+    except MissingDataError as exc:
         log.warning("Victoria Park experiment skipped: %s", exc)
         ctx.config["victoria-park"] = f"skipped: {exc}"
         return
@@ -255,11 +255,8 @@ def _write(ctx, rows, logs, full, cfg) -> None:
             sc.t_s, errors, sc.jump, gaps, lg.scan_t, window, sizes, title, path
         )
     )
-    rec = open_recording(ctx.path("victoria_park.rrd"), decimate=20)
-    try:
+    with open_recording(ctx.path("victoria_park.rrd"), decimate=20) as rec:
         slam_run(full, features="detections", association="ihgr", config=cfg, visualiser=rec)
-    finally:
-        rec.close()
 
 
 def _cell(v):

@@ -44,7 +44,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
-from experiments.errors import DataError
+from experiments.errors import MissingDataError
 from experiments.io.config_file import config_toml
 from experiments.io.victoria_park import load_victoria_park
 from experiments.io.writers import write_atomic, write_table
@@ -144,7 +144,7 @@ def run(ctx) -> None:
     """The registered experiment `victoria-park-calibration`."""
     try:
         seq = load_victoria_park(n_scans=FIT_SCANS)
-    except DataError as exc:
+    except MissingDataError as exc:
         log.warning("Victoria Park calibration skipped: %s", exc)
         ctx.config["victoria-park-calibration"] = f"skipped: {exc}"
         return

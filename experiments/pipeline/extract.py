@@ -8,7 +8,13 @@ from pathlib import Path
 
 from experiments.errors import ConfigError
 from experiments.io.sequence_file import load_sequence
-from experiments.io.writers import FEATURES_SCHEMA, dumps_json, features_to_dict, write_atomic
+from experiments.io.writers import (
+    FEATURES_SCHEMA,
+    check_output_file,
+    dumps_json,
+    features_to_dict,
+    write_atomic,
+)
 from experiments.render.viz import open_recording
 from features import ExtractorParams, extract_features
 from features.bailey import BaileyParams
@@ -27,7 +33,8 @@ def run_extract(
 ) -> dict:
     """Extract features from every scan of `input_path` and write the features JSON to `out`
     (format: README, "Formats"); optionally a rerun recording. Returns a summary: scans,
-    circles, the output path."""
+    circles, the output path. Both outputs are written atomically (temporary file, rename);
+    an output path that is the input, or not a regular file, is refused before any work."""
     out = Path(out)
     params: dict = {}
     if line_test is not None:
@@ -40,21 +47,21 @@ def run_extract(
         resolved = asdict(BaileyParams())
     else:
         resolved = ExtractorParams.from_kwargs(**params).to_dict()
-    if out.parent and not out.parent.is_dir():
-        raise ConfigError(f"--out: folder {out.parent} does not exist")
+    check_output_file(out, "--out", inputs=[input_path])
+    if rerun_path is not None:
+        check_output_file(rerun_path, "--rerun", inputs=[input_path, out])
     seq = load_sequence(input_path)
-    rec = open_recording(rerun_path)
     scans = []
-    for k in range(seq.n_scans):
-        scan = seq.scan(k)
-        f = extract_features(scan, method, **params)
-        scans.append(features_to_dict(f, k))
-        rec.set_scan(k, float(seq.scan_t[k]))
-        rec.log_scan(scan)
-        rec.log_features(scan, f)
-        if progress is not None and (k % 50 == 0 or k == seq.n_scans - 1):
-            progress("extract", k + 1, seq.n_scans)
-    rec.close()
+    with open_recording(rerun_path) as rec:
+        for k in range(seq.n_scans):
+            scan = seq.scan(k)
+            f = extract_features(scan, method, **params)
+            scans.append(features_to_dict(f, k))
+            rec.set_scan(k, float(seq.scan_t[k]))
+            rec.log_scan(scan)
+            rec.log_features(scan, f)
+            if progress is not None and (k % 50 == 0 or k == seq.n_scans - 1):
+                progress("extract", k + 1, seq.n_scans)
     doc = {
         "schema": FEATURES_SCHEMA,
         "input": str(input_path),

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.errors import DataError
 from experiments.eval.gps import score_sequence
 from experiments.eval.poses import nees, pose_errors
 from experiments.io.config_file import config_toml
@@ -14,7 +15,14 @@ from experiments.io.features_json import load_features_json
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.run_log import RUN_LOG_NAME, write_run_log
 from experiments.io.sequence_file import load_sequence
-from experiments.io.writers import dumps_json, json_types, write_atomic
+from experiments.io.writers import (
+    atomic_folder,
+    check_output_file,
+    check_output_folder,
+    dumps_json,
+    json_types,
+    write_atomic,
+)
 from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, se2
 from slam import run as slam_run
@@ -53,49 +61,69 @@ def run_slam(
                      against the truth (Table-3 errors, mean NEES) when it has truth
     Returns the summary. initial_heading: start heading in radians (GPS starts). config: the
     filter's settings (default `SlamConfig()`: the simulated Cycab's).
+
+    The files are written as one set (`experiments.io.writers.atomic_folder`): into a temporary
+    folder beside out_dir, summary.json last, then swapped for out_dir as a whole; an
+    interruption or a write error leaves the previous out_dir as it was. out_dir must be absent,
+    empty or an earlier `trunkslam slam` output (it has a summary.json), and must not hold the
+    inputs. The recording (rerun_path) is written to a temporary name and renamed; inside
+    out_dir it becomes part of the set.
     """
+    out = check_output_folder(out_dir, "--out", (SUMMARY,), inputs=[input_path, features_file])
+    rerun_in_out = None
+    if rerun_path is not None:
+        rerun_path = Path(rerun_path)
+        if rerun_path.resolve().is_relative_to(out.resolve()):
+            rerun_in_out = rerun_path.resolve().relative_to(out.resolve())
+            if rerun_in_out == Path("."):
+                raise DataError(f"--rerun {rerun_path}: is the --out folder")
+        else:
+            check_output_file(rerun_path, "--rerun", inputs=[input_path, features_file])
     seq = load_sequence(input_path)
     cfg = config or SlamConfig()
     source = features
     if features_file is not None:
         source = load_features_json(features_file, seq.n_scans, seq.n_beams)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    rec = open_recording(rerun_path)
-    t0 = time.perf_counter()
-    lg = slam_run(
-        seq,
-        features=source,
-        association=association,
-        config=cfg,
-        visualiser=rec,
-        initial_heading_rad=initial_heading,
-        progress=progress,
-    )
-    seconds = time.perf_counter() - t0
-    rec.close()
-    write_atomic(out / "trajectory.tum", trajectory_tum(lg.scan_t, lg.pose))
-    if seq.gps_t is not None:
-        ant = seq.gps_pose if seq.gps_pose is not None else _laser(seq, cfg)
-        ant_xy = np.array([se2.compose(p, ant) for p in lg.pose])
-        write_atomic(out / "trajectory_gps_antenna.tum", trajectory_tum(lg.scan_t, ant_xy))
-    write_atomic(out / "trajectory.csv", trajectory_csv(lg.scan_t, lg.pose, lg.pose_cov))
-    write_atomic(
-        out / "map.csv",
-        map_csv(
-            lg.landmark_id,
-            lg.landmark_xy,
-            lg.landmark_cov,
-            lg.landmark_first_scan,
-            lg.landmark_n_obs,
-        ),
-    )
-    write_atomic(out / "config.toml", config_toml(cfg, f"trunkslam slam {input_path}"))
-    write_run_log(out / RUN_LOG_NAME, lg)
-    summary = summarise(lg, seq, seconds, laser_pose=_laser(seq, cfg))
-    summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
-    write_atomic(out / "summary.json", dumps_json(summary))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_folder(out) as stage:
+        rec_path = rerun_path if rerun_in_out is None else stage / rerun_in_out
+        with open_recording(rec_path) as rec:
+            t0 = time.perf_counter()
+            lg = slam_run(
+                seq,
+                features=source,
+                association=association,
+                config=cfg,
+                visualiser=rec,
+                initial_heading_rad=initial_heading,
+                progress=progress,
+            )
+            seconds = time.perf_counter() - t0
+        write_atomic(stage / "trajectory.tum", trajectory_tum(lg.scan_t, lg.pose))
+        if seq.gps_t is not None:
+            ant = seq.gps_pose if seq.gps_pose is not None else _laser(seq, cfg)
+            ant_xy = np.array([se2.compose(p, ant) for p in lg.pose])
+            write_atomic(stage / "trajectory_gps_antenna.tum", trajectory_tum(lg.scan_t, ant_xy))
+        write_atomic(stage / "trajectory.csv", trajectory_csv(lg.scan_t, lg.pose, lg.pose_cov))
+        write_atomic(
+            stage / "map.csv",
+            map_csv(
+                lg.landmark_id,
+                lg.landmark_xy,
+                lg.landmark_cov,
+                lg.landmark_first_scan,
+                lg.landmark_n_obs,
+            ),
+        )
+        write_atomic(stage / "config.toml", config_toml(cfg, f"trunkslam slam {input_path}"))
+        write_run_log(stage / RUN_LOG_NAME, lg)
+        summary = summarise(lg, seq, seconds, laser_pose=_laser(seq, cfg))
+        summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
+        write_atomic(stage / SUMMARY, dumps_json(summary))  # last: the set is complete
     return summary
+
+
+SUMMARY = "summary.json"
 
 
 def _str(p) -> str | None:

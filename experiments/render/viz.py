@@ -20,11 +20,16 @@ SLAM runs (slam.run's visualiser interface, world frame):
 
 from __future__ import annotations
 
+import contextlib
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
 
+from experiments.errors import DataError
+from experiments.io.writers import check_output_file
 from experiments.render.shapes import circle_polyline, ellipse_polyline
 from features.types import Features, Scan
 from slam import se2
@@ -61,10 +66,26 @@ class NullRecorder:
     def log_associations(self, from_xy, to_xy) -> None: ...
     def log_truth(self, pose) -> None: ...
     def close(self) -> None: ...
+    def abort(self) -> None: ...
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        """Closed (the recording put in place) when the block succeeds; aborted (nothing left
+        behind) when it raises or is interrupted."""
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
 
 
 class Recorder(NullRecorder):
-    """Writes a `.rrd` recording (open it with `rerun FILE.rrd`)."""
+    """Writes a `.rrd` recording (open it with `rerun FILE.rrd`).
+
+    The recording goes to a temporary file beside `path` (`.NAME.XXXX.rrd.tmp`) and is renamed
+    to `path` by `close()`: an interrupted run never leaves a truncated recording at `path`.
+    `abort()` (or leaving a `with` block by an exception) deletes the temporary file."""
 
     def __init__(self, path: Path | str, app_id: str = "trunkslam", decimate: int = 1):
         """decimate: log the scene of every this-many scans only (paths still grow every scan);
@@ -73,9 +94,25 @@ class Recorder(NullRecorder):
         self.decimate = max(int(decimate), 1)
         self._k = 0
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec = rr.RecordingStream(app_id)
-        self.rec.save(str(self.path))
-        self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+        check_output_file(self.path, "recording")
+        try:
+            fd, tmp = tempfile.mkstemp(
+                dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".rrd.tmp"
+            )
+        except OSError as exc:
+            raise DataError(f"recording {self.path}: cannot be written ({exc.strerror})") from None
+        os.close(fd)
+        self._tmp = Path(tmp)
+        try:
+            self.rec = rr.RecordingStream(app_id)
+            self.rec.save(str(self._tmp))
+            self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+        except RuntimeError as exc:  # rerun's error when it cannot create the file
+            self._tmp.unlink(missing_ok=True)
+            raise DataError(f"recording {self.path}: cannot be written ({exc})") from None
+        except BaseException:  # interrupted while opening: leave nothing behind
+            self._tmp.unlink(missing_ok=True)
+            raise
 
     def _skip(self) -> bool:
         return self._k % self.decimate != 0
@@ -214,7 +251,27 @@ class Recorder(NullRecorder):
         )
 
     def close(self) -> None:
-        self.rec.flush()
+        """Finish the recording and put it at `path` (atomically: a rename)."""
+        if self._tmp is None:
+            return
+        try:
+            self.rec.flush()
+            self.rec.disconnect()  # closes the file sink
+            os.chmod(self._tmp, 0o644)
+            os.replace(self._tmp, self.path)
+        except BaseException:
+            self.abort()
+            raise
+        self._tmp = None
+
+    def abort(self) -> None:
+        """Drop the recording: the temporary file is deleted, `path` is left as it was."""
+        if self._tmp is None:
+            return
+        with contextlib.suppress(Exception):
+            self.rec.disconnect()
+        self._tmp.unlink(missing_ok=True)
+        self._tmp = None
 
 
 def open_recording(path: Path | str | None, decimate: int = 1) -> NullRecorder:

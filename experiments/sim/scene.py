@@ -437,10 +437,16 @@ def load_scene(name_or_path: str | Path) -> Scene:
     """
     path = _resolve(name_or_path)
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        # an integer too long for a float becomes inf (refused as not finite), not a huge int
+        data = json.loads(
+            path.read_text(encoding="utf-8"),
+            parse_int=lambda t: int(t) if len(t) < 300 else float(t),
+        )
     except json.JSONDecodeError as exc:
         raise DataError(f"{path}: not valid JSON ({exc})") from None
-    except OSError as exc:
+    except RecursionError:
+        raise DataError(f"{path}: JSON nested too deeply to be a scene") from None
+    except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: cannot read ({exc})") from None
     return scene_from_dict(data, source=str(path), default_name=path.stem)
 

@@ -154,15 +154,24 @@ def test_missing_file_is_named_with_where_to_get_it(vp_dir, tmp_path, skip):
     assert VP_FILES[skip] in msg and "README.md" in msg
 
 
-def test_corrupt_mat_file(tmp_path):
+def test_corrupt_mat_file(tmp_path, monkeypatch):
+    import experiments.io.victoria_park as vp
+
     (tmp_path / "partial_raw_scans_ss2002").mkdir()
     (tmp_path / VP_FILES["sick"]).write_bytes(b"MATLAB 5.0 MAT-file, garbage" + bytes(200))
+    with pytest.raises(DataError, match="sick.mat: sha256 .* differs"):  # caught by its sum
+        load_raw_sick_ranges(tmp_path)
+    monkeypatch.setattr(vp, "VP_SHA256", {})  # no sum to check: the reader's own error
     with pytest.raises(DataError, match="cannot be read as a MATLAB file"):
         load_raw_sick_ranges(tmp_path)
 
 
-def test_mat_file_without_the_variable(tmp_path):
+def test_mat_file_without_the_variable(tmp_path, monkeypatch):
     from scipy.io import savemat
+
+    import experiments.io.victoria_park as vp
+
+    monkeypatch.setattr(vp, "VP_SHA256", {})  # a hand-made file has no published sum
 
     savemat(tmp_path / "aa3_dr.mat", {"time": np.arange(3), "speed": np.zeros(3)})
     from experiments.io.victoria_park import load_mat

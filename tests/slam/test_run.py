@@ -299,12 +299,13 @@ def test_initial_heading_does_not_override_the_truth_start():
 
 
 def test_impossible_encoder_offset_is_a_clear_error():
+    """Refused where the sequence is built (its steering with this encoder offset would make the
+    encoder stand still), not deep inside the run."""
     seq = drive_sequence(1.0, 0.6)
-    bad = dataclasses.replace(
-        seq, vehicle={"model": "ackermann", "wheelbase_m": 1.0, "encoder_offset_m": 2.0}
-    )
     with pytest.raises(ValueError, match="encoder_offset_m"):
-        run(bad, features="paper")
+        dataclasses.replace(
+            seq, vehicle={"model": "ackermann", "wheelbase_m": 1.0, "encoder_offset_m": 2.0}
+        )
 
 
 def test_gps_start_fits_heading_and_position_through_noise_and_a_jump():
