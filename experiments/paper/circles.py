@@ -117,7 +117,7 @@ def pillar_monte_carlo(n_trials, rng, methods=METHODS, noise_m=0.01, progress=No
                 rec.log_scan(scan, pose=pose)
                 for m, f in feats.items():
                     rec.log_circles(f"world/circles/{m}", f.circle_params, pose=pose, method=m)
-                rec.log_circles("world/truth/pillars", truth, labels=mc.names)
+                rec.log_circles("world/truth/pillars", truth, labels=mc.names, static=True)
             if progress is not None:
                 progress("pillar Monte Carlo", p * n_trials + t + 1, total)
     return mc
@@ -253,7 +253,7 @@ def run_tables(ctx) -> None:
             "methods": list(METHODS),
         }
     )
-    rec = open_recording(ctx.path("circles.rrd"))
+    rec = open_recording(ctx.path("circles.rrd"), "circles")
     try:
         mc = pillar_monte_carlo(n, ctx.rng("table1"), progress=ctx.progress, rec=rec)
         pillar_figures(ctx, rec)
@@ -371,9 +371,9 @@ def pillar_figures(ctx, rec) -> None:
         scan = sensor.scan(ranges, stamp_s=float(k))
         feats = _extract_all(scan, sigma, ("paper", "geometric", "bailey"))
         rec.set_scan(100 + k)
-        rec.log_scan(scan, pose=pose, path="figures/scan")
+        rec.log_scan(scan, pose=pose, path="figures/laser/scan")
         for m, f in feats.items():
-            rec.log_features(scan, f, pose=pose, path=f"figures/features/{m}")
+            rec.log_features(scan, f, pose=pose, path=f"figures/laser/{m}")
         truth_l = np.column_stack([_to_sensor(truth, pose), truth[:, 2]])
         if k == 0:
             ctx.outputs.append(

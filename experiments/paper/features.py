@@ -85,10 +85,11 @@ def victoria_park_figure(ctx, rec) -> None:
         scan = seq.scan(k)
         f = extract_features(scan, "paper")
         b = extract_features(scan, "bailey")
-        rec.set_scan(k)
-        rec.log_scan(scan, path="victoria_park/scan")
-        rec.log_features(scan, f, path="victoria_park/features/paper")
-        rec.log_circles("victoria_park/features/bailey/circles", b.circle_params, method="bailey")
+        rec.set_scan(k, scan.stamp_s)
+        rec.log_scalars("circles_per_scan", {"paper": f.n_circles, "bailey": b.n_circles})
+        rec.log_scan(scan, path="laser/scan")
+        rec.log_features(scan, f, path="laser/features/paper")
+        rec.log_circles("laser/features/bailey/circles", b.circle_params, method="bailey")
         if f.n_circles > best_n:
             best_k, best_n = k, f.n_circles
         if k % 100 == 0:
@@ -124,7 +125,11 @@ def run(ctx) -> None:
     ctx.config["features"]["extractor_defaults"] = ExtractorParams().to_dict()
     ctx.config["features"]["bailey"] = asdict(BaileyParams())
     classification(ctx)
-    rec = open_recording(ctx.path("features.rrd"))
+    rec = open_recording(
+        ctx.path("features.rrd"),
+        "features",
+        series=[("circles_per_scan", "circles per scan (paper, Bailey)")],
+    )
     try:
         victoria_park_figure(ctx, rec)
     finally:

@@ -51,6 +51,7 @@ import numpy as np
 from experiments.eval.detections import dominant_label, false_detections, run_labels
 from experiments.eval.poses import consistency as consistency_figures
 from experiments.eval.poses import nees, nees_bounds, pose_errors
+from experiments.eval.series import slam_panels, slam_series
 from experiments.io.writers import dumps_json, json_types, write_atomic, write_table
 from experiments.sim import sensor_preset
 from experiments.sim.trajectory import CycabParams, simulate_cycab_run
@@ -565,12 +566,11 @@ def _write_recording(res: Exp2Results, path: Path) -> Path:
 
     cfg = res.config
     seq = res.seq0
-    rec = Recorder(path)
-    rec.set_scan(0)
-    rec.log_circles("world/truth/trees", seq.truth_landmarks, method="truth")
+    rec = Recorder(path, "slam", series=slam_panels(True))
+    rec.log_truth_trees(seq.truth_landmarks)
     m = "paper" if "paper" in cfg.methods else cfg.methods[0]
     params = extractor_params(m, cfg.cycab)
-    slam_run(
+    lg = slam_run(
         seq,
         features=m,
         feature_params=params,
@@ -578,6 +578,7 @@ def _write_recording(res: Exp2Results, path: Path) -> Path:
         config=cfg.slam,
         visualiser=rec,
     )
+    rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
     rec.close()
     return path
 

@@ -43,15 +43,18 @@ def run_extract(
     if out.parent and not out.parent.is_dir():
         raise ConfigError(f"--out: folder {out.parent} does not exist")
     seq = load_sequence(input_path)
-    rec = open_recording(rerun_path)
+    rec = open_recording(
+        rerun_path, "features", series=[("circles_per_scan", f"circles per scan ({method})")]
+    )
     scans = []
     for k in range(seq.n_scans):
         scan = seq.scan(k)
         f = extract_features(scan, method, **params)
         scans.append(features_to_dict(f, k))
         rec.set_scan(k, float(seq.scan_t[k]))
-        rec.log_scan(scan)
-        rec.log_features(scan, f)
+        rec.log_scan(scan, path="laser/scan")
+        rec.log_features(scan, f, path="laser/features")
+        rec.log_scalars("circles_per_scan", {method: f.n_circles})
         if progress is not None and (k % 50 == 0 or k == seq.n_scans - 1):
             progress("extract", k + 1, seq.n_scans)
     rec.close()

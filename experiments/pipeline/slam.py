@@ -9,6 +9,7 @@ import numpy as np
 
 from experiments.eval.gps import score_sequence
 from experiments.eval.poses import nees, pose_errors
+from experiments.eval.series import slam_panels, slam_series
 from experiments.io.config_file import config_toml
 from experiments.io.features_json import load_features_json
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
@@ -32,6 +33,7 @@ def run_slam(
     config: SlamConfig | None = None,
     features_file: Path | str | None = None,
     progress=None,
+    ellipse_scale: float = 10.0,
 ) -> dict:
     """Run EKF-SLAM over the sequence file `input_path` and write the results into out_dir.
 
@@ -50,7 +52,9 @@ def run_slam(
                      errors against GPS (`experiments.eval.gps`) when the sequence has GPS, and
                      against the truth (Table-3 errors, mean NEES) when it has truth
     Returns the summary. initial_heading: start heading in radians (GPS starts). config: the
-    filter's settings (default `SlamConfig()`: the simulated Cycab's).
+    filter's settings (default `SlamConfig()`: the simulated Cycab's). rerun_path: also write a
+    recording (`experiments.render.viz`, kind "slam"; simulated truth trees and path when the
+    sequence has them), its covariance ellipses drawn `ellipse_scale` times their 95% size.
     """
     seq = load_sequence(input_path)
     cfg = config or SlamConfig()
@@ -59,7 +63,12 @@ def run_slam(
         source = load_features_json(features_file, seq.n_scans, seq.n_beams)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rec = open_recording(rerun_path)
+    has_truth = seq.truth_t is not None
+    rec = open_recording(
+        rerun_path, "slam", ellipse_scale=ellipse_scale, series=slam_panels(has_truth)
+    )
+    if seq.truth_landmarks is not None:
+        rec.log_truth_trees(seq.truth_landmarks)
     t0 = time.perf_counter()
     lg = slam_run(
         seq,
@@ -71,6 +80,7 @@ def run_slam(
         progress=progress,
     )
     seconds = time.perf_counter() - t0
+    rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
     rec.close()
     write_atomic(out / "trajectory.tum", trajectory_tum(lg.scan_t, lg.pose))
     if seq.gps_t is not None:
