@@ -34,7 +34,10 @@ def run_experiments(
     if progress is not None:
         ctx.progress = progress
     timings = {}
-    for fn, group in groups.items():
+    step = ctx.progress
+    for i, (fn, group) in enumerate(groups.items()):
+        step("experiments", i, len(groups))
+        log.info("running %s", " ".join(group))
         t0 = time.perf_counter()
         before = set(ctx.config)
         fn(ctx)
@@ -46,6 +49,7 @@ def run_experiments(
         for n in group:
             ctx.config[n] = ctx.config.get(n) or shared
         log.info("%s done in %.1f s", name, timings[name])
+        step("experiments", i + 1, len(groups))
     manifest = {
         "experiments": names,
         "quick": quick,
