@@ -149,7 +149,8 @@ def run(
         t.append(time.perf_counter())
         tent, next_id = _manage(s, state, tent, z, R, a, status, book, k, next_id)
         t.append(time.perf_counter())
-        book.scan_done(k, state, len(tent), z, R, status, n_used, nis, 2 * n_used, t)
+        radius = np.asarray(f.circle_params, float).reshape(-1, 3)[:, 2]
+        book.scan_done(k, state, len(tent), z, R, status, n_used, nis, 2 * n_used, t, radius)
         _visualise(vis, k, sequence, scan, f, state, tent, s.laser, z, status)
         if progress is not None:
             progress(k + 1, N)

@@ -19,7 +19,7 @@ from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, se2
 from slam import run as slam_run
 
-__all__ = ["run_slam", "summarise"]
+__all__ = ["landmark_radii", "run_slam", "summarise"]
 
 
 def run_slam(
@@ -45,8 +45,10 @@ def run_slam(
                      rotation about z by theta), readable by evo
     trajectory_gps_antenna.tum  the same path at the GPS antenna (sequences with GPS), to compare
                      with `trunkslam export-reference`'s gps.tum
-    trajectory.csv   t, x, y, theta and the upper triangle of the pose covariance
-    map.csv          id, x, y, covariance (xx, xy, yy), scan it joined the map, scans seen in
+    trajectory.csv   t_s, the rear-axle centre's pose in the world frame and the upper triangle
+                     of its covariance, units in the column names (`io.results.TRAJECTORY_COLUMNS`)
+    map.csv          id, centre (world), radius, covariance (xx, xy, yy), scan it joined the
+                     map, scans seen in (`io.results.MAP_COLUMNS`)
     config.toml      the resolved configuration (`--config` reads it back)
     summary.json     input, methods, start, counts, timings (mean, median, p95, max per phase),
                      errors against GPS (`experiments.eval.gps`) when the sequence has GPS, and
@@ -96,6 +98,7 @@ def run_slam(
             lg.landmark_cov,
             lg.landmark_first_scan,
             lg.landmark_n_obs,
+            landmark_radii(lg),
         ),
     )
     write_atomic(out / "config.toml", config_toml(cfg, f"trunkslam slam {input_path}"))
@@ -103,6 +106,17 @@ def run_slam(
     summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
     write_atomic(out / "summary.json", dumps_json(summary))
     return summary
+
+
+def landmark_radii(lg: SlamLog) -> np.ndarray:
+    """(n,) median radius, m, of the circles that updated each landmark of the final map (NaN
+    when none has a radius)."""
+    out = np.full(lg.landmark_id.size, np.nan)
+    for j, i in enumerate(lg.landmark_id):
+        r = lg.meas_radius_m[(lg.meas_status == i) & np.isfinite(lg.meas_radius_m)]
+        if r.size:
+            out[j] = float(np.median(r))
+    return out
 
 
 def _str(p) -> str | None:
