@@ -379,7 +379,7 @@ def pillar_figures(ctx, rec) -> None:
             ctx.outputs.append(
                 plots.plot_raw_scan(
                     scan.points_xy,
-                    "Fig. 2(b): one whole scan (simulated pillar court, position 1)",
+                    "Fig. 2(b): one whole scan (simulated pillar court, position 1; laser frame)",
                     ctx.out_dir / "fig2b_raw_scan.png",
                 )
             )
@@ -480,4 +480,6 @@ def run_sweep(ctx) -> None:
         notes=f"One pillar straight ahead of a PLS200, {n} scans per point; the others held at "
         f"{SWEEP_DEFAULT}. The crlb rows are the Cramer-Rao bound (RMS, relative).",
     )
-    ctx.outputs.append(plots.plot_sweep(results, ctx.out_dir / "circle_sweep.png"))
+    ctx.outputs.append(
+        plots.plot_sweep(results, ctx.out_dir / "circle_sweep.png", held=SWEEP_DEFAULT)
+    )

@@ -67,7 +67,11 @@ def classification(ctx) -> None:
         title="Classification of simulated trunks, walls and bushes",
         notes=notes,
     )
-    ctx.outputs.append(plots.plot_circle_rates(res, ctx.out_dir / "classification.png"))
+    setup = (
+        f"Simulated trunks ahead of a PLS200 (0.5 deg beams), {100 * sigma:g} cm range noise, "
+        f"1 cm quantisation, {n} trials per point"
+    )
+    ctx.outputs.append(plots.plot_circle_rates(res, ctx.out_dir / "classification.png", setup))
 
 
 def victoria_park_figure(ctx, rec) -> None:
@@ -108,7 +112,8 @@ def victoria_park_figure(ctx, rec) -> None:
                 ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"]),
             ],
             f.edge_xy,
-            f"Victoria Park scan {best_k + 1} (t = {scan.stamp_s:.2f} s; laser frame)",
+            f"Victoria Park scan index {best_k} (0-based, as in the manifest and the recording; "
+            f"t = {scan.stamp_s:.2f} s; laser frame)",
             ctx.out_dir / "fig_vp_scan.png",
             zoom=plots.zoom_box(f.circle_params),
         )
