@@ -28,6 +28,7 @@ def main() -> None:
     ap.add_argument("--scan", type=int, default=None, help="scan index (default: the last)")
     ap.add_argument("--wait", type=float, default=8.0, help="seconds to let the viewer draw")
     ap.add_argument("--port", type=int, default=9877)
+    ap.add_argument("--width", type=int, default=1280, help="pixels; 0 keeps the full size")
     a = ap.parse_args()
     viewer = ViewerClient.spawn(
         headless=True,
@@ -46,6 +47,12 @@ def main() -> None:
         viewer.save_screenshot(a.png)
     finally:
         viewer.quit()
+    if a.width:  # small enough for a README: scaled down, 256 colours (the UI has few)
+        from PIL import Image
+
+        im = Image.open(a.png).convert("RGB")
+        im = im.resize((a.width, round(im.height * a.width / im.width)), Image.LANCZOS)
+        im.quantize(256).save(a.png, optimize=True)
     print(f"{a.rrd} -> {a.png} (rerun {rr.__version__})")
 
 

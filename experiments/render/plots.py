@@ -123,8 +123,8 @@ def _key(ax, box=None, fontsize=8, loc="best") -> None:
         Line2D([], [], color="tab:orange", label="segment: clutter"),
     ]
     for h in ax.patches + ax.lines:
-        label = h.get_label()
-        if label.startswith("_") or not label:
+        label = h.get_label() or ""
+        if not label or label.startswith("_"):
             continue
         if box is not None and not _inside(ax, label, box):
             continue
@@ -179,6 +179,7 @@ def plot_features(
         axes[1].set_ylim(y0, y1)
         axes[1].set_title("zoom on the dashed box", fontsize=10)
         _key(axes[1], box=zoom)
+        _key(axes[0], fontsize=7)
     else:
         _key(axes[0])
     return save(fig, path)
@@ -264,36 +265,46 @@ def plot_sweep(results: dict, path: Path, held: dict | None = None) -> Path:
     """CE and RE (rows) against each swept variable (columns), one line per method.
 
     results[var][value][method] = (RMS CE, RMS RE, extracted fraction); held: the values of the
-    variables not swept (for the title). Values where no method extracted the pillar are
-    shaded and said, so a curve that stops has its reason on the figure.
+    variables not swept (for the title). Where a method extracted no circle the figure says
+    so, so a curve that stops has its reason on it.
     """
     variables = list(results)
     fig, axes = plt.subplots(2, len(variables), figsize=(5 * len(variables), 7.8), squeeze=False)
-    styles = {"paper": "o-", "geometric": "s-", "bailey": "^-", "taubin": "d-", "crlb": "k--"}
+    styles = {"paper": "o-", "geometric": "s-", "bailey": "^-", "taubin": "d-", "crlb": "--"}
     ylabels = ("RMS CE (eq. 10): centre error / range", "RMS RE (eq. 11): radius error / radius")
     for j, var in enumerate(variables):
         xs = sorted(results[var])
         methods = list(results[var][xs[0]])
-        none = [x for x in xs if all(results[var][x][m][2] == 0 for m in methods if m != "crlb")]
+        missing: dict[tuple, list[str]] = {}  # values a method never extracted -> methods
+        for m in methods:
+            gone = tuple(x for x in xs if m != "crlb" and results[var][x][m][2] == 0)
+            if gone:
+                missing.setdefault(gone, []).append(m)
+        note = "; ".join(
+            f"{', '.join(ms)}: no circle at {', '.join(f'{x:g}' for x in gone)}"
+            for gone, ms in missing.items()
+        )
         for i, label in enumerate(ylabels):
             ax = axes[i, j]
             for m in methods:
                 ys = [results[var][x][m][i] for x in xs]
-                ax.plot(xs, ys, styles.get(m, "o-"), label=_SWEEP_NAMES.get(m, m), ms=4)
-            for x in none:
-                k = xs.index(x)
-                lo = xs[k - 1] if k else x
-                hi = xs[k + 1] if k + 1 < len(xs) else x
-                ax.axvspan((lo + x) / 2, (x + hi) / 2, color="0.85", zorder=0)
-            if none and i == 0:
+                ax.plot(
+                    xs,
+                    ys,
+                    styles.get(m, "o-"),
+                    color=METHOD_COLORS.get(m, "k"),  # crlb: black
+                    label=_SWEEP_NAMES.get(m, m),
+                    ms=4,
+                )
+            if note and i == 0:
                 ax.text(
-                    0.98,
-                    0.04,
-                    "shaded: no method extracts the pillar\n(fewer than 4 beams on it)",
+                    0.02,
+                    0.02,
+                    f"{note}\n(fewer than 4 beams on the pillar)",
                     transform=ax.transAxes,
-                    ha="right",
-                    va="bottom",
                     fontsize=7,
+                    va="bottom",
+                    bbox=dict(facecolor="white", alpha=0.8, lw=0),
                 )
             ax.set_yscale("log")
             ax.set_xlabel(SWEEP_AXES.get(var, var))

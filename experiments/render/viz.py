@@ -118,9 +118,14 @@ def blueprint(
         body = rrb.Vertical(scan, *panels, row_shares=[4] + [1] * len(panels))
         return rrb.Blueprint(body, rrb.TimePanel(timeline="time"), *collapsed)
     if kind == "circles":
+        no_radius = {  # the pillars' names label them; radius labels would overlap
+            f"world/circles/{m}": rr.LineStrips2D.from_fields(show_labels=False)
+            for m in METHOD_COLORS
+        }
         court = rrb.Spatial2DView(
             origin=_y_up("world"),
             contents="/world/**",
+            overrides=no_radius,
             name="pillar court, world frame: one scan per position, circles by method, "
             "true pillars white",
         )
@@ -423,7 +428,9 @@ class Recorder(NullRecorder):
 
     def _style(self, name: str, curves: tuple[str, ...], points: bool) -> None:
         colors = [
-            _BOUND_COLOR if "sigma" in c or "%" in c else _CURVE_COLORS[i % len(_CURVE_COLORS)]
+            _BOUND_COLOR
+            if "sigma" in c or "%" in c
+            else METHOD_COLORS.get(c, _CURVE_COLORS[i % len(_CURVE_COLORS)])
             for i, c in enumerate(curves)
         ]
         if points:
