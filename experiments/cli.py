@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import sys
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -127,11 +128,56 @@ def _numbers(option: str, text: str, n: int) -> list[float]:
     return values
 
 
+class _StderrHandler(logging.StreamHandler):
+    """Writes to whatever sys.stderr is when a record comes (not the one at set-up)."""
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:
+        pass
+
+
+def _version(value: bool) -> None:
+    if value:
+        from importlib.metadata import version
+
+        typer.echo(f"trunkslam {version('trunkslam')}")
+        raise typer.Exit()
+
+
 @app.callback()
-def main(verbose: Annotated[bool, typer.Option("--verbose", "-v")] = False) -> None:
-    logging.basicConfig(
-        level=logging.INFO if verbose else logging.WARNING, format="%(levelname)s %(message)s"
-    )
+def main(
+    verbose: Annotated[
+        bool,
+        typer.Option(
+            "--verbose",
+            "-v",
+            help="log what the commands do, progress detail included (before the command: "
+            "trunkslam -v slam ...)",
+        ),
+    ] = False,
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", callback=_version, is_eager=True, help="print the version and exit"
+        ),
+    ] = False,
+) -> None:
+    from experiments.render.progress import CONSOLE
+
+    level = logging.INFO if verbose else logging.WARNING
+    if CONSOLE.is_terminal:  # log lines print above the progress bars
+        from rich.logging import RichHandler
+
+        handler = RichHandler(console=CONSOLE, show_path=False, show_time=False)
+        logging.basicConfig(level=level, format="%(message)s", handlers=[handler], force=True)
+    else:
+        handler = _StderrHandler()
+        handler.setFormatter(logging.Formatter("%(levelname)s %(message)s"))
+        logging.basicConfig(level=level, handlers=[handler], force=True)
 
 
 @app.command()
@@ -142,27 +188,32 @@ def extract(
     method: Annotated[ExtractMethod, typer.Option(help="circle extractor")] = ExtractMethod.paper,
     sigma_r: Annotated[
         float | None,
-        typer.Option(help="range noise sigma the extractor assumes, m (paper/geometric only)"),
+        typer.Option(
+            help="range noise sigma the extractor assumes, m (paper/geometric only) [default: 0.02]"
+        ),
     ] = None,
     line_test: Annotated[
         LineTest | None,
-        typer.Option(help="line test: lrt (default) or paper (eq. 5); paper/geometric only"),
+        typer.Option(help="line test: lrt or paper (eq. 5); paper/geometric only [default: lrt]"),
     ] = None,
-    rerun: Annotated[Path | None, typer.Option(help="also write a rerun recording")] = None,
+    rerun: Annotated[
+        Path | None, typer.Option(help="also write a rerun recording (.rrd) [default: none]")
+    ] = None,
 ) -> None:
     """Extract circles, lines, edges and clutter from every scan of a sequence file."""
     from experiments.pipeline.extract import run_extract
     from experiments.render.progress import Progress
 
-    s = run_extract(
-        input,
-        out,
-        method.value,
-        sigma_r_m=sigma_r,
-        line_test=None if line_test is None else line_test.value,
-        rerun_path=rerun,
-        progress=Progress(),
-    )
+    with Progress() as progress:
+        s = run_extract(
+            input,
+            out,
+            method.value,
+            sigma_r_m=sigma_r,
+            line_test=None if line_test is None else line_test.value,
+            rerun_path=rerun,
+            progress=progress,
+        )
     typer.echo(f"{s['scans']} scans -> {out} ({s['circles']} circles)")
 
 
@@ -178,7 +229,8 @@ def convert_victoria_park(
         ),
     ] = False,
     data: Annotated[
-        Path | None, typer.Option(help="victoria_park folder (default: $TRUNKSLAM_DATA/...)")
+        Path | None,
+        typer.Option(help="victoria_park folder [default: $TRUNKSLAM_DATA/victoria_park]"),
     ] = None,
 ) -> None:
     """Victoria Park (odometry, GPS, raw scans and/or published detections) as one sequence file."""
@@ -203,7 +255,9 @@ def simulate(
     out: Annotated[Path, typer.Option(help="sequence file to write")] = Path("scan.npz"),
     sensor: Annotated[Sensor, typer.Option(help="sensor preset")] = Sensor.pls200,
     back_to_back: Annotated[bool, typer.Option(help="two sensors back to back (360 deg)")] = False,
-    noise: Annotated[float | None, typer.Option(help="range noise sigma, m (default 0.01)")] = None,
+    noise: Annotated[
+        float | None, typer.Option(help="range noise sigma, m [default: 0.01 (the preset's)]")
+    ] = None,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
 ) -> None:
     """Simulate one scan of a scene from a pose and write it as a sequence file."""
@@ -229,7 +283,7 @@ def simulate(
 def simulate_drive(
     scene: Annotated[str, typer.Argument(help="scene with a route (scan_positions)")] = "tree_park",
     out: Annotated[Path, typer.Option(help="sequence file to write")] = Path("run.npz"),
-    scans: Annotated[int, typer.Option(min=1, help="scans in the run (5 Hz)")] = 240,
+    scans: Annotated[int, typer.Option(min=1, help="scans in the run (5 Hz: 0.2 s a scan)")] = 240,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
 ) -> None:
     """Simulate a Cycab drive around a scene's route (experiment 2's set-up): scans, odometry,
@@ -257,12 +311,32 @@ def reproduce(
     out: Annotated[Path, typer.Option(help="output folder")] = Path("results"),
     seed: Annotated[int, typer.Option(help="root random seed", min=0)] = 0,
 ) -> None:
-    """Run the paper's experiments: tables (.md/.csv), figures (.png), recordings (.rrd)."""
+    """Run the paper's experiments: tables (.md/.csv), figures (.png), recordings (.rrd).
+
+    Experiments (NAMES; several may be given, none means all but the calibration):
+
+    - features: classification of simulated trunks, the Victoria Park scan figure, features.rrd
+
+    - table1, table2: circle-centre and radius accuracy on the pillar court (one run), circles.rrd
+
+    - circle-sweep: CE and RE against range, radius and noise, with the Cramer-Rao bound
+
+    - table3, table4: EKF-SLAM Monte Carlo on the simulated tree park (one run), slam.rrd
+
+    - association: IHGR, JCBB and NN side by side
+
+    - victoria-park: EKF-SLAM on the real run against GPS (needs the data), victoria_park.rrd
+
+    - noise-calibration: measurement-noise model of each extractor (3 s)
+
+    - victoria-park-calibration: the ute's noise and laser yaw (15 min; only when named)
+    """
     from experiments.paper.reproduce import run_experiments
     from experiments.render.progress import Progress
 
     chosen = [n.value for n in names or []]
-    written = run_experiments(chosen, out, quick=quick, seed=seed, progress=Progress())
+    with Progress() as progress:
+        written = run_experiments(chosen, out, quick=quick, seed=seed, progress=progress)
     typer.echo(f"{len(written)} files in {out}/ (see {out}/manifest.json)")
 
 
@@ -278,19 +352,37 @@ def slam_cmd(
     ] = SlamFeatures.paper,
     features_file: Annotated[
         Path | None,
-        typer.Option(help="features JSON from `trunkslam extract` to use instead of --features"),
+        typer.Option(
+            help="features JSON from `trunkslam extract` to use instead of --features "
+            "[default: none]"
+        ),
     ] = None,
     association: Annotated[Association, typer.Option(help="data association")] = Association.ihgr,
     config: Annotated[
-        str | None, typer.Option(help="SLAM settings: a TOML file or a preset of datasets/configs")
+        str | None,
+        typer.Option(
+            help="SLAM settings: a TOML file or a preset of datasets/configs "
+            "[default: cycab, the simulated Cycab's]"
+        ),
     ] = None,
     dump_config: Annotated[
         bool, typer.Option(help="print the resolved settings as TOML and exit")
     ] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("slam_out"),
-    rerun: Annotated[Path | None, typer.Option(help="also write a rerun recording")] = None,
+    rerun: Annotated[
+        Path | None, typer.Option(help="also write a rerun recording (.rrd) [default: none]")
+    ] = None,
+    ellipse_scale: Annotated[
+        float,
+        typer.Option(
+            min=0.01,
+            help="covariance ellipses in the recording are drawn this many times their 95% size "
+            "(x1: true size)",
+        ),
+    ] = 10.0,
     initial_heading: Annotated[
-        float | None, typer.Option(help="start heading, rad, when starting from GPS")
+        float | None,
+        typer.Option(help="start heading, rad, when starting from GPS [default: from the GPS fit]"),
     ] = None,
     smooth: Annotated[
         bool, typer.Option(help="then re-solve the run with the GTSAM smoother (batch)")
@@ -309,20 +401,21 @@ def slam_cmd(
         return
     if input is None:
         raise typer.BadParameter("a sequence file is needed", param_hint="INPUT")
-    progress = Progress()
-    s = run_slam(
-        input,
-        features.value,
-        association.value,
-        out,
-        rerun,
-        initial_heading,
-        config=cfg,
-        features_file=features_file,
-        progress=lambda done, total: (
-            progress("slam", done, total) if done % 100 == 0 or done == total else None
-        ),
-    )
+    with Progress() as progress:
+        s = run_slam(
+            input,
+            features.value,
+            association.value,
+            out,
+            rerun,
+            initial_heading,
+            config=cfg,
+            features_file=features_file,
+            progress=lambda done, total: (
+                progress("slam", done, total) if done % 10 == 0 or done == total else None
+            ),
+            ellipse_scale=ellipse_scale,
+        )
     gps = s.get("gps")
     err = f", {gps['all_rmse']:.2f} m RMS from GPS" if gps else ""
     typer.echo(
@@ -399,7 +492,10 @@ def export_reference_cmd(
 @handle_errors
 def bench_extract(
     repeats: Annotated[int, typer.Option(min=1, help="passes over the 2000 scans")] = 3,
-    data: Annotated[Path | None, typer.Option(help="victoria_park folder")] = None,
+    data: Annotated[
+        Path | None,
+        typer.Option(help="victoria_park folder [default: $TRUNKSLAM_DATA/victoria_park]"),
+    ] = None,
 ) -> None:
     """Scans per second of each extractor on the 2000 real Victoria Park scans."""
     from experiments.bench.extract import bench_extract as bench

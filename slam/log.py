@@ -43,7 +43,8 @@ class SlamLog:
     meas_*: one row per circle extracted: meas_scan, meas_feature, meas_z (K, 2), meas_R
         (K, 2, 2), meas_status (landmark id >= 0 when used in an update; -1 new tentative,
         -2 tentative seen again, -3 tentative confirmed into the map, -4 ambiguous (gated but not
-        assigned, ignored), -5 beyond max_feature_range_m).
+        assigned, ignored), -5 beyond max_feature_range_m), meas_radius_m (K,) the circle's
+        radius (NaN when the features have none).
     scan_nis (N,), scan_nis_dof (N,): NIS of each scan's batch update and its degrees of
         freedom (NaN, 0 without an update); scan_logdet (N,): ln |S| of that batch (NaN without).
     n_features, n_associated, n_tentative, n_map: (N,) per scan.
@@ -83,6 +84,7 @@ class SlamLog:
     meas_R: np.ndarray
     meas_status: np.ndarray
     meas_track: np.ndarray
+    meas_radius_m: np.ndarray
     scan_nis: np.ndarray
     scan_nis_dof: np.ndarray
     scan_logdet: np.ndarray
@@ -133,7 +135,7 @@ class LogBuilder:
             k: [] for k in ("scan", "feature", "landmark", "z", "innov", "S")
         }
         self.meas: dict[str, list] = {
-            k: [] for k in ("scan", "feature", "z", "R", "status", "track")
+            k: [] for k in ("scan", "feature", "z", "R", "status", "track", "radius")
         }
         self.odo_delta = np.zeros((n, 3))
         self.odo_cov = np.zeros((n, 3, 3))
@@ -181,9 +183,11 @@ class LogBuilder:
         nis: float,
         nis_dof: int,
         times: list[float],
+        radius_m=None,
     ) -> None:
-        """Scan k's estimate, counts, measurements with their status, and phase times
-        (`times`: perf_counter at the start and after each of the five steps)."""
+        """Scan k's estimate, counts, measurements with their status and circle radius
+        (`radius_m` (m,), or None), and phase times (`times`: perf_counter at the start and
+        after each of the five steps)."""
         self.pose[k] = state.pose
         self.pose_cov[k] = state.pose_cov
         self.nis[k] = nis
@@ -200,6 +204,7 @@ class LogBuilder:
             self.meas["R"].append(R[i])
             self.meas["status"].append(int(status[i]))
             self.meas["track"].append(int(track[i]))
+            self.meas["radius"].append(np.nan if radius_m is None else float(radius_m[i]))
         for key, a, b in zip(TIMING_KEYS[:5], times[:-1], times[1:]):
             self.timing[key][k] = b - a
         self.timing["total"][k] = times[-1] - times[0]
@@ -232,6 +237,7 @@ class LogBuilder:
             meas_R=np.array(meas["R"]).reshape(-1, 2, 2),
             meas_status=np.array(meas["status"], np.int64),
             meas_track=np.array(meas["track"], np.int64),
+            meas_radius_m=np.array(meas["radius"], np.float64),
             scan_nis=self.nis,
             scan_nis_dof=self.nis_dof,
             scan_logdet=self.logdet,

@@ -159,7 +159,8 @@ def run(
         track = np.where(status >= 0, status, -1)
         tent, next_id = _manage(s, state, tent, z, R, a, status, track, book, k, next_id)
         t.append(time.perf_counter())
-        book.scan_done(k, state, len(tent), z, R, status, track, n_used, nis, 2 * n_used, t)
+        radius = np.asarray(f.circle_params, float).reshape(-1, 3)[:, 2]
+        book.scan_done(k, state, len(tent), z, R, status, track, n_used, nis, 2 * n_used, t, radius)
         _visualise(vis, k, sequence, scan, f, state, tent, s.laser, z, status)
         if progress is not None:
             progress(k + 1, N)

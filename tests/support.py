@@ -96,3 +96,35 @@ def quick_reproduce(tmp_path_factory, name: str, seed: int):
     out = tmp_path_factory.mktemp(name)
     run_experiments([name], out, quick=True, seed=seed)
     return out
+
+
+def read_recording(path) -> dict:
+    """What a `.rrd` file holds, read back with the rerun SDK's reader (`rerun.chunk.RrdReader`):
+    entity paths (without the leading /), timelines, and the views of the blueprint the file
+    carries as (class, origin, contents, name) with the origins and contents without the
+    leading /; class "2D", "3D" or "TimeSeries"."""
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(path)
+    schema = reader.store().schema()
+    entities = {str(e).lstrip("/") for e in schema.entity_paths()}
+    timelines = {str(i).removeprefix("Index(timeline:").rstrip(")") for i in schema.index_columns()}
+    views, contents = {}, {}
+    for store in reader.blueprints():
+        for chunk in reader.store(store=store).stream().to_chunks():
+            d = chunk.to_record_batch().to_pydict()
+            path = str(chunk.entity_path).lstrip("/")
+            if "ViewBlueprint:class_identifier" in d:
+                views[path] = (
+                    d["ViewBlueprint:class_identifier"][-1][0],
+                    d["ViewBlueprint:space_origin"][-1][0].lstrip("/"),
+                    d["ViewBlueprint:display_name"][-1][0],
+                )
+            if "ViewContents:query" in d:
+                contents[path.removesuffix("/ViewContents")] = d["ViewContents:query"][-1]
+    return {
+        "entities": entities,
+        "timelines": timelines,
+        "blueprints": len(reader.blueprints()),
+        "views": [(c, o, contents.get(k, []), n) for k, (c, o, n) in views.items()],
+    }

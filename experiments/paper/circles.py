@@ -117,7 +117,7 @@ def pillar_monte_carlo(n_trials, rng, methods=METHODS, noise_m=0.01, progress=No
                 rec.log_scan(scan, pose=pose)
                 for m, f in feats.items():
                     rec.log_circles(f"world/circles/{m}", f.circle_params, pose=pose, method=m)
-                rec.log_circles("world/truth/pillars", truth, labels=mc.names)
+                rec.log_circles("world/truth/pillars", truth, labels=mc.names, static=True)
             if progress is not None:
                 progress("pillar Monte Carlo", p * n_trials + t + 1, total)
     return mc
@@ -253,7 +253,7 @@ def run_tables(ctx) -> None:
             "methods": list(METHODS),
         }
     )
-    with open_recording(ctx.path("circles.rrd")) as rec:
+    with open_recording(ctx.path("circles.rrd"), "circles") as rec:
         mc = pillar_monte_carlo(n, ctx.rng("table1"), progress=ctx.progress, rec=rec)
         pillar_figures(ctx, rec)
     s = summarise(mc)
@@ -368,15 +368,15 @@ def pillar_figures(ctx, rec) -> None:
         scan = sensor.scan(ranges, stamp_s=float(k))
         feats = _extract_all(scan, sigma, ("paper", "geometric", "bailey"))
         rec.set_scan(100 + k)
-        rec.log_scan(scan, pose=pose, path="figures/scan")
+        rec.log_scan(scan, pose=pose, path="figures/laser/scan")
         for m, f in feats.items():
-            rec.log_features(scan, f, pose=pose, path=f"figures/features/{m}")
+            rec.log_features(scan, f, pose=pose, path=f"figures/laser/{m}")
         truth_l = np.column_stack([_to_sensor(truth, pose), truth[:, 2]])
         if k == 0:
             ctx.outputs.append(
                 plots.plot_raw_scan(
                     scan.points_xy,
-                    "Fig. 2(b): one whole scan (simulated pillar court, position 1)",
+                    "Fig. 2(b): one whole scan (simulated pillar court, position 1; laser frame)",
                     ctx.out_dir / "fig2b_raw_scan.png",
                 )
             )
@@ -477,4 +477,6 @@ def run_sweep(ctx) -> None:
         notes=f"One pillar straight ahead of a PLS200, {n} scans per point; the others held at "
         f"{SWEEP_DEFAULT}. The crlb rows are the Cramer-Rao bound (RMS, relative).",
     )
-    ctx.outputs.append(plots.plot_sweep(results, ctx.out_dir / "circle_sweep.png"))
+    ctx.outputs.append(
+        plots.plot_sweep(results, ctx.out_dir / "circle_sweep.png", held=SWEEP_DEFAULT)
+    )

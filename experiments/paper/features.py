@@ -67,7 +67,11 @@ def classification(ctx) -> None:
         title="Classification of simulated trunks, walls and bushes",
         notes=notes,
     )
-    ctx.outputs.append(plots.plot_circle_rates(res, ctx.out_dir / "classification.png"))
+    setup = (
+        f"Simulated trunks ahead of a PLS200 (0.5 deg beams), {100 * sigma:g} cm range noise, "
+        f"1 cm quantisation, {n} trials per point"
+    )
+    ctx.outputs.append(plots.plot_circle_rates(res, ctx.out_dir / "classification.png", setup))
 
 
 def victoria_park_figure(ctx, rec) -> None:
@@ -85,10 +89,11 @@ def victoria_park_figure(ctx, rec) -> None:
         scan = seq.scan(k)
         f = extract_features(scan, "paper")
         b = extract_features(scan, "bailey")
-        rec.set_scan(k)
-        rec.log_scan(scan, path="victoria_park/scan")
-        rec.log_features(scan, f, path="victoria_park/features/paper")
-        rec.log_circles("victoria_park/features/bailey/circles", b.circle_params, method="bailey")
+        rec.set_scan(k, scan.stamp_s)
+        rec.log_scalars("circles_per_scan", {"paper": f.n_circles, "bailey": b.n_circles})
+        rec.log_scan(scan, path="laser/scan")
+        rec.log_features(scan, f, path="laser/features/paper")
+        rec.log_circles("laser/features/bailey/circles", b.circle_params, method="bailey")
         if f.n_circles > best_n:
             best_k, best_n = k, f.n_circles
         if k % 100 == 0:
@@ -107,7 +112,8 @@ def victoria_park_figure(ctx, rec) -> None:
                 ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"]),
             ],
             f.edge_xy,
-            f"Victoria Park scan {best_k + 1} (t = {scan.stamp_s:.2f} s; laser frame)",
+            f"Victoria Park scan index {best_k} (0-based, as in the manifest and the recording; "
+            f"t = {scan.stamp_s:.2f} s; laser frame)",
             ctx.out_dir / "fig_vp_scan.png",
             zoom=plots.zoom_box(f.circle_params),
         )
@@ -124,5 +130,9 @@ def run(ctx) -> None:
     ctx.config["features"]["extractor_defaults"] = ExtractorParams().to_dict()
     ctx.config["features"]["bailey"] = asdict(BaileyParams())
     classification(ctx)
-    with open_recording(ctx.path("features.rrd")) as rec:
+    with open_recording(
+        ctx.path("features.rrd"),
+        "features",
+        series=[("circles_per_scan", "circles per scan (paper, Bailey)")],
+    ) as rec:
         victoria_park_figure(ctx, rec)

@@ -69,8 +69,11 @@ def run_experiments(
         ctx = RunContext(out_dir=stage, quick=quick, seed=seed)
         if progress is not None:
             ctx.progress = progress
-        for fn, group in groups.items():
+        step = ctx.progress
+        for i, (fn, group) in enumerate(groups.items()):
+            step("experiments", i, len(groups))
             name = " ".join(group)
+            log.info("running %s", name)
             t0 = time.perf_counter()
             before_files, before_config = _files(stage), set(ctx.config)
             try:
@@ -89,6 +92,7 @@ def run_experiments(
             for n in group:
                 ctx.config[n] = ctx.config.get(n) or shared
             log.info("%s done in %.1f s", name, timings[name])
+            step("experiments", i + 1, len(groups))
         outputs = sorted(_files(stage))
         manifest = {
             "experiments": names,

@@ -51,6 +51,7 @@ import numpy as np
 from experiments.eval.detections import dominant_label, false_detections, run_labels
 from experiments.eval.poses import consistency as consistency_figures
 from experiments.eval.poses import nees, nees_bounds, pose_errors
+from experiments.eval.series import slam_panels, slam_series
 from experiments.io.writers import dumps_json, json_types, write_atomic, write_table
 from experiments.sim import sensor_preset
 from experiments.sim.trajectory import CycabParams, simulate_cycab_run
@@ -623,10 +624,9 @@ def _write_recording(res: Exp2Results, path: Path) -> Path:
     seq = res.seq0
     m = "paper" if "paper" in cfg.methods else cfg.methods[0]
     params = extractor_params(m, cfg.cycab)
-    with Recorder(path) as rec:
-        rec.set_scan(0)
-        rec.log_circles("world/truth/trees", seq.truth_landmarks, method="truth")
-        slam_run(
+    with Recorder(path, "slam", series=slam_panels(True)) as rec:
+        rec.log_truth_trees(seq.truth_landmarks)
+        lg = slam_run(
             seq,
             features=m,
             feature_params=params,
@@ -634,6 +634,7 @@ def _write_recording(res: Exp2Results, path: Path) -> Path:
             config=cfg.slam,
             visualiser=rec,
         )
+        rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
     return path
 
 

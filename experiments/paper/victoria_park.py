@@ -31,6 +31,7 @@ from scipy.stats import chi2
 
 from experiments.errors import MissingDataError
 from experiments.eval.gps import score_sequence
+from experiments.eval.series import slam_panels, slam_series
 from experiments.io.config_file import load_slam_config
 from experiments.io.victoria_park import VP_N_RAW_SCANS, load_ss2002_reference, load_victoria_park
 from experiments.io.writers import json_types, write_table
@@ -255,8 +256,11 @@ def _write(ctx, rows, logs, full, cfg) -> None:
             sc.t_s, errors, sc.jump, gaps, lg.scan_t, window, sizes, title, path
         )
     )
-    with open_recording(ctx.path("victoria_park.rrd"), decimate=20) as rec:
-        slam_run(full, features="detections", association="ihgr", config=cfg, visualiser=rec)
+    with open_recording(
+        ctx.path("victoria_park.rrd"), "slam", decimate=20, series=slam_panels(False)
+    ) as rec:
+        lg = slam_run(full, features="detections", association="ihgr", config=cfg, visualiser=rec)
+        rec.log_series(lg.scan_t, slam_series(lg))
 
 
 def _cell(v):

@@ -52,14 +52,17 @@ def run_extract(
         check_output_file(rerun_path, "--rerun", inputs=[input_path, out])
     seq = load_sequence(input_path)
     scans = []
-    with open_recording(rerun_path) as rec:
+    with open_recording(
+        rerun_path, "features", series=[("circles_per_scan", f"circles per scan ({method})")]
+    ) as rec:
         for k in range(seq.n_scans):
             scan = seq.scan(k)
             f = extract_features(scan, method, **params)
             scans.append(features_to_dict(f, k))
             rec.set_scan(k, float(seq.scan_t[k]))
-            rec.log_scan(scan)
-            rec.log_features(scan, f)
+            rec.log_scan(scan, path="laser/scan")
+            rec.log_features(scan, f, path="laser/features")
+            rec.log_scalars("circles_per_scan", {method: f.n_circles})
             if progress is not None and (k % 50 == 0 or k == seq.n_scans - 1):
                 progress("extract", k + 1, seq.n_scans)
     doc = {

@@ -10,6 +10,7 @@ import numpy as np
 from experiments.errors import DataError
 from experiments.eval.gps import score_sequence
 from experiments.eval.poses import nees, pose_errors
+from experiments.eval.series import slam_panels, slam_series
 from experiments.io.config_file import config_toml
 from experiments.io.features_json import load_features_json
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
@@ -27,7 +28,7 @@ from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, se2
 from slam import run as slam_run
 
-__all__ = ["run_slam", "summarise"]
+__all__ = ["landmark_radii", "run_slam", "summarise"]
 
 
 def run_slam(
@@ -41,6 +42,7 @@ def run_slam(
     config: SlamConfig | None = None,
     features_file: Path | str | None = None,
     progress=None,
+    ellipse_scale: float = 10.0,
 ) -> dict:
     """Run EKF-SLAM over the sequence file `input_path` and write the results into out_dir.
 
@@ -52,15 +54,19 @@ def run_slam(
                      rotation about z by theta), readable by evo
     trajectory_gps_antenna.tum  the same path at the GPS antenna (sequences with GPS), to compare
                      with `trunkslam export-reference`'s gps.tum
-    trajectory.csv   t, x, y, theta and the upper triangle of the pose covariance
-    map.csv          id, x, y, covariance (xx, xy, yy), scan it joined the map, scans seen in
+    trajectory.csv   t_s, the rear-axle centre's pose in the world frame and the upper triangle
+                     of its covariance, units in the column names (`io.results.TRAJECTORY_COLUMNS`)
+    map.csv          id, centre (world), radius, covariance (xx, xy, yy), scan it joined the
+                     map, scans seen in (`io.results.MAP_COLUMNS`)
     config.toml      the resolved configuration (`--config` reads it back)
     run_log.npz      what the GTSAM smoother needs (`trunkslam smooth`; experiments.io.run_log)
     summary.json     input, methods, start, counts, timings (mean, median, p95, max per phase),
                      errors against GPS (`experiments.eval.gps`) when the sequence has GPS, and
                      against the truth (Table-3 errors, mean NEES) when it has truth
     Returns the summary. initial_heading: start heading in radians (GPS starts). config: the
-    filter's settings (default `SlamConfig()`: the simulated Cycab's).
+    filter's settings (default `SlamConfig()`: the simulated Cycab's). rerun_path: also write a
+    recording (`experiments.render.viz`, kind "slam"; simulated truth trees and path when the
+    sequence has them), its covariance ellipses drawn `ellipse_scale` times their 95% size.
 
     The files are written as one set (`experiments.io.writers.atomic_folder`): into a temporary
     folder beside out_dir, summary.json last, then swapped for out_dir as a whole; an
@@ -87,7 +93,12 @@ def run_slam(
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_folder(out) as stage:
         rec_path = rerun_path if rerun_in_out is None else stage / rerun_in_out
-        with open_recording(rec_path) as rec:
+        has_truth = seq.truth_t is not None
+        with open_recording(
+            rec_path, "slam", ellipse_scale=ellipse_scale, series=slam_panels(has_truth)
+        ) as rec:
+            if seq.truth_landmarks is not None:
+                rec.log_truth_trees(seq.truth_landmarks)
             t0 = time.perf_counter()
             lg = slam_run(
                 seq,
@@ -99,6 +110,7 @@ def run_slam(
                 progress=progress,
             )
             seconds = time.perf_counter() - t0
+            rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
         write_atomic(stage / "trajectory.tum", trajectory_tum(lg.scan_t, lg.pose))
         if seq.gps_t is not None:
             ant = seq.gps_pose if seq.gps_pose is not None else _laser(seq, cfg)
@@ -113,6 +125,7 @@ def run_slam(
                 lg.landmark_cov,
                 lg.landmark_first_scan,
                 lg.landmark_n_obs,
+                landmark_radii(lg),
             ),
         )
         write_atomic(stage / "config.toml", config_toml(cfg, f"trunkslam slam {input_path}"))
@@ -124,6 +137,17 @@ def run_slam(
 
 
 SUMMARY = "summary.json"
+
+
+def landmark_radii(lg: SlamLog) -> np.ndarray:
+    """(n,) median radius, m, of the circles that updated each landmark of the final map (NaN
+    when none has a radius)."""
+    out = np.full(lg.landmark_id.size, np.nan)
+    for j, i in enumerate(lg.landmark_id):
+        r = lg.meas_radius_m[(lg.meas_status == i) & np.isfinite(lg.meas_radius_m)]
+        if r.size:
+            out[j] = float(np.median(r))
+    return out
 
 
 def _str(p) -> str | None:

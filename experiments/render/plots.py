@@ -42,8 +42,9 @@ def plot_raw_scan(points_xy: np.ndarray, title: str, path: Path) -> Path:
     """Fig. 2(b): the points of one whole scan around the sensor at the origin."""
     fig, ax = plt.subplots(figsize=(6.5, 6.5))
     p = points_xy[np.all(np.isfinite(points_xy), axis=1)]
-    ax.plot(p[:, 0], p[:, 1], ".", ms=2.5, color="k")
-    ax.plot([0], [0], "r+", ms=12, mew=2)
+    ax.plot(p[:, 0], p[:, 1], ".", ms=2.5, color="k", label="scan points")
+    ax.plot([0], [0], "r+", ms=12, mew=2, label="laser (two PLS200 back to back)")
+    ax.legend(fontsize=8, loc="upper right")
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
@@ -87,6 +88,7 @@ def _draw(ax, points_xy, segments, circles, edges, truth, lw=1.0):
                     label=name if i == 0 else None,
                 )
             )
+            ax.patches[-1]._key = name
     if truth is not None and len(truth):
         for i, (cx, cy, r) in enumerate(truth):
             ax.add_patch(
@@ -101,11 +103,49 @@ def _draw(ax, points_xy, segments, circles, edges, truth, lw=1.0):
                     label="truth" if i == 0 else None,
                 )
             )
+            ax.patches[-1]._key = "truth"
     if len(edges):
         ax.plot(edges[:, 0], edges[:, 1], "x", color="red", ms=7, mew=1.5, zorder=4, label="edges")
-    ax.plot([0], [0], "k^", ms=7)
+    ax.plot([0], [0], "k^", ms=7, label="laser")
     ax.set_aspect("equal")
     ax.grid(alpha=0.3)
+
+
+def _key(ax, box=None, fontsize=8, loc="best") -> None:
+    """Legend: what the point colours mean, then the circles, edges and truth; with box
+    (xmin, xmax, ymin, ymax) only the entries with something inside it."""
+    from matplotlib.lines import Line2D
+
+    handles = [
+        Line2D([], [], ls="", marker=".", color="0.55", label="scan points (no segment)"),
+        Line2D([], [], color="tab:green", label="segment: circle"),
+        Line2D([], [], color="tab:blue", label="segment: line"),
+        Line2D([], [], color="tab:orange", label="segment: clutter"),
+    ]
+    for h in ax.patches + ax.lines:
+        label = h.get_label() or ""
+        if not label or label.startswith("_"):
+            continue
+        if box is not None and not _inside(ax, label, box):
+            continue
+        handles.append(h)
+    ax.legend(handles=handles, loc=loc, fontsize=fontsize)
+
+
+def _inside(ax, label: str, box) -> bool:
+    """Has the axes anything of `label` (circles by centre, lines by points) inside box?"""
+    x0, x1, y0, y1 = box
+    for h in ax.patches:
+        if getattr(h, "_key", None) == label:
+            cx, cy = h.center
+            if x0 <= cx <= x1 and y0 <= cy <= y1:
+                return True
+    for h in ax.lines:
+        if h.get_label() == label:
+            x, y = np.asarray(h.get_xdata(), float), np.asarray(h.get_ydata(), float)
+            if np.any((x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)):
+                return True
+    return False
 
 
 def plot_features(
@@ -128,18 +168,20 @@ def plot_features(
     axes = np.atleast_1d(axes)
     for ax in axes:
         _draw(ax, points_xy, segments, circles, edges_xy, truth_xyr, lw=1.0)
-    axes[0].set_title(title)
-    axes[0].set_xlabel("x (m)")
-    axes[0].set_ylabel("y (m)")
+    axes[0].set_title(title, fontsize=10)
+    for ax in axes:
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
     if zoom:
         x0, x1, y0, y1 = zoom
         axes[0].add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", color="m"))
         axes[1].set_xlim(x0, x1)
         axes[1].set_ylim(y0, y1)
-        axes[1].set_title("zoom on the dashed box")
-        axes[1].legend(loc="best", fontsize=8)
+        axes[1].set_title("zoom on the dashed box", fontsize=10)
+        _key(axes[1], box=zoom)
+        _key(axes[0], fontsize=7)
     else:
-        axes[0].legend(loc="best", fontsize=8)
+        _key(axes[0])
     return save(fig, path)
 
 
@@ -161,8 +203,9 @@ def plot_rates(table: dict[str, dict[str, float]], title: str, ylabel: str, path
     return save(fig, path)
 
 
-def plot_circle_rates(res, path: Path) -> Path:
-    """Circle-extraction rate of simulated trunks against range, per radius and line test."""
+def plot_circle_rates(res, path: Path, setup: str = "") -> Path:
+    """Circle-extraction rate of simulated trunks against range, per radius and line test;
+    setup: a line saying how they were simulated (the figure's title)."""
     tests = list(res.circle_rate)
     fig, axes = plt.subplots(1, len(tests), figsize=(5.5 * len(tests), 4), sharey=True)
     axes = np.atleast_1d(axes)
@@ -177,7 +220,9 @@ def plot_circle_rates(res, path: Path) -> Path:
         ax.set_xlabel("range (m)")
         ax.grid(alpha=0.3)
     axes[0].set_ylabel("fraction of trunks extracted as circles")
-    axes[0].legend(fontsize=8)
+    axes[0].legend(fontsize=8, title="trunk radius (both panels)", title_fontsize=8)
+    if setup:
+        fig.suptitle(setup, fontsize=10)
     return save(fig, path)
 
 
@@ -200,20 +245,46 @@ def plot_scene(scene, path: Path) -> Path:
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"Fig. 2(a): {scene.name} (walls solid, low balusters dotted, shrubs green)")
+    ax.set_title(
+        f"Fig. 2(a): {scene.name}, world frame: walls solid, low balusters dotted,\n"
+        "shrubs olive, pillars a-j brown (true size), scan positions 1-6 red +",
+        fontsize=10,
+    )
     ax.grid(alpha=0.3)
     return save(fig, path)
 
 
-def plot_sweep(results: dict, path: Path) -> Path:
-    """CE and RE (rows) against each swept variable (columns), one line per method."""
+SWEEP_AXES = {
+    "range_m": "pillar range (m)",
+    "radius_m": "pillar radius (m)",
+    "noise_m": "range noise sigma (m)",
+}
+
+
+def plot_sweep(results: dict, path: Path, held: dict | None = None) -> Path:
+    """CE and RE (rows) against each swept variable (columns), one line per method.
+
+    results[var][value][method] = (RMS CE, RMS RE, extracted fraction); held: the values of the
+    variables not swept (for the title). Where a method extracted no circle the figure says
+    so, so a curve that stops has its reason on it.
+    """
     variables = list(results)
-    fig, axes = plt.subplots(2, len(variables), figsize=(5 * len(variables), 7.5))
-    styles = {"paper": "o-", "geometric": "s-", "bailey": "^-", "taubin": "d-", "crlb": "k--"}
+    fig, axes = plt.subplots(2, len(variables), figsize=(5 * len(variables), 7.8), squeeze=False)
+    styles = {"paper": "o-", "geometric": "s-", "bailey": "^-", "taubin": "d-", "crlb": "--"}
+    ylabels = ("RMS CE (eq. 10): centre error / range", "RMS RE (eq. 11): radius error / radius")
     for j, var in enumerate(variables):
         xs = sorted(results[var])
         methods = list(results[var][xs[0]])
-        for i, label in enumerate(("RMS CE", "RMS RE")):
+        missing: dict[tuple, list[str]] = {}  # values a method never extracted -> methods
+        for m in methods:
+            gone = tuple(x for x in xs if m != "crlb" and results[var][x][m][2] == 0)
+            if gone:
+                missing.setdefault(gone, []).append(m)
+        note = "; ".join(
+            f"{', '.join(ms)}: no circle at {', '.join(f'{x:g}' for x in gone)}"
+            for gone, ms in missing.items()
+        )
+        for i, label in enumerate(ylabels):
             ax = axes[i, j]
             for m in methods:
                 ys = [results[var][x][m][i] for x in xs]
@@ -221,16 +292,39 @@ def plot_sweep(results: dict, path: Path) -> Path:
                     xs,
                     ys,
                     styles.get(m, "o-"),
-                    label="Cramer-Rao (RMS)" if m == "crlb" else m,
+                    color=METHOD_COLORS.get(m, "k"),  # crlb: black
+                    label=_SWEEP_NAMES.get(m, m),
                     ms=4,
                 )
+            if note and i == 0:
+                ax.text(
+                    0.02,
+                    0.02,
+                    f"{note}\n(fewer than 4 beams on the pillar)",
+                    transform=ax.transAxes,
+                    fontsize=7,
+                    va="bottom",
+                    bbox=dict(facecolor="white", alpha=0.8, lw=0),
+                )
             ax.set_yscale("log")
-            ax.set_xlabel(var.replace("_m", " (m)"))
-            ax.set_ylabel(label)
+            ax.set_xlabel(SWEEP_AXES.get(var, var))
+            ax.set_ylabel(f"{label} (relative)", fontsize=8)
             ax.grid(alpha=0.3, which="both")
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle("Circle accuracy: one pillar ahead of a PLS200 (others at 10 m, 0.3 m, 1 cm)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8)
+    held_txt = ", ".join(
+        f"{SWEEP_AXES.get(k, k).split(' (')[0]} {v:g} m" for k, v in (held or {}).items()
+    )
+    fig.suptitle(
+        "Circle accuracy, one pillar straight ahead of a PLS200 (0.5 deg beams); one variable "
+        f"swept, the others held at: {held_txt}",
+        fontsize=9,
+    )
+    fig.tight_layout(rect=(0, 0.05, 1, 0.97))
     return save(fig, path)
+
+
+_SWEEP_NAMES = {"crlb": "Cramer-Rao bound (RMS)"}
 
 
 # ---- EKF-SLAM (experiment 2: the paper's Figs. 7, 10, 11; consistency) -------------------------
@@ -247,16 +341,35 @@ def plot_slam_path(
     walls: Sequence[np.ndarray] = (),
     bushes: Sequence[np.ndarray] = (),
 ) -> Path:
-    """Fig. 7: true path (dashed), estimated path (solid), trees (stars), the map's landmarks
-    with 95% ellipses (magnified x10 to be visible), walls and bushes of the scene (grey)."""
+    """Fig. 7: estimated path (wide, translucent) under the true path (dashed, the simulated
+    pose itself), trees (stars), the map's landmarks with 95% ellipses (magnified x10 to be
+    visible), walls and bushes of the scene (grey), the start (dot)."""
     fig, ax = plt.subplots(figsize=(8, 6))
     for w in walls:
         ax.plot(w[:, 0], w[:, 1], "-", color="0.4", lw=2)
     for b in bushes:
         q = np.vstack([b, b[:1]])
         ax.fill(q[:, 0], q[:, 1], color="0.85", zorder=0)
-    ax.plot(truth_xy[:, 0], truth_xy[:, 1], "k--", lw=1.2, label="true path (DGPS truth)")
-    ax.plot(est_xy[:, 0], est_xy[:, 1], "-", color="tab:blue", lw=1.2, label="estimated path")
+    ax.plot(
+        est_xy[:, 0],
+        est_xy[:, 1],
+        "-",
+        color="tab:blue",
+        lw=3.0,
+        alpha=0.45,
+        zorder=2,
+        label="estimated path",
+    )
+    ax.plot(
+        truth_xy[:, 0],
+        truth_xy[:, 1],
+        "--",
+        color="k",
+        lw=1.0,
+        dashes=(4, 3),
+        zorder=3,
+        label="true path (exact simulated pose)",
+    )
     ax.plot(trees_xyr[:, 0], trees_xyr[:, 1], "*", color="tab:green", ms=13, label="trees (truth)")
     if len(map_xy):
         ax.plot(
@@ -272,7 +385,7 @@ def plot_slam_path(
                 lw=0.7,
                 label="95% ellipse x10" if i == 0 else None,
             )
-    ax.plot(truth_xy[0, 0], truth_xy[0, 1], "ko", ms=6)
+    ax.plot(truth_xy[0, 0], truth_xy[0, 1], "ko", ms=6, zorder=4, label="start")
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")

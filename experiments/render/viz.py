@@ -1,21 +1,35 @@
 """Rerun inspection: our dataclasses as rerun entities on the timelines `scan` (index) and
-`time` (the scan's time, s, when known).
+`time` (the scan's time, s, when known). The only module that imports rerun.
 
-The only module that imports rerun. Entities (laser frame unless a pose is given):
-  world/scan                 scan points (grey)
-  world/features/segments    one strip per segment, coloured by kind (line blue, circle green,
-                             clutter orange)
-  world/features/circles     fitted circles (outline), labelled with radius
-  world/features/lines       fitted lines (projected endpoints)
-  world/features/edges       occluding edges (red crosses)
-  world/truth/...            simulated truth when known
-SLAM runs (slam.run's visualiser interface, world frame):
-  world/vehicle              pose arrow, 95% position ellipse (3-sigma heading in the label)
-  world/vehicle/path         estimated path so far
-  world/landmarks            map landmarks: centres, ids, 95% ellipses
+Every recording carries its layout (a blueprint, `rerun.blueprint`), chosen by its kind:
+
+- "slam": a map that follows the vehicle (north up, 50 m across) beside a whole-map tab, the
+  scan in the laser frame, and time series panels (`experiments.eval.series`: pose error with
+  3-sigma bounds when there is truth, NIS with its 95% bounds, innovations with 2-sigma bounds,
+  map size, ms a scan);
+- "features": the scans in the laser frame (`laser/scan`, `laser/features/<method>`), and
+  circles per scan;
+- "circles": the simulated pillar court in the world frame (one scan per position, every
+  method's circles, the true pillars) and the figure scans.
+
+Entities. A frame entity carries a 2D pose as a rerun transform; its children are in its frame.
+  world/laser                the laser's world pose (frame entity)
+  world/laser/scan           scan points (grey), laser frame
+  world/laser/features/...   segments (strips coloured by kind: line blue, circle green,
+                             clutter orange), circles (outline, radius label), lines, edges
+  world/truth/...            simulated truth: trees (white dots, true outlines) or pillars,
+                             true pose (`vehicle`) and path (`path`)
+SLAM runs (slam.run's visualiser interface):
+  world/vehicle              estimated pose (frame entity) with its arrow (`world/vehicle/arrow`)
+  world/vehicle_ellipse      95% position ellipse, drawn `ellipse_scale` times its size
+  world/path                 estimated path so far
+  world/follow               the vehicle's position without its heading, y mirrored (the
+                             following map view's origin; rerun draws 2D views y down)
+  .../y_up                   static y mirror under each view's frame: every view reads y up
+  world/landmarks            map landmarks: centres, ids; `ellipses`: 95% ellipses, scaled
   world/tentative            tentative features (not yet in the map)
   world/associations         lines from each associated measurement to its landmark
-  world/truth/vehicle        true pose and path (simulated runs)
+  series/...                 the time series
 """
 
 from __future__ import annotations
@@ -27,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 import rerun as rr
+import rerun.blueprint as rrb
 
 from experiments.errors import DataError
 from experiments.io.writers import check_output_file
@@ -34,8 +49,9 @@ from experiments.render.shapes import circle_polyline, ellipse_polyline
 from features.types import Features, Scan
 from slam import se2
 
-__all__ = ["NullRecorder", "Recorder", "open_recording"]
+__all__ = ["KINDS", "NullRecorder", "Recorder", "blueprint", "open_recording"]
 
+KINDS = ("slam", "features", "circles")
 KIND_COLORS = np.array([[255, 150, 40], [60, 120, 255], [40, 200, 90]], dtype=np.uint8)
 METHOD_COLORS = {
     "paper": [40, 200, 90],
@@ -45,6 +61,11 @@ METHOD_COLORS = {
     "taubin": [150, 150, 255],
     "truth": [255, 255, 255],
 }
+SCAN_POINT_PX = 2.0  # scan points: on-screen radius in UI points, readable at any zoom
+FOLLOW_HALF_WIDTH_M = 15.0  # the following map view shows at least +-15 m around the vehicle
+# names of series curves whose colour is fixed: bounds grey, the rest from the palette
+_BOUND_COLOR = [150, 150, 150]
+_CURVE_COLORS = [[255, 90, 90], [90, 170, 255], [120, 220, 120]]
 
 
 def _transform(xy: np.ndarray, pose: np.ndarray | None) -> np.ndarray:
@@ -53,18 +74,121 @@ def _transform(xy: np.ndarray, pose: np.ndarray | None) -> np.ndarray:
     return se2.transform_points(pose, xy)
 
 
+def _pose_transform(pose) -> rr.Transform3D:
+    """A 2D pose [x, y, theta] as a rerun transform (rotation about z)."""
+    x, y, th = (float(v) for v in pose)
+    return rr.Transform3D(
+        translation=[x, y, 0.0], rotation=rr.RotationAxisAngle(axis=[0, 0, 1], radians=th)
+    )
+
+
+def _parent(path: str) -> str:
+    return path.rsplit("/", 1)[0]
+
+
+def _y_up(frame: str) -> str:
+    """A child of `frame` that mirrors y: rerun draws 2D views with y down (rerun issue 1387),
+    so each view's origin is such a child, and the map reads as on paper, y up."""
+    return f"{frame}/y_up"
+
+
+# the frames that get a y_up child, by kind
+_VIEW_FRAMES = {
+    "slam": ("world", "world/laser"),
+    "features": ("laser",),
+    "circles": ("world", "figures"),
+}
+
+
+def _series_view(name: str, title: str) -> rrb.TimeSeriesView:
+    return rrb.TimeSeriesView(origin=f"series/{name}", name=title)
+
+
+def blueprint(
+    kind: str, series: list[tuple[str, str]] = (), ellipse_scale: float = 1.0
+) -> rrb.Blueprint:
+    """The layout of a recording of `kind` (KINDS). series: (name, title) of the time series
+    panels (slam and features)."""
+    if kind not in KINDS:
+        raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
+    panels = [_series_view(n, t) for n, t in series]
+    collapsed = [rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed")]
+    if kind == "features":
+        scan = rrb.Spatial2DView(
+            origin=_y_up("laser"),
+            contents="/laser/**",
+            name="scan and features, laser frame (x forward, m); circles: paper green, "
+            "geometric magenta, Bailey yellow",
+        )
+        body = rrb.Vertical(scan, *panels, row_shares=[4] + [1] * len(panels))
+        return rrb.Blueprint(body, rrb.TimePanel(timeline="time"), *collapsed)
+    if kind == "circles":
+        no_radius = {  # the pillars' names label them; radius labels would overlap
+            f"world/circles/{m}": rr.LineStrips2D.from_fields(show_labels=False)
+            for m in METHOD_COLORS
+        }
+        court = rrb.Spatial2DView(
+            origin=_y_up("world"),
+            contents="/world/**",
+            overrides=no_radius,
+            name="pillar court, world frame: one scan per position, circles by method, "
+            "true pillars white",
+        )
+        figs = rrb.Spatial2DView(
+            origin=_y_up("figures"),
+            contents="/figures/**",
+            name="figure scans (scan 100-105), all features",
+        )
+        return rrb.Blueprint(
+            rrb.Horizontal(court, figs), rrb.TimePanel(timeline="scan"), *collapsed
+        )
+    hide_feature_labels = {
+        "world/laser/features/circles": rr.LineStrips2D.from_fields(show_labels=False)
+    }
+    scale = f"ellipses 95%, drawn x{ellipse_scale:g}"
+    h = FOLLOW_HALF_WIDTH_M
+    follow = rrb.Spatial2DView(
+        origin="world/follow",
+        contents="/world/**",
+        name=f"map following the vehicle (m; {scale})",
+        visual_bounds=rrb.VisualBounds2D(x_range=[-h, h], y_range=[-h, h]),
+        overrides=hide_feature_labels,
+    )
+    whole = rrb.Spatial2DView(
+        origin=_y_up("world"),
+        contents="/world/**",
+        name=f"whole map (m; {scale})",
+        overrides=hide_feature_labels,
+    )
+    scan = rrb.Spatial2DView(
+        origin=_y_up("world/laser"),
+        contents="/world/laser/**",
+        name="scan and features, laser frame (x forward, m)",
+        visual_bounds=rrb.VisualBounds2D(x_range=[-5.0, 35.0], y_range=[-20.0, 20.0]),
+    )
+    left = rrb.Vertical(rrb.Tabs(follow, whole), scan, row_shares=[3, 2])
+    right = rrb.Grid(*panels, grid_columns=2) if panels else None
+    body = rrb.Horizontal(left, right, column_shares=[3, 2]) if right else left
+    return rrb.Blueprint(body, rrb.TimePanel(timeline="time"), *collapsed)
+
+
 class NullRecorder:
     """Does nothing: the default visualiser, so algorithms and loops never need rerun."""
 
     def set_scan(self, k: int, stamp_s: float | None = None) -> None: ...
-    def log_scan(self, scan: Scan, pose=None, path: str = "world/scan") -> None: ...
-    def log_features(self, scan, features, pose=None, path="world/features") -> None: ...
-    def log_circles(self, path, circles_xyr, pose=None, method="truth", labels=None) -> None: ...
+    def log_scan(self, scan: Scan, pose=None, path: str = "world/laser/scan") -> None: ...
+    def log_features(self, scan, features, pose=None, path="world/laser/features") -> None: ...
+    def log_circles(
+        self, path, circles_xyr, pose=None, method="truth", labels=None, static=False
+    ) -> None: ...
+    def log_truth_trees(self, circles_xyr) -> None: ...
     def log_vehicle(self, pose, cov) -> None: ...
     def log_landmarks(self, xy, cov, ids) -> None: ...
     def log_tentatives(self, xy) -> None: ...
     def log_associations(self, from_xy, to_xy) -> None: ...
     def log_truth(self, pose) -> None: ...
+    def log_scalars(self, name: str, values: dict[str, float]) -> None: ...
+    def log_series(self, scan_t, series) -> None: ...
     def close(self) -> None: ...
     def abort(self) -> None: ...
 
@@ -81,18 +205,36 @@ class NullRecorder:
 
 
 class Recorder(NullRecorder):
-    """Writes a `.rrd` recording (open it with `rerun FILE.rrd`).
+    """Writes a `.rrd` recording with its blueprint (open it with `rerun FILE.rrd`).
 
     The recording goes to a temporary file beside `path` (`.NAME.XXXX.rrd.tmp`) and is renamed
     to `path` by `close()`: an interrupted run never leaves a truncated recording at `path`.
     `abort()` (or leaving a `with` block by an exception) deletes the temporary file."""
 
-    def __init__(self, path: Path | str, app_id: str = "trunkslam", decimate: int = 1):
-        """decimate: log the scene of every this-many scans only (paths still grow every scan);
-        a whole Victoria Park run at 1 would be gigabytes."""
+    def __init__(
+        self,
+        path: Path | str,
+        kind: str = "slam",
+        *,
+        app_id: str | None = None,
+        decimate: int = 1,
+        ellipse_scale: float = 10.0,
+        series: list[tuple[str, str]] = (),
+    ):
+        """kind: "slam", "features" or "circles" (the blueprint). decimate: log the scene of
+        every this-many scans only (paths and time series still get every scan); a whole
+        Victoria Park run at 1 would be gigabytes. ellipse_scale: covariance ellipses are drawn
+        this many times their 95% size (true size is invisible at map scale); the map views
+        say so in their titles. series: (name, title) of the time series panels."""
+        if ellipse_scale <= 0:
+            raise ValueError(f"ellipse_scale: must be > 0, got {ellipse_scale!r}")
         self.path = Path(path)
+        self.kind = kind
         self.decimate = max(int(decimate), 1)
+        self.ellipse_scale = float(ellipse_scale)
         self._k = 0
+        self._est_path: list[np.ndarray] = []
+        self._truth_path: list[np.ndarray] = []
         self.path.parent.mkdir(parents=True, exist_ok=True)
         check_output_file(self.path, "recording")
         try:
@@ -104,9 +246,12 @@ class Recorder(NullRecorder):
         os.close(fd)
         self._tmp = Path(tmp)
         try:
-            self.rec = rr.RecordingStream(app_id)
-            self.rec.save(str(self._tmp))
-            self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Y_UP, static=True)
+            self.rec = rr.RecordingStream(app_id or f"trunkslam_{kind}")
+            self.rec.save(
+                str(self._tmp), default_blueprint=blueprint(kind, list(series), self.ellipse_scale)
+            )
+            for frame in _VIEW_FRAMES[kind]:
+                self.rec.log(_y_up(frame), rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
         except RuntimeError as exc:  # rerun's error when it cannot create the file
             self._tmp.unlink(missing_ok=True)
             raise DataError(f"recording {self.path}: cannot be written ({exc})") from None
@@ -124,91 +269,141 @@ class Recorder(NullRecorder):
         if stamp_s is not None:
             self.rec.set_time("time", duration=float(stamp_s))
 
-    def log_scan(self, scan: Scan, pose=None, path: str = "world/scan") -> None:
+    def log_scan(self, scan: Scan, pose=None, path: str = "world/laser/scan") -> None:
+        """Scan points in the laser frame at `path`. With `pose` (the laser's world pose), the
+        parent of `path` is the laser's frame entity and gets the pose."""
         if self._skip():
             return
+        if pose is not None:
+            self.rec.log(_parent(path), _pose_transform(pose))
         pts = scan.points_xy[scan.valid]
-        self.rec.log(path, rr.Points2D(_transform(pts, pose), radii=0.03, colors=[180, 180, 180]))
+        self.rec.log(
+            path, rr.Points2D(pts, radii=rr.Radius.ui_points(SCAN_POINT_PX), colors=[200, 200, 200])
+        )
 
-    def log_features(self, scan: Scan, features: Features, pose=None, path="world/features"):
+    def log_features(self, scan: Scan, features: Features, pose=None, path="world/laser/features"):
+        """Segments, circles, lines and edges in the laser frame under `path`; with `pose`, as
+        `log_scan` (the parent of `path` gets the laser's world pose)."""
         if self._skip():
             return
+        if pose is not None:
+            self.rec.log(_parent(path), _pose_transform(pose))
         pts = scan.points_xy
         strips, colors = [], []
         for (a, b), k in zip(features.segment_beams, features.segment_kind):
-            strips.append(_transform(pts[features.beams(a, b)], pose))
+            strips.append(pts[features.beams(a, b)])
             colors.append(KIND_COLORS[int(k)])
-        self.rec.log(f"{path}/segments", rr.LineStrips2D(strips, colors=colors, radii=0.02))
-        self.log_circles(f"{path}/circles", features.circle_params, pose, features.method)
-        lines = [_transform(e, pose) for e in features.line_endpoints]
-        self.rec.log(f"{path}/lines", rr.LineStrips2D(lines, colors=[60, 120, 255], radii=0.04))
+        self.rec.log(
+            f"{path}/segments",
+            rr.LineStrips2D(strips, colors=colors, radii=rr.Radius.ui_points(1.5)),
+        )
+        self.log_circles(f"{path}/circles", features.circle_params, None, features.method)
+        self.rec.log(
+            f"{path}/lines",
+            rr.LineStrips2D(
+                list(features.line_endpoints), colors=[60, 120, 255], radii=rr.Radius.ui_points(2)
+            ),
+        )
         self.rec.log(
             f"{path}/edges",
-            rr.Points2D(_transform(features.edge_xy, pose), radii=0.12, colors=[255, 40, 40]),
+            rr.Points2D(features.edge_xy, radii=rr.Radius.ui_points(4.0), colors=[255, 40, 40]),
         )
 
-    def log_circles(self, path, circles_xyr, pose=None, method="truth", labels=None):
+    def log_circles(
+        self, path, circles_xyr, pose=None, method="truth", labels=None, static=False
+    ) -> None:
+        """Circles (C, 3) [x, y, r] as outlines labelled with their radius (or `labels`; [] for
+        none); `pose` transforms them into the world; static: for all times (truth)."""
         circles_xyr = np.asarray(circles_xyr, float).reshape(-1, 3)
         strips = [_transform(circle_polyline(*c), pose) for c in circles_xyr]
         if labels is None:
-            labels = [f"r={c[2]:.3f} m" for c in circles_xyr]
+            labels = [f"r={c[2]:.2f} m" for c in circles_xyr]
+        elif len(labels) == 0:
+            labels = None
         self.rec.log(
             path,
             rr.LineStrips2D(
                 strips,
                 colors=METHOD_COLORS.get(method, [255, 255, 255]),
                 labels=labels,
-                radii=0.015,
+                radii=rr.Radius.ui_points(1.5),
             ),
+            static=static,
         )
 
     # ---- SLAM (the visualiser interface of slam.run; world frame) -------------------------------
 
+    def log_truth_trees(self, circles_xyr) -> None:
+        """Simulated trees (L, 3) [x, y, r], world frame, for all times: white dots (seen at any
+        zoom) under their true outlines."""
+        circles_xyr = np.asarray(circles_xyr, float).reshape(-1, 3)
+        self.rec.log(
+            "world/truth/trees",
+            rr.Points2D(
+                circles_xyr[:, :2], radii=rr.Radius.ui_points(4.5), colors=[[255, 255, 255]]
+            ),
+            static=True,
+        )
+        self.log_circles("world/truth/trees/outline", circles_xyr, labels=[], static=True)
+
     def log_vehicle(self, pose, cov) -> None:
-        """Estimated pose (arrow), 95% position ellipse and the path so far."""
+        """Estimated pose (frame entity and arrow), 95% position ellipse and the path so far."""
         pose = np.asarray(pose, float)
         cov = np.asarray(cov, float)
-        path = self.__dict__.setdefault("_est_path", [])
-        path.append(pose[:2].copy())
+        self._est_path.append(pose[:2].copy())
         if self._skip():
             return
-        head = 1.0 * np.array([np.cos(pose[2]), np.sin(pose[2])])
         sig_th = float(np.sqrt(max(cov[2, 2], 0.0)))
+        self.rec.log("world/vehicle", _pose_transform(pose))
+        self.rec.log(  # y mirrored: see _y_up
+            "world/follow",
+            rr.Transform3D(translation=[pose[0], pose[1], 0.0], scale=[1.0, -1.0, 1.0]),
+        )
         self.rec.log(
-            "world/vehicle",
+            "world/vehicle/arrow",
             rr.Arrows2D(
-                origins=[pose[:2]],
-                vectors=[head],
+                origins=[[0.0, 0.0]],
+                vectors=[[2.0, 0.0]],
                 colors=[[255, 80, 80]],
-                labels=[f"3 sigma heading +-{np.degrees(3 * sig_th):.2f} deg"],
+                radii=rr.Radius.ui_points(2.0),
+                labels=[f"heading +-{np.degrees(3 * sig_th):.2f} deg (3 sigma)"],
             ),
         )
         self.rec.log(
-            "world/vehicle/ellipse",
+            "world/vehicle_ellipse",
             rr.LineStrips2D(
-                [ellipse_polyline(pose[:2], cov[:2, :2])], colors=[[255, 80, 80]], radii=0.01
+                [ellipse_polyline(pose[:2], cov[:2, :2] * self.ellipse_scale**2)],
+                colors=[[255, 80, 80]],
+                radii=rr.Radius.ui_points(1.0),
             ),
         )
         self.rec.log(
-            "world/vehicle/path",
-            rr.LineStrips2D([np.array(path)], colors=[[255, 80, 80]], radii=0.02),
+            "world/path",
+            rr.LineStrips2D(
+                [np.array(self._est_path)], colors=[[255, 80, 80]], radii=rr.Radius.ui_points(1.5)
+            ),
         )
 
     def log_landmarks(self, xy, cov, ids) -> None:
         if self._skip():
             return
         xy = np.asarray(xy, float).reshape(-1, 2)
-        cov = np.asarray(cov, float).reshape(-1, 2, 2)
-        labels = [f"L{int(i)}" for i in ids]
+        cov = np.asarray(cov, float).reshape(-1, 2, 2) * self.ellipse_scale**2
         self.rec.log(
-            "world/landmarks", rr.Points2D(xy, radii=0.08, colors=[[40, 200, 90]], labels=labels)
+            "world/landmarks",
+            rr.Points2D(
+                xy,
+                radii=rr.Radius.ui_points(3.0),
+                colors=[[40, 200, 90]],
+                labels=[f"L{int(i)}" for i in ids],
+            ),
         )
         self.rec.log(
             "world/landmarks/ellipses",
             rr.LineStrips2D(
                 [ellipse_polyline(c, P) for c, P in zip(xy, cov)],
                 colors=[[40, 200, 90]],
-                radii=0.01,
+                radii=rr.Radius.ui_points(1.0),
             ),
         )
 
@@ -216,7 +411,10 @@ class Recorder(NullRecorder):
         if self._skip():
             return
         xy = np.asarray(xy, float).reshape(-1, 2)
-        self.rec.log("world/tentative", rr.Points2D(xy, radii=0.06, colors=[[255, 200, 0]]))
+        self.rec.log(
+            "world/tentative",
+            rr.Points2D(xy, radii=rr.Radius.ui_points(3.0), colors=[[255, 200, 0]]),
+        )
 
     def log_associations(self, from_xy, to_xy) -> None:
         if self._skip():
@@ -226,32 +424,77 @@ class Recorder(NullRecorder):
         self.rec.log(
             "world/associations",
             rr.LineStrips2D(
-                [np.stack([p, q]) for p, q in zip(a, b)], colors=[[0, 200, 255]], radii=0.02
+                [np.stack([p, q]) for p, q in zip(a, b)],
+                colors=[[0, 200, 255]],
+                radii=rr.Radius.ui_points(1.0),
             ),
         )
 
     def log_truth(self, pose) -> None:
         """True pose (arrow) and path so far."""
         pose = np.asarray(pose, float)
-        path = self.__dict__.setdefault("_truth_path", [])
-        path.append(pose[:2].copy())
+        self._truth_path.append(pose[:2].copy())
         if self._skip():
             return
         self.rec.log(
             "world/truth/vehicle",
             rr.Arrows2D(
                 origins=[pose[:2]],
-                vectors=[[np.cos(pose[2]), np.sin(pose[2])]],
+                vectors=[[2 * np.cos(pose[2]), 2 * np.sin(pose[2])]],
                 colors=[[255, 255, 255]],
+                radii=rr.Radius.ui_points(1.5),
             ),
         )
         self.rec.log(
-            "world/truth/vehicle/path",
-            rr.LineStrips2D([np.array(path)], colors=[[255, 255, 255]], radii=0.015),
+            "world/truth/path",
+            rr.LineStrips2D(
+                [np.array(self._truth_path)],
+                colors=[[255, 255, 255]],
+                radii=rr.Radius.ui_points(1.0),
+            ),
         )
 
+    # ---- time series -----------------------------------------------------------------------------
+
+    def log_scalars(self, name: str, values: dict[str, float]) -> None:
+        """One row of the series `series/<name>` at the current scan, one curve per key."""
+        self.rec.log(f"series/{name}", rr.Scalars([float(v) for v in values.values()]))
+        if name not in self.__dict__.setdefault("_styled", set()):
+            self._styled.add(name)
+            self._style(name, tuple(values), points=False)
+
+    def _style(self, name: str, curves: tuple[str, ...], points: bool) -> None:
+        colors = [
+            _BOUND_COLOR
+            if "sigma" in c or "%" in c
+            else METHOD_COLORS.get(c, _CURVE_COLORS[i % len(_CURVE_COLORS)])
+            for i, c in enumerate(curves)
+        ]
+        if points:
+            style = rr.SeriesPoints(names=list(curves), colors=colors, marker_sizes=[1.5])
+        else:
+            style = rr.SeriesLines(names=list(curves), colors=colors)
+        self.rec.log(f"series/{name}", style, static=True)
+
+    def log_series(self, scan_t, series) -> None:
+        """Whole series at once (`experiments.eval.series.Series`), on both timelines; scan_t
+        (N,): the run's scan times, s."""
+        scan_t = np.asarray(scan_t, float)
+        for s in series:
+            k = np.asarray(s.scan, np.int64)
+            self.rec.send_columns(
+                f"series/{s.name}",
+                indexes=[
+                    rr.TimeColumn("scan", sequence=k),
+                    rr.TimeColumn("time", duration=scan_t[k]),
+                ],
+                columns=rr.Scalars.columns(scalars=np.asarray(s.values, float)),
+            )
+            self._style(s.name, s.curves, s.points)
+
     def close(self) -> None:
-        """Finish the recording and put it at `path` (atomically: a rename)."""
+        """Finish the file (its footer, which readers use to list its stores) and put it at
+        `path` (atomically: a rename)."""
         if self._tmp is None:
             return
         try:
@@ -274,7 +517,15 @@ class Recorder(NullRecorder):
         self._tmp = None
 
 
-def open_recording(path: Path | str | None, decimate: int = 1) -> NullRecorder:
-    """A Recorder writing to `path` (see `Recorder` for decimate), or a NullRecorder when path
-    is None."""
-    return NullRecorder() if path is None else Recorder(path, decimate=decimate)
+def open_recording(
+    path: Path | str | None,
+    kind: str = "slam",
+    *,
+    decimate: int = 1,
+    ellipse_scale: float = 10.0,
+    series: list[tuple[str, str]] = (),
+) -> NullRecorder:
+    """A Recorder writing to `path` (see `Recorder`), or a NullRecorder when path is None."""
+    if path is None:
+        return NullRecorder()
+    return Recorder(path, kind, decimate=decimate, ellipse_scale=ellipse_scale, series=list(series))

@@ -217,7 +217,7 @@ def test_slam_smooth_and_smooth_after_the_fact(tmp_path):
         ekf["truth"]["mean_abs_error"].values()
     )
     rows = (out / "trajectory_smoothed.csv").read_text().splitlines()
-    assert len(rows) == 81 and rows[0].startswith("t_s,x_m,y_m,theta_rad,cov_xx")
+    assert len(rows) == 81 and rows[0].startswith("t_s,rear_axle_x_world_m")
     # after the fact, with the other solver and all measurements
     res = runner.invoke(
         app, ["smooth", str(out), "--solver", "isam2", "--polish", "--measurements", "all"]

@@ -12,6 +12,7 @@ import pytest
 from regenerate_golden import FILES, slam_rng
 
 from experiments.eval.detections import false_detections
+from experiments.io.results import MAP_COLUMNS, TRAJECTORY_COLUMNS
 from experiments.io.sequence_file import save_sequence
 from experiments.paper.reproduce import run_experiments
 from experiments.paper.runner import RunContext
@@ -167,12 +168,23 @@ def test_slam_command_writes_trajectory_map_and_summary(tmp_path):
     np.testing.assert_allclose(tum[0, 1:3], seq.truth_pose[0, :2], atol=1e-9)  # starts at truth
     yaw = 2 * np.arctan2(tum[:, 6], tum[:, 7])
     rows = list(csv.DictReader((out / "trajectory.csv").open()))
-    assert len(rows) == 50 and float(rows[0]["cov_xx"]) == 0.0
+    assert len(rows) == 50 and float(rows[0]["var_x_m2"]) == 0.0
+    assert list(rows[0]) == list(TRAJECTORY_COLUMNS)  # point, frame and units in the names
     np.testing.assert_allclose(
-        np.cos(yaw), np.cos([float(r["theta_rad"]) for r in rows]), atol=1e-6
+        np.cos(yaw), np.cos([float(r["heading_world_rad"]) for r in rows]), atol=1e-6
     )
     lm = list(csv.DictReader((out / "map.csv").open()))
     assert len(lm) == summary["landmarks"] >= 3
+    assert list(lm[0]) == list(MAP_COLUMNS)
+    # the radius: the circles' median, close to the true tree it sits on (geometric fit)
+    matched = 0
+    for row in lm:
+        xy = np.array([float(row["x_world_m"]), float(row["y_world_m"])])
+        d = np.hypot(*(seq.truth_landmarks[:, :2] - xy).T)
+        if d.min() < 0.3:
+            assert abs(float(row["radius_m"]) - seq.truth_landmarks[d.argmin(), 2]) < 0.05
+            matched += 1
+    assert matched >= 3
     s = json.loads((out / "summary.json").read_text())
     assert s["features"] == "geometric" and s["association"] == "ihgr" and s["start"] == "truth"
     assert s["truth"]["mean_abs_error"]["dx_m"] < 0.1

@@ -50,3 +50,17 @@ def test_classification_table_is_consistent(quick_run):
     assert len(rows) == 25
     big = [r for r in rows if float(r["beams on trunk"]) >= 8]
     assert big and all(float(r["circle rate (lrt)"]) >= 0.75 for r in big)
+
+
+def test_features_recording_carries_its_layout(quick_run, vp_dir):
+    from support import read_recording
+
+    rec = read_recording(quick_run / "features.rrd")
+    assert {
+        "laser/scan",
+        "laser/features/paper/circles",
+        "laser/features/bailey/circles",
+        "series/circles_per_scan",
+    } <= rec["entities"]
+    assert {"scan", "time"} <= rec["timelines"]
+    assert {v[0] for v in rec["views"]} == {"2D", "TimeSeries"}

@@ -1,0 +1,118 @@
+"""Each kind of rerun recording, read back with the rerun SDK's reader: the entities, the
+timelines and the blueprint (layout) it should carry."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from support import read_recording, simulated_scan_file
+
+from experiments.io.sequence_file import save_sequence
+from experiments.paper.circles import pillar_monte_carlo
+from experiments.pipeline.extract import run_extract
+from experiments.pipeline.slam import run_slam
+from experiments.render.viz import Recorder
+from experiments.sim import CycabParams, simulate_cycab_run
+
+
+def views_by_class(rec: dict, cls: str) -> list[tuple]:
+    return [v for v in rec["views"] if v[0] == cls]
+
+
+def assert_no_3d_view(rec: dict) -> None:
+    assert rec["blueprints"] == 1
+    assert not views_by_class(rec, "3D"), rec["views"]
+
+
+@pytest.fixture(scope="module")
+def slam_recording(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("slam_rec")
+    seq = simulate_cycab_run(np.random.default_rng(3), "tree_park", CycabParams(n_scans=40))
+    src = save_sequence(seq, tmp / "run.npz")
+    run_slam(src, "geometric", "ihgr", tmp / "out", tmp / "run.rrd", None)
+    return read_recording(tmp / "run.rrd")
+
+
+def test_slam_recording_entities(slam_recording):
+    e = slam_recording["entities"]
+    wanted = {
+        "world/laser",  # the laser's pose; its children are in the laser frame
+        "world/laser/scan",
+        "world/laser/features/circles",
+        "world/vehicle",
+        "world/path",
+        "world/follow",
+        "world/landmarks",
+        "world/landmarks/ellipses",
+        "world/truth/trees",  # the simulated file's trees
+        "world/truth/path",
+        "series/pose_error/x",
+        "series/pose_error/theta",
+        "series/nis",
+        "series/innovation/range",
+        "series/map_size",
+        "series/ms_per_scan",
+    }
+    assert wanted <= e, wanted - e
+
+
+def test_slam_recording_has_scan_and_time_timelines(slam_recording):
+    assert {"scan", "time"} <= slam_recording["timelines"]
+
+
+def test_slam_recording_blueprint(slam_recording):
+    assert_no_3d_view(slam_recording)
+    origins = {v[1]: v for v in views_by_class(slam_recording, "2D")}
+    # the map follows the vehicle and shows the whole world; the scan view is the laser frame
+    assert origins["world/follow"][2] == ["/world/**"]
+    assert "x10" in origins["world/follow"][3]  # the ellipse scale is said in the view
+    assert origins["world/laser/y_up"][2] == ["/world/laser/**"]
+    assert "world/y_up" in origins
+    series = {v[1] for v in views_by_class(slam_recording, "TimeSeries")}
+    assert {
+        "series/pose_error/x",
+        "series/pose_error/y",
+        "series/pose_error/theta",
+        "series/nis",
+        "series/innovation/range",
+        "series/innovation/bearing",
+        "series/map_size",
+        "series/ms_per_scan",
+    } == series
+
+
+def test_features_recording(tmp_path):
+    src = simulated_scan_file(tmp_path)
+    run_extract(src, tmp_path / "f.json", "geometric", rerun_path=tmp_path / "f.rrd")
+    rec = read_recording(tmp_path / "f.rrd")
+    wanted = {"laser/scan", "laser/features/segments", "laser/features/circles", "laser/y_up"}
+    assert wanted | {"series/circles_per_scan"} <= rec["entities"]
+    assert not any(e.startswith("world") for e in rec["entities"])
+    assert {"scan", "time"} <= rec["timelines"]
+    assert_no_3d_view(rec)
+    assert [v[1] for v in views_by_class(rec, "2D")] == ["laser/y_up"]
+    assert [v[1] for v in views_by_class(rec, "TimeSeries")] == ["series/circles_per_scan"]
+
+
+def test_circles_recording(tmp_path):
+    rec = Recorder(tmp_path / "c.rrd", "circles")
+    mc = pillar_monte_carlo(1, np.random.default_rng(0), methods=("paper", "bailey"), rec=rec)
+    rec.close()
+    r = read_recording(tmp_path / "c.rrd")
+    assert {
+        "world/laser/scan",
+        "world/circles/paper",
+        "world/circles/bailey",
+        "world/truth/pillars",
+    } <= r["entities"]
+    assert "scan" in r["timelines"]
+    assert_no_3d_view(r)
+    assert {v[1] for v in views_by_class(r, "2D")} == {"world/y_up", "figures/y_up"}
+    assert len(mc.names) == 10
+
+
+def test_recorder_refuses_unknown_kind_and_bad_scale(tmp_path):
+    with pytest.raises(ValueError, match="kind"):
+        Recorder(tmp_path / "x.rrd", "movie")
+    with pytest.raises(ValueError, match="ellipse_scale"):
+        Recorder(tmp_path / "x.rrd", "slam", ellipse_scale=0.0)
