@@ -321,11 +321,14 @@ def reproduce(
 
     - circle-sweep: CE and RE against range, radius and noise, with the Cramer-Rao bound
 
-    - table3, table4: EKF-SLAM Monte Carlo on the simulated tree park (one run), slam.rrd
+    - table3, table4: EKF-SLAM Monte Carlo on the simulated tree park (one run), with the GTSAM
+    smoother's columns, slam.rrd
 
     - association: IHGR, JCBB and NN side by side
 
     - victoria-park: EKF-SLAM on the real run against GPS (needs the data), victoria_park.rrd
+
+    - smoother: GTSAM's Victoria Park graph solved; the full run's EKF against its smoother
 
     - noise-calibration: measurement-noise model of each extractor (3 s)
 
@@ -547,7 +550,10 @@ def bench_smoother(
     per_pose: Annotated[
         bool, typer.Option(help="also iSAM2 one pose at a time on GTSAM's graph (about 30 s)")
     ] = True,
-    data: Annotated[Path | None, typer.Option(help="victoria_park folder")] = None,
+    data: Annotated[
+        Path | None,
+        typer.Option(help="victoria_park folder [default: $TRUNKSLAM_DATA/victoria_park]"),
+    ] = None,
     seed: Annotated[int, typer.Option(min=0, help="random seed of the tree-park run")] = 0,
 ) -> None:
     """Seconds of the GTSAM smoother (batch, iSAM2, iSAM2 + polish) on a tree-park run, the

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.errors import DataError
+from experiments.errors import MissingDataError
 from experiments.io.provenance import machine
 from experiments.io.writers import markdown_table
 from slam import run
@@ -34,8 +34,7 @@ def bench_smoother(
     """Rows {problem, solver, poses, landmarks, chi2 per dof, iterations, seconds, seconds
     marginals}; the Victoria Park rows are left out (and said, as a row) without the data."""
     from experiments.io.config_file import load_slam_config
-    from experiments.io.paths import victoria_park_dir
-    from experiments.io.victoria_park import load_victoria_park
+    from experiments.io.victoria_park import gtsam_graph, load_victoria_park
     from experiments.sim.trajectory import simulate_cycab_run
 
     rows = []
@@ -44,7 +43,7 @@ def bench_smoother(
     _tick(progress, 1)
     try:
         vp = load_victoria_park(root, full=True)
-    except DataError as exc:
+    except MissingDataError as exc:
         rows.append({"problem": f"Victoria Park run: skipped ({exc})"})
     else:
         rows += _our_run(
@@ -52,10 +51,8 @@ def bench_smoother(
         )
     _tick(progress, 2)
     try:
-        graph = (victoria_park_dir() if root is None else root) / "gtsam" / "victoria_park.txt"
-        if not graph.is_file():
-            raise DataError(f"{graph}: missing")
-    except DataError as exc:
+        graph = gtsam_graph(root)
+    except MissingDataError as exc:
         rows.append({"problem": f"GTSAM victoria_park.txt: skipped ({exc})"})
         return rows
     runs = [("batch", 1)] + ([("isam2", 1)] if per_pose else [])

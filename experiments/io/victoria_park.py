@@ -33,10 +33,12 @@ __all__ = [
     "VP_VEHICLE",
     "VP_MAX_RANGE_M",
     "VP_N_RAW_SCANS",
+    "GTSAM_GRAPH",
     "VP_FILES",
     "VP_SHA256",
     "readme_sha256",
     "verify_file",
+    "gtsam_graph",
     "load_victoria_park",
     "load_reference_detections",
     "load_raw_sick_ranges",
@@ -87,7 +89,9 @@ VP_SHA256 = {
     "reference_detections/VictoriaParkSinSincronizar.mat": (
         "8e5212b3028d40f64dcf7b43f68f89e67ea4b0c0b3ec01835997381fe9d96997"
     ),
+    "gtsam/victoria_park.txt": "10596bac625acfe009080748b0ec9993fc9925a93370878c20288a22eeee5253",
 }
+GTSAM_GRAPH = "gtsam/victoria_park.txt"
 _SHA_ROW = re.compile(r"^\|\s*`([^`]+)`\s*\|[^|]*\|\s*`([0-9a-f]{64})`", re.MULTILINE)
 _verified: dict[tuple[str, int, int], str] = {}  # (path, size, mtime_ns) -> sha256 seen
 
@@ -131,6 +135,12 @@ def verify_file(root: Path, rel: str) -> Path:
             f"corrupt or another version; {_HOW_TO_GET}"
         )
     return path
+
+
+def gtsam_graph(root: Path | str | None = None) -> Path:
+    """GTSAM's preprocessed Victoria Park graph (`gtsam/victoria_park.txt`), its sha256 checked;
+    `MissingDataError` when absent, `DataError` when it differs."""
+    return verify_file(_root(root), GTSAM_GRAPH)
 
 
 def _root(root: Path | str | None) -> Path:

@@ -14,7 +14,8 @@ consistency (experiment `table3`).
 
 Writes smoother.md/.csv, vp_smoother_map.png (EKF and smoother paths over the GPS track, with
 the smoothed map) and vp_smoother_errors.png (their distance to the GPS fixes against time).
-Parts whose data is absent are skipped with a note in the manifest. --quick: the first 1500
+Parts whose data is absent are skipped with a note in the manifest; corrupt data (a sha256 that
+differs) fails the experiment. --quick: the first 1500
 scans of the full run.
 """
 
@@ -26,11 +27,10 @@ import time
 
 import numpy as np
 
-from experiments.errors import DataError
+from experiments.errors import MissingDataError
 from experiments.eval.gps import score_sequence
 from experiments.io.config_file import load_slam_config
-from experiments.io.paths import victoria_park_dir
-from experiments.io.victoria_park import load_victoria_park
+from experiments.io.victoria_park import gtsam_graph, load_victoria_park
 from experiments.io.writers import write_table
 from slam import run as slam_run
 from slam import se2
@@ -63,10 +63,8 @@ def run(ctx) -> None:
     cfg_out = ctx.config.setdefault("smoother", {})
     rows: list[list] = []
     try:
-        graph = victoria_park_dir() / "gtsam" / "victoria_park.txt"
-        if not graph.is_file():
-            raise DataError(f"{graph}: missing")
-    except DataError as exc:
+        graph = gtsam_graph()
+    except MissingDataError as exc:
         log.warning("smoother: GTSAM's graph skipped: %s", exc)
         cfg_out["gtsam_graph"] = f"skipped: {exc}"
     else:
@@ -87,7 +85,7 @@ def run(ctx) -> None:
         ctx.progress("smoother", 1, 2)
     try:
         full = load_victoria_park(full=True)
-    except DataError as exc:
+    except MissingDataError as exc:
         log.warning("smoother: the Victoria Park run skipped: %s", exc)
         cfg_out["victoria_park"] = f"skipped: {exc}"
     else:
