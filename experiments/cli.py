@@ -564,7 +564,11 @@ def bench_smoother(
     sizes = [int(v) for v in _numbers("--chunks", chunks, len(chunks.split(",")))]
     if any(v < 1 for v in sizes):
         raise typer.BadParameter("poses per update must be >= 1", param_hint="--chunks")
-    typer.echo(format_table(bench(data, tuple(sizes), per_pose, seed)))
+    from experiments.render.progress import Progress
+
+    with Progress() as progress:
+        rows = bench(data, tuple(sizes), per_pose, seed, progress=progress)
+    typer.echo(format_table(rows))
 
 
 @bench_app.command("raycast")

@@ -33,7 +33,12 @@ from experiments.errors import MissingDataError
 from experiments.eval.gps import score_sequence
 from experiments.eval.series import slam_panels, slam_series
 from experiments.io.config_file import load_slam_config
-from experiments.io.victoria_park import VP_N_RAW_SCANS, load_ss2002_reference, load_victoria_park
+from experiments.io.victoria_park import (
+    VP_N_RAW_SCANS,
+    VP_N_SCANS,
+    load_ss2002_reference,
+    load_victoria_park,
+)
 from experiments.io.writers import json_types, write_table
 from slam import SlamLog, se2
 from slam import run as slam_run
@@ -248,7 +253,8 @@ def _write(ctx, rows, logs, full, cfg) -> None:
     ok = np.flatnonzero(lg.scan_nis_dof > 0)
     inside[ok] = nis_inside(lg)
     window = np.array([np.nanmean(inside[max(0, k - 99) : k + 1]) for k in range(lg.n_scans)])
-    title = "Victoria Park, full run (IHGR)"
+    part = "full run" if full.n_scans == VP_N_SCANS else f"first {full.n_scans} scans"
+    title = f"Victoria Park, {part} (IHGR)"
     path = ctx.out_dir / "vp_timeseries.png"
     errors, sizes = {label: sc.errors}, {label: lg.n_map}
     ctx.outputs.append(
