@@ -470,8 +470,7 @@ def _isam2(g: _Graph, o: SmootherOptions) -> tuple[gtsam.Values, int]:
     for k in range(p.n_scans):
         if k > 0:  # L_k = L_{k-1} (T^-1 D_k T)
             prev = prev.compose(g.T_inv.compose(gtsam.Pose2(*p.odo_delta[k])).compose(g.T))
-        cur = prev
-        values.insert(_pose_key(k), cur)
+        values.insert(_pose_key(k), prev)
         for f in g.by_scan[k]:
             graph.add(f)
         for i in meas_at[k]:
@@ -481,9 +480,8 @@ def _isam2(g: _Graph, o: SmootherOptions) -> tuple[gtsam.Values, int]:
                 r, b = p.meas_z[i]
                 values.insert(
                     _landmark_key(lid),
-                    cur.transformFrom(np.array([r * math.cos(b), r * math.sin(b)])),
+                    prev.transformFrom(np.array([r * math.cos(b), r * math.sin(b)])),
                 )
-        prev = cur
         if (k + 1) % o.isam2_every == 0 or k == p.n_scans - 1:
             isam.update(graph, values)
             updates += 1
