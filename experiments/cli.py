@@ -642,6 +642,36 @@ def bench_smoother(
     typer.echo(format_table(bench(data, tuple(sizes), per_pose, seed)))
 
 
+@bench_app.command("reproduce")
+@handle_errors
+def bench_reproduce(
+    names: Annotated[
+        list[ExperimentName] | None,
+        typer.Argument(help="experiments to run (default: those of `trunkslam reproduce`)"),
+    ] = None,
+    quick: Annotated[bool, typer.Option(help="the small-sample version")] = False,
+    workers: Annotated[
+        int | None,
+        typer.Option(min=2, help="the parallel run's worker processes [default: every core]"),
+    ] = None,
+    dask: Annotated[
+        str | None,
+        typer.Option(help="also run on this Dask scheduler (tcp://host:8786) [default: no]"),
+    ] = None,
+) -> None:
+    """Wall time of `trunkslam reproduce` with 1 worker and with every core (and on a Dask
+    scheduler), and whether the tables are the same."""
+    from experiments.bench.reproduce import bench_reproduce as bench
+    from experiments.bench.reproduce import format_table
+    from experiments.render.progress import Progress
+
+    chosen = [n.value for n in names or []]
+    with Progress() as progress:
+        rows = bench(chosen, quick, (1, workers), dask, progress)
+    what = " ".join(chosen) or "(default experiments)"
+    typer.echo(format_table(rows, what + (" --quick" if quick else "")))
+
+
 @bench_app.command("raycast")
 @handle_errors
 def bench_raycast(

@@ -183,7 +183,7 @@ def _slam_defaults() -> dict:
         "scene": cfg.scene,
         "association": cfg.association,
         "cycab": cfg.cycab.to_dict(),
-        "slam": json_types(cfg.slam.to_dict()),
+        "slam": cfg.slam.to_dict(),
         "false_match_m": cfg.false_match_m,
     }
 
@@ -289,7 +289,10 @@ def load_sweep(path: Path | str) -> SweepSpec:
         raise ConfigError(f"{path}: unknown key {extra[0]!r} (known: {', '.join(sorted(known))})")
     if "study" not in data:
         raise ConfigError(f"{path}: 'study' is missing (one of {', '.join(STUDIES)})")
-    study = _study(data["study"])
+    try:
+        study = _study(data["study"])
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
     trials, seed = data.get("trials", 10), data.get("seed", 0)
     if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
         raise ConfigError(f"{path}: trials must be a whole number >= 1, got {trials!r}")
