@@ -396,7 +396,9 @@ def sweep(
     ] = None,
     fields: Annotated[
         Study | None,
-        typer.Option("--fields", help="print a study's fields and their defaults, and exit"),
+        typer.Option(
+            "--fields", help="print a study's fields and their defaults, and exit [default: no]"
+        ),
     ] = None,
 ) -> None:
     """Run a study over a grid (or list) of configuration values: sweep.csv (tidy: point,

@@ -241,3 +241,10 @@ def test_example_sweep_files_parse():
     for f in files:
         spec = load_sweep(f)
         assert spec.points and spec.trials >= 1
+
+
+def test_cli_study_choices_are_the_studies():
+    from experiments.cli import Study
+    from experiments.paper.sweep import STUDIES
+
+    assert [s.value for s in Study] == list(STUDIES)
