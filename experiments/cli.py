@@ -310,8 +310,26 @@ def reproduce(
     quick: Annotated[bool, typer.Option(help="small-sample version")] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("results"),
     seed: Annotated[int, typer.Option(help="root random seed", min=0)] = 0,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="local worker processes for the trials (1: this process) [default: every core]",
+        ),
+    ] = None,
+    dask: Annotated[
+        str | None,
+        typer.Option(
+            envvar="TRUNKSLAM_DASK",
+            help="run the trials on this Dask scheduler (tcp://host:8786) instead of local "
+            "processes; needs trunkslam[dask] [default: $TRUNKSLAM_DASK, else none]",
+        ),
+    ] = None,
 ) -> None:
     """Run the paper's experiments: tables (.md/.csv), figures (.png), recordings (.rrd).
+
+    The trials run on every local core (--workers), or on a Dask cluster (--dask); the numbers
+    are the same whichever, bit for bit (wall times aside).
 
     Experiments (NAMES; several may be given, none means all but the calibration):
 
@@ -334,13 +352,72 @@ def reproduce(
 
     - victoria-park-calibration: the ute's noise and laser yaw (15 min; only when named)
     """
+    from experiments.exec import make_executor
     from experiments.paper.reproduce import run_experiments
     from experiments.render.progress import Progress
 
     chosen = [n.value for n in names or []]
-    with Progress() as progress:
-        written = run_experiments(chosen, out, quick=quick, seed=seed, progress=progress)
+    with Progress() as progress, make_executor(workers, dask) as executor:
+        written = run_experiments(
+            chosen, out, quick=quick, seed=seed, progress=progress, executor=executor
+        )
     typer.echo(f"{len(written)} files in {out}/ (see {out}/manifest.json)")
+
+
+class Study(StrEnum):
+    association = "association"
+    slam = "slam"
+    circles = "circles"
+
+
+@app.command()
+@handle_errors
+def sweep(
+    config: Annotated[
+        Path | None,
+        typer.Argument(help="sweep file (TOML), e.g. datasets/configs/sweep_slam_noise.toml"),
+    ] = None,
+    out: Annotated[Path, typer.Option(help="output folder")] = Path("sweep_out"),
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            help="local worker processes (1: this process) [default: the file's [executor], "
+            "else every core]",
+        ),
+    ] = None,
+    dask: Annotated[
+        str | None,
+        typer.Option(
+            envvar="TRUNKSLAM_DASK",
+            help="run the trials on this Dask scheduler (tcp://host:8786) [default: "
+            "$TRUNKSLAM_DASK, else the file's [executor]]",
+        ),
+    ] = None,
+    fields: Annotated[
+        Study | None,
+        typer.Option(
+            "--fields", help="print a study's fields and their defaults, and exit [default: no]"
+        ),
+    ] = None,
+) -> None:
+    """Run a study over a grid (or list) of configuration values: sweep.csv (tidy: point,
+    swept values, method, metric, mean, std, n), a plot per swept field, sweep.json."""
+    if fields is not None:
+        from experiments.paper.sweep import STUDIES, study_defaults
+
+        typer.echo(f"# {fields.value}: {STUDIES[fields.value].about}")
+        for k, v in study_defaults(fields.value).items():
+            typer.echo(f"{k} = {v!r}")
+        return
+    if config is None:
+        raise typer.BadParameter("a sweep file is needed", param_hint="CONFIG")
+    from experiments.paper.sweep import run_sweep_file
+    from experiments.render.progress import Progress
+
+    with Progress() as progress:
+        written = run_sweep_file(config, out, workers, dask, progress)
+    typer.echo(f"{len(written)} files in {out}/ (see {out}/sweep.csv)")
 
 
 @app.command("slam")
@@ -569,6 +646,36 @@ def bench_smoother(
     with Progress() as progress:
         rows = bench(data, tuple(sizes), per_pose, seed, progress=progress)
     typer.echo(format_table(rows))
+
+
+@bench_app.command("reproduce")
+@handle_errors
+def bench_reproduce(
+    names: Annotated[
+        list[ExperimentName] | None,
+        typer.Argument(help="experiments to run (default: those of `trunkslam reproduce`)"),
+    ] = None,
+    quick: Annotated[bool, typer.Option(help="the small-sample version")] = False,
+    workers: Annotated[
+        int | None,
+        typer.Option(min=2, help="the parallel run's worker processes [default: every core]"),
+    ] = None,
+    dask: Annotated[
+        str | None,
+        typer.Option(help="also run on this Dask scheduler (tcp://host:8786) [default: no]"),
+    ] = None,
+) -> None:
+    """Wall time of `trunkslam reproduce` with 1 worker and with every core (and on a Dask
+    scheduler), and whether the tables are the same."""
+    from experiments.bench.reproduce import bench_reproduce as bench
+    from experiments.bench.reproduce import format_table
+    from experiments.render.progress import Progress
+
+    chosen = [n.value for n in names or []]
+    with Progress() as progress:
+        rows = bench(chosen, quick, (1, workers), dask, progress)
+    what = " ".join(chosen) or "(default experiments)"
+    typer.echo(format_table(rows, what + (" --quick" if quick else "")))
 
 
 @bench_app.command("raycast")

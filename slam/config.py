@@ -138,6 +138,13 @@ class SlamConfig:
             models[method] = m
         object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
 
+    def __reduce__(self):
+        """Pickled as its fields, the read-only `constant_noise` as a plain dict (a mapping
+        proxy does not pickle), so a config can travel to worker processes."""
+        state = {f.name: getattr(self, f.name) for f in fields(self)}
+        state["constant_noise"] = dict(self.constant_noise)
+        return (_slam_config, (state,))
+
     def noise_for(self, method: str, has_cov: bool | None = None) -> tuple[str, NoiseModel]:
         """("fit" | "constant", NoiseModel) for circles from `method`. has_cov: whether they carry
         their own covariance (default: only `geometric` does)."""
@@ -166,6 +173,10 @@ class SlamConfig:
         """A config from a plain nested dict; unknown keys and wrong types are errors naming
         the key's path. Keys left out keep their defaults."""
         return config_from_dict(cls, data)
+
+
+def _slam_config(state: dict) -> SlamConfig:
+    return SlamConfig(**state)
 
 
 def config_to_dict(obj) -> dict:

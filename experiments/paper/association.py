@@ -26,13 +26,21 @@ import numpy as np
 from association import CostModel, SlidingWindowAssociator, associate_detailed, solve_set_partition
 from association.inputs import prepare
 from association.single import single_scan_problem
+from experiments.exec import SerialExecutor
 from experiments.io.writers import markdown_table, write_atomic, write_table
 from experiments.render import plots
 from experiments.sim.landmarks import LandmarkScan, LandmarkSimConfig, simulate_landmark_scans
 
 log = logging.getLogger(__name__)
 
-__all__ = ["cost_model_for", "run", "rate_study", "optimality_study"]
+__all__ = [
+    "cost_model_for",
+    "optimality_study",
+    "optimality_trial",
+    "rate_study",
+    "rate_trial",
+    "run",
+]
 
 METHOD_LABELS = {
     "ihgr": "IHGR (single scan)",
@@ -131,6 +139,11 @@ SWEEPS = {
 }
 
 
+def rate_trial(cfg: LandmarkSimConfig, seed) -> dict:
+    """One simulated sequence of the rate study under `cfg`: `run_methods`' counts."""
+    return run_methods(simulate_landmark_scans(cfg, np.random.default_rng(seed)), cfg)
+
+
 def _sweep_config(base: LandmarkSimConfig, field: str, value: float) -> LandmarkSimConfig:
     if field == "sigma_xy_m":
         return replace(base, sigma_xy_m=value, sigma_heading_rad=math.radians(value * 10.0 / 3.0))
@@ -143,47 +156,51 @@ def rate_study(
     base: LandmarkSimConfig | None = None,
     sweeps: dict = SWEEPS,
     progress=lambda d, i, n: None,
+    executor=None,
 ) -> list[dict]:
     """Rows: sweep, value, method, measurements, correct/false/missed rates, ms per scan.
 
-    Common random numbers: sequence q of every sweep point draws from the same seed, so the
-    points of a sweep differ by the swept parameter rather than by the luck of the draw."""
+    Every (sweep point, sequence q) is a trial (`rate_trial`) on `executor`. Common random
+    numbers: sequence q of every sweep point draws from the same seed, so the points of a sweep
+    differ by the swept parameter rather than by the luck of the draw."""
     base = base or LandmarkSimConfig()
     rows = []
-    total = sum(len(v[2]) for v in sweeps.values()) * n_seq
-    done = 0
-    seeds = rng.integers(0, 2**63 - 1, n_seq)
-    for name, (field, _label, values) in sweeps.items():
-        for v in values:
-            cfg = _sweep_config(base, field, v)
-            agg: dict = {}
-            for q in range(n_seq):
-                seq = simulate_landmark_scans(cfg, np.random.default_rng(int(seeds[q])))
-                st = run_methods(seq, cfg)
-                for m, s in st.items():
-                    a = agg.setdefault(m, dict.fromkeys(s, 0))
-                    for k, x in s.items():
-                        a[k] += x
-                done += 1
-                progress("association rates", done, total)
-            n_scored = n_seq * (cfg.n_scans - EVAL_FROM_SCAN)
-            for m, a in agg.items():
-                n = max(a["n"], 1)
-                rows.append(
-                    {
-                        "sweep": name,
-                        "value": v,
-                        "method": m,
-                        "measurements": a["n"],
-                        "correct_rate": a["correct"] / n,
-                        "false_pair_rate": a["false_pair"] / n,
-                        "missed_pair_rate": a["missed_pair"] / n,
-                        "ms_per_scan": 1e3 * a["seconds"] / n_scored,
-                        "jcbb_budget_hits": a["budget_hits"],
-                        "new_confirmed_rate": a["unmapped_confirmed"] / max(a["unmapped"], 1),
-                        "clutter_confirmed_rate": (a["clutter_confirmed"] / max(a["clutter"], 1)),
-                    }
-                )
+    seeds = [np.random.SeedSequence(int(x)) for x in rng.integers(0, 2**63 - 1, n_seq)]
+    points = [(name, v) for name, (_f, _l, values) in sweeps.items() for v in values]
+    cfgs = {pt: _sweep_config(base, sweeps[pt[0]][0], pt[1]) for pt in points}
+    got = (executor or SerialExecutor()).map(
+        rate_trial,
+        [cfgs[pt] for pt in points for _ in range(n_seq)],
+        [seeds[q] for _ in points for q in range(n_seq)],
+        desc="association rates",
+        progress=progress,
+    )
+    for j, (name, v) in enumerate(points):
+        cfg = cfgs[(name, v)]
+        agg: dict = {}
+        for st in got[j * n_seq : (j + 1) * n_seq]:
+            for m, s in st.items():
+                a = agg.setdefault(m, dict.fromkeys(s, 0))
+                for k, x in s.items():
+                    a[k] += x
+        n_scored = n_seq * (cfg.n_scans - EVAL_FROM_SCAN)
+        for m, a in agg.items():
+            n = max(a["n"], 1)
+            rows.append(
+                {
+                    "sweep": name,
+                    "value": v,
+                    "method": m,
+                    "measurements": a["n"],
+                    "correct_rate": a["correct"] / n,
+                    "false_pair_rate": a["false_pair"] / n,
+                    "missed_pair_rate": a["missed_pair"] / n,
+                    "ms_per_scan": 1e3 * a["seconds"] / n_scored,
+                    "jcbb_budget_hits": a["budget_hits"],
+                    "new_confirmed_rate": a["unmapped_confirmed"] / max(a["unmapped"], 1),
+                    "clutter_confirmed_rate": (a["clutter_confirmed"] / max(a["clutter"], 1)),
+                }
+            )
     return rows
 
 
@@ -262,10 +279,55 @@ def _window_instances(rng, n, empty_map: bool):
     return out
 
 
+OPT_VARIANTS = {"IHGR": {"fix_ones": False}, "IHGR, also fixing every x = 1": {"fix_ones": True}}
+
+
+def optimality_trial(instance: tuple, seed=None) -> list[dict]:
+    """Solve one instance (`instance` = (family, k, c, A, e)) exactly (milp) and by IHGR (each
+    variant; single-scan problems only the default): one row per variant. Deterministic (the
+    instance was drawn beforehand), so `seed` is None."""
+    fam, k, c, A, e = instance
+    t0 = time.perf_counter()
+    opt = solve_set_partition(c, A, e, method="milp")
+    t_milp = time.perf_counter() - t0
+    rows = []
+    for vname, opts in OPT_VARIANTS.items():
+        if fam.startswith("single") and vname != "IHGR":
+            continue
+        t0 = time.perf_counter()
+        res = solve_set_partition(c, A, e, method="ihgr", presolve=False, **opts)
+        t_ihgr = time.perf_counter() - t0
+        rows.append(
+            {
+                "family": fam,
+                "variant": vname,
+                "instance": k,
+                "columns": int(len(c)),
+                "rows": int(A.shape[0]),
+                "ihgr_cost": res.cost,
+                "optimum": opt.cost,
+                "lp_bound": res.lp_bound,
+                "gap": res.cost - opt.cost,
+                "fractional": res.fractional,
+                "lp_solves": res.lp_solves,
+                "ms_ihgr": 1e3 * t_ihgr,
+                "ms_milp": 1e3 * t_milp,
+            }
+        )
+    return rows
+
+
 def optimality_study(
-    rng: np.random.Generator, n_per_family: dict[str, int], progress=lambda d, i, n: None
+    rng: np.random.Generator,
+    n_per_family: dict[str, int],
+    progress=lambda d, i, n: None,
+    executor=None,
 ) -> list[dict]:
-    """Rows per instance: family, variant, ihgr cost, optimum, lp bound, fractional, solves."""
+    """Rows per instance: family, variant, ihgr cost, optimum, lp bound, fractional, solves.
+
+    The instances are drawn here, one family after the other from `rng` (as they always were);
+    solving them, the expensive part, is one trial per instance (`optimality_trial`) on
+    `executor`."""
     families = {
         "single-scan (simulated)": lambda n: _single_scan_instances(rng, n),
         "K=3 window (simulated SLAM)": lambda n: _window_instances(rng, n, empty_map=False),
@@ -274,41 +336,15 @@ def optimality_study(
             _random_multiscan_instance(rng) for _ in range(n)
         ],
     }
-    variants = {"IHGR": {"fix_ones": False}, "IHGR, also fixing every x = 1": {"fix_ones": True}}
-    rows = []
-    total = sum(n_per_family.values())
-    done = 0
-    for fam, make in families.items():
-        for k, (c, A, e) in enumerate(make(n_per_family[fam])):
-            t0 = time.perf_counter()
-            opt = solve_set_partition(c, A, e, method="milp")
-            t_milp = time.perf_counter() - t0
-            for vname, opts in variants.items():
-                if fam.startswith("single") and vname != "IHGR":
-                    continue
-                t0 = time.perf_counter()
-                res = solve_set_partition(c, A, e, method="ihgr", presolve=False, **opts)
-                t_ihgr = time.perf_counter() - t0
-                rows.append(
-                    {
-                        "family": fam,
-                        "variant": vname,
-                        "instance": k,
-                        "columns": int(len(c)),
-                        "rows": int(A.shape[0]),
-                        "ihgr_cost": res.cost,
-                        "optimum": opt.cost,
-                        "lp_bound": res.lp_bound,
-                        "gap": res.cost - opt.cost,
-                        "fractional": res.fractional,
-                        "lp_solves": res.lp_solves,
-                        "ms_ihgr": 1e3 * t_ihgr,
-                        "ms_milp": 1e3 * t_milp,
-                    }
-                )
-            done += 1
-            progress("association optimality", done, total)
-    return rows
+    instances = [
+        (fam, k, c, A, e)
+        for fam, make in families.items()
+        for k, (c, A, e) in enumerate(make(n_per_family[fam]))
+    ]
+    got = (executor or SerialExecutor()).map(
+        optimality_trial, instances, desc="association optimality", progress=progress
+    )
+    return [row for rows in got for row in rows]
 
 
 def summarise_optimality(rows: list[dict]) -> list[list]:
@@ -457,7 +493,7 @@ def run(ctx) -> None:
         }
     )
 
-    rows = rate_study(ctx.rng("association_rates"), n_seq, base, sweeps, ctx.progress)
+    rows = rate_study(ctx.rng("association_rates"), n_seq, base, sweeps, ctx.progress, ctx.executor)
     notes = _rate_notes(base, n_seq, rows)
     ctx.outputs += write_table(
         ctx.out_dir / "association",
@@ -473,7 +509,7 @@ def run(ctx) -> None:
         {k: lab for k, (_, lab, _) in SWEEPS.items()},
     )
 
-    orows = optimality_study(ctx.rng("association_optimality"), n_opt, ctx.progress)
+    orows = optimality_study(ctx.rng("association_optimality"), n_opt, ctx.progress, ctx.executor)
     summary = summarise_optimality(orows)
     oc = odd_cycle()
     md = "# IHGR against the exact integer optimum\n\n" + markdown_table(OPT_HEADER, summary)

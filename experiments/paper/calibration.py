@@ -14,46 +14,64 @@ import math
 import numpy as np
 
 from experiments.eval.detections import dominant_label, run_labels
+from experiments.exec import SerialExecutor
 from experiments.io.writers import write_table
 from experiments.paper.slam import METHODS, extractor_params
 from experiments.sim.trajectory import CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import DEFAULT_CONSTANT_NOISE, interpolate_poses, se2, wrap_angle
 
-__all__ = ["SEEDS", "calibrate_measurement_noise", "run"]
+__all__ = ["SEEDS", "calibrate_measurement_noise", "calibration_trial", "run"]
 
 SEEDS = (1000, 1001, 1002, 1003)
 
 
+def calibration_trial(job: tuple, seed) -> dict:
+    """One simulated run (`job` = (cycab, scene)) of the calibration: method -> list of (true
+    range, range error, bearing error) of the circles found on trunks."""
+    cycab, scene = job
+    errs: dict[str, list] = {m: [] for m in METHODS}
+    seq = simulate_cycab_run(np.random.default_rng(seed), scene, cycab)
+    truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    lm = seq.truth_landmarks
+    for k in range(seq.n_scans):
+        lw = se2.compose(truth[k], seq.laser_pose)
+        d = lm[:, :2] - lw[:2]
+        tr = np.hypot(*d.T)
+        tb = np.arctan2(d[:, 1], d[:, 0]) - lw[2]
+        for m in METHODS:
+            f = extract_features(seq.scan(k), m, **extractor_params(m, cycab))
+            for (a, b), p in zip(f.circle_beams, f.circle_params):
+                lab = run_labels(seq.scan_labels[k], a, b)
+                j, _, n_ret = dominant_label(lab, returns_only=True)
+                if n_ret == 0 or j >= lm.shape[0]:
+                    continue
+                r = math.hypot(p[0], p[1])
+                eb = float(wrap_angle(math.atan2(p[1], p[0]) - tb[j]))
+                errs[m].append((tr[j], r - tr[j], eb))
+    return errs
+
+
 def calibrate_measurement_noise(
-    seeds=SEEDS, cycab: CycabParams | None = None, scene: str = "tree_park"
+    seeds=SEEDS, cycab: CycabParams | None = None, scene: str = "tree_park", executor=None
 ) -> dict:
     """Fit the constant noise model of `slam.DEFAULT_CONSTANT_NOISE` to the extractors' centre
     errors on circles found on trunks (majority of beams on one trunk), by maximum likelihood of
     zero-mean Gaussian errors: range error ~ N(0, (a + b r)^2), bearing error ~ N(0, c^2 +
     (t / r)^2) (a bias is absorbed into the spread). Returns method -> dict of the fitted
-    values, the RMS errors and the normalised error variances under the fit (1 = calibrated)."""
+    values, the RMS errors and the normalised error variances under the fit (1 = calibrated).
+    Each seed's run is a trial (`calibration_trial`) on `executor`."""
+    import numpy as np
+
     cycab = cycab or CycabParams()
-    errs: dict[str, list] = {m: [] for m in METHODS}
-    for seed in seeds:
-        seq = simulate_cycab_run(np.random.default_rng(seed), scene, cycab)
-        truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-        lm = seq.truth_landmarks
-        for k in range(seq.n_scans):
-            lw = se2.compose(truth[k], seq.laser_pose)
-            d = lm[:, :2] - lw[:2]
-            tr = np.hypot(*d.T)
-            tb = np.arctan2(d[:, 1], d[:, 0]) - lw[2]
-            for m in METHODS:
-                f = extract_features(seq.scan(k), m, **extractor_params(m, cycab))
-                for (a, b), p in zip(f.circle_beams, f.circle_params):
-                    lab = run_labels(seq.scan_labels[k], a, b)
-                    j, _, n_ret = dominant_label(lab, returns_only=True)
-                    if n_ret == 0 or j >= lm.shape[0]:
-                        continue
-                    r = math.hypot(p[0], p[1])
-                    eb = float(wrap_angle(math.atan2(p[1], p[0]) - tb[j]))
-                    errs[m].append((tr[j], r - tr[j], eb))
+    got = (executor or SerialExecutor()).map(
+        calibration_trial,
+        [(cycab, scene)] * len(seeds),
+        [np.random.SeedSequence(s) for s in seeds],
+        desc="noise calibration runs",
+        chunksize=1,
+    )
+    errs: dict[str, list] = {m: [e for g in got for e in g[m]] for m in METHODS}
     out = {}
     for m, v in errs.items():
         v = np.array(v)
@@ -96,7 +114,7 @@ def _fit(nll, start, xatol: float) -> np.ndarray:
 
 def run(ctx) -> None:
     """The registered experiment `noise-calibration`: the fits beside the values in use."""
-    fits = calibrate_measurement_noise()
+    fits = calibrate_measurement_noise(executor=ctx.executor)
     ctx.config["noise-calibration"] = {"seeds": list(SEEDS), "scene": "tree_park"}
     keys = ("range_sigma_m", "range_sigma_per_m", "bearing_sigma_rad", "cross_range_sigma_m")
     header = ["method", "circles", "range mean (m)", "range RMS (m)", "bearing RMS (rad)"]

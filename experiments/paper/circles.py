@@ -21,6 +21,7 @@ positions and trials in which the method extracted the pillar. The miss rate is 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -28,13 +29,22 @@ import numpy as np
 
 from experiments.eval.circles import center_error, circle_crlb, radius_error
 from experiments.eval.detections import assign_circles
+from experiments.exec import SerialExecutor, spawn_seeds
 from experiments.io.writers import write_table
 from experiments.render import plots
 from experiments.sim import load_scene, scene_from_dict, sensor_preset, simulate_scan
 from features import extract_features
 from slam import se2
 
-__all__ = ["METHODS", "PAPER_TABLE1", "pillar_monte_carlo", "run_tables", "run_sweep"]
+__all__ = [
+    "METHODS",
+    "PAPER_TABLE1",
+    "pillar_monte_carlo",
+    "pillar_trial",
+    "run_tables",
+    "run_sweep",
+    "sweep_trial",
+]
 
 METHODS = ("paper", "geometric", "bailey", "taubin")
 TABLE_PILLARS = ("d", "e", "f", "g")
@@ -80,24 +90,52 @@ class MonteCarlo:
     n_positions: int = 0
 
 
-def pillar_monte_carlo(n_trials, rng, methods=METHODS, noise_m=0.01, progress=None, rec=None):
-    scene = load_scene("pillar_court")
+@functools.cache
+def _court():
+    """The pillar court, read once per process (the trials of a worker share it)."""
+    return load_scene("pillar_court")
+
+
+def _pillar_draw(p: int, methods, noise_m: float, seed):
+    """One noise draw at scan position p: (scan, per-beam labels, features per method)."""
+    scene = _court()
+    sensor = _sensor(noise_m)
+    ranges, labels = simulate_scan(
+        scene, scene.scan_positions[p], sensor, np.random.default_rng(seed)
+    )
+    scan = sensor.scan(ranges, stamp_s=float(p))
+    return scan, labels, _extract_all(scan, sensor.effective_sigma_m, methods)
+
+
+def pillar_trial(job: tuple, seed) -> list[tuple]:
+    """Trial (p, t) of the pillar Monte Carlo (`job` = (p, methods, noise_m)): one scan at
+    position p; returns (method, pillar, x0, y0, r) of every circle assigned to a pillar."""
+    p, methods, noise_m = job
+    _, labels, feats = _pillar_draw(p, methods, noise_m, seed)
+    n = len(_court().circles)
+    return [
+        (m, k, *xyr) for m, f in feats.items() for k, xyr in assign_circles(f, labels, n).items()
+    ]
+
+
+def pillar_monte_carlo(
+    n_trials, rng, methods=METHODS, noise_m=0.01, progress=None, rec=None, executor=None
+):
+    """The Monte Carlo of Tables 1-2: n_trials scans at each position, each a trial with its
+    own seed (`spawn_seeds(rng, ...)`: first one per position for the noise-free scan that
+    counts the beams on each pillar, then one per (position, trial)), run on `executor`."""
+    scene = _court()
     sensor = _sensor(noise_m)
     exact = sensor_preset("pls200", back_to_back=True, range_sigma_m=0.0, quantisation_m=0.0)
     sigma = sensor.effective_sigma_m
     truth = scene.truth_landmarks
-    mc = MonteCarlo(
-        [c.name for c in scene.circles],
-        truth,
-        n_trials,
-        sigma,
-        n_positions=len(scene.scan_positions),
-    )
+    P = len(scene.scan_positions)
+    mc = MonteCarlo([c.name for c in scene.circles], truth, n_trials, sigma, n_positions=P)
     mc.est = {m: {k: [] for k in range(len(truth))} for m in methods}
     angles = sensor.angles_rad
-    total = len(scene.scan_positions) * n_trials
+    seeds = spawn_seeds(rng, P * (n_trials + 1))
     for p, pose in enumerate(scene.scan_positions):
-        _, lab0 = simulate_scan(scene, pose, exact, rng)
+        _, lab0 = simulate_scan(scene, pose, exact, np.random.default_rng(seeds[p]))
         for k in range(len(truth)):
             hit = lab0 == k
             mc.beams[(p, k)] = int(hit.sum())
@@ -105,21 +143,22 @@ def pillar_monte_carlo(n_trials, rng, methods=METHODS, noise_m=0.01, progress=No
             mc.true_sensor[(p, k)] = c_s
             if hit.sum() >= 3:
                 mc.crlb[(p, k)] = circle_crlb(c_s, truth[k, 2], angles[hit], sigma)
-        for t in range(n_trials):
-            ranges, labels = simulate_scan(scene, pose, sensor, rng)
-            scan = sensor.scan(ranges, stamp_s=float(p))
-            feats = _extract_all(scan, sigma, methods)
+    jobs = [(p, tuple(methods), noise_m) for p in range(P) for _ in range(n_trials)]
+    records = (executor or SerialExecutor()).map(
+        pillar_trial, jobs, seeds[P:], desc="pillar Monte Carlo", progress=progress
+    )
+    for i, found in enumerate(records):
+        p, t = divmod(i, n_trials)
+        for m, k, *xyr in found:
+            mc.est[m][k].append((p, t, *xyr))
+    if rec is not None:  # the first draw of each position, drawn again here
+        rec.log_circles("world/truth/pillars", truth, labels=mc.names, static=True)
+        for p, pose in enumerate(scene.scan_positions):
+            scan, _, feats = _pillar_draw(p, methods, noise_m, seeds[P + p * n_trials])
+            rec.set_scan(p)
+            rec.log_scan(scan, pose=pose)
             for m, f in feats.items():
-                for k, xyr in assign_circles(f, labels, len(truth)).items():
-                    mc.est[m][k].append((p, t, *xyr))
-            if rec is not None and t == 0:
-                rec.set_scan(p)
-                rec.log_scan(scan, pose=pose)
-                for m, f in feats.items():
-                    rec.log_circles(f"world/circles/{m}", f.circle_params, pose=pose, method=m)
-                rec.log_circles("world/truth/pillars", truth, labels=mc.names, static=True)
-            if progress is not None:
-                progress("pillar Monte Carlo", p * n_trials + t + 1, total)
+                rec.log_circles(f"world/circles/{m}", f.circle_params, pose=pose, method=m)
     return mc
 
 
@@ -254,7 +293,9 @@ def run_tables(ctx) -> None:
         }
     )
     with open_recording(ctx.path("circles.rrd"), "circles") as rec:
-        mc = pillar_monte_carlo(n, ctx.rng("table1"), progress=ctx.progress, rec=rec)
+        mc = pillar_monte_carlo(
+            n, ctx.rng("table1"), progress=ctx.progress, rec=rec, executor=ctx.executor
+        )
         pillar_figures(ctx, rec)
     s = summarise(mc)
     cfg["extractor_sigma_r_m"] = mc.sigma_m
@@ -449,26 +490,28 @@ def sweep_point(rng, range_m, radius_m, noise_m, n_trials, methods=METHODS):
     return res
 
 
+def sweep_trial(point: dict, seed) -> dict:
+    """One point of the circle sweep (`point`: range_m, radius_m, noise_m, n_trials), a trial
+    with its own seed: `sweep_point`'s result."""
+    return sweep_point(np.random.default_rng(seed), **point)
+
+
 def run_sweep(ctx) -> None:
     n = 10 if ctx.quick else 100
-    rng = ctx.rng("circle-sweep")
     ctx.config.setdefault("circle-sweep", {}).update(
         {"n_trials": n, "defaults": SWEEP_DEFAULT, "values": SWEEPS, "sensor": "PLS200"}
     )
+    points = [(var, v) for var, values in SWEEPS.items() for v in values]
+    jobs = [dict(SWEEP_DEFAULT, **{var: v}, n_trials=n) for var, v in points]
+    got = ctx.map(
+        sweep_trial, jobs, spawn_seeds(ctx.rng("circle-sweep"), len(jobs)), "circle sweep"
+    )
     rows = []
-    results = {}
-    total = sum(len(v) for v in SWEEPS.values())
-    done = 0
-    for var, values in SWEEPS.items():
-        results[var] = {}
-        for v in values:
-            kw = dict(SWEEP_DEFAULT, **{var: v})
-            res = sweep_point(rng, n_trials=n, **kw)
-            results[var][v] = res
-            for m, (ce, re, frac) in res.items():
-                rows.append([var, v, m, ce, re, frac])
-            done += 1
-            ctx.progress("circle sweep", done, total)
+    results: dict = {var: {} for var in SWEEPS}
+    for (var, v), res in zip(points, got):
+        results[var][v] = res
+        for m, (ce, re, frac) in res.items():
+            rows.append([var, v, m, ce, re, frac])
     ctx.outputs += write_table(
         ctx.out_dir / "circle_sweep",
         ["varied", "value", "method", "RMS CE", "RMS RE", "extracted fraction"],

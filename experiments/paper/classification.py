@@ -17,12 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from experiments.eval.detections import found
+from experiments.exec import SerialExecutor, spawn_seeds
 from experiments.sim import make_bush, scene_from_dict, sensor_preset, simulate_scan
 from features import extract_features
 
 __all__ = [
     "ClassificationResult",
     "classification_study",
+    "classification_trial",
     "trunk_trial",
     "wall_trial",
     "bush_trial",
@@ -107,6 +109,20 @@ class ClassificationResult:
     n_trials: int
 
 
+def classification_trial(cell: tuple, seed) -> list:
+    """One cell of the classification study, a trial with its own seed: `cell` is
+    ("trunk", line_test, r, d, n, sigma), ("wall", line_test, n, sigma) or ("bush", line_test, n,
+    sigma); returns the n trials' results in order."""
+    rng = np.random.default_rng(seed)
+    kind, t = cell[:2]
+    if kind == "trunk":
+        r, d, n, sigma = cell[2:]
+        return [trunk_trial(rng, r, d, sigma, line_test=t) for _ in range(n)]
+    n, sigma = cell[2:]
+    one = wall_trial if kind == "wall" else bush_trial
+    return [one(rng, sigma, line_test=t) for _ in range(n)]
+
+
 def classification_study(
     rng: np.random.Generator,
     n_trials: int = 40,
@@ -115,27 +131,35 @@ def classification_study(
     radii=RADII_M,
     ranges=RANGES_M,
     progress=lambda desc, done, total: None,
+    executor=None,
 ) -> ClassificationResult:
+    """Every cell (line test x trunk radius x range, walls, bushes) is a trial of n_trials
+    scenes with its own seed (`spawn_seeds(rng, cells)`), run on `executor`."""
+    cells = []
+    for t in line_tests:
+        cells += [("trunk", t, r, d, n_trials, sigma_m) for r in radii for d in ranges]
+        cells += [("wall", t, n_trials, sigma_m), ("bush", t, n_trials, sigma_m)]
+    got = (executor or SerialExecutor()).map(
+        classification_trial,
+        cells,
+        spawn_seeds(rng, len(cells)),
+        desc="classification",
+        progress=progress,
+    )
     rate: dict = {t: {} for t in line_tests}
     beams: dict = {}
     wall_frac: dict = {}
     wall_fc: dict = {}
     bush: dict = {}
-    total = len(line_tests) * (len(radii) * len(ranges) + 2)
-    done = 0
-    for t in line_tests:
-        for r in radii:
-            for d in ranges:
-                res = [trunk_trial(rng, r, d, sigma_m, line_test=t) for _ in range(n_trials)]
-                rate[t][(r, d)] = float(np.mean([f for f, _ in res]))
-                beams[(r, d)] = float(np.mean([n for _, n in res]))
-                done += 1
-                progress("classification", done, total)
-        w = [wall_trial(rng, sigma_m, line_test=t) for _ in range(n_trials)]
-        wall_frac[t] = float(np.nanmean([f for f, _ in w]))
-        wall_fc[t] = float(np.mean([c for _, c in w]))
-        done += 1
-        bush[t] = float(np.mean([bush_trial(rng, sigma_m, line_test=t) for _ in range(n_trials)]))
-        done += 1
-        progress("classification", done, total)
+    for cell, res in zip(cells, got):
+        kind, t = cell[:2]
+        if kind == "trunk":
+            r, d = cell[2:4]
+            rate[t][(r, d)] = float(np.mean([f for f, _ in res]))
+            beams[(r, d)] = float(np.mean([n for _, n in res]))
+        elif kind == "wall":
+            wall_frac[t] = float(np.nanmean([f for f, _ in res]))
+            wall_fc[t] = float(np.mean([c for _, c in res]))
+        else:
+            bush[t] = float(np.mean(res))
     return ClassificationResult(rate, beams, wall_frac, wall_fc, bush, n_trials)

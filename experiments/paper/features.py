@@ -31,7 +31,9 @@ def classification(ctx) -> None:
         "radii_m": RADII_M,
         "ranges_m": RANGES_M,
     }
-    res = classification_study(ctx.rng("classification"), n, sigma, progress=ctx.progress)
+    res = classification_study(
+        ctx.rng("classification"), n, sigma, progress=ctx.progress, executor=ctx.executor
+    )
     header = [
         "radius (m)",
         "range (m)",

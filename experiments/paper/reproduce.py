@@ -19,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from experiments.errors import ExperimentFailed, input_errors
+from experiments.exec import Executor, SerialExecutor
 from experiments.io.provenance import git_commit, versions
 from experiments.io.writers import atomic_folder, check_output_folder, dumps_json, write_atomic
 from experiments.paper.runner import DEFAULT_EXPERIMENTS, RunContext, get_experiment
@@ -49,11 +50,15 @@ def run_experiments(
     quick: bool = False,
     seed: int = 0,
     progress: Callable[[str, int, int], None] | None = None,
+    executor: Executor | None = None,
 ) -> list[Path]:
     """Run the named experiments (all when empty) into out_dir, replacing what was there as one
     set (see the module doc); returns the files written. out_dir must be absent, empty or an
-    earlier result set (it has a manifest.json). Raises `ExperimentFailed` after the run when
-    an experiment failed."""
+    earlier result set (it has a manifest.json). The experiments' trials run on `executor`
+    (`experiments.exec`; default: this process); the results do not depend on it. Raises
+    `ExperimentFailed` after the run when an experiment failed (a trial that raised fails its
+    experiment, named with its seed)."""
+    executor = executor or SerialExecutor()
     names = list(dict.fromkeys(names)) or list(DEFAULT_EXPERIMENTS)
     groups: dict[Callable, list[str]] = {}  # names that share a function are one run
     for n in names:  # unknown names fail before any work
@@ -66,7 +71,7 @@ def run_experiments(
     failed: dict[str, str] = {}
     timings: dict[str, float] = {}
     with atomic_folder(out_dir) as stage:
-        ctx = RunContext(out_dir=stage, quick=quick, seed=seed)
+        ctx = RunContext(out_dir=stage, quick=quick, seed=seed, executor=executor)
         if progress is not None:
             ctx.progress = progress
         step = ctx.progress
@@ -102,6 +107,7 @@ def run_experiments(
             "versions": versions(),
             "config": ctx.config,
             "seconds": timings,
+            "executor": executor.describe(),
             "failed": failed,
             "outputs": outputs,
         }

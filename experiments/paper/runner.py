@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import ConfigError
+from experiments.exec import Executor, SerialExecutor
 
 __all__ = [
     "DEFAULT_EXPERIMENTS",
@@ -30,6 +31,7 @@ class RunContext:
     seed: the root seed; experiments derive their generators with `rng(name)`.
     progress: callback(description, done, total) for long loops; no-op by default.
     config: the resolved parameters each experiment used, written to manifest.json.
+    executor: where the experiments' trials run (`experiments.exec`; default: this process).
     """
 
     out_dir: Path
@@ -38,6 +40,14 @@ class RunContext:
     progress: Callable[[str, int, int], None] = lambda desc, done, total: None
     config: dict = field(default_factory=dict)
     outputs: list[Path] = field(default_factory=list)
+    executor: Executor = field(default_factory=SerialExecutor)
+
+    def map(self, fn, configs, seeds=None, desc: str = "trials", chunksize=None) -> list:
+        """The records of trials `fn(configs[i], seeds[i])`, in order, run on `executor` with
+        progress (`Executor.map`)."""
+        return self.executor.map(
+            fn, configs, seeds, desc=desc, progress=self.progress, chunksize=chunksize
+        )
 
     def rng(self, name: str) -> np.random.Generator:
         """A generator for one experiment, independent of the others and of their order."""

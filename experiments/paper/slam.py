@@ -52,6 +52,7 @@ from experiments.eval.detections import dominant_label, false_detections, run_la
 from experiments.eval.poses import consistency as consistency_figures
 from experiments.eval.poses import nees, nees_bounds, pose_errors
 from experiments.eval.series import slam_panels, slam_series
+from experiments.exec import SerialExecutor, spawn_seeds
 from experiments.io.writers import dumps_json, json_types, write_atomic, write_table
 from experiments.sim import sensor_preset
 from experiments.sim.trajectory import CycabParams, simulate_cycab_run
@@ -72,6 +73,7 @@ __all__ = [
     "key_figures",
     "monte_carlo",
     "run",
+    "slam_trial",
     "table4_rates",
 ]
 
@@ -229,18 +231,101 @@ class Exp2Results:
     seconds: float = 0.0
 
 
-def monte_carlo(cfg: Exp2Config, rng: np.random.Generator, progress=None) -> Exp2Results:
-    """Run the Monte Carlo study; `rng` seeds every run (run i uses rng.spawn(n_runs)[i])."""
-    t_start = time.perf_counter()
-    res = Exp2Results(cfg)
+def _variants(cfg: Exp2Config) -> list[tuple]:
+    """(name, method, SlamConfig overrides, kind) of every row: the methods, then the
+    sensitivity variants of the methods run."""
     variants = [(m, m, {}, "") for m in cfg.methods]
     if cfg.sensitivity:
         variants += [v for v in SENSITIVITY if v[1] in cfg.methods]
-    R = cfg.n_runs
+    return variants
+
+
+def _runs_of(cfg: Exp2Config, name: str) -> int:
+    return cfg.n_runs if name in cfg.methods else min(cfg.sensitivity_runs, cfg.n_runs)
+
+
+def slam_trial(job: tuple[Exp2Config, int, bool], seed) -> dict:
+    """Run r of the Monte Carlo study (`job` = (cfg, r, keep)), a pure function of its seed:
+    one simulated drive, every method and variant on it. Returns per variant name the run's
+    figures (abs_err, nees, nis, nis_dof, detected, false, map_size, map_on_trees, times,
+    smoother's), and when `keep` also its sequence and logs (run 0: the figures, the
+    recording)."""
+    cfg, r, keep = job
+    rng = np.random.default_rng(seed)
+    variants = [v for v in _variants(cfg) if r < _runs_of(cfg, v[0])]
+    seq = simulate_cycab_run(rng, cfg.scene, cfg.cycab)
+    truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
+    lm = seq.truth_landmarks
+    out: dict = {"time_extract": {}, "runs": {}}
+    feats: dict[str, list] = {}
+    for m in sorted({v[1] for v in variants}):
+        t0 = time.perf_counter()
+        params = extractor_params(m, cfg.cycab)
+        feats[m] = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
+        out["time_extract"][m] = (time.perf_counter() - t0) / seq.n_scans
+    noise_rng = rng.spawn(1)[0]
+    for name, m, overrides, kind in variants:
+        scfg = replace(cfg.slam, **overrides)
+        fs = feats[m]
+        if kind == "synthetic":
+            fs = synthetic_features(
+                fs, seq, laser_w, scfg.noise_for(m)[1], noise_rng, cfg.false_match_m
+            )
+        elif kind == "debias":
+            fs = [_push_out(f, -KASA_RANGE_BIAS_M) for f in fs]
+        t0 = time.perf_counter()
+        lg = slam_run(seq, features=fs, association=cfg.association, config=scfg)
+        o: dict = {"time_slam": (time.perf_counter() - t0) / seq.n_scans}
+        e = pose_errors(lg.pose, truth)
+        # the paper's formula, over the scans after the first (which starts at the truth)
+        o["abs_err"] = np.mean(np.abs(e[1:]), axis=0)
+        o["nees"] = nees(e[1:], lg.pose_cov[1:])
+        o["nis"] = lg.scan_nis
+        o["nis_dof"] = lg.scan_nis_dof
+        if cfg.smoother:
+            sm = smooth(problem_from_log(lg))
+            es = pose_errors(sm.pose, truth)
+            o["sm_abs_err"] = np.mean(np.abs(es[1:]), axis=0)
+            o["sm_nees"] = nees(es[1:], sm.pose_cov[1:])
+            o["time_smoother"] = sm.seconds + sm.seconds_marginals
+            if keep and name == m:
+                o["sm_pose0"] = sm.pose
+        if name == m:
+            det = [
+                false_detections(f, seq.scan_labels[k], laser_w[k], lm, cfg.false_match_m)
+                for k, f in enumerate(feats[m])
+            ]
+            o["detected"] = np.array([d for d, _ in det], np.int64)
+            o["false"] = np.array([f for _, f in det], np.int64)
+        o["map_size"] = lg.landmark_xy.shape[0]
+        o["map_on_trees"] = 0
+        if lg.landmark_xy.shape[0]:
+            d = np.hypot(
+                lg.landmark_xy[:, None, 0] - lm[None, :, 0],
+                lg.landmark_xy[:, None, 1] - lm[None, :, 1],
+            )
+            o["map_on_trees"] = int(np.sum(d.min(axis=1) <= cfg.false_match_m))
+        if keep and name == m:
+            o["log0"] = lg
+        out["runs"][name] = o
+    if keep:
+        out["seq0"] = seq
+    return out
+
+
+def monte_carlo(
+    cfg: Exp2Config, rng: np.random.Generator, progress=None, executor=None
+) -> Exp2Results:
+    """Run the Monte Carlo study; `rng` seeds every run (run i uses rng.spawn(n_runs)[i], as
+    `spawn_seeds(rng, n_runs)[i]`). The runs are trials (`slam_trial`) on `executor` (default:
+    this process), reduced in run order."""
+    t_start = time.perf_counter()
+    res = Exp2Results(cfg)
+    variants = _variants(cfg)
     N = cfg.cycab.n_scans
-    runs_of = {v[0]: (R if v[0] in cfg.methods else min(cfg.sensitivity_runs, R)) for v in variants}
     for name, *_ in variants:
-        R = runs_of[name]
+        R = _runs_of(cfg, name)
         res.abs_err[name] = np.zeros((R, 3))
         for d in (res.nees, res.nis):
             d[name] = np.full((R, N), np.nan)
@@ -256,65 +341,38 @@ def monte_carlo(cfg: Exp2Config, rng: np.random.Generator, progress=None) -> Exp
             res.sm_nees[name] = np.full((R, N), np.nan)
             res.time_smoother[name] = np.zeros(R)
     R = cfg.n_runs
-    gens = rng.spawn(R)
-    for r in range(R):
-        seq = simulate_cycab_run(gens[r], cfg.scene, cfg.cycab)
-        truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-        laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
-        lm = seq.truth_landmarks
-        feats: dict[str, list] = {}
-        for m in sorted({v[1] for v in variants if r < runs_of[v[0]]}):
-            t0 = time.perf_counter()
-            params = extractor_params(m, cfg.cycab)
-            feats[m] = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
-            res.time_extract[m][r] = (time.perf_counter() - t0) / seq.n_scans
-        noise_rng = gens[r].spawn(1)[0]
-        for name, m, overrides, kind in variants:
-            if r >= runs_of[name]:
-                continue
-            scfg = replace(cfg.slam, **overrides)
-            fs = feats[m]
-            if kind == "synthetic":
-                fs = synthetic_features(
-                    fs, seq, laser_w, scfg.noise_for(m)[1], noise_rng, cfg.false_match_m
-                )
-            elif kind == "debias":
-                fs = [_push_out(f, -KASA_RANGE_BIAS_M) for f in fs]
-            t0 = time.perf_counter()
-            lg = slam_run(seq, features=fs, association=cfg.association, config=scfg)
-            res.time_slam[name][r] = (time.perf_counter() - t0) / seq.n_scans
-            e = pose_errors(lg.pose, truth)
-            # the paper's formula, over the scans after the first (which starts at the truth)
-            res.abs_err[name][r] = np.mean(np.abs(e[1:]), axis=0)
-            res.nees[name][r, 1:] = nees(e[1:], lg.pose_cov[1:])
-            res.nis[name][r] = lg.scan_nis
-            res.nis_dof[name][r] = lg.scan_nis_dof
+    executor = executor or SerialExecutor()
+    records = executor.map(
+        slam_trial,
+        [(cfg, r, r == 0) for r in range(R)],
+        spawn_seeds(rng, R),
+        desc="table3/4 Monte Carlo",
+        progress=progress,
+        chunksize=1,
+    )
+    for r, rec in enumerate(records):
+        for m, t in rec["time_extract"].items():
+            res.time_extract[m][r] = t
+        for name, o in rec["runs"].items():
+            res.time_slam[name][r] = o["time_slam"]
+            res.abs_err[name][r] = o["abs_err"]
+            res.nees[name][r, 1:] = o["nees"]
+            res.nis[name][r] = o["nis"]
+            res.nis_dof[name][r] = o["nis_dof"]
             if cfg.smoother:
-                sm = smooth(problem_from_log(lg))
-                es = pose_errors(sm.pose, truth)
-                res.sm_abs_err[name][r] = np.mean(np.abs(es[1:]), axis=0)
-                res.sm_nees[name][r, 1:] = nees(es[1:], sm.pose_cov[1:])
-                res.time_smoother[name][r] = sm.seconds + sm.seconds_marginals
-                if r == 0 and name == m:
-                    res.sm_pose0[m] = sm.pose
-            if name == m:
-                for k, f in enumerate(feats[m]):
-                    res.detected[name][r, k], res.false[name][r, k] = false_detections(
-                        f, seq.scan_labels[k], laser_w[k], lm, cfg.false_match_m
-                    )
-            res.map_size[name][r] = lg.landmark_xy.shape[0]
-            if lg.landmark_xy.shape[0]:
-                d = np.hypot(
-                    lg.landmark_xy[:, None, 0] - lm[None, :, 0],
-                    lg.landmark_xy[:, None, 1] - lm[None, :, 1],
-                )
-                res.map_on_trees[name][r] = int(np.sum(d.min(axis=1) <= cfg.false_match_m))
-            if r == 0 and name == m:
-                res.logs0[m] = lg
+                res.sm_abs_err[name][r] = o["sm_abs_err"]
+                res.sm_nees[name][r, 1:] = o["sm_nees"]
+                res.time_smoother[name][r] = o["time_smoother"]
+                if "sm_pose0" in o:
+                    res.sm_pose0[name] = o["sm_pose0"]
+            if "detected" in o:
+                res.detected[name][r], res.false[name][r] = o["detected"], o["false"]
+            res.map_size[name][r] = o["map_size"]
+            res.map_on_trees[name][r] = o["map_on_trees"]
+            if "log0" in o:
+                res.logs0[name] = o["log0"]
         if r == 0:
-            res.seq0 = seq
-        if progress is not None:
-            progress("table3/4 Monte Carlo", r + 1, R)
+            res.seq0 = rec["seq0"]
     res.seconds = time.perf_counter() - t_start
     return res
 
@@ -656,7 +714,7 @@ def run(ctx, cfg: Exp2Config | None = None) -> Exp2Results:
         "extractor_params": {m: extractor_params(m, cfg.cycab) for m in cfg.methods},
         "sensitivity": [v[0] for v in SENSITIVITY] if cfg.sensitivity else [],
     }
-    res = monte_carlo(cfg, ctx.rng("slam"), progress=ctx.progress)
+    res = monte_carlo(cfg, ctx.rng("slam"), progress=ctx.progress, executor=ctx.executor)
     out = Path(ctx.out_dir)
     written = _write_tables(res, out) + _write_figures(res, out)
     written.append(_write_recording(res, ctx.path("slam.rrd")))

@@ -36,7 +36,7 @@ from slam import run as slam_run
 from slam import se2
 from slam.smoother import problem_from_log, smooth, solve_graph_file
 
-__all__ = ["GRAPH_CHUNK", "run"]
+__all__ = ["GRAPH_CHUNK", "run", "smoother_trial"]
 
 log = logging.getLogger(__name__)
 
@@ -58,40 +58,63 @@ HEADER = [
 ]
 
 
+def smoother_trial(job: tuple, seed=None) -> dict:
+    """One part of the experiment, a deterministic trial (seed None): ("graph", None) solves
+    GTSAM's graph file (found where this process looks for the data); ("victoria-park", quick)
+    runs the EKF over the full run (--quick: 1500 scans) and smooths it. Returns the table rows
+    and what the figures need."""
+    kind, arg = job
+    if kind == "graph":
+        g = solve_graph_file(gtsam_graph(), "isam2-chunks", GRAPH_CHUNK)
+        row = ["GTSAM victoria_park.txt", g.method, g.n_poses, g.n_landmarks]
+        row += [_r(g.chi2_per_dof), *[""] * 5, g.iterations, _r(g.seconds)]
+        return {"rows": [row], "method": g.method}
+    return _victoria_park(arg)
+
+
 def run(ctx) -> None:
-    """The registered experiment `smoother`."""
+    """The registered experiment `smoother`: its two parts are trials (`smoother_trial`)."""
     cfg_out = ctx.config.setdefault("smoother", {})
-    rows: list[list] = []
+    jobs = []
     try:
         graph = gtsam_graph()
+        jobs.append(("graph", None))
     except MissingDataError as exc:
         log.warning("smoother: GTSAM's graph skipped: %s", exc)
         cfg_out["gtsam_graph"] = f"skipped: {exc}"
-    else:
-        g = solve_graph_file(graph, "isam2-chunks", GRAPH_CHUNK)
-        cfg_out["gtsam_graph"] = {"file": str(graph), "method": g.method}
-        rows.append(
-            [
-                "GTSAM victoria_park.txt",
-                g.method,
-                g.n_poses,
-                g.n_landmarks,
-                _r(g.chi2_per_dof),
-                *[""] * 5,
-                g.iterations,
-                _r(g.seconds),
-            ]
-        )
-        ctx.progress("smoother", 1, 2)
     try:
         full = load_victoria_park(full=True)
     except MissingDataError as exc:
         log.warning("smoother: the Victoria Park run skipped: %s", exc)
         cfg_out["victoria_park"] = f"skipped: {exc}"
     else:
-        rows += _victoria_park(ctx, full, cfg_out)
-    if not rows:
+        jobs.append(("victoria-park", ctx.quick))
+    if not jobs:
         return
+    rows: list[list] = []
+    got_all = ctx.map(smoother_trial, jobs, desc="smoother", chunksize=1)
+    for (kind, _), got in zip(jobs, got_all):
+        rows += got["rows"]
+        if kind == "graph":
+            cfg_out["gtsam_graph"] = {"file": str(graph), "method": got["method"]}
+            continue
+        from experiments.render import plots
+
+        cfg_out["victoria_park"] = {"preset": PRESET, "scans": got["n"]}
+        title = "Victoria Park: EKF and smoothed antenna paths over the GPS fixes (smoothed map)"
+        ctx.outputs.append(
+            plots.plot_vp_map(
+                full.gps_xy, got["ant"], got["map"], title, ctx.out_dir / "vp_smoother_map.png"
+            )
+        )
+        ctx.outputs.append(
+            plots.plot_gps_errors(
+                got["errors"],
+                got["jump"],
+                "Victoria Park: distance to the GPS fixes (jumps marked x)",
+                ctx.out_dir / "vp_smoother_errors.png",
+            )
+        )
     notes = (
         "chi2 per dof: twice GTSAM's graph error over residuals minus unknowns. GTSAM's graph: "
         f"iSAM2 fed {GRAPH_CHUNK} poses per update, then batch Levenberg-Marquardt (the file's "
@@ -105,14 +128,13 @@ def run(ctx) -> None:
     ctx.outputs += write_table(ctx.out_dir / "smoother", HEADER, rows, title, notes)
 
 
-def _victoria_park(ctx, full, cfg_out) -> list[list]:
+def _victoria_park(quick: bool) -> dict:
     from experiments.paper.victoria_park import head
-    from experiments.render import plots
 
+    full = load_victoria_park(full=True)
     cfg = load_slam_config(PRESET)
-    n = 1500 if ctx.quick else full.n_scans
+    n = 1500 if quick else full.n_scans
     full = head(full, n)
-    cfg_out["victoria_park"] = {"preset": PRESET, "scans": n}
     laser = np.asarray(cfg.laser_pose if cfg.laser_pose is not None else full.laser_pose)
     t0 = time.perf_counter()
     lg = slam_run(full, features="detections", association="ihgr", config=cfg)
@@ -151,22 +173,14 @@ def _victoria_park(ctx, full, cfg_out) -> list[list]:
         "EKF": np.array([se2.compose(p, laser)[:2] for p in lg.pose]),
         "smoother": np.array([se2.compose(p, laser)[:2] for p in sm.pose]),
     }
-    title = "Victoria Park: EKF and smoothed antenna paths over the GPS fixes (smoothed map)"
-    ctx.outputs.append(
-        plots.plot_vp_map(
-            full.gps_xy, ant, sm.landmark_xy, title, ctx.out_dir / "vp_smoother_map.png"
-        )
-    )
-    ctx.outputs.append(
-        plots.plot_gps_errors(
-            {"EKF": (sc_e.t_s, sc_e.errors), "smoother": (sc_s.t_s, sc_s.errors)},
-            sc_e.jump,
-            "Victoria Park: distance to the GPS fixes (jumps marked x)",
-            ctx.out_dir / "vp_smoother_errors.png",
-        )
-    )
-    ctx.progress("smoother", 2, 2)
-    return rows
+    return {
+        "rows": rows,
+        "n": n,
+        "ant": ant,
+        "map": sm.landmark_xy,
+        "errors": {"EKF": (sc_e.t_s, sc_e.errors), "smoother": (sc_s.t_s, sc_s.errors)},
+        "jump": sc_e.jump,
+    }
 
 
 def _gps(sc) -> list:

@@ -22,6 +22,7 @@ manifest, when the data is absent. --quick: the first 1500 scans of the full run
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import time
@@ -44,7 +45,7 @@ from slam import SlamLog, se2
 from slam import run as slam_run
 from slam.start import procrustes_2d
 
-__all__ = ["PRESET", "PUBLISHED", "head", "nis_inside", "reference_match", "run"]
+__all__ = ["PRESET", "PUBLISHED", "head", "nis_inside", "reference_match", "run", "vp_trial"]
 
 log = logging.getLogger(__name__)
 
@@ -137,43 +138,67 @@ def _one(label, seq, features, association, cfg, ref, extra=None):
     return row, lg, sc
 
 
+@functools.cache
+def _data(quick: bool):
+    """(full run, raw scans, 2002 reference), with --quick the first 1500 and 400 scans; read
+    once per process (the trials of a worker share it)."""
+    full = load_victoria_park(full=True)
+    raw = load_victoria_park()
+    if quick:
+        full, raw = head(full, 1500), head(raw, 400)
+    return full, raw, load_ss2002_reference()
+
+
+def vp_trial(job: tuple, seed=None) -> tuple:
+    """One row of the table (`job` = (label, "full" or "raw", features, association, quick,
+    keep)): features "detections" or an extractor run on the raw scans. Deterministic (seed
+    None). Returns (row, log, score), the log and score only when `keep`."""
+    label, which, features, assoc, quick, keep = job
+    full, raw, ref = _data(quick)
+    seq = full if which == "full" else raw
+    cfg = load_slam_config(PRESET)
+    extra = None
+    if features != "detections":
+        from features import extract_features
+
+        params = {} if features == "bailey" else SHORT_TRUNKS
+        features = [extract_features(seq.scan(k), features, **params) for k in range(seq.n_scans)]
+        extra = {"published_matched": _published_matched(seq, features)}
+    row, lg, sc = _one(label, seq, features, assoc, cfg, ref, extra)
+    return (row, lg, sc) if keep else (row, None, None)
+
+
 def run(ctx) -> None:
-    """The registered experiment `victoria-park`."""
+    """The registered experiment `victoria-park`: its seven runs are trials (`vp_trial`)."""
     cfg_out = ctx.config.setdefault("victoria-park", {})
     try:
-        full = load_victoria_park(full=True)
-        raw = load_victoria_park()
-        ref = load_ss2002_reference()
+        full, raw, _ = _data(ctx.quick)
     except MissingDataError as exc:
         log.warning("Victoria Park experiment skipped: %s", exc)
         ctx.config["victoria-park"] = f"skipped: {exc}"
         return
-    from features import extract_features
-
     cfg = load_slam_config(PRESET)
-    n_full, n_raw = (1500, 400) if ctx.quick else (full.n_scans, raw.n_scans)
-    full = head(full, n_full)
-    raw = head(raw, n_raw)
     cfg_out.update(
-        preset=PRESET, config=json_types(cfg.to_dict()), scans_full=n_full, scans_raw=n_raw
+        preset=PRESET,
+        config=json_types(cfg.to_dict()),
+        scans_full=full.n_scans,
+        scans_raw=raw.n_scans,
     )
-    rows, logs = [], {}
-    jobs = [(f"full run, published detections, {a}", full, "detections", a) for a in METHODS]
-    jobs.append(("scans 1-2000, published detections, ihgr", raw, "detections", "ihgr"))
-    for i, (label, seq, feats, assoc) in enumerate(jobs):
-        row, lg, sc = _one(label, seq, feats, assoc, cfg, ref)
-        rows.append(row)
-        logs[label] = (lg, sc)
-        ctx.progress("victoria park runs", i + 1, len(jobs) + 3)
-    for j, method in enumerate(("bailey", "paper", "geometric")):
-        params = {} if method == "bailey" else SHORT_TRUNKS
-        feats = [extract_features(raw.scan(k), method, **params) for k in range(raw.n_scans)]
-        extra = {"published_matched": _published_matched(raw, feats)}
-        label = f"scans 1-2000, our {method} extractor on the raw scans, ihgr"
-        row, lg, sc = _one(label, raw, feats, "ihgr", cfg, ref, extra)
-        rows.append(row)
-        ctx.progress("victoria park runs", len(jobs) + j + 1, len(jobs) + 3)
-    _write(ctx, rows, logs, full, cfg)
+    jobs = [(f"full run, published detections, {a}", "full", "detections", a) for a in METHODS]
+    jobs.append(("scans 1-2000, published detections, ihgr", "raw", "detections", "ihgr"))
+    jobs += [
+        (f"scans 1-2000, our {m} extractor on the raw scans, ihgr", "raw", m, "ihgr")
+        for m in ("bailey", "paper", "geometric")
+    ]
+    got = ctx.map(
+        vp_trial,
+        [(*j, ctx.quick, i == 0) for i, j in enumerate(jobs)],
+        desc="victoria park runs",
+        chunksize=1,
+    )
+    rows = [row for row, _, _ in got]
+    _, lg, sc = got[0]
+    _write(ctx, rows, {jobs[0][0]: (lg, sc)}, full, cfg)
 
 
 def head(seq, n: int):

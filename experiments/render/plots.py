@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -606,4 +607,42 @@ def plot_gps_errors(
     ax.set_title(title)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="upper left")
+    return save(fig, path)
+
+
+def plot_sweep_field(rows: list, swept: list, k: int, title: str, path: Path) -> Path:
+    """One panel per metric of a sweep (`experiments.paper.sweep.sweep_rows`: [point, *swept
+    values, method, metric, mean, std, n]): the mean against swept field k with +-1 standard
+    error, one line per method and combination of the other swept fields."""
+    off = len(swept)
+    metrics = list(dict.fromkeys(r[off + 2] for r in rows))
+    xs = list(dict.fromkeys(r[1 + k] for r in rows))
+    numeric = all(isinstance(x, int | float) and not isinstance(x, bool) for x in xs)
+    pos = {x: (x if numeric else i) for i, x in enumerate(xs)}
+    ncols = min(len(metrics), 4) or 1
+    nrows = max(1, math.ceil(len(metrics) / ncols))
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False, layout="constrained"
+    )
+    for ax, metric in zip(axes.flat, metrics):
+        lines: dict = {}
+        for r in rows:
+            if r[off + 2] != metric:
+                continue
+            others = ", ".join(f"{swept[i]}={r[1 + i]}" for i in range(off) if i != k)
+            label = r[off + 1] + (f" ({others})" if others else "")
+            lines.setdefault(label, []).append((pos[r[1 + k]], r[off + 3], r[off + 4], r[off + 5]))
+        for label, pts in lines.items():
+            x, mean, std, n = (np.array(v, float) for v in zip(*sorted(pts)))
+            se = np.where(n > 1, std / np.sqrt(np.maximum(n, 1)), np.nan)
+            ax.errorbar(x, mean, yerr=se, marker="o", ms=3, capsize=2, label=label)
+        ax.set_title(metric, fontsize=9)
+        ax.set_xlabel(swept[k])
+        if not numeric:
+            ax.set_xticks(range(len(xs)), [str(x) for x in xs])
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(metrics) :]:
+        ax.set_visible(False)
+    axes.flat[0].legend(fontsize=7)
+    fig.suptitle(title, fontsize=10)
     return save(fig, path)

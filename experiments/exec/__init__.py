@@ -1,0 +1,37 @@
+"""Where the trials of a study run: one executor abstraction for every experiment's trial loop.
+
+A trial is a pure function `fn(config, seed)` of its configuration and its own seed (a
+`numpy.random.SeedSequence` from `SeedSequence.spawn`, or None for a deterministic trial) that
+returns a small, picklable record. An executor runs a list of them and returns the records in
+trial order, whatever finished first, so a study reduces its records in the same order and gets
+the same numbers, bit for bit, on one core, on all local cores or on a Dask cluster.
+
+- `trials`: `Executor` (the interface, and the in-process `SerialExecutor`), `spawn_seeds`,
+  `TrialsFailed` (trials that raised, each with its seed; the others' records kept)
+- `local`: `ProcessExecutor`, local worker processes with one BLAS thread each
+- `cluster`: `DaskExecutor`, a `dask.distributed` scheduler (the only module importing dask)
+- `make_executor(workers, dask)`: what `--workers` / `--dask` ask for
+
+Nothing here imports numpy at module level: a worker process sets its thread limits before
+numpy loads.
+"""
+
+from experiments.exec.trials import (
+    Executor,
+    SerialExecutor,
+    TrialFailure,
+    TrialsFailed,
+    describe_seed,
+    make_executor,
+    spawn_seeds,
+)
+
+__all__ = [
+    "Executor",
+    "SerialExecutor",
+    "TrialFailure",
+    "TrialsFailed",
+    "describe_seed",
+    "make_executor",
+    "spawn_seeds",
+]

@@ -1,0 +1,436 @@
+"""`trunkslam sweep CONFIG.toml`: a study run over a grid (or a list) of configuration values.
+
+The sweep file (TOML; examples in datasets/configs/sweep_*.toml):
+
+    study = "slam"            # association, slam or circles (`STUDIES`)
+    trials = 20               # trials per point
+    seed = 0                  # root seed
+    [base]                    # fields held fixed at every point (dotted names or tables)
+    "cycab.n_scans" = 120
+    [grid]                    # every combination of these values ...
+    "cycab.range_sigma_m" = [0.01, 0.03, 0.05]
+    # ... or a list of points instead:  [[points]]  "cycab.range_sigma_m" = 0.01
+    [executor]                # optional: where the trials run (--workers / --dask win)
+    workers = 2               # or dask = "tcp://host:8786"
+
+A field is a dotted path into the study's configuration (`trunkslam sweep --fields STUDY`
+prints them with their defaults); a wrong name, type or value is an error naming it. Every
+(point, trial) is one trial on the executor; trial q has the same seed at every point (common
+random numbers: points differ by the swept value, not by the luck of the draw). Writes, into
+one output folder (replaced as a set): sweep.csv (tidy: one row per point, method and metric,
+with the mean, standard deviation and number of trials), sweep_<field>.png per swept field,
+and sweep.json (the file's settings, every point resolved, the executor, failed trials with
+their seeds) last.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import logging
+import math
+import time
+import tomllib
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from experiments.errors import ConfigError, ExperimentFailed
+from experiments.exec import Executor, TrialsFailed, make_executor, spawn_seeds
+from experiments.io.writers import (
+    atomic_folder,
+    check_output_folder,
+    dumps_json,
+    json_types,
+    write_atomic,
+)
+from experiments.paper.runner import experiment_seed
+
+__all__ = ["STUDIES", "Study", "load_sweep", "run_sweep_file", "study_defaults"]
+
+log = logging.getLogger(__name__)
+
+SUMMARY = "sweep.json"
+
+
+# ---- the studies --------------------------------------------------------------------------------
+
+
+def _association_config(point: dict):
+    from experiments.sim.landmarks import LandmarkSimConfig
+    from slam.config import config_from_dict
+
+    return config_from_dict(LandmarkSimConfig, point["sim"]), float(point["gate_prob"])
+
+
+def association_trial(point: dict, seed) -> dict:
+    """One simulated sequence: per method, its correct, false-pairing and missed-pairing rates
+    and ms per scored scan (experiment `association`'s measures)."""
+    from experiments.paper.association import EVAL_FROM_SCAN, run_methods
+    from experiments.sim.landmarks import simulate_landmark_scans
+
+    cfg, gate = _association_config(point)
+    st = run_methods(simulate_landmark_scans(cfg, np.random.default_rng(seed)), cfg, gate_prob=gate)
+    out = {}
+    for m, s in st.items():
+        n = max(s["n"], 1)
+        out[m] = {
+            "correct_rate": s["correct"] / n,
+            "false_pair_rate": s["false_pair"] / n,
+            "missed_pair_rate": s["missed_pair"] / n,
+            "ms_per_scan": 1e3 * s["seconds"] / max(cfg.n_scans - EVAL_FROM_SCAN, 1),
+        }
+    return out
+
+
+def _slam_config(point: dict):
+    from experiments.paper.slam import Exp2Config
+    from experiments.sim.trajectory import CycabParams
+    from slam import SlamConfig
+    from slam.config import config_from_dict
+
+    methods = tuple(point["methods"])
+    if not methods or any(m not in ("paper", "geometric", "bailey") for m in methods):
+        raise ConfigError(f"methods: expected some of paper, geometric, bailey, got {methods}")
+    return Exp2Config(
+        n_runs=1,
+        methods=methods,
+        scene=str(point["scene"]),
+        cycab=config_from_dict(CycabParams, point["cycab"], "cycab"),
+        association=str(point["association"]),
+        slam=SlamConfig.from_dict(point["slam"]),
+        false_match_m=float(point["false_match_m"]),
+        sensitivity=False,
+        smoother=False,
+    )
+
+
+def slam_trial(point: dict, seed) -> dict:
+    """One simulated Cycab run (experiment 2's `slam_trial`): per method, the mean |dx|, |dy|,
+    |dtheta| (Table 3's formula), mean NEES, NIS per dof, final landmarks and the share of false
+    circles (Table 4's, over all scans)."""
+    from experiments.paper.slam import slam_trial as exp2_trial
+
+    rec = exp2_trial((_slam_config(point), 0, False), seed)
+    out = {}
+    for m, o in rec["runs"].items():
+        dof = o["nis_dof"].sum()
+        det = o["detected"].sum()
+        out[m] = {
+            "dx_m": float(o["abs_err"][0]),
+            "dy_m": float(o["abs_err"][1]),
+            "dtheta_rad": float(o["abs_err"][2]),
+            "nees_mean": float(np.nanmean(o["nees"])),
+            "nis_per_dof": float(np.nansum(o["nis"]) / dof) if dof else math.nan,
+            "landmarks": float(o["map_size"]),
+            "false_rate": float(o["false"].sum() / det) if det else math.nan,
+        }
+    return out
+
+
+def _circles_config(point: dict) -> tuple[tuple, dict]:
+    from experiments.paper.circles import METHODS
+
+    methods = tuple(point["methods"])
+    if not methods or any(m not in METHODS for m in methods):
+        raise ConfigError(f"methods: expected some of {', '.join(METHODS)}, got {methods}")
+    try:
+        kw = {k: float(point[k]) for k in ("range_m", "radius_m", "noise_m")}
+    except (TypeError, ValueError):
+        raise ConfigError("range_m, radius_m and noise_m must be numbers") from None
+    if not all(0 < v < 1e6 for v in kw.values()):
+        raise ConfigError(f"range_m, radius_m and noise_m must be positive, got {kw}")
+    return methods, kw
+
+
+def circles_trial(point: dict, seed) -> dict:
+    """One scan of one pillar straight ahead (the circle sweep's set-up): per method, its CE
+    and RE (eq. 10, 11; NaN when not extracted) and whether it was extracted; and the
+    Cramer-Rao bound's (as 'crlb', RMS)."""
+    from experiments.paper.circles import sweep_point
+
+    methods, kw = _circles_config(point)
+    res = sweep_point(np.random.default_rng(seed), n_trials=1, methods=methods, **kw)
+    return {m: {"ce": ce, "re": re, "extracted": frac} for m, (ce, re, frac) in res.items()}
+
+
+@dataclass(frozen=True)
+class Study:
+    """A sweepable study: its default configuration (a plain nested dict), what checks a point
+    (raises ConfigError/SlamError naming the field) and its trial."""
+
+    about: str
+    defaults: Callable[[], dict]
+    check: Callable[[dict], object]
+    trial: Callable[[dict, object], dict]
+
+
+def _association_defaults() -> dict:
+    from experiments.sim.landmarks import LandmarkSimConfig
+
+    return {"sim": asdict(LandmarkSimConfig()), "gate_prob": 0.99}
+
+
+def _slam_defaults() -> dict:
+    from experiments.paper.slam import METHODS, Exp2Config
+
+    cfg = Exp2Config()
+    return {
+        "methods": list(METHODS),
+        "scene": cfg.scene,
+        "association": cfg.association,
+        "cycab": cfg.cycab.to_dict(),
+        "slam": cfg.slam.to_dict(),
+        "false_match_m": cfg.false_match_m,
+    }
+
+
+def _circles_defaults() -> dict:
+    from experiments.paper.circles import METHODS, SWEEP_DEFAULT
+
+    return {"methods": list(METHODS), **SWEEP_DEFAULT}
+
+
+STUDIES = {
+    "association": Study(
+        "IHGR, JCBB and NN on simulated landmark maps (experiment association): sim.* are "
+        "the simulator's fields, gate_prob the gates' chi-square probability",
+        _association_defaults,
+        _association_config,
+        association_trial,
+    ),
+    "slam": Study(
+        "EKF-SLAM on the simulated tree park (experiment 2, Tables 3-4): cycab.* the car, "
+        "sensors and odometry noise, slam.* the filter (slam.gate_prob, ...), association",
+        _slam_defaults,
+        _slam_config,
+        slam_trial,
+    ),
+    "circles": Study(
+        "one pillar ahead of a PLS200 (the circle sweep): range_m, radius_m, noise_m, methods",
+        _circles_defaults,
+        _circles_config,
+        circles_trial,
+    ),
+}
+
+
+def study_defaults(name: str) -> dict:
+    """The study's configuration at its defaults, as dotted names -> values."""
+    return _flatten(_study(name).defaults())
+
+
+def _study(name) -> Study:
+    if name not in STUDIES:
+        raise ConfigError(f"study: unknown study {name!r}; known: {', '.join(STUDIES)}")
+    return STUDIES[name]
+
+
+# ---- the sweep file -----------------------------------------------------------------------------
+
+
+def _flatten(d: dict, prefix: str = "") -> dict:
+    """Nested tables as dotted names; a value that is not a table is a leaf."""
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict) and v:
+            out.update(_flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def _set(config: dict, dotted: str, value, where: str) -> None:
+    """config[a][b][c] = value for "a.b.c"; the path must exist in the defaults."""
+    *parents, leaf = dotted.split(".")
+    node = config
+    for i, p in enumerate(parents):
+        if not isinstance(node.get(p), dict):
+            raise ConfigError(f"{where}: {dotted!r} is not a field ({'.'.join(parents[: i + 1])})")
+        node = node[p]
+    if leaf not in node:
+        known = ", ".join(sorted(node))
+        raise ConfigError(f"{where}: {dotted!r} is not a field (known here: {known})")
+    node[leaf] = value
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A parsed sweep file: the study, trials per point, root seed, the resolved configuration
+    of every point (plain nested dicts), the swept fields and each point's values of them, and
+    the [executor] table."""
+
+    study: str
+    trials: int
+    seed: int
+    points: list
+    swept: list
+    values: list
+    executor: dict
+    source: dict
+
+
+def load_sweep(path: Path | str) -> SweepSpec:
+    """Read and check a sweep file; errors name the file and the key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such sweep file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    known = {"study", "trials", "seed", "base", "grid", "points", "executor"}
+    extra = sorted(set(data) - known)
+    if extra:
+        raise ConfigError(f"{path}: unknown key {extra[0]!r} (known: {', '.join(sorted(known))})")
+    if "study" not in data:
+        raise ConfigError(f"{path}: 'study' is missing (one of {', '.join(STUDIES)})")
+    try:
+        study = _study(data["study"])
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    trials, seed = data.get("trials", 10), data.get("seed", 0)
+    if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
+        raise ConfigError(f"{path}: trials must be a whole number >= 1, got {trials!r}")
+    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
+        raise ConfigError(f"{path}: seed must be a whole number >= 0, got {seed!r}")
+    if ("grid" in data) == ("points" in data):
+        which = "both" if "grid" in data else "neither"
+        raise ConfigError(f"{path}: give either [grid] or [[points]], not {which}")
+    if "grid" in data:
+        grid = _flatten(data["grid"])
+        for k, v in grid.items():
+            if not isinstance(v, list) or not v:
+                raise ConfigError(f"{path}: grid.{k} must be a non-empty list of values")
+        swept = list(grid)
+        values = [list(c) for c in itertools.product(*grid.values())]
+    else:
+        pts = [_flatten(p) for p in data["points"]]
+        swept = list(dict.fromkeys(k for p in pts for k in p))
+        for j, p in enumerate(pts):
+            if set(p) != set(swept):
+                raise ConfigError(f"{path}: points[{j}] sets {sorted(p)}, the others {swept}")
+        values = [[p[k] for k in swept] for p in pts]
+    base = study.defaults()
+    for k, v in _flatten(data.get("base", {})).items():
+        _set(base, k, v, f"{path}: base")
+    points = []
+    for j, vals in enumerate(values):
+        point = _copy(base)
+        for k, v in zip(swept, vals):
+            _set(point, k, v, f"{path}: {'grid' if 'grid' in data else f'points[{j}]'}")
+        try:
+            study.check(point)
+        except (TypeError, ValueError) as exc:  # ConfigError, SlamError: name the point
+            raise ConfigError(f"{path}: point {dict(zip(swept, vals))}: {exc}") from None
+        points.append(point)
+    ex = data.get("executor", {})
+    if set(ex) - {"workers", "dask"}:
+        raise ConfigError(f"{path}: [executor] takes workers and dask, got {sorted(ex)}")
+    return SweepSpec(data["study"], trials, seed, points, swept, values, ex, data)
+
+
+def _copy(d):
+    return {k: _copy(v) for k, v in d.items()} if isinstance(d, dict) else d
+
+
+# ---- running it ---------------------------------------------------------------------------------
+
+
+def sweep_rows(spec: SweepSpec, records: list) -> list[list]:
+    """Tidy rows [point, *swept values, method, metric, mean, std, n] from the records of every
+    (point, trial) in order (None for a failed trial)."""
+    rows = []
+    T = spec.trials
+    for j, vals in enumerate(spec.values):
+        got = [r for r in records[j * T : (j + 1) * T] if r is not None]
+        methods = list(dict.fromkeys(m for r in got for m in r))
+        for m in methods:
+            metrics = list(dict.fromkeys(k for r in got for k in r.get(m, {})))
+            for k in metrics:
+                v = np.array([r[m][k] for r in got if m in r], float)
+                ok = v[np.isfinite(v)]
+                mean = float(ok.mean()) if ok.size else math.nan
+                std = float(ok.std(ddof=1)) if ok.size > 1 else math.nan
+                rows.append([j, *vals, m, k, mean, std, int(ok.size)])
+    return rows
+
+
+def run_sweep(
+    spec: SweepSpec, out_dir: Path, executor: Executor, progress=None
+) -> tuple[list[Path], list]:
+    """Run a parsed sweep into out_dir (replaced as one set); returns (files written, failed
+    trials). Failed trials are left out of the means (column n) and listed in sweep.json."""
+    from experiments.render import plots
+
+    out_dir = Path(out_dir)
+    check_output_folder(out_dir, "--out", markers=(SUMMARY,))
+    study = _study(spec.study)
+    seeds = spawn_seeds(experiment_seed(spec.seed, f"sweep:{spec.study}"), spec.trials)
+    jobs = [p for p in spec.points for _ in range(spec.trials)]
+    t0 = time.perf_counter()
+    failures = []
+    try:
+        records = executor.map(
+            study.trial, jobs, seeds * len(spec.points), desc="sweep", progress=progress
+        )
+    except TrialsFailed as exc:
+        records, failures = exc.records, exc.failures
+    seconds = time.perf_counter() - t0
+    rows = sweep_rows(spec, records)
+    header = ["point", *spec.swept, "method", "metric", "mean", "std", "n"]
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_folder(out_dir) as stage:
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(header)
+        w.writerows(rows)
+        written = [write_atomic(stage / "sweep.csv", buf.getvalue())]
+        for k, field in enumerate(spec.swept):
+            name = f"sweep_{field}.png"
+            title = f"{spec.study}: {spec.trials} trials per point, swept {field}"
+            written.append(plots.plot_sweep_field(rows, spec.swept, k, title, stage / name))
+        summary = {
+            "study": spec.study,
+            "trials": spec.trials,
+            "seed": spec.seed,
+            "file": spec.source,
+            "swept": spec.swept,
+            "points": [{"values": v, "config": p} for v, p in zip(spec.values, spec.points)],
+            "executor": executor.describe(),
+            "seconds": round(seconds, 2),
+            "failed": [
+                {"point": f.index // spec.trials, "trial": f.index % spec.trials, **asdict(f)}
+                for f in failures
+            ],
+        }
+        written.append(write_atomic(stage / SUMMARY, dumps_json(json_types(summary))))
+    return [out_dir / p.name for p in written], failures
+
+
+def run_sweep_file(
+    path: Path | str,
+    out_dir: Path,
+    workers: int | None = None,
+    dask: str | None = None,
+    progress=None,
+) -> list[Path]:
+    """`trunkslam sweep`: read the file, run it on --workers / --dask (else its [executor],
+    else every local core), write the set. Raises ExperimentFailed (after writing) when trials
+    failed, naming them with their seeds."""
+    spec = load_sweep(path)
+    if workers is None and dask is None:
+        workers, dask = spec.executor.get("workers"), spec.executor.get("dask")
+    with make_executor(workers, dask) as executor:
+        written, failures = run_sweep(spec, out_dir, executor, progress)
+    if failures:
+        shown = "; ".join(str(f) for f in failures[:3])
+        raise ExperimentFailed(
+            f"{len(failures)} trial(s) of the sweep failed ({shown}); the others are in "
+            f"{out_dir}/ ({SUMMARY} lists every failure with its seed)"
+        )
+    return written
