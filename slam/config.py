@@ -50,7 +50,10 @@ class SlamConfig:
         lies outside this (wider) gate of every landmark and tentative feature in view;
         between the two gates it is ignored (status AMBIGUOUS), so a measurement of a mapped
         tree that just failed its gate does not become a duplicate landmark.
-    association_params: extra keyword arguments of `association.associate`.
+    association_params: extra keyword arguments of `association.associate` (for "ihgr-window":
+        the `CostModel` densities and the rounding options).
+    window_scans: K of the "ihgr-window" association (`association.SlidingWindowAssociator`),
+        2..4 intended; see the README for how the default was chosen.
     map_policy: tentative features (`slam.mapping.MapPolicy`).
     initial_pose_sigma: (sigma_x_m, sigma_y_m, sigma_theta_rad) of the start pose when it comes
         from the truth or the origin (0: the map's frame is the start pose).
@@ -78,6 +81,7 @@ class SlamConfig:
     gate_prob: float = 0.999
     new_feature_gate_prob: float = 0.9999
     association_params: dict = field(default_factory=dict)
+    window_scans: int = 3
     map_policy: MapPolicy = field(default_factory=MapPolicy)
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gps_start_fit_m: float = 50.0
@@ -120,6 +124,10 @@ class SlamConfig:
             v = getattr(self, name)
             if not (0 <= v < math.inf):
                 raise SlamError(f"SlamConfig.{name}: must be finite and >= 0, got {v!r}")
+        if isinstance(self.window_scans, bool) or not 1 <= self.window_scans <= 8:
+            raise SlamError(
+                f"SlamConfig.window_scans: must be an integer in 1..8, got {self.window_scans!r}"
+            )
         if not self.max_odometry_gap_s > 0:
             raise SlamError("SlamConfig.max_odometry_gap_s: must be > 0")
         if not self.max_feature_range_m > 0:

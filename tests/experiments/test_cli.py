@@ -192,6 +192,26 @@ def test_simulate_drive_then_slam(tmp_path):
     assert max(s["truth"]["mean_abs_error"].values()) < 0.05
 
 
+def test_slam_with_the_ihgr_window(tmp_path):
+    run = tmp_path / "run.npz"
+    res = runner.invoke(app, ["simulate-drive", "--scans", "40", "--seed", "2", "--out", str(run)])
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["slam", str(run), "--window", "2", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    s = json.loads((out / "summary.json").read_text())
+    assert s["association"] == "ihgr-window" and s["config"]["window_scans"] == 2
+    assert s["window"]["K"] == 2 and s["window"]["steps"] == 40 and s["landmarks"] >= 3
+    assert "window_scans = 2" in (out / "config.toml").read_text()
+    res = runner.invoke(app, ["slam", str(run), "--association", "ihgr-window", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert json.loads((out / "summary.json").read_text())["window"]["K"] == 3
+    res = runner.invoke(
+        app, ["slam", str(run), "--window", "2", "--association", "jcbb", "--out", str(out)]
+    )
+    assert res.exit_code != 0 and "--window" in res.output
+
+
 def test_slam_smooth_and_smooth_after_the_fact(tmp_path):
     run = tmp_path / "run.npz"
     res = runner.invoke(app, ["simulate-drive", "--scans", "80", "--seed", "4", "--out", str(run)])
