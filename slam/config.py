@@ -18,7 +18,12 @@ from dataclasses import dataclass, field, fields, is_dataclass
 
 from slam.errors import SlamError
 from slam.mapping import MapPolicy
-from slam.measurement import DEFAULT_CONSTANT_NOISE, NoiseModel
+from slam.measurement import (
+    DEFAULT_CONSTANT_NOISE,
+    DEFAULT_FIT_FLOOR,
+    DEFAULT_RANGE_BIAS,
+    NoiseModel,
+)
 from slam.vehicle import OdometryNoise
 
 __all__ = ["SlamConfig", "config_from_dict", "config_to_dict"]
@@ -38,7 +43,13 @@ class SlamConfig:
     range_sigma_m, range_sigma_per_m, bearing_sigma_rad, cross_range_sigma_m: when set, they
         override that part of the constant model for every method.
     fit_floor_range_m, fit_floor_bearing_rad: added in quadrature to the fit's noise (model
-        error the fit cannot see; 0 in simulation where trunks are true circles).
+        error the fit cannot see: range quantisation, mixed returns); the defaults are the
+        maximum-likelihood floors of the `geometric` fit in the simulated tree park
+        (`slam.measurement.DEFAULT_FIT_FLOOR`, calibration seeds 1000-1003).
+    range_bias: known mean range error a + b r of each extractor's centres, by method name, as
+        (a_m, b_per_m), subtracted from the ranges r of its circles (extracted, or a sequence's
+        detections of that method); methods not given keep their `DEFAULT_RANGE_BIAS` entry
+        ((0, 0) when it has none).
     laser_pose: (x_m, y_m, theta_rad) of the laser in the vehicle frame, replacing the
         sequence's (a calibrated mounting); None keeps the sequence's.
     gate_prob: chi-square probability of the association gates (passed to `associate`). 0.999
@@ -75,8 +86,9 @@ class SlamConfig:
     range_sigma_per_m: float | None = None
     bearing_sigma_rad: float | None = None
     cross_range_sigma_m: float | None = None
-    fit_floor_range_m: float = 0.0
-    fit_floor_bearing_rad: float = 0.0
+    fit_floor_range_m: float = DEFAULT_FIT_FLOOR[0]
+    fit_floor_bearing_rad: float = DEFAULT_FIT_FLOOR[1]
+    range_bias: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     laser_pose: tuple[float, float, float] | None = None
     gate_prob: float = 0.999
     new_feature_gate_prob: float = 0.9999
@@ -145,6 +157,21 @@ class SlamConfig:
                 raise SlamError(f"SlamConfig.constant_noise.{method}: sigmas must be finite, >= 0")
             models[method] = m
         object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
+        biases = dict(DEFAULT_RANGE_BIAS)
+        for method, v in dict(self.range_bias).items():
+            ok = isinstance(v, (tuple, list)) and len(v) == 2
+            ok = ok and all(isinstance(x, (int, float)) and math.isfinite(x) for x in v)
+            if not ok or abs(v[0]) >= 1.0 or abs(v[1]) >= 0.1:
+                raise SlamError(
+                    f"SlamConfig.range_bias.{method}: expected (a_m, b_per_m) with |a| < 1 m and "
+                    f"|b| < 0.1, got {v!r}"
+                )
+            biases[method] = (float(v[0]), float(v[1]))
+        object.__setattr__(self, "range_bias", types.MappingProxyType(biases))
+
+    def range_bias_for(self, method: str) -> tuple[float, float]:
+        """(a_m, b_per_m): the known mean range error a + b r of circles from `method`."""
+        return tuple(self.range_bias.get(method, (0.0, 0.0)))
 
     def noise_for(self, method: str, has_cov: bool | None = None) -> tuple[str, NoiseModel]:
         """("fit" | "constant", NoiseModel) for circles from `method`. has_cov: whether they carry

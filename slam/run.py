@@ -225,7 +225,7 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
         raw, n_pre = _resolve_features(features, dict(feature_params or {}))
         noise = cfg.noise_for(raw.method)
         floor = (cfg.fit_floor_range_m, cfg.fit_floor_bearing_rad)
-        feat_fn = _from_features(raw, noise, floor)
+        feat_fn = _from_features(raw, noise, floor, cfg.range_bias_for(raw.method))
         if isinstance(features, str) and not seq.has_ranges:
             raise SlamError(
                 f"features: {features!r} extracts from raw scans, and this sequence has none; "
@@ -715,8 +715,9 @@ def _resolve_association(association) -> Callable:
     return call
 
 
-def _from_features(feat_fn: Callable, noise, floor) -> Callable:
-    """(k, scan) -> (Features, z, R) from a features callable."""
+def _from_features(feat_fn: Callable, noise, floor, range_bias=(0.0, 0.0)) -> Callable:
+    """(k, scan) -> (Features, z, R) from a features callable; `range_bias` (a_m, b_per_m), the
+    extractor's known mean range error a + b r, is taken off the ranges."""
 
     def measure(k, scan):
         f = feat_fn(k, scan)
@@ -724,7 +725,7 @@ def _from_features(feat_fn: Callable, noise, floor) -> Callable:
             raise SlamError(
                 f"features: scan {k} gave {type(f).__name__}, expected a features.Features"
             )
-        z, R = measurements_from_features(f, noise, floor)
+        z, R = measurements_from_features(f, noise, floor, range_bias)
         return f, z, R
 
     measure.method = feat_fn.method
@@ -732,20 +733,24 @@ def _from_features(feat_fn: Callable, noise, floor) -> Callable:
 
 
 def _detections_source(seq: Sequence, noise, cfg: SlamConfig) -> Callable:
-    """(k, scan) -> (Features, z, R) from the sequence's precomputed detections: z as stored,
-    R their covariance (plus the fit floor) or the constant model of their method; the Features
-    (circles at the detections) are for the visualiser."""
+    """(k, scan) -> (Features, z, R) from the sequence's precomputed detections: z as stored less
+    the known range bias of their method, R their covariance (plus the fit floor) or the
+    constant model of their method; the Features (circles at the detections, as stored) are for
+    the visualiser."""
     kind, model = noise
     floor = np.diag([cfg.fit_floor_range_m**2, cfg.fit_floor_bearing_rad**2])
+    bias = cfg.range_bias_for(seq.det_method)
 
     def measure(k, scan):
-        z, radius, cov = seq.detections(k)
+        stored, radius, cov = seq.detections(k)
+        z = stored.copy()
+        z[:, 0] -= bias[0] + bias[1] * stored[:, 0]
         R = cov + floor if kind == "fit" else constant_noise(z, model)
         n = z.shape[0]
         c, s_ = np.cos(z[:, 1]), np.sin(z[:, 1])
         f = dataclasses.replace(
             Features.empty(float(seq.scan_t[k]), seq.det_method, seq.n_beams),
-            circle_params=np.column_stack([z[:, 0] * c, z[:, 0] * s_, radius]),
+            circle_params=np.column_stack([stored[:, 0] * c, stored[:, 0] * s_, radius]),
             circle_cov=np.zeros((n, 3, 3)),
             circle_beams=np.zeros((n, 2), np.int64),
             circle_rms_m=np.full(n, np.nan),
