@@ -7,6 +7,7 @@ code 1; anything else is a bug and shows its traceback.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import sys
@@ -50,6 +51,7 @@ class SlamFeatures(StrEnum):
 
 class Association(StrEnum):
     ihgr = "ihgr"
+    ihgr_window = "ihgr-window"
     jcbb = "jcbb"
     nn = "nn"
 
@@ -437,7 +439,22 @@ def slam_cmd(
             "[default: none]"
         ),
     ] = None,
-    association: Annotated[Association, typer.Option(help="data association")] = Association.ihgr,
+    association: Annotated[
+        Association,
+        typer.Option(
+            help="data association: single-scan IHGR, the K-scan IHGR window (K: --window), "
+            "JCBB or NN"
+        ),
+    ] = Association.ihgr,
+    window: Annotated[
+        int | None,
+        typer.Option(
+            min=1,
+            max=8,
+            help="K of the IHGR window (implies --association ihgr-window) "
+            "[default: window_scans of the settings, 3]",
+        ),
+    ] = None,
     config: Annotated[
         str | None,
         typer.Option(
@@ -476,6 +493,14 @@ def slam_cmd(
     from slam import SlamConfig
 
     cfg = load_slam_config(config) if config is not None else SlamConfig()
+    if window is not None:
+        if association not in (Association.ihgr, Association.ihgr_window):
+            raise typer.BadParameter(
+                f"--window is the IHGR window's K; not for --association {association.value}",
+                param_hint="--window",
+            )
+        association = Association.ihgr_window
+        cfg = dataclasses.replace(cfg, window_scans=window)
     if dump_config:
         typer.echo(config_toml(cfg, f"trunkslam slam settings ({config or 'defaults'})"), nl=False)
         return

@@ -18,7 +18,12 @@ from dataclasses import dataclass, field, fields, is_dataclass
 
 from slam.errors import SlamError
 from slam.mapping import MapPolicy
-from slam.measurement import DEFAULT_CONSTANT_NOISE, NoiseModel
+from slam.measurement import (
+    DEFAULT_CONSTANT_NOISE,
+    DEFAULT_FIT_FLOOR,
+    DEFAULT_RANGE_BIAS,
+    NoiseModel,
+)
 from slam.vehicle import OdometryNoise
 
 __all__ = ["SlamConfig", "config_from_dict", "config_to_dict"]
@@ -38,7 +43,13 @@ class SlamConfig:
     range_sigma_m, range_sigma_per_m, bearing_sigma_rad, cross_range_sigma_m: when set, they
         override that part of the constant model for every method.
     fit_floor_range_m, fit_floor_bearing_rad: added in quadrature to the fit's noise (model
-        error the fit cannot see; 0 in simulation where trunks are true circles).
+        error the fit cannot see: range quantisation, mixed returns); the defaults are the
+        maximum-likelihood floors of the `geometric` fit in the simulated tree park
+        (`slam.measurement.DEFAULT_FIT_FLOOR`, calibration seeds 1000-1003).
+    range_bias: known mean range error a + b r of each extractor's centres, by method name, as
+        (a_m, b_per_m), subtracted from the ranges r of its circles (extracted, or a sequence's
+        detections of that method); methods not given keep their `DEFAULT_RANGE_BIAS` entry
+        ((0, 0) when it has none).
     laser_pose: (x_m, y_m, theta_rad) of the laser in the vehicle frame, replacing the
         sequence's (a calibrated mounting); None keeps the sequence's.
     gate_prob: chi-square probability of the association gates (passed to `associate`). 0.999
@@ -50,7 +61,10 @@ class SlamConfig:
         lies outside this (wider) gate of every landmark and tentative feature in view;
         between the two gates it is ignored (status AMBIGUOUS), so a measurement of a mapped
         tree that just failed its gate does not become a duplicate landmark.
-    association_params: extra keyword arguments of `association.associate`.
+    association_params: extra keyword arguments of `association.associate` (for "ihgr-window":
+        the `CostModel` densities and the rounding options).
+    window_scans: K of the "ihgr-window" association (`association.SlidingWindowAssociator`),
+        2..4 intended; see the README for how the default was chosen.
     map_policy: tentative features (`slam.mapping.MapPolicy`).
     initial_pose_sigma: (sigma_x_m, sigma_y_m, sigma_theta_rad) of the start pose when it comes
         from the truth or the origin (0: the map's frame is the start pose).
@@ -72,12 +86,14 @@ class SlamConfig:
     range_sigma_per_m: float | None = None
     bearing_sigma_rad: float | None = None
     cross_range_sigma_m: float | None = None
-    fit_floor_range_m: float = 0.0
-    fit_floor_bearing_rad: float = 0.0
+    fit_floor_range_m: float = DEFAULT_FIT_FLOOR[0]
+    fit_floor_bearing_rad: float = DEFAULT_FIT_FLOOR[1]
+    range_bias: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     laser_pose: tuple[float, float, float] | None = None
     gate_prob: float = 0.999
     new_feature_gate_prob: float = 0.9999
     association_params: dict = field(default_factory=dict)
+    window_scans: int = 3
     map_policy: MapPolicy = field(default_factory=MapPolicy)
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gps_start_fit_m: float = 50.0
@@ -120,6 +136,10 @@ class SlamConfig:
             v = getattr(self, name)
             if not (0 <= v < math.inf):
                 raise SlamError(f"SlamConfig.{name}: must be finite and >= 0, got {v!r}")
+        if isinstance(self.window_scans, bool) or not 1 <= self.window_scans <= 8:
+            raise SlamError(
+                f"SlamConfig.window_scans: must be an integer in 1..8, got {self.window_scans!r}"
+            )
         if not self.max_odometry_gap_s > 0:
             raise SlamError("SlamConfig.max_odometry_gap_s: must be > 0")
         if not self.max_feature_range_m > 0:
@@ -137,12 +157,28 @@ class SlamConfig:
                 raise SlamError(f"SlamConfig.constant_noise.{method}: sigmas must be finite, >= 0")
             models[method] = m
         object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
+        biases = dict(DEFAULT_RANGE_BIAS)
+        for method, v in dict(self.range_bias).items():
+            ok = isinstance(v, (tuple, list)) and len(v) == 2
+            ok = ok and all(isinstance(x, (int, float)) and math.isfinite(x) for x in v)
+            if not ok or abs(v[0]) >= 1.0 or abs(v[1]) >= 0.1:
+                raise SlamError(
+                    f"SlamConfig.range_bias.{method}: expected (a_m, b_per_m) with |a| < 1 m and "
+                    f"|b| < 0.1, got {v!r}"
+                )
+            biases[method] = (float(v[0]), float(v[1]))
+        object.__setattr__(self, "range_bias", types.MappingProxyType(biases))
+
+    def range_bias_for(self, method: str) -> tuple[float, float]:
+        """(a_m, b_per_m): the known mean range error a + b r of circles from `method`."""
+        return tuple(self.range_bias.get(method, (0.0, 0.0)))
 
     def __reduce__(self):
-        """Pickled as its fields, the read-only `constant_noise` as a plain dict (a mapping
-        proxy does not pickle), so a config can travel to worker processes."""
+        """Pickled as its fields, the read-only `constant_noise` and `range_bias` as plain dicts
+        (a mapping proxy does not pickle), so a config can travel to worker processes."""
         state = {f.name: getattr(self, f.name) for f in fields(self)}
         state["constant_noise"] = dict(self.constant_noise)
+        state["range_bias"] = dict(self.range_bias)
         return (_slam_config, (state,))
 
     def noise_for(self, method: str, has_cov: bool | None = None) -> tuple[str, NoiseModel]:

@@ -60,6 +60,8 @@ class SlamLog:
     final_x, final_P: the final state. landmark ids index `final_x` via landmark_id order.
     start: "truth", "gps" or "origin". features_method, association_method: names used.
     config: the resolved configuration (plain types).
+    window_stats: association "ihgr-window" only: K, steps, fractional first LPs, steps the
+        rounding changed (more than one LP solve), LP solves, track hypotheses built.
     """
 
     scan_t: np.ndarray
@@ -104,6 +106,7 @@ class SlamLog:
     features_method: str
     association_method: str
     config: dict
+    window_stats: dict | None = None
 
     @property
     def n_scans(self) -> int:
@@ -144,6 +147,7 @@ class LogBuilder:
         self.laser_pose = np.zeros(3)
         self.n_obs: dict[int, int] = {}
         self.first_scan: dict[int, int] = {}
+        self._meas_row0 = np.zeros(n, np.int64)  # first measurement row of each scan
 
     def started(self, pose: np.ndarray, cov: np.ndarray, laser_pose: np.ndarray) -> None:
         """The filter's prior at the first scan and the laser pose used."""
@@ -193,6 +197,7 @@ class LogBuilder:
         self.nis[k] = nis
         self.nis_dof[k] = nis_dof
         m = z.shape[0]
+        self._meas_row0[k] = len(self.meas["scan"])
         self.counts["n_features"][k] = m
         self.counts["n_associated"][k] = n_associated
         self.counts["n_tentative"][k] = n_tentative
@@ -209,8 +214,20 @@ class LogBuilder:
             self.timing[key][k] = b - a
         self.timing["total"][k] = times[-1] - times[0]
 
+    def retrack(self, k: int, feature: int, track: int) -> None:
+        """Give measurement `feature` of the already logged scan k the track id `track` (a
+        window's new landmark: its earlier sightings)."""
+        self.meas["track"][int(self._meas_row0[k]) + int(feature)] = int(track)
+
     def build(
-        self, state, *, start: str, features_method: str, association_method: str, config: dict
+        self,
+        state,
+        *,
+        start: str,
+        features_method: str,
+        association_method: str,
+        config: dict,
+        window_stats: dict | None = None,
     ) -> SlamLog:
         ids = state.landmark_ids
         obs, meas = self.obs, self.meas
@@ -254,4 +271,5 @@ class LogBuilder:
             features_method=features_method,
             association_method=association_method,
             config=config,
+            window_stats=window_stats,
         )

@@ -14,6 +14,17 @@ Per scan k (times `scan_t[k]`), five steps, each a function below:
    measurements that gate with no landmark or tentative start new tentatives; tentatives not
    associated are dropped.
 
+With association "ihgr-window" steps 3 and 5 are `_associate_window` and `_manage_window`: the
+K-scan `association.SlidingWindowAssociator` (K = `SlamConfig.window_scans`) replaces the
+tentative features. Every scan it is offered the landmarks in view and the laser's world pose
+with the odometry drift over the window (the sum of the last K - 1 prediction noises) as its
+relative uncertainty; it commits the newest scan's pairings (fed to the update as they are) and
+re-decides, over the window, which earlier unpaired measurements are first sightings of one new
+landmark, which a mapped landmark missed by its own scan explains, and which are clutter. A
+measurement whose track was seen in min(confirm_scans, K) scans of the window becomes a
+landmark (initialised from the current measurement); the window is told (`mark_mapped`), and
+the track's earlier sightings get its id in the log (the smoother's "all" measurements).
+
 The start pose is the truth at the first scan when the sequence has truth, else a fit of the
 dead-reckoned antenna track to the GPS fixes of the first `gps_start_fit_m` metres
 (`slam.start`; the heading from `initial_heading_rad` when given), else the origin.
@@ -89,18 +100,24 @@ class _Setup:
     fov: tuple[float, float]  # first and last beam angle, rad, laser frame
     max_range: float
     gate_new: float  # chi2 (2 dof) of the gate outside which a measurement may be new
+    window: int = 0  # K of the "ihgr-window" association, 0 for a single-scan method
 
 
 @dataclass(frozen=True, eq=False)
 class _Association:
     """One scan's association: assign (m,) is an index into [landmarks in view, tentatives in
     view] or -1; ambiguous (m,) marks unassigned measurements inside the wider gate of something;
-    lm_idx, t_idx: state positions of the landmarks in view and indices of the tentatives."""
+    lm_idx, t_idx: state positions of the landmarks in view and indices of the tentatives.
+    Window only: sightings (m,) scans of the window that saw an unpaired measurement's landmark
+    (`WindowDecision.sightings`); tracks: measurement -> [(scans_ago, measurement)] of its
+    chosen new-landmark track (indices into each scan's full measurement list)."""
 
     assign: np.ndarray
     ambiguous: np.ndarray
     lm_idx: np.ndarray
     t_idx: np.ndarray
+    sightings: np.ndarray | None = None
+    tracks: dict | None = None
 
 
 def run(
@@ -119,8 +136,9 @@ def run(
     features: a `features.extract_features` method name ("paper", "geometric", "bailey"),
         "detections" (the sequence's precomputed detections), a callable (k, scan) -> Features,
         or a list of N precomputed Features (laser frame).
-    association: "ihgr", "jcbb", "nn", or a callable with the signature of
-        `association.associate` minus `method` (z, R, z_hat, H, P, gate_prob=..., **params).
+    association: "ihgr", "jcbb", "nn", "ihgr-window" (K-scan IHGR, K = config.window_scans;
+        see the module docstring), or a callable with the signature of `association.associate`
+        minus `method` (z, R, z_hat, H, P, gate_prob=..., **params).
     feature_params: keyword arguments for `extract_features` (method name only).
     visualiser: an object with the methods of `NullVisualiser` (default: nothing is logged).
     initial_heading_rad: overrides the start heading (needed for GPS starts without motion).
@@ -141,26 +159,36 @@ def run(
     pose0, cov0, start = _start(s, initial_heading_rad)
     state = Filter(initial_state(pose0, cov0), first_estimates=s.cfg.first_estimates_jacobians)
     tent = Tentatives.empty()
+    win = _Window.start(s) if s.window else None
     next_id = 0
     book = LogBuilder(np.asarray(sequence.scan_t, dtype=np.float64))
     book.started(pose0, cov0, s.laser)
     N = sequence.n_scans
     for k in range(N):
         t = [time.perf_counter()]
-        _predict(s, state, k, book)
+        Q = _predict(s, state, k, book)
         book.predicted(k, state.pose, state.pose_cov)
         t.append(time.perf_counter())
         scan, f, z, R, status = _measure(s, k)
         t.append(time.perf_counter())
-        a = _associate(s, state, tent, z, R, status != OUT_OF_RANGE)
+        if win is None:
+            a = _associate(s, state, tent, z, R, status != OUT_OF_RANGE)
+        else:
+            a = _associate_window(s, state, win, z, R, status != OUT_OF_RANGE, Q)
         t.append(time.perf_counter())
         nis, n_used = _update(s, state, z, R, a, status, book, k)
         t.append(time.perf_counter())
         track = np.where(status >= 0, status, -1)
-        tent, next_id = _manage(s, state, tent, z, R, a, status, track, book, k, next_id)
+        if win is None:
+            tent, next_id = _manage(s, state, tent, z, R, a, status, track, book, k, next_id)
+            n_pending = len(tent)
+        else:
+            next_id, n_pending = _manage_window(
+                s, state, win, z, R, a, status, track, book, k, next_id
+            )
         t.append(time.perf_counter())
         radius = np.asarray(f.circle_params, float).reshape(-1, 3)[:, 2]
-        book.scan_done(k, state, len(tent), z, R, status, track, n_used, nis, 2 * n_used, t, radius)
+        book.scan_done(k, state, n_pending, z, R, status, track, n_used, nis, 2 * n_used, t, radius)
         _visualise(vis, k, sequence, scan, f, state, tent, s.laser, z, status)
         if progress is not None:
             progress(k + 1, N)
@@ -170,6 +198,7 @@ def run(
         features_method=getattr(s.features, "method", "custom"),
         association_method=getattr(s.associate, "method", "custom"),
         config=s.cfg.to_dict(),
+        window_stats=win.stats() if win is not None else None,
     )
 
 
@@ -196,7 +225,7 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
         raw, n_pre = _resolve_features(features, dict(feature_params or {}))
         noise = cfg.noise_for(raw.method)
         floor = (cfg.fit_floor_range_m, cfg.fit_floor_bearing_rad)
-        feat_fn = _from_features(raw, noise, floor)
+        feat_fn = _from_features(raw, noise, floor, cfg.range_bias_for(raw.method))
         if isinstance(features, str) and not seq.has_ranges:
             raise SlamError(
                 f"features: {features!r} extracts from raw scans, and this sequence has none; "
@@ -204,6 +233,7 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
             )
     _check_runnable(seq, n_pre, cfg)
     a0 = float(seq.scan_angle_min)
+    window = cfg.window_scans if association == WINDOW else 0
     return _Setup(
         seq=seq,
         cfg=cfg,
@@ -217,20 +247,22 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
         fov=(a0, a0 + float(seq.scan_angle_increment) * (seq.n_beams - 1)),
         max_range=min(float(seq.scan_max_range), cfg.max_feature_range_m),
         gate_new=-2.0 * math.log1p(-max(cfg.new_feature_gate_prob, cfg.gate_prob)),
+        window=window,
     )
 
 
 # ---- the five steps -----------------------------------------------------------------------------
 
 
-def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> None:
+def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> np.ndarray:
     """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan).
 
     The increment and its covariance in the frame of the pose at k - 1 go to the log (the
     smoother's odometry factors): the motion model is invariant to where the car is, so the
-    world-frame Q is that covariance rotated by the heading."""
+    world-frame Q is that covariance rotated by the heading. Returns Q (3, 3), world frame
+    (zeros at k = 0)."""
     if k == 0:
-        return
+        return np.zeros((3, 3))
     t = s.seq.scan_t
     p0 = state.pose.copy()
     p1, F, Q = integrate(s.model, p0, s.odometry, t[k - 1], t[k], s.cfg.odometry_noise)
@@ -240,6 +272,7 @@ def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> None:
     A = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])  # world -> frame of p0
     book.odometry(k, delta, A @ Q @ A.T)
     state.predict(p1, F, Q)
+    return Q
 
 
 def _measure(s: _Setup, k: int):
@@ -371,6 +404,162 @@ def _manage(s: _Setup, state: Filter, tent, z, R, a: _Association, status, track
         book.n_obs[lid] = int(tent.hits[ti]) + 1
         book.first_scan[lid] = k
     return tent_new, next_id
+
+
+# ---- the K-scan window (association "ihgr-window") ----------------------------------------------
+
+WINDOW = "ihgr-window"
+
+
+@dataclass(eq=False)
+class _Window:
+    """The run's `SlidingWindowAssociator` and what the loop remembers of the window's scans:
+    for each of the last K - 1 scans its index k, the positions of its usable measurements
+    (the associator numbers only those) and the process noise of its prediction."""
+
+    assoc: object  # association.SlidingWindowAssociator
+    scans: list  # [(k, use (m_use,) int, Q (3, 3))], oldest first
+    n_steps: int = 0
+    n_fractional: int = 0
+    n_rounded: int = 0  # steps whose rounding needed more than one LP
+    n_lp_solves: int = 0
+    n_tracks: int = 0
+
+    @classmethod
+    def start(cls, s: _Setup) -> _Window:
+        from association import CostModel, SlidingWindowAssociator
+        from association.rounding import ROUNDING_OPTIONS
+
+        params = dict(s.cfg.association_params)
+        cost_keys = {f.name for f in dataclasses.fields(CostModel)}
+        unknown = set(params) - cost_keys - set(ROUNDING_OPTIONS)
+        if unknown:
+            raise SlamError(
+                f"association_params: {sorted(unknown)} are not parameters of {WINDOW!r} "
+                f"(allowed: {sorted(cost_keys | set(ROUNDING_OPTIONS))})"
+            )
+        model = CostModel(**{k: v for k, v in params.items() if k in cost_keys})
+        rounding = {k: v for k, v in params.items() if k in ROUNDING_OPTIONS}
+        assoc = SlidingWindowAssociator(s.window, s.cfg.gate_prob, model, **rounding)
+        return cls(assoc, [])
+
+    def stats(self) -> dict:
+        """Window figures of the run: steps, how many first LPs were fractional, how many steps
+        the rounding changed (more than one LP solve: a fractional LP was rounded and
+        re-solved), LP solves, track hypotheses built."""
+        return {
+            "K": self.assoc.K,
+            "steps": self.n_steps,
+            "fractional_lps": self.n_fractional,
+            "rounded_steps": self.n_rounded,
+            "lp_solves": self.n_lp_solves,
+            "track_hypotheses": self.n_tracks,
+        }
+
+
+def _associate_window(
+    s: _Setup, state: Filter, win: _Window, z, R, usable, Q: np.ndarray
+) -> _Association:
+    """Step 3 with the K-scan window: every landmark in view is offered (a track is not built
+    where it could be a mapped landmark, so the window must see them all), on the sub-state
+    [pose, those landmarks]; the laser's world pose goes with the odometry drift over the window
+    as its relative covariance."""
+    cfg = s.cfg
+    K = win.assoc.K
+    z_lm, H_lm = se2.observe(state.pose, state.landmarks_xy, s.laser)
+    lm_idx = np.flatnonzero(_in_view(z_lm, s.max_range, s.fov, cfg))
+    n = lm_idx.size
+    m = z.shape[0]
+    ambiguous = np.zeros(m, bool)
+    use = np.flatnonzero(usable)
+    cols = landmark_columns(lm_idx)  # (n, 5)
+    if use.size and n:
+        C5 = state.P[cols[:, :, None], cols[:, None, :]]
+        ambiguous[use] = _gates(z[use], R[use], z_lm[lm_idx], H_lm[lm_idx], C5, s.gate_new).any(1)
+    H = np.zeros((n, 2, 3 + 2 * n))
+    H[:, :, :3] = H_lm[lm_idx, :, :3]
+    for j in range(n):
+        H[j, :, 3 + 2 * j : 5 + 2 * j] = H_lm[lm_idx[j], :, 3:5]
+    sub = np.concatenate([[0, 1, 2], cols[:, 3:].ravel()]).astype(np.int64)
+    P_sub = state.P[np.ix_(sub, sub)]
+    drift = Q + sum((q for _, _, q in win.scans[len(win.scans) - (K - 2) :]), np.zeros((3, 3)))
+    if K < 2:
+        drift = np.zeros((3, 3))
+    pose = state.pose
+    p_laser, dp = se2.sensor_position(pose, s.laser)
+    J = np.array([[1.0, 0.0, dp[0]], [0.0, 1.0, dp[1]], [0.0, 0.0, 1.0]])
+    laser_world = np.array([p_laser[0], p_laser[1], pose[2] + s.laser[2]])
+    out = win.assoc.step(
+        z[use],
+        R[use],
+        z_lm[lm_idx],
+        H,
+        0.5 * (P_sub + P_sub.T),
+        sensor_pose=laser_world,
+        sensor_pose_cov=0.5 * (J @ drift @ J.T + (J @ drift @ J.T).T),
+        feature_ids=state.landmark_ids[lm_idx].astype(np.int64),
+    )
+    dec = win.assoc.last
+    win.n_steps += 1
+    win.n_fractional += int(dec.rounding.fractional)
+    win.n_rounded += int(dec.rounding.lp_solves > 1)
+    win.n_lp_solves += int(dec.rounding.lp_solves)
+    win.n_tracks += int(dec.n_tracks)
+    assign = np.full(m, -1, np.int64)
+    assign[use] = out
+    sightings = np.zeros(m, np.int64)
+    sightings[use] = dec.sightings
+    # the chosen tracks in the scans' own measurement numbering
+    past = {ago: u for ago, (_, u, _) in enumerate(reversed(win.scans), start=1)}
+    past[0] = use
+    tracks = {}
+    for members in dec.tracks:
+        ago_last, i_last = members[-1]
+        if ago_last == 0:
+            tracks[int(use[i_last])] = [
+                (ago, int(past[ago][i])) for ago, i in members if ago in past
+            ]
+    win.scans = (win.scans + [(None, use, Q)])[-(K - 1) :] if K > 1 else []
+    ambiguous &= assign < 0
+    return _Association(assign, ambiguous, lm_idx, np.zeros(0, np.int64), sightings, tracks)
+
+
+def _manage_window(
+    s: _Setup, state: Filter, win: _Window, z, R, a: _Association, status, track, book, k, next_id
+):
+    """Step 5 with the window: an unpaired measurement whose track was seen in
+    min(confirm_scans, K) scans of the window joins the map; ambiguous ones (inside the wider
+    gate of a landmark) are ignored and leave the window's pool like the mapped ones; the rest
+    stay open in the window (status NEW_TENTATIVE). Returns (next free id, open measurements)."""
+    need = min(s.cfg.map_policy.confirm_scans, win.assoc.K)
+    use_pos = {int(i): j for j, i in enumerate(win.scans[-1][1])} if win.scans else None
+    if use_pos is None:  # K = 1 keeps no scans: number this scan's usable measurements here
+        use_pos = {int(i): j for j, i in enumerate(np.flatnonzero(status != OUT_OF_RANGE))}
+    closed = []
+    n_open = 0
+    for i in np.flatnonzero((a.assign < 0) & (status != OUT_OF_RANGE)):
+        if a.ambiguous[i]:
+            status[i] = AMBIGUOUS
+            closed.append(use_pos[int(i)])
+            continue
+        if a.sightings[i] < need:
+            n_open += 1
+            continue
+        lid = next_id
+        next_id += 1
+        state.add_landmark(z[i], R[i], s.laser, lid)
+        status[i] = CONFIRMED
+        track[i] = lid
+        members = a.tracks.get(int(i), [])
+        for ago, j in members:
+            if ago > 0:
+                book.retrack(k - ago, j, lid)
+        book.n_obs[lid] = max(int(a.sightings[i]), 1)
+        book.first_scan[lid] = k
+        closed.append(use_pos[int(i)])
+    if closed:
+        win.assoc.mark_mapped(closed)
+    return next_id, n_open
 
 
 # ---- helpers ------------------------------------------------------------------------------------
@@ -511,8 +700,12 @@ def _resolve_association(association) -> Callable:
 
     if not isinstance(association, str):
         raise SlamError(f"association: expected a method name or a callable, got {association!r}")
+    if association == WINDOW:
+        call = _resolve_association("ihgr")  # not called: the window has its own step
+        call.method = WINDOW
+        return call
     if association not in METHODS:
-        raise SlamError(f"association: unknown method {association!r}; known: {list(METHODS)}")
+        raise SlamError(f"association: unknown method {association!r}; known: {[*METHODS, WINDOW]}")
     method = association
 
     def call(z, R, z_hat, H, P, gate_prob=0.99, **params):
@@ -522,8 +715,9 @@ def _resolve_association(association) -> Callable:
     return call
 
 
-def _from_features(feat_fn: Callable, noise, floor) -> Callable:
-    """(k, scan) -> (Features, z, R) from a features callable."""
+def _from_features(feat_fn: Callable, noise, floor, range_bias=(0.0, 0.0)) -> Callable:
+    """(k, scan) -> (Features, z, R) from a features callable; `range_bias` (a_m, b_per_m), the
+    extractor's known mean range error a + b r, is taken off the ranges."""
 
     def measure(k, scan):
         f = feat_fn(k, scan)
@@ -531,7 +725,7 @@ def _from_features(feat_fn: Callable, noise, floor) -> Callable:
             raise SlamError(
                 f"features: scan {k} gave {type(f).__name__}, expected a features.Features"
             )
-        z, R = measurements_from_features(f, noise, floor)
+        z, R = measurements_from_features(f, noise, floor, range_bias)
         return f, z, R
 
     measure.method = feat_fn.method
@@ -539,20 +733,24 @@ def _from_features(feat_fn: Callable, noise, floor) -> Callable:
 
 
 def _detections_source(seq: Sequence, noise, cfg: SlamConfig) -> Callable:
-    """(k, scan) -> (Features, z, R) from the sequence's precomputed detections: z as stored,
-    R their covariance (plus the fit floor) or the constant model of their method; the Features
-    (circles at the detections) are for the visualiser."""
+    """(k, scan) -> (Features, z, R) from the sequence's precomputed detections: z as stored less
+    the known range bias of their method, R their covariance (plus the fit floor) or the
+    constant model of their method; the Features (circles at the detections, as stored) are for
+    the visualiser."""
     kind, model = noise
     floor = np.diag([cfg.fit_floor_range_m**2, cfg.fit_floor_bearing_rad**2])
+    bias = cfg.range_bias_for(seq.det_method)
 
     def measure(k, scan):
-        z, radius, cov = seq.detections(k)
+        stored, radius, cov = seq.detections(k)
+        z = stored.copy()
+        z[:, 0] -= bias[0] + bias[1] * stored[:, 0]
         R = cov + floor if kind == "fit" else constant_noise(z, model)
         n = z.shape[0]
         c, s_ = np.cos(z[:, 1]), np.sin(z[:, 1])
         f = dataclasses.replace(
             Features.empty(float(seq.scan_t[k]), seq.det_method, seq.n_beams),
-            circle_params=np.column_stack([z[:, 0] * c, z[:, 0] * s_, radius]),
+            circle_params=np.column_stack([stored[:, 0] * c, stored[:, 0] * s_, radius]),
             circle_cov=np.zeros((n, 3, 3)),
             circle_beams=np.zeros((n, 2), np.int64),
             circle_rms_m=np.full(n, np.nan),

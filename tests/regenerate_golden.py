@@ -28,6 +28,7 @@ FILES = {
     "circles": GOLDEN / "circles_quick.json",
     "slam": GOLDEN / "exp_slam_quick.json",
     "victoria_park": GOLDEN / "victoria_park_1000.json",
+    "window_loop": GOLDEN / "window_loop.json",
 }
 
 
@@ -83,7 +84,44 @@ def victoria_park_1000() -> dict:
     }
 
 
-COMPUTE = {"circles": circles_quick, "slam": slam_quick, "victoria_park": victoria_park_1000}
+WINDOW_LOOP_METHODS = (("IHGR window K = 3", "ihgr-window", 3), ("IHGR (single scan)", "ihgr", 0))
+
+
+def window_loop() -> dict:
+    """The IHGR window in the SLAM loop (`experiments.paper.association_loop.tree_park_loop`):
+    2 tree-park runs of 170 scans with the odometry noise x2, seed 0, the K = 3 window beside
+    single-scan IHGR: landmarks, false pairings, duplicates, missed trees, pose error."""
+    from experiments.paper.association_loop import tree_park_loop
+
+    rows = tree_park_loop(
+        np.random.default_rng(experiment_seed(0, "window_loop")),
+        2,
+        noise_scales=(2.0,),
+        methods=WINDOW_LOOP_METHODS,
+        n_scans=170,
+    )
+    keys = ("landmarks", "false_pairings", "updates", "duplicates", "missed_trees")
+    out = {
+        r["method"]: {
+            **{k: r[k] for k in keys},
+            "pose_error_m": round(r["pose_error_m"], 5),
+            "window_fractional": r["window_fractional"],
+        }
+        for r in rows
+    }
+    out["_note"] = (
+        "written by `python tests/regenerate_golden.py window_loop`; compared by "
+        "tests/experiments/test_association_loop.py"
+    )
+    return out
+
+
+COMPUTE = {
+    "circles": circles_quick,
+    "slam": slam_quick,
+    "victoria_park": victoria_park_1000,
+    "window_loop": window_loop,
+}
 
 
 def main(names: list[str]) -> None:

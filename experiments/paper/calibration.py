@@ -19,9 +19,16 @@ from experiments.io.writers import write_table
 from experiments.paper.slam import METHODS, extractor_params
 from experiments.sim.trajectory import CycabParams, simulate_cycab_run
 from features import extract_features
-from slam import DEFAULT_CONSTANT_NOISE, interpolate_poses, se2, wrap_angle
+from slam import DEFAULT_CONSTANT_NOISE, SlamConfig, interpolate_poses, se2, wrap_angle
+from slam.measurement import DEFAULT_FIT_FLOOR, measurements_from_features
 
-__all__ = ["SEEDS", "calibrate_measurement_noise", "calibration_trial", "run"]
+__all__ = [
+    "SEEDS",
+    "calibrate_fit_floor",
+    "calibrate_measurement_noise",
+    "calibration_trial",
+    "run",
+]
 
 SEEDS = (1000, 1001, 1002, 1003)
 
@@ -89,8 +96,11 @@ def calibrate_measurement_noise(
         qb = _fit(nll_bearing, [0.001, 0.005], xatol=1e-8)
         sr = qa[0] + qa[1] * r
         sb2 = qb[0] ** 2 + (qb[1] / r) ** 2
+        bias_ab = np.linalg.lstsq(np.column_stack([np.ones_like(r), r]), er, rcond=None)[0]
         out[m] = {
             "n": len(v),
+            "range_bias_a_m": float(bias_ab[0]),
+            "range_bias_b_per_m": float(bias_ab[1]),
             "range_rms_m": float(np.sqrt(np.mean(er**2))),
             "range_mean_m": float(np.mean(er)),
             "bearing_rms_rad": float(np.sqrt(np.mean(eb**2))),
@@ -102,6 +112,53 @@ def calibrate_measurement_noise(
             "normalised_var_bearing": float(np.mean(eb**2 / sb2)),
         }
     return out
+
+
+def calibrate_fit_floor(
+    seeds=SEEDS, cycab: CycabParams | None = None, scene: str = "tree_park", method="geometric"
+) -> dict:
+    """Maximum-likelihood floors (f_r m, f_b rad) of R = R_fit + diag(f_r^2, f_b^2) for the
+    centres of `method`'s circles on trunks (as `calibrate_measurement_noise` finds them), with
+    the mean NIS per degree of freedom of the errors under R_fit alone and with the floors."""
+    cycab = cycab or CycabParams()
+    noise = ("fit", None)
+    rows = []
+    for seed in seeds:
+        seq = simulate_cycab_run(np.random.default_rng(seed), scene, cycab)
+        truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+        lm = seq.truth_landmarks
+        for k in range(seq.n_scans):
+            lw = se2.compose(truth[k], seq.laser_pose)
+            f = extract_features(seq.scan(k), method, **extractor_params(method, cycab))
+            z, R = measurements_from_features(f, noise)
+            for i, (a, b) in enumerate(f.circle_beams):
+                j, c, n_ret = dominant_label(run_labels(seq.scan_labels[k], a, b), True)
+                if n_ret == 0 or j >= lm.shape[0] or 2 * c <= n_ret:
+                    continue
+                d = lm[j, :2] - lw[:2]
+                er = z[i, 0] - math.hypot(d[0], d[1])
+                eb = float(wrap_angle(z[i, 1] - (math.atan2(d[1], d[0]) - lw[2])))
+                rows.append((er, eb, R[i, 0, 0], R[i, 0, 1], R[i, 1, 1]))
+    A = np.array(rows)
+
+    def nis(q):
+        rr, rb, bb = A[:, 2] + q[0] ** 2, A[:, 3], A[:, 4] + q[1] ** 2
+        det = rr * bb - rb**2
+        v = (bb * A[:, 0] ** 2 - 2 * rb * A[:, 0] * A[:, 1] + rr * A[:, 1] ** 2) / det
+        return v, det
+
+    def nll(q):
+        v, det = nis(q)
+        return float(np.sum(0.5 * np.log(det) + 0.5 * v))
+
+    q = _fit(nll, [0.003, 1e-4], xatol=1e-8)
+    return {
+        "n": len(A),
+        "floor_range_m": float(q[0]),
+        "floor_bearing_rad": float(q[1]),
+        "nis_per_dof_fit": float(np.mean(nis([0.0, 0.0])[0]) / 2),
+        "nis_per_dof_floors": float(np.mean(nis(q)[0]) / 2),
+    }
 
 
 def _fit(nll, start, xatol: float) -> np.ndarray:
@@ -120,6 +177,7 @@ def run(ctx) -> None:
     header = ["method", "circles", "range mean (m)", "range RMS (m)", "bearing RMS (rad)"]
     header += [f"fitted {k}" for k in keys] + [f"in use {k}" for k in keys]
     header += ["normalised var range", "normalised var bearing"]
+    header += ["fitted range bias a (m)", "fitted range bias b (m/m)", "in use range bias (a, b)"]
     rows = []
     for m, f in fits.items():
         rows.append(
@@ -127,6 +185,7 @@ def run(ctx) -> None:
             + [f[k] for k in keys]
             + list(DEFAULT_CONSTANT_NOISE[m])
             + [f["normalised_var_range"], f["normalised_var_bearing"]]
+            + [f["range_bias_a_m"], f["range_bias_b_per_m"], list(SlamConfig().range_bias_for(m))]
         )
     ctx.outputs += write_table(
         ctx.out_dir / "noise_calibration",
@@ -137,6 +196,35 @@ def run(ctx) -> None:
             f"Seeds {list(SEEDS)}, 240 scans each, circles whose beams with a return mostly hit "
             "one trunk. sigma_range = a + b r, sigma_bearing^2 = c^2 + (t / r)^2. 'in use' is "
             "slam.DEFAULT_CONSTANT_NOISE (the fits rounded up to two digits). A normalised "
-            "variance of 1 means the fitted model matches the errors."
+            "variance of 1 means the fitted model matches the errors. 'fitted range bias': the "
+            "least-squares line a + b r through the range errors; 'in use': "
+            "slam.measurement.DEFAULT_RANGE_BIAS (the fits to three digits, for the extractors "
+            "whose mean range error exceeds a tenth of their spread), subtracted from their "
+            "ranges in slam.run."
+        ),
+    )
+    fl = calibrate_fit_floor()
+    ctx.config["noise-calibration"]["fit_floor"] = fl
+    ctx.outputs += write_table(
+        ctx.out_dir / "noise_calibration_floor",
+        ["method", "circles", "floor range (m)", "floor bearing (rad)", "in use range (m)"]
+        + ["in use bearing (rad)", "NIS per dof, fit covariance", "NIS per dof, with floors"],
+        [
+            [
+                "geometric",
+                fl["n"],
+                fl["floor_range_m"],
+                fl["floor_bearing_rad"],
+                *DEFAULT_FIT_FLOOR,
+                fl["nis_per_dof_fit"],
+                fl["nis_per_dof_floors"],
+            ]
+        ],
+        title="Floors of the geometric fit's covariance: maximum-likelihood fit (tree park)",
+        notes=(
+            f"Seeds {list(SEEDS)}, the circles of noise_calibration.md. R = R_fit + diag(f_r^2, "
+            "f_b^2) fitted by maximum likelihood of the centre errors; 'in use' is "
+            "slam.measurement.DEFAULT_FIT_FLOOR (SlamConfig.fit_floor_range_m, "
+            "fit_floor_bearing_rad; the fits rounded up to two digits)."
         ),
     )

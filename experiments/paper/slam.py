@@ -119,18 +119,31 @@ class Exp2Config:
         return cls(n_runs=4, cycab=CycabParams(n_scans=170), sensitivity=False)
 
 
-# Consistency variants: (name, method, SlamConfig overrides, kind). They explain the NEES figures.
-# kind "synthetic": the method's circles on trunks only, each centre replaced by the truth plus
-# Gaussian noise drawn from the method's constant noise model (same detections, ideal errors);
-# "debias": every centre moved KASA_RANGE_BIAS_M farther along its beam; "": as extracted.
-KASA_RANGE_BIAS_M = -0.0043  # mean range error of the paper's centres (calibration seeds)
+# Consistency variants: (name, method, SlamConfig overrides, kind). They explain the NEES figures:
+# each switches off one part of the measurement model (`slam.measurement.DEFAULT_RANGE_BIAS`,
+# `DEFAULT_FIT_FLOOR`) or changes the detections. kind "synthetic": the method's circles on
+# trunks only, each centre replaced by the truth plus Gaussian noise drawn from the method's
+# constant noise model (same detections, ideal errors, no bias to correct); "": as extracted.
+NO_PAPER_BIAS = {"range_bias": {"paper": (0.0, 0.0)}}
 SENSITIVITY = (
-    ("paper detections, synthetic centres", "paper", {}, "synthetic"),
-    ("paper, Kasa's mean range bias (4.3 mm) removed", "paper", {}, "debias"),
+    ("paper detections, synthetic centres", "paper", NO_PAPER_BIAS, "synthetic"),
+    ("paper, without the range-bias correction", "paper", NO_PAPER_BIAS, ""),
+    (
+        "geometric, without the fit floors",
+        "geometric",
+        {"fit_floor_range_m": 0.0, "fit_floor_bearing_rad": 0.0},
+        "",
+    ),
     (
         "geometric, constant noise instead of the fit's",
         "geometric",
         {"measurement_noise": "constant"},
+        "",
+    ),
+    (
+        "bailey, without the range-bias correction",
+        "bailey",
+        {"range_bias": {"bailey": (0.0, 0.0)}},
         "",
     ),
     ("bailey, circles beyond 12 m ignored", "bailey", {"max_feature_range_m": 12.0}, ""),
@@ -187,15 +200,6 @@ def synthetic_features(
             )
         )
     return out
-
-
-def _push_out(f, dr_m: float):
-    """Features with every circle centre moved dr_m farther along its beam."""
-    p = np.array(f.circle_params, dtype=np.float64).reshape(-1, 3)
-    r = np.hypot(p[:, 0], p[:, 1])
-    scale = np.where(r > 0, (r + dr_m) / np.where(r > 0, r, 1.0), 1.0)
-    p[:, :2] *= scale[:, None]
-    return replace(f, circle_params=p)
 
 
 @dataclass
@@ -272,8 +276,6 @@ def slam_trial(job: tuple[Exp2Config, int, bool], seed) -> dict:
             fs = synthetic_features(
                 fs, seq, laser_w, scfg.noise_for(m)[1], noise_rng, cfg.false_match_m
             )
-        elif kind == "debias":
-            fs = [_push_out(f, -KASA_RANGE_BIAS_M) for f in fs]
         t0 = time.perf_counter()
         lg = slam_run(seq, features=fs, association=cfg.association, config=scfg)
         o: dict = {"time_slam": (time.perf_counter() - t0) / seq.n_scans}

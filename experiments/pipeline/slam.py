@@ -183,6 +183,7 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float, laser_pose=None) -> di
         "seconds": seconds,
         "timing": timing,
         "config": json_types(lg.config),
+        **({"window": lg.window_stats} if lg.window_stats else {}),
     }
     if seq.gps_t is not None:
         summary["gps"] = score_sequence(seq, lg.scan_t, lg.pose, laser_pose).to_dict()

@@ -54,7 +54,8 @@ class CycabParams:
     n_scans: scans in the run.
     speed_sigma_mps, steer_sigma_rad: noise of each odometry sample's readings.
     dgps_rate_hz, dgps_offset_s, dgps_sigma_m: the DGPS reference (2 cm, the paper's figure).
-    sensor: preset name; range_sigma_m, mixed_prob: its noise and mixed-return probability.
+    sensor: preset name; range_sigma_m, mixed_prob: its noise and mixed-return probability;
+        quantisation_m: its range quantisation (None: the preset's, 1 cm for the LMS200).
     """
 
     wheelbase_m: float = 1.2
@@ -76,6 +77,7 @@ class CycabParams:
     sensor: str = "lms200"
     range_sigma_m: float = 0.01
     mixed_prob: float = 0.1
+    quantisation_m: float | None = None
 
     def __post_init__(self) -> None:
         for name in (
@@ -108,6 +110,10 @@ class CycabParams:
             raise ConfigError(f"CycabParams.n_scans: must be an integer >= 1, got {self.n_scans!r}")
         if len(self.laser_pose) != 3:
             raise ConfigError("CycabParams.laser_pose: expected (x, y, theta)")
+        if self.quantisation_m is not None and not self.quantisation_m >= 0:
+            raise ConfigError(
+                f"CycabParams.quantisation_m: must be >= 0, got {self.quantisation_m!r}"
+            )
 
     @property
     def vehicle(self) -> dict:
@@ -215,7 +221,10 @@ def simulate_cycab_run(
     steer = d.steer_rad + p.steer_sigma_rad * rng_odo.standard_normal(n_samples)
     steer = np.clip(steer, -math.pi / 2, math.pi / 2)
     # scans
-    sensor = sensor_preset(p.sensor, range_sigma_m=p.range_sigma_m, mixed_prob=p.mixed_prob)
+    quant = {} if p.quantisation_m is None else {"quantisation_m": p.quantisation_m}
+    sensor = sensor_preset(
+        p.sensor, range_sigma_m=p.range_sigma_m, mixed_prob=p.mixed_prob, **quant
+    )
     scan_idx = np.arange(p.n_scans) * p.scan_every
     ranges = np.empty((p.n_scans, sensor.n_beams))
     labels = np.empty((p.n_scans, sensor.n_beams), dtype=np.int64)

@@ -65,6 +65,30 @@ def test_quick_run_writes_tables_plot_and_optimality(quick_run):
         assert total <= 1.0 + 1e-9
 
 
+def test_quick_run_has_the_in_the_loop_section(quick_run):
+    assert "## In the SLAM loop" in (quick_run / "association.md").read_text()
+    rows = list(csv.DictReader((quick_run / "association_loop.csv").open()))
+    tree = [r for r in rows if r["data"].startswith("tree park")]
+    assert {r["data"] for r in tree} == {f"tree park, odometry noise x{s}" for s in (1, 2, 4)}
+    assert {r["method"] for r in tree} == {
+        "IHGR (single scan)",
+        "IHGR window K = 2",
+        "IHGR window K = 3",
+        "IHGR window K = 4",
+        "JCBB",
+        "NN",
+    }
+    for r in tree:
+        assert 0 <= int(r["false pairings"]) <= int(r["updates"])
+        assert 4 <= float(r["landmarks"]) <= 12 and int(r["missed trees"]) <= 2
+        assert 0 < float(r["pose error (m)"]) < 0.5
+        window = r["method"].startswith("IHGR window")
+        assert bool(r["window LPs fractional"]) == window
+        if window:
+            frac, steps = map(int, r["window LPs fractional"].split("/"))
+            assert steps == 2 * 120 and 0 <= frac <= steps
+
+
 def test_quick_run_single_scan_ihgr_is_always_optimal(quick_run):
     rows = list(csv.DictReader((quick_run / "association_optimality.csv").open()))
     single = [r for r in rows if r["family"].startswith("single")]

@@ -112,6 +112,9 @@ def test_quick_run_matches_golden_numbers():
     # the paper's direction holds in this run
     for i in range(3):
         assert got["paper"]["table3_mean"][i] < got["bailey"]["table3_mean"][i]
+    # the smoother (each pose informed by the whole run) is at or below the EKF over the runs
+    for m in ("paper", "geometric", "bailey"):
+        assert sum(got[m]["smoother_table3_mean"]) <= sum(got[m]["table3_mean"]), m
 
 
 def test_experiment2_writes_every_output(tmp_path):

@@ -22,6 +22,7 @@ from slam import (
 )
 from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT
 from slam.mapping import Tentatives
+from slam.measurement import DEFAULT_FIT_FLOOR
 from slam.vehicle import AckermannModel, Odometry, integrate
 
 CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
@@ -374,8 +375,11 @@ def test_detections_noise_model_and_errors():
     det = as_detections(seq, feats, "bailey")
     cov = np.array([np.diag([0.04**2, 0.002**2])] * det.det_scan.size)
     with_cov = dataclasses.replace(det, det_cov=cov)
-    lg = run(with_cov, features="detections")  # auto: the detections' own covariance
-    np.testing.assert_allclose(lg.meas_R, cov)
+    lg = run(with_cov, features="detections")  # auto: the detections' own covariance + floors
+    f_r, f_b = DEFAULT_FIT_FLOOR
+    np.testing.assert_allclose(lg.meas_R, cov + np.diag([f_r**2, f_b**2]))
+    no_floor = SlamConfig(fit_floor_range_m=0.0, fit_floor_bearing_rad=0.0)
+    np.testing.assert_allclose(run(with_cov, features="detections", config=no_floor).meas_R, cov)
     lg = run(with_cov, features="detections", config=SlamConfig(measurement_noise="constant"))
     z = lg.meas_z
     expected = 0.0092 + 0.0015 * z[:, 0]  # the bailey constant model
@@ -388,3 +392,17 @@ def test_detections_noise_model_and_errors():
     assert run(no_ranges, features="detections").landmark_xy.shape[0] == 4
     with pytest.raises(SlamError, match="extracts from raw scans"):
         run(no_ranges, features="paper")
+
+
+def test_config_pickles_with_its_read_only_tables():
+    """Worker processes receive configurations by pickle: the constant-noise and range-bias
+    tables (read-only mappings) survive the round trip."""
+    import pickle
+
+    cfg = SlamConfig(
+        range_bias={"paper": (-0.01, 0.001)}, constant_noise={"paper": (0.01, 0, 0, 0)}
+    )
+    back = pickle.loads(pickle.dumps(cfg))
+    assert back == cfg
+    assert back.range_bias_for("paper") == (-0.01, 0.001)
+    assert tuple(back.constant_noise["paper"]) == (0.01, 0, 0, 0)
