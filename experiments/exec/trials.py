@@ -131,14 +131,16 @@ class Executor:
 
         fn must be a module-level function (it is sent to the workers by reference). seeds:
         one per trial (None: every trial gets None). chunksize: trials sent together (default:
-        about four chunks per worker). Raises `TrialsFailed` after all trials when any raised."""
+        about four chunks per worker; one trial at a time in this process). Raises
+        `TrialsFailed` after all trials when any raised."""
         configs = list(configs)
         n = len(configs)
         seeds = [None] * n if seeds is None else list(seeds)
         if len(seeds) != n:
             raise ConfigError(f"{desc}: {n} trial configurations but {len(seeds)} seeds")
         tasks = [(i, configs[i], seeds[i]) for i in range(n)]
-        size = chunksize or max(1, math.ceil(n / (4 * self.workers)))
+        size = chunksize or (1 if self.workers == 1 else math.ceil(n / (4 * self.workers)))
+        size = max(size, 1)
         chunks = [tasks[a : a + size] for a in range(0, n, size)]
         records: list = [None] * n
         failures: list[TrialFailure] = []
