@@ -536,11 +536,15 @@ def _loop_section(ctx, cfg_out: dict) -> None:
 
     n_runs, n_scans, vp_scans = (2, 120, 300) if ctx.quick else (al.TREE_PARK_RUNS, None, None)
     rows = al.tree_park_loop(
-        ctx.rng("association_loop"), n_runs, n_scans=n_scans, progress=ctx.progress
+        ctx.rng("association_loop"),
+        n_runs,
+        n_scans=n_scans,
+        progress=ctx.progress,
+        executor=ctx.executor,
     )
     vp_note = ""
     try:
-        rows += al.victoria_park_loop(vp_scans, progress=ctx.progress)
+        rows += al.victoria_park_loop(vp_scans, progress=ctx.progress, executor=ctx.executor)
     except MissingDataError as exc:
         log.warning("association in the loop: Victoria Park skipped: %s", exc)
         vp_note = f"Victoria Park skipped: {exc}\n"

@@ -44,7 +44,15 @@ from slam import SlamConfig, interpolate_poses, se2
 from slam import run as slam_run
 from slam.vehicle import OdometryNoise
 
-__all__ = ["LOOP_METHODS", "LOOP_HEADER", "loop_rows", "tree_park_loop", "victoria_park_loop"]
+__all__ = [
+    "LOOP_HEADER",
+    "LOOP_METHODS",
+    "loop_rows",
+    "tree_park_loop",
+    "tree_park_trial",
+    "victoria_park_loop",
+    "victoria_park_trial",
+]
 
 log = logging.getLogger(__name__)
 
@@ -84,71 +92,28 @@ def tree_park_loop(
     methods=LOOP_METHODS,
     n_scans: int | None = None,
     progress=lambda desc, done, total: None,
+    executor=None,
 ) -> list[dict]:
     """Per (noise scale, method): summed and averaged figures over n_runs simulated runs (run i
-    of every scale and method uses the same seed: common random numbers)."""
-    base_cyc = CycabParams() if n_scans is None else CycabParams(n_scans=n_scans)
-    seeds = rng.integers(0, 2**63 - 1, n_runs)
+    of every scale and method uses the same seed: common random numbers). Each (scale, run) is
+    a trial (`tree_park_trial`) on `executor` (default: this process), reduced in order."""
+    from experiments.exec.trials import SerialExecutor
+
+    seeds = [int(v) for v in rng.integers(0, 2**63 - 1, n_runs)]
+    jobs = [(scale, n_scans, tuple(methods)) for scale in noise_scales for _ in range(n_runs)]
+    records = (executor or SerialExecutor()).map(
+        tree_park_trial,
+        jobs,
+        seeds * len(noise_scales),
+        desc="association in the loop (tree park)",
+        progress=progress,
+        chunksize=1,
+    )
     rows = []
-    total = len(noise_scales) * n_runs
-    done = 0
-    for scale in noise_scales:
-        cyc = replace(
-            base_cyc,
-            speed_sigma_mps=base_cyc.speed_sigma_mps * scale,
-            steer_sigma_rad=base_cyc.steer_sigma_rad * scale,
-        )
-        on = OdometryNoise()
-        base = SlamConfig(
-            odometry_noise=replace(
-                on, speed_sigma_mps=cyc.speed_sigma_mps, steer_sigma_rad=cyc.steer_sigma_rad
-            )
-        )
-        acc = {label: [] for label, _, _ in methods}
-        for q in range(n_runs):
-            seq = simulate_cycab_run(np.random.default_rng(int(seeds[q])), "tree_park", cyc)
-            truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-            params = extractor_params("paper", cyc)
-            feats = [extract_features(seq.scan(k), "paper", **params) for k in range(seq.n_scans)]
-            objects = [
-                [
-                    dominant_label(run_labels(seq.scan_labels[k], a, b), returns_only=True)[0]
-                    for a, b in f.circle_beams
-                ]
-                for k, f in enumerate(feats)
-            ]
-            trees = seq.truth_landmarks
-            seen_count = np.zeros(trees.shape[0], np.int64)
-            for obj in objects:
-                for o in set(obj):
-                    if 0 <= o < trees.shape[0]:
-                        seen_count[o] += 1
-            seen = seen_count >= SEEN_SCANS
-            for label, assoc, K in methods:
-                t0 = time.perf_counter()
-                lg = slam_run(seq, features=feats, association=assoc, config=_config(base, K))
-                sec = time.perf_counter() - t0
-                e = pose_errors(lg.pose, truth)[1:]
-                false, used = false_pairings(lg, lambda k, i, o=objects: o[k][i])
-                dup, missed = duplicates_and_missed(lg.landmark_xy, trees[:, :2], seen, TOL_M)
-                acc[label].append(
-                    {
-                        "false": false,
-                        "used": used,
-                        "landmarks": lg.landmark_xy.shape[0],
-                        "duplicates": dup,
-                        "missed": missed,
-                        "pos_err": float(np.mean(np.hypot(e[:, 0], e[:, 1]))),
-                        "max_pos_err": float(np.max(np.hypot(e[:, 0], e[:, 1]))),
-                        "dtheta": float(np.mean(np.abs(e[:, 2]))),
-                        "ms": 1e3 * sec / lg.n_scans,
-                        **_window_figures(lg.window_stats),
-                    }
-                )
-            done += 1
-            progress("association in the loop (tree park)", done, total)
+    for i, scale in enumerate(noise_scales):
+        runs = records[i * n_runs : (i + 1) * n_runs]
         for label, _, _ in methods:
-            a = acc[label]
+            a = [run[label] for run in runs]
             rows.append(
                 {
                     "data": f"tree park, odometry noise x{scale:g}",
@@ -172,54 +137,127 @@ def tree_park_loop(
     return rows
 
 
+def tree_park_trial(job: tuple, seed: int) -> dict:
+    """One simulated tree-park run (`job` = (odometry noise scale, scans or None, methods)) with
+    every method on it: method label -> its figures. A pure function of (job, seed)."""
+    scale, n_scans, methods = job
+    base_cyc = CycabParams() if n_scans is None else CycabParams(n_scans=n_scans)
+    cyc = replace(
+        base_cyc,
+        speed_sigma_mps=base_cyc.speed_sigma_mps * scale,
+        steer_sigma_rad=base_cyc.steer_sigma_rad * scale,
+    )
+    on = OdometryNoise()
+    base = SlamConfig(
+        odometry_noise=replace(
+            on, speed_sigma_mps=cyc.speed_sigma_mps, steer_sigma_rad=cyc.steer_sigma_rad
+        )
+    )
+    seq = simulate_cycab_run(np.random.default_rng(seed), "tree_park", cyc)
+    truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    params = extractor_params("paper", cyc)
+    feats = [extract_features(seq.scan(k), "paper", **params) for k in range(seq.n_scans)]
+    objects = [
+        [
+            dominant_label(run_labels(seq.scan_labels[k], a, b), returns_only=True)[0]
+            for a, b in f.circle_beams
+        ]
+        for k, f in enumerate(feats)
+    ]
+    trees = seq.truth_landmarks
+    seen_count = np.zeros(trees.shape[0], np.int64)
+    for obj in objects:
+        for o in set(obj):
+            if 0 <= o < trees.shape[0]:
+                seen_count[o] += 1
+    seen = seen_count >= SEEN_SCANS
+    out = {}
+    for label, assoc, K in methods:
+        t0 = time.perf_counter()
+        lg = slam_run(seq, features=feats, association=assoc, config=_config(base, K))
+        sec = time.perf_counter() - t0
+        e = pose_errors(lg.pose, truth)[1:]
+        false, used = false_pairings(lg, lambda k, i, o=objects: o[k][i])
+        dup, missed = duplicates_and_missed(lg.landmark_xy, trees[:, :2], seen, TOL_M)
+        out[label] = {
+            "false": false,
+            "used": used,
+            "landmarks": lg.landmark_xy.shape[0],
+            "duplicates": dup,
+            "missed": missed,
+            "pos_err": float(np.mean(np.hypot(e[:, 0], e[:, 1]))),
+            "max_pos_err": float(np.max(np.hypot(e[:, 0], e[:, 1]))),
+            "dtheta": float(np.mean(np.abs(e[:, 2]))),
+            "ms": 1e3 * sec / lg.n_scans,
+            **_window_figures(lg.window_stats),
+        }
+    return out
+
+
 def victoria_park_loop(
-    n_scans: int | None = None, methods=LOOP_METHODS, progress=lambda desc, done, total: None
+    n_scans: int | None = None,
+    methods=LOOP_METHODS,
+    progress=lambda desc, done, total: None,
+    executor=None,
 ) -> list[dict]:
     """The full Victoria Park run (or its first n_scans) with the published detections and the
-    preset `victoria_park_ute`, one row per method. Raises MissingDataError without the data."""
+    preset `victoria_park_ute`, one row per method, each a trial (`victoria_park_trial`) on
+    `executor`. Raises MissingDataError without the data."""
+    from experiments.exec.trials import SerialExecutor
+    from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
+
+    load_victoria_park(full=True)  # missing or corrupt data: said here, before any trial
+    load_ss2002_reference()
+    return (executor or SerialExecutor()).map(
+        victoria_park_trial,
+        [(n_scans, m) for m in methods],
+        desc="association in the loop (Victoria Park)",
+        progress=progress,
+        chunksize=1,
+    )
+
+
+def victoria_park_trial(job: tuple, seed=None) -> dict:
+    """One method (`job` = (scans or None, (label, association, K))) on the Victoria Park run:
+    its row. Deterministic (the seed is unused)."""
     from experiments.eval.gps import score_sequence
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
     from experiments.paper.victoria_park import PRESET, head
     from slam.start import procrustes_2d
 
+    n_scans, (label, assoc, K) = job
     full = load_victoria_park(full=True)
     ground, ref_trees = load_ss2002_reference()
     if n_scans is not None:
         full = head(full, n_scans)
     cfg = load_slam_config(PRESET)
     laser = np.asarray(cfg.laser_pose if cfg.laser_pose is not None else full.laser_pose)
-    rows = []
-    for i, (label, assoc, K) in enumerate(methods):
-        t0 = time.perf_counter()
-        lg = slam_run(full, features="detections", association=assoc, config=_config(cfg, K))
-        sec = time.perf_counter() - t0
-        sc = score_sequence(full, lg.scan_t, lg.pose, laser)
-        n = min(ground.shape[0], lg.n_scans)
-        ours = np.array([se2.compose(p, laser)[:2] for p in lg.pose[:n]])
-        theta, t = procrustes_2d(ground[:n, :2], ours)
-        tw = se2.rotate(theta, ref_trees[:, :2]) + t
-        dup, missed = duplicates_and_missed(lg.landmark_xy, tw, None, TOL_M)
-        rows.append(
-            {
-                "data": f"Victoria Park, {lg.n_scans} scans, published detections",
-                "method": label,
-                "runs": 1,
-                "landmarks": float(lg.landmark_xy.shape[0]),
-                "false_pairings": -1,
-                "updates": int(lg.obs_scan.size),
-                "duplicates": dup,
-                "missed_trees": missed,
-                "pose_error_m": math.nan,
-                "worst_pose_error_m": math.nan,
-                "dtheta_rad": math.nan,
-                "gps_rmse_m": float(sc.all_rmse),
-                "ms_per_scan": 1e3 * sec / lg.n_scans,
-                **_window_figures(lg.window_stats),
-            }
-        )
-        progress("association in the loop (Victoria Park)", i + 1, len(methods))
-    return rows
+    t0 = time.perf_counter()
+    lg = slam_run(full, features="detections", association=assoc, config=_config(cfg, K))
+    sec = time.perf_counter() - t0
+    sc = score_sequence(full, lg.scan_t, lg.pose, laser)
+    n = min(ground.shape[0], lg.n_scans)
+    ours = np.array([se2.compose(p, laser)[:2] for p in lg.pose[:n]])
+    theta, t = procrustes_2d(ground[:n, :2], ours)
+    tw = se2.rotate(theta, ref_trees[:, :2]) + t
+    dup, missed = duplicates_and_missed(lg.landmark_xy, tw, None, TOL_M)
+    return {
+        "data": f"Victoria Park, {lg.n_scans} scans, published detections",
+        "method": label,
+        "runs": 1,
+        "landmarks": float(lg.landmark_xy.shape[0]),
+        "false_pairings": -1,
+        "updates": int(lg.obs_scan.size),
+        "duplicates": dup,
+        "missed_trees": missed,
+        "pose_error_m": math.nan,
+        "worst_pose_error_m": math.nan,
+        "dtheta_rad": math.nan,
+        "gps_rmse_m": float(sc.all_rmse),
+        "ms_per_scan": 1e3 * sec / lg.n_scans,
+        **_window_figures(lg.window_stats),
+    }
 
 
 LOOP_HEADER = [
