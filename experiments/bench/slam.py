@@ -21,7 +21,7 @@ from experiments.io.writers import markdown_table
 from experiments.sim.landmarks import avenue
 from slam import TIMING_KEYS, SlamConfig, run
 
-__all__ = ["bench", "bench_victoria_park", "format_table"]
+__all__ = ["bench", "bench_victoria_park", "format_table", "records_table"]
 
 
 BINS = (0, 25, 50, 100, 200, 300, 400, 600, 800, 1200)
@@ -83,9 +83,15 @@ def _rows(log, wall: float, bins, label: str) -> list[dict]:
 
 
 def format_table(rows: list[dict]) -> str:
+    return records_table("EKF-SLAM time per scan against map size", rows)
+
+
+def records_table(title: str, rows: list[dict]) -> str:
+    """`title (machine; ...)` over a Markdown table of `rows` (dicts; columns in order of first
+    appearance, a missing key an empty cell): the bench tables' common form."""
     header = list(dict.fromkeys(k for r in rows for k in r))
     body = [[r.get(k, "") for k in header] for r in rows]
     return (
-        f"EKF-SLAM time per scan against map size ({machine()}; one process, threads as set "
-        "by OMP_NUM_THREADS)\n\n" + markdown_table(header, body)
+        f"{title} ({machine()}; one process, threads as set by OMP_NUM_THREADS)\n\n"
+        + markdown_table(header, body)
     )

@@ -13,9 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from experiments.bench.slam import records_table
 from experiments.errors import MissingDataError
-from experiments.io.provenance import machine
-from experiments.io.writers import markdown_table
 from slam import run
 from slam.smoother import SmootherOptions, problem_from_log, smooth, solve_graph_file
 
@@ -101,9 +100,4 @@ def _tick(progress, done: int) -> None:
 
 
 def format_table(rows: list[dict]) -> str:
-    header = list(dict.fromkeys(k for r in rows for k in r))
-    body = [[r.get(k, "") for k in header] for r in rows]
-    return (
-        f"GTSAM smoother seconds ({machine()}; one process, threads as set by OMP_NUM_THREADS)"
-        "\n\n" + markdown_table(header, body)
-    )
+    return records_table("GTSAM smoother seconds", rows)
