@@ -22,6 +22,7 @@ import json
 import math
 import os
 import shutil
+import signal
 import stat
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -131,7 +132,16 @@ def write_atomic(path: Path | str, data: str | bytes | Callable[[BinaryIO], obje
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+    interruption_point("file-written")
     return path
+
+
+def interruption_point(name: str) -> None:
+    """Fault injection for the interruption tests: when the environment variable
+    `TRUNKSLAM_INTERRUPT_AT` names this point, the process sends itself SIGINT here (a real
+    Ctrl-C at a known moment instead of a race with a timer). No effect otherwise."""
+    if os.environ.get("TRUNKSLAM_INTERRUPT_AT") == name:
+        signal.raise_signal(signal.SIGINT)
 
 
 def _kind(mode: int) -> str:

@@ -44,7 +44,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from experiments.errors import DataError
-from experiments.io.writers import check_output_file
+from experiments.io.writers import check_output_file, interruption_point
 from experiments.render.shapes import circle_polyline, ellipse_polyline
 from features.types import Features, Scan
 from slam import se2
@@ -265,6 +265,7 @@ class Recorder(NullRecorder):
     def set_scan(self, k: int, stamp_s: float | None = None) -> None:
         """Timeline `scan` = k; with the scan's time, also timeline `time` (seconds)."""
         self._k = int(k)
+        interruption_point("recording-scan")  # the interruption tests' Ctrl-C, mid-recording
         self.rec.set_time("scan", sequence=int(k))
         if stamp_s is not None:
             self.rec.set_time("time", duration=float(stamp_s))

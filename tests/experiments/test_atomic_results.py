@@ -26,6 +26,7 @@ from experiments.io.writers import (
     check_output_folder,
     write_atomic,
 )
+from tests.support import read_recording
 
 runner = CliRunner()
 TRUNKSLAM = [sys.executable, "-m", "experiments.cli"]
@@ -308,8 +309,16 @@ def test_reproduce_interrupted_at_several_points_is_old_or_new(old_set, tmp_path
     assert interrupted >= 2  # most points were hit while the run was still going
 
 
+def _run_interrupted_at(point: str, args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """Run trunkslam with a SIGINT raised at the named `interruption_point` (deterministic)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1", TRUNKSLAM_INTERRUPT_AT=point)
+    return subprocess.run(TRUNKSLAM + args, cwd=cwd, env=env, capture_output=True, text=True)
+
+
 @pytest.mark.slow
 def test_slam_and_extract_interrupted_leave_old_outputs_and_no_truncated_recording(drive, tmp_path):
+    """Ctrl-C once the first result file is in the temporary folder, and in the middle of the
+    recording: the old outputs stay, nothing temporary is left."""
     out = tmp_path / "slam_out"
     res = runner.invoke(app, ["slam", str(drive), "--out", str(out)])
     assert res.exit_code == 0, res.output
@@ -318,20 +327,24 @@ def test_slam_and_extract_interrupted_leave_old_outputs_and_no_truncated_recordi
     rrd.write_bytes(b"an older recording")
     drive_sum = hashlib.sha256(drive.read_bytes()).hexdigest()
     args = ["slam", str(drive), "--features", "bailey", "--out", str(out), "--rerun", str(rrd)]
-    for ready in (_staged(out, 0), lambda: any(tmp_path.glob(".run.rrd.*"))):
-        proc = _start(args, tmp_path)
-        sent = _interrupt_when(proc, ready)
-        proc.communicate(timeout=120)
-        assert sent and proc.returncode != 0
-        assert snapshot(out) == old
-        assert rrd.read_bytes() == b"an older recording"
-        assert not leftovers(out) and not list(tmp_path.glob(".run.rrd.*"))
+    # mid-recording: the old recording and the old folder stay
+    proc = _run_interrupted_at("recording-scan", args, tmp_path)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert snapshot(out) == old and rrd.read_bytes() == b"an older recording"
+    assert not leftovers(out) and not list(tmp_path.glob(".run.rrd.*"))
+    # first result file staged: the folder stays old; the recording, closed and renamed into
+    # place before the folder is written (README: not part of the atomic set), is the new one
+    proc = _run_interrupted_at("file-written", args, tmp_path)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert snapshot(out) == old
+    assert "series/map_size" in read_recording(rrd)["entities"]
+    assert not leftovers(out) and not list(tmp_path.glob(".run.rrd.*"))
+    rrd.write_bytes(b"an older recording")
     features = tmp_path / "f.json"
     features.write_text("{}")
-    proc = _start(["extract", str(drive), "--out", str(features), "--rerun", str(rrd)], tmp_path)
-    sent = _interrupt_when(proc, lambda: any(tmp_path.glob(".run.rrd.*")))
-    proc.communicate(timeout=120)
-    assert sent and proc.returncode != 0
+    args = ["extract", str(drive), "--out", str(features), "--rerun", str(rrd)]
+    proc = _run_interrupted_at("recording-scan", args, tmp_path)
+    assert proc.returncode != 0 and "Traceback" not in proc.stderr, proc.stderr
     assert features.read_text() == "{}" and rrd.read_bytes() == b"an older recording"
     assert not list(tmp_path.glob(".*"))
     assert hashlib.sha256(drive.read_bytes()).hexdigest() == drive_sum
