@@ -116,3 +116,33 @@ def test_recorder_refuses_unknown_kind_and_bad_scale(tmp_path):
         Recorder(tmp_path / "x.rrd", "movie")
     with pytest.raises(ValueError, match="ellipse_scale"):
         Recorder(tmp_path / "x.rrd", "slam", ellipse_scale=0.0)
+
+
+_MS_PER_SCAN = """
+import json, numpy as np
+from experiments.eval.series import slam_series
+from experiments.sim import CycabParams, simulate_cycab_run
+from slam import run
+seq = simulate_cycab_run(np.random.default_rng(3), "tree_park", CycabParams(n_scans=40))
+lg = run(seq, features="geometric", association="ihgr")
+ms = next(s for s in slam_series(lg) if s.name == "ms_per_scan").values[:, 0]
+print(json.dumps(ms.tolist()))
+"""
+
+
+def test_time_per_scan_panel_has_no_first_scan_spike():
+    """In a fresh process (numba kernels not yet loaded, lazy imports not yet done) the
+    recording's ms-a-scan series of a small simulated run: the first scans are not outliers
+    (below 10x the median, or no slower than the slowest later scan), so the panel's axis
+    shows the run. Without `slam.run`'s warm-up scan 0 takes seconds against a median of ms."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, "-c", _MS_PER_SCAN], capture_output=True, text=True, check=True
+    )
+    ms = np.array(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert ms.shape == (40,) and np.all(ms > 0)
+    limit = max(10 * np.median(ms), ms[4:].max())
+    assert np.all(ms[:4] <= limit), (ms[:4], np.median(ms), ms[4:].max())
