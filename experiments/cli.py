@@ -240,11 +240,15 @@ def convert_victoria_park(
     from experiments.io.sequence_file import save_sequence
     from experiments.io.victoria_park import VP_FILES, load_victoria_park
     from experiments.io.writers import check_output_file
+    from experiments.render.progress import Progress
 
     root = data if data is not None else victoria_park_dir()
     check_output_file(out, "--out", inputs=[root / f for f in VP_FILES.values()])
-    seq = load_victoria_park(root, full=full)
-    save_sequence(seq, out)
+    with Progress() as progress:
+        seq = load_victoria_park(root, full=full, progress=progress)
+        progress(f"writing {out.name}", 0, 1)
+        save_sequence(seq, out)
+        progress(f"writing {out.name}", 1, 1)
     kind = "detections only" if full else "raw scans and detections"
     typer.echo(f"{seq.n_scans} scans ({kind}, {seq.det_scan.size} detections) -> {out}")
 
@@ -605,8 +609,11 @@ def bench_extract(
     """Scans per second of each extractor on the 2000 real Victoria Park scans."""
     from experiments.bench.extract import bench_extract as bench
     from experiments.bench.extract import format_extract
+    from experiments.render.progress import Progress
 
-    typer.echo(format_extract(bench(repeats=repeats, root=data)))
+    with Progress() as progress:
+        rows = bench(repeats=repeats, root=data, progress=progress)
+    typer.echo(format_extract(rows))
 
 
 @bench_app.command("association")
@@ -617,8 +624,11 @@ def bench_association(
 ) -> None:
     """Median time per scan of each association method at Victoria Park scale."""
     from experiments.bench.association import bench, format_table
+    from experiments.render.progress import Progress
 
-    typer.echo(format_table(bench(repeats=repeats, seed=seed)))
+    with Progress() as progress:
+        rows = bench(repeats=repeats, seed=seed, progress=progress)
+    typer.echo(format_table(rows))
 
 
 @bench_app.command("slam")
@@ -634,12 +644,14 @@ def bench_slam(
     Victoria Park run when its data is there."""
     from experiments.bench.slam import bench, bench_victoria_park, format_table
     from experiments.errors import MissingDataError
+    from experiments.render.progress import Progress
 
-    rows = bench(n_trees=trees, association=association.value, seed=seed)
-    try:
-        rows += bench_victoria_park(association.value)
-    except MissingDataError as exc:
-        typer.echo(f"Victoria Park rows skipped: {exc}", err=True)
+    with Progress() as progress:
+        rows = bench(n_trees=trees, association=association.value, seed=seed, progress=progress)
+        try:
+            rows += bench_victoria_park(association.value, progress=progress)
+        except MissingDataError as exc:
+            typer.echo(f"Victoria Park rows skipped: {exc}", err=True)
     typer.echo(format_table(rows))
 
 
@@ -712,8 +724,11 @@ def bench_raycast(
     """Microseconds per 720-beam simulated scan on the bundled scenes and a random one."""
     from experiments.bench.raycast import bench_raycast as bench
     from experiments.bench.raycast import format_table
+    from experiments.render.progress import Progress
 
-    typer.echo(format_table(bench(repeats=repeats, seed=seed)))
+    with Progress() as progress:
+        rows = bench(repeats=repeats, seed=seed, progress=progress)
+    typer.echo(format_table(rows))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -29,8 +30,11 @@ def _stats(times_s: list[float]) -> tuple[float, float]:
     return float(np.median(t)), float(np.percentile(t, 90))
 
 
-def bench(repeats: int = 200, seed: int = 0) -> list[dict]:
-    """Rows (method, median_ms, p90_ms, notes): wall time per scan over `repeats` scans."""
+def bench(
+    repeats: int = 200, seed: int = 0, progress: Callable[[str, int, int], None] | None = None
+) -> list[dict]:
+    """Rows (method, median_ms, p90_ms, notes): wall time per scan over `repeats` scans.
+    progress(description, done, total) is called between scans, never inside a timed call."""
     from association import SlidingWindowAssociator, associate_detailed
     from association.inputs import prepare
 
@@ -57,6 +61,8 @@ def bench(repeats: int = 200, seed: int = 0) -> list[dict]:
     times: dict[str, list[float]] = {k: [] for k in methods}
     infos: dict[str, list] = {k: [] for k in methods}
     for k, s in enumerate(scans):  # round robin: every method on this scan, then the next scan
+        if progress is not None and k % 10 == 0:
+            progress("association scans", k, len(scans))
         for name, fn in methods.items():
             t0 = time.perf_counter()
             info = fn(s)
@@ -65,6 +71,8 @@ def bench(repeats: int = 200, seed: int = 0) -> list[dict]:
                 times[name].append(dt)
                 infos[name].append(info)
 
+    if progress is not None:
+        progress("association scans", len(scans), len(scans))
     rows = [("input checks + gating only", *_stats(times["checks"]), "common to every method")]
     lp = np.array([i.lp_solves for i in infos["ihgr"]])
     rows.append(

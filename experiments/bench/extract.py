@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -43,14 +44,21 @@ def cold_compile_seconds() -> float:
 
 
 def bench_extract(
-    repeats: int = 3, root: Path | None = None, methods=("paper", "geometric", "bailey")
+    repeats: int = 3,
+    root: Path | None = None,
+    methods=("paper", "geometric", "bailey"),
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> list[dict]:
     """Time each method over all scans, single thread, after a warm-up.
 
     The first call of a method (numba compilation, or loading its on-disk cache) is timed
     separately as `first_call_s`. Scans are built before timing; `scan_build_us` is the cost of
     constructing one `features.Scan` (validation and no-return masking), reported apart.
+    progress(description, done, total) is called between the timed passes, never inside one.
     """
+    step = progress or (lambda desc, done, total: None)
+    desc = "extractor passes"
+    total = len(methods) * repeats + 1  # and the cold compilation in a fresh process
     from experiments.io.victoria_park import load_victoria_park
     from features import extract_features
 
@@ -70,6 +78,7 @@ def bench_extract(
         per_pass = []
         n_circles = 0
         for _ in range(repeats):
+            step(desc, len(rows) * repeats + len(per_pass), total)
             n_circles = 0
             t0 = time.perf_counter()
             for s in scans:
@@ -88,7 +97,9 @@ def bench_extract(
                 "scan_build_us": scan_build_us,
             }
         )
+    step(desc, total - 1, total)
     compile_s = cold_compile_seconds()
+    step(desc, total, total)
     for r in rows:
         r["cold_compile_s"] = compile_s
     return rows

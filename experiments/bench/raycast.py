@@ -51,14 +51,17 @@ def _time_us(f, repeats: int) -> float:
     return best * 1e6
 
 
-def bench_raycast(repeats: int = 300, seed: int = 0) -> list[dict]:
+def bench_raycast(repeats: int = 300, seed: int = 0, progress=None) -> list[dict]:
     """Best-of-5 mean time per call, us, of `raycast`, `raycast_dense` and `simulate_scan`
-    (720 beams, back-to-back PLS200) on the bundled scenes and a random 50-object scene."""
+    (720 beams, back-to-back PLS200) on the bundled scenes and a random 50-object scene.
+    progress: an optional callback(description, done, total) after each scene."""
     rng = np.random.default_rng(seed)
     sensor = sensor_preset("pls200", back_to_back=True)
     scenes = [load_scene("pillar_court"), load_scene("test_yard"), random_scene(rng)]
     rows = []
-    for scene in scenes:
+    for k, scene in enumerate(scenes):
+        if progress is not None:
+            progress("ray casting scenes", k, len(scenes))
         pose = scene.scan_positions[0] if scene.scan_positions.shape[0] else np.zeros(3)
         ang = pose[2] + sensor.angles_rad
         geo = scene.geometry(sensor.mount_height_m)
@@ -78,6 +81,8 @@ def bench_raycast(repeats: int = 300, seed: int = 0) -> list[dict]:
                 ),
             }
         )
+    if progress is not None:
+        progress("ray casting scenes", len(scenes), len(scenes))
     return rows
 
 

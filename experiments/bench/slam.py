@@ -27,25 +27,50 @@ __all__ = ["bench", "bench_victoria_park", "format_table", "records_table"]
 BINS = (0, 25, 50, 100, 200, 300, 400, 600, 800, 1200)
 
 
-def bench(n_trees: int = 800, association: str = "ihgr", seed: int = 0, bins=BINS) -> list[dict]:
-    """Median ms per scan of each phase, by map size (landmarks in the filter)."""
+def _scans(progress, desc: str):
+    """`slam.run`'s progress callback (after each scan, outside its timed steps) as a
+    progress(description, done, total), every 10 scans; None without `progress`."""
+    if progress is None:
+        return None
+
+    def each(done: int, total: int) -> None:
+        if done % 10 == 0 or done == total:
+            progress(desc, done, total)
+
+    return each
+
+
+def bench(
+    n_trees: int = 800, association: str = "ihgr", seed: int = 0, bins=BINS, progress=None
+) -> list[dict]:
+    """Median ms per scan of each phase, by map size (landmarks in the filter). progress:
+    an optional callback(description, done, total), after each tenth scan."""
     seq, feats = avenue(n_trees, np.random.default_rng(seed))
     t0 = time.perf_counter()
-    log = run(seq, features=feats, association=association, config=SlamConfig())
+    log = run(
+        seq,
+        features=feats,
+        association=association,
+        config=SlamConfig(),
+        progress=_scans(progress, "slam, avenue"),
+    )
     return _rows(log, time.perf_counter() - t0, bins, "avenue")
 
 
-def bench_victoria_park(association: str = "ihgr", root=None, bins=BINS) -> list[dict]:
+def bench_victoria_park(
+    association: str = "ihgr", root=None, bins=BINS, progress=None
+) -> list[dict]:
     """The full Victoria Park run (7249 scans, published detections, preset victoria_park_ute):
-    the same rows, and the whole run's seconds."""
+    the same rows, and the whole run's seconds (of a second run: the first loads the caches)."""
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_victoria_park
 
     seq = load_victoria_park(root, full=True)
     cfg = load_slam_config("victoria_park_ute")
-    run(seq, features="detections", association=association, config=cfg)  # warm-up: numba, caches
+    kw = dict(features="detections", association=association, config=cfg)
+    run(seq, **kw, progress=_scans(progress, "slam, Victoria Park (warm-up)"))
     t0 = time.perf_counter()
-    log = run(seq, features="detections", association=association, config=cfg)
+    log = run(seq, **kw, progress=_scans(progress, "slam, Victoria Park"))
     rows = _rows(log, time.perf_counter() - t0, bins, "Victoria Park")
     return rows
 

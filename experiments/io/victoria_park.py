@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import math
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -235,7 +236,11 @@ def load_reference_detections(
 
 
 def load_victoria_park(
-    root: Path | str | None = None, n_scans: int | None = None, *, full: bool = False
+    root: Path | str | None = None,
+    n_scans: int | None = None,
+    *,
+    full: bool = False,
+    progress: Callable[[str, int, int], None] | None = None,
 ) -> Sequence:
     """The Victoria Park run as a `Sequence`, with odometry, GPS and the published detections.
 
@@ -245,6 +250,7 @@ def load_victoria_park(
         the published detections only (`scan_n_beams` 361, no raw ranges).
     n_scans: keep the first n_scans scans (1..2000, or 1..7249 with full). Odometry (61945 rows,
         the whole 26 min) and GPS (4466 fixes) are always complete.
+    progress: callback(description, files read, files to read) after each file.
     Scans: ranges (word & 8191) / 100 m, >= 80 m -> NaN, scan_max_range 80 m; angle_min -pi/2,
     increment pi/360 (laser frame, x forward). gps_xy = [Lo_m, La_m] (x east, y north, m);
     gps_pose = laser position (the antenna sits at the laser). Detections (det_method
@@ -260,11 +266,22 @@ def load_victoria_park(
         raise ConfigError(f"n_scans: must be an integer in 1..{limit}, got {n_scans!r}")
     root = _root(root)
     n = limit if n_scans is None else int(n_scans)
+    n_files = 3 if full else 4
+
+    def step(done: int, total: int) -> None:
+        if progress is not None:
+            progress("reading Victoria Park", done, total)
+
+    step(0, n_files)
     t_all, dets = load_reference_detections(root)
+    step(1, n_files)
     if t_all.size < limit:
         raise DataError(f"{root / VP_FILES['reference']}: TLsr has only {t_all.size} times")
     scan_t = t_all[:n]
-    ranges = None if full else load_raw_sick_ranges(root)[:n]
+    ranges = None
+    if not full:
+        ranges = load_raw_sick_ranges(root)[:n]
+        step(2, n_files)
     k = np.concatenate([np.full(d.shape[1], i) for i, d in enumerate(dets[:n])]).astype(np.int64)
     d = np.concatenate(dets[:n], axis=1)
 
@@ -272,11 +289,13 @@ def load_victoria_park(
     odo_ms = _column("odometry", dr, "time")
     speed = _column("odometry", dr, "speed", odo_ms.size)
     steer = _column("odometry", dr, "steering", odo_ms.size)
+    step(n_files - 1, n_files)
 
     gps = load_mat(root, "gps", ("timeGps", "La_m", "Lo_m"))
     gps_ms = _column("gps", gps, "timeGps")
     lo = _column("gps", gps, "Lo_m", gps_ms.size)
     la = _column("gps", gps, "La_m", gps_ms.size)
+    step(n_files, n_files)
 
     return Sequence(
         scan_t=scan_t,

@@ -106,3 +106,19 @@ def test_verbose_logs_progress_detail(tmp_path):
     assert quiet.exit_code == 0 and loud.exit_code == 0
     assert "INFO extract: 1/1 (100%)" in loud.output
     assert "INFO" not in quiet.output
+
+
+def test_convert_victoria_park_shows_its_progress(tmp_path, vp_dir):
+    out = tmp_path / "vp.npz"
+    res = runner.invoke(app, ["-v", "convert", "victoria-park", "--full", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "INFO reading Victoria Park: 0/3 (0%)" in res.output
+    assert "INFO reading Victoria Park: 3/3 (100%)" in res.output  # detections, odometry, GPS
+    assert "INFO writing vp.npz: 1/1 (100%)" in res.output and out.stat().st_size > 0
+
+
+def test_bench_commands_show_their_progress():
+    res = runner.invoke(app, ["-v", "bench", "raycast", "--repeats", "1"])
+    assert res.exit_code == 0, res.output
+    assert "INFO ray casting scenes: 3/3 (100%)" in res.output
+    assert "| scene |" in res.output  # and the table after it
