@@ -128,3 +128,66 @@ def read_recording(path) -> dict:
         "blueprints": len(reader.blueprints()),
         "views": [(c, o, contents.get(k, []), n) for k, (c, o, n) in views.items()],
     }
+
+
+# the result CSVs whose Markdown is not a pivot of them: the optimality study's CSV holds every
+# instance, its Markdown a summary (medians, fractions) of them
+NOT_PIVOTED = {"association_optimality.csv"}
+
+
+def _md_tables(md_path):
+    """(csv name, pivot spec, header cells, body rows of cells) of every table in a Markdown
+    result file that `write_tidy_table` marked as the pivot of a CSV."""
+    import json
+
+    from experiments.io.writers import PIVOT_MARK
+
+    lines = md_path.read_text().splitlines()
+    out = []
+    for i, line in enumerate(lines):
+        if not line.startswith(PIVOT_MARK):
+            continue
+        name, spec = line[len(PIVOT_MARK) :].removesuffix(" -->").split(": ", 1)
+        table = []
+        for row in lines[i + 1 :]:
+            if not row.startswith("|"):
+                break
+            table.append([c.strip() for c in row.strip()[1:-1].split(" | ")])
+        out.append((name, json.loads(spec), table[0], table[2:]))
+    return out
+
+
+def assert_tidy_tables(folder) -> set[str]:
+    """Every result CSV in `folder` is tidy and its Markdown table is its pivot: read with
+    `csv.DictReader`, every column is shown in the pivot (index, columns, values), each
+    observation (the index and column fields) is there once, every value cell is a number or
+    empty, and pivoting the CSV's records gives exactly the Markdown table's cells. Returns the
+    names of the CSVs checked; fails on a CSV that no Markdown table is the pivot of."""
+    import csv
+
+    from experiments.io.writers import parse_value, pivot_cells
+
+    checked = set()
+    for md in sorted(folder.glob("*.md")):
+        for name, spec, header, body in _md_tables(md):
+            with (folder / name).open(newline="") as fh:
+                reader = csv.DictReader(fh)
+                raw = list(reader)
+                fields = reader.fieldnames
+            keys = spec["index"] + spec["columns"]
+            assert len(fields) == len(set(fields)), name
+            assert set(fields) == set(keys) | set(spec["values"]), (name, fields, spec)
+            ids = [tuple(r[k] for k in keys) for r in raw]
+            assert len(ids) == len(set(ids)), f"{name}: an observation appears twice"
+            assert all(r[k] != "" for r in raw for k in keys), f"{name}: an empty identifier"
+            for r in raw:
+                for v in spec["values"]:
+                    assert r[v] == "" or isinstance(parse_value(r[v]), (int, float)), (name, v)
+            records = [{k: parse_value(v) for k, v in r.items()} for r in raw]
+            cells = pivot_cells(records, spec["index"], spec["columns"], spec["values"])
+            assert len(header) == len(cells[0]), name
+            assert cells == body, name
+            checked.add(name)
+    stray = {p.name for p in folder.glob("*.csv")} - checked - NOT_PIVOTED
+    assert not stray, f"CSVs with no Markdown pivot: {stray}"
+    return checked

@@ -1,5 +1,5 @@
-"""Writing results: the features JSON of `trunkslam extract`, Markdown/CSV tables, atomic files
-and atomic result folders.
+"""Writing results: the features JSON of `trunkslam extract`, tidy result tables (CSV, and the
+Markdown table pivoted from the same records), atomic files and atomic result folders.
 
 Every result is written so that an interruption (Ctrl-C, a full disk, a crash) leaves either the
 old complete result or the new complete one, never a mix:
@@ -40,11 +40,19 @@ __all__ = [
     "check_output_file",
     "check_output_folder",
     "dumps_json",
+    "csv_value",
     "features_to_dict",
+    "format_cell",
     "json_types",
     "markdown_table",
+    "parse_value",
+    "pivot",
+    "pivot_cells",
+    "read_tidy_csv",
+    "tidy_csv",
+    "tidy_markdown",
     "write_atomic",
-    "write_table",
+    "write_tidy_table",
 ]
 
 FEATURES_SCHEMA = "trunkslam.features/1"
@@ -337,25 +345,198 @@ def _cell(v) -> str:
     return str(v)
 
 
+def format_cell(v) -> str:
+    """A value as a Markdown table cell: floats to 4 significant digits, a value that is not
+    there (None, NaN, inf) as "n/a", anything else as its text."""
+    if v is None:
+        return "n/a"
+    if isinstance(v, (np.integer, np.floating)):
+        v = v.item()
+    return _cell(v)
+
+
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
     out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     out += ["| " + " | ".join(_cell(v) for v in r) + " |" for r in rows]
     return "\n".join(out) + "\n"
 
 
-def write_table(stem: Path, header, rows, title: str = "", notes: str = "") -> list[Path]:
-    """Write `stem`.md (title, table, notes) and `stem`.csv; returns both paths."""
-    md = (f"# {title}\n\n" if title else "") + markdown_table(header, rows)
+# ---- tidy tables --------------------------------------------------------------------------------
+#
+# A result table is a list of records (dicts), one per observation. Its CSV holds them as they
+# are (one row each, every field a column); its Markdown table is a pivot of them. See the
+# README's "Result tables" for the two layouts the experiments use.
+
+PIVOT_MARK = "<!-- pivot of "
+
+
+def csv_value(v) -> str:
+    """A value as a CSV cell: floats at full precision (repr), a missing value (None, NaN) as
+    an empty cell, inf as "inf"; anything else as its text."""
+    if v is None:
+        return ""
+    if isinstance(v, (np.integer, np.floating, np.bool_)):
+        v = v.item()
+    if isinstance(v, float):
+        return "" if math.isnan(v) else repr(v)
+    return str(v)
+
+
+def parse_value(text: str):
+    """A CSV cell read back: "" as NaN, integers as int, other numbers as float, else the text."""
+    if text == "":
+        return math.nan
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def read_tidy_csv(path: Path | str) -> list[dict]:
+    """The records of a result CSV (`write_tidy_table`), values parsed with `parse_value`."""
+    with open(path, newline="") as fh:
+        return [{k: parse_value(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+
+
+def _key_part(v):
+    if isinstance(v, (np.integer, np.floating, np.bool_)):
+        v = v.item()
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        raise ValueError("an identifier of a tidy record is missing (None or NaN)")
+    return v
+
+
+def pivot(
+    records: Sequence[dict],
+    index: Sequence[str],
+    columns: Sequence[str] = (),
+    values: str | Sequence[str] = "value",
+) -> tuple[list[tuple], list[tuple], dict[tuple, object]]:
+    """The wide view of tidy records, in plain Python.
+
+    A row per distinct value of the `index` fields, a column per distinct value of the
+    `columns` fields (and per name in `values` when there are several: value name outer,
+    column values inner), in order of first appearance. Returns (row keys, column keys as
+    (*column values, value name), cells {(row key, column key): value}); a combination no
+    record has is absent from cells. `ValueError` when two records give the same cell (the
+    records are not one per observation) or an identifier is missing."""
+    names = [values] if isinstance(values, str) else list(values)
+    rows: dict[tuple, None] = {}
+    cols: dict[tuple, None] = {}
+    cells: dict[tuple, object] = {}
+    for r in records:
+        rk = tuple(_key_part(r[f]) for f in index)
+        ck = tuple(_key_part(r[f]) for f in columns)
+        rows.setdefault(rk)
+        cols.setdefault(ck)
+        for name in names:
+            if name not in r:
+                continue
+            key = (rk, (*ck, name))
+            if key in cells:
+                raise ValueError(
+                    f"pivot: two records for {dict(zip(index, rk))} {dict(zip(columns, ck))} "
+                    f"{name}: the records are not one per observation"
+                )
+            cells[key] = r[name]
+    col_keys = [(*ck, name) for name in names for ck in cols]
+    col_keys = [c for c in col_keys if any((rk, c) in cells for rk in rows)]
+    return list(rows), col_keys, cells
+
+
+def pivot_cells(records, index, columns=(), values="value") -> list[list[str]]:
+    """The Markdown cells of the pivot (`pivot`): per row, the index values, then the cells
+    (`format_cell`; "" where no record has that combination)."""
+    row_keys, col_keys, cells = pivot(records, index, columns, values)
+    return [
+        [format_cell(v) for v in rk]
+        + [format_cell(cells[(rk, ck)]) if (rk, ck) in cells else "" for ck in col_keys]
+        for rk in row_keys
+    ]
+
+
+def _label(key: tuple, labels: dict, several_values: bool, columns: Sequence[str]) -> str:
+    parts = key if (several_values or not columns) else key[:-1]
+    for k in (key, parts):
+        if k in labels:
+            return labels[k]
+    text = " ".join(str(p) for p in parts)
+    return labels.get(text, text)
+
+
+def tidy_markdown(
+    records: Sequence[dict],
+    index: Sequence[str],
+    columns: Sequence[str] = (),
+    values: str | Sequence[str] = "value",
+    labels: dict | None = None,
+    source: str = "",
+) -> str:
+    """The Markdown table of tidy records: their pivot (`pivot`), headed by `labels` (an index
+    field's name, a column key's text or tuple -> header text; default the text itself), after
+    a comment naming the CSV `source` and the pivot so that it can be checked against it."""
+    labels = dict(labels or {})
+    names = [values] if isinstance(values, str) else list(values)
+    row_keys, col_keys, _ = pivot(records, index, columns, values)
+    header = [labels.get(f, f) for f in index]
+    header += [_label(ck, labels, len(names) > 1, columns) for ck in col_keys]
+    spec = {"index": list(index), "columns": list(columns), "values": names}
+    mark = f"{PIVOT_MARK}{source}: {json.dumps(spec)} -->\n" if source else ""
+    return (
+        mark
+        + markdown_table(header, [])
+        + "".join(
+            "| " + " | ".join(r) + " |\n" for r in pivot_cells(records, index, columns, values)
+        )
+    )
+
+
+def tidy_csv(records: Sequence[dict], fields: Sequence[str] | None = None) -> str:
+    """The CSV text of tidy records: one row each; columns `fields` (default: every field, in
+    order of first appearance); a field a record lacks is an empty cell."""
+    if fields is None:
+        fields = list(dict.fromkeys(k for r in records for k in r))
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(fields)
+    for r in records:
+        w.writerow([csv_value(r.get(f)) for f in fields])
+    return buf.getvalue()
+
+
+def write_tidy_table(
+    stem: Path,
+    records: Sequence[dict],
+    index: Sequence[str],
+    columns: Sequence[str] = (),
+    values: str | Sequence[str] = "value",
+    *,
+    labels: dict | None = None,
+    title: str = "",
+    notes: str = "",
+) -> list[Path]:
+    """Write tidy records as `stem`.csv (one row per record, every field a column, numbers at
+    full precision, missing values empty) and `stem`.md (title, the pivot of the same records
+    by `tidy_markdown`, notes); returns both paths. Every field must appear in the pivot
+    (`index`, `columns` or `values`), so that the Markdown table shows all of the CSV."""
+    fields = list(dict.fromkeys(k for r in records for k in r))
+    shown = {*index, *columns, *([values] if isinstance(values, str) else values)}
+    if set(fields) - shown:
+        raise ValueError(f"write_tidy_table: fields {sorted(set(fields) - shown)} not in the pivot")
+    records = [{f: r.get(f) for f in fields} for r in records]
+    stem = Path(stem)
+    md = (f"# {title}\n\n" if title else "") + tidy_markdown(
+        records, index, columns, values, labels, source=stem.name + ".csv"
+    )
     if notes:
         md += "\n" + notes.strip() + "\n"
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(header)
-    w.writerows(rows)
-    stem = Path(stem)
     return [
         write_atomic(stem.with_suffix(".md"), md),
-        write_atomic(stem.with_suffix(".csv"), buf.getvalue()),
+        write_atomic(stem.with_suffix(".csv"), tidy_csv(records, fields)),
     ]
 
 

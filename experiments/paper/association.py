@@ -31,7 +31,7 @@ from association import CostModel, SlidingWindowAssociator, associate_detailed, 
 from association.inputs import prepare
 from association.single import single_scan_problem
 from experiments.exec import SerialExecutor
-from experiments.io.writers import markdown_table, write_atomic, write_table
+from experiments.io.writers import markdown_table, write_atomic, write_tidy_table
 from experiments.render import plots
 from experiments.sim.landmarks import LandmarkScan, LandmarkSimConfig, simulate_landmark_scans
 
@@ -422,37 +422,36 @@ def odd_cycle() -> dict:
 # --------------------------------------------------------------------------------------------
 
 
-RATE_HEADER = [
-    "sweep",
-    "value",
-    "method",
-    "measurements",
-    "correct rate",
-    "false pairing rate",
-    "missed pairing rate",
-    "ms per scan",
-    "JCBB budget hits",
-    "unmapped confirmed (K=3)",
-    "clutter confirmed (K=3)",
-]
+RATE_LABELS = {
+    "sweep_value": "value",
+    "correct_rate": "correct rate",
+    "false_pair_rate": "false pairing rate",
+    "missed_pair_rate": "missed pairing rate",
+    "ms_per_scan": "ms per scan",
+    "jcbb_budget_hits": "JCBB budget hits",
+    "unmapped_confirmed_rate": "unmapped confirmed (K=3)",
+    "clutter_confirmed_rate": "clutter confirmed (K=3)",
+}
 
 
-def _rate_rows(rows):
+def _rate_records(rows) -> list[dict]:
+    """The rate table's records: one per sweep point and method; the JCBB and window columns
+    are empty for the other methods."""
     k3 = {"ihgr_k3"}
     return [
-        [
-            r["sweep"],
-            r["value"],
-            METHOD_LABELS[r["method"]],
-            r["measurements"],
-            round(r["correct_rate"], 4),
-            round(r["false_pair_rate"], 4),
-            round(r["missed_pair_rate"], 4),
-            round(r["ms_per_scan"], 2),
-            r["jcbb_budget_hits"] if r["method"] == "jcbb" else "",
-            round(r["new_confirmed_rate"], 3) if r["method"] in k3 else "",
-            round(r["clutter_confirmed_rate"], 3) if r["method"] in k3 else "",
-        ]
+        {
+            "sweep": r["sweep"],
+            "sweep_value": r["value"],
+            "method": METHOD_LABELS[r["method"]],
+            "measurements": r["measurements"],
+            "correct_rate": r["correct_rate"],
+            "false_pair_rate": r["false_pair_rate"],
+            "missed_pair_rate": r["missed_pair_rate"],
+            "ms_per_scan": r["ms_per_scan"],
+            "jcbb_budget_hits": r["jcbb_budget_hits"] if r["method"] == "jcbb" else None,
+            "unmapped_confirmed_rate": r["new_confirmed_rate"] if r["method"] in k3 else None,
+            "clutter_confirmed_rate": r["clutter_confirmed_rate"] if r["method"] in k3 else None,
+        }
         for r in rows
     ]
 
@@ -499,10 +498,13 @@ def run(ctx) -> None:
 
     rows = rate_study(ctx.rng("association_rates"), n_seq, base, sweeps, ctx.progress, ctx.executor)
     notes = _rate_notes(base, n_seq, rows)
-    ctx.outputs += write_table(
+    records = _rate_records(rows)
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "association",
-        RATE_HEADER,
-        _rate_rows(rows),
+        records,
+        index=["sweep", "sweep_value", "method"],
+        values=list(records[0])[3:],
+        labels=RATE_LABELS,
         title="Correct-association rate on simulated maps",
         notes=notes,
     )
@@ -555,8 +557,14 @@ def _loop_section(ctx, cfg_out: dict) -> None:
         "victoria_park_scans": vp_scans or "all",
         "methods": [label for label, _, _ in al.LOOP_METHODS],
     }
-    paths = write_table(
-        ctx.out_dir / "association_loop", al.LOOP_HEADER, al.loop_rows(rows), notes=al.NOTES
+    records = al.loop_records(rows)
+    paths = write_tidy_table(
+        ctx.out_dir / "association_loop",
+        records,
+        index=["data", "method"],
+        values=list(records[0])[2:],
+        labels=al.LOOP_LABELS,
+        notes=al.NOTES,
     )
     md_loop = paths[0].read_text()
     paths[0].unlink()

@@ -15,7 +15,7 @@ import numpy as np
 
 from experiments.eval.detections import dominant_label, run_labels
 from experiments.exec import SerialExecutor
-from experiments.io.writers import write_table
+from experiments.io.writers import write_tidy_table
 from experiments.paper.slam import METHODS, extractor_params
 from experiments.sim.trajectory import CycabParams, simulate_cycab_run
 from features import extract_features
@@ -173,24 +173,44 @@ def run(ctx) -> None:
     """The registered experiment `noise-calibration`: the fits beside the values in use."""
     fits = calibrate_measurement_noise(executor=ctx.executor)
     ctx.config["noise-calibration"] = {"seeds": list(SEEDS), "scene": "tree_park"}
-    keys = ("range_sigma_m", "range_sigma_per_m", "bearing_sigma_rad", "cross_range_sigma_m")
-    header = ["method", "circles", "range mean (m)", "range RMS (m)", "bearing RMS (rad)"]
-    header += [f"fitted {k}" for k in keys] + [f"in use {k}" for k in keys]
-    header += ["normalised var range", "normalised var bearing"]
-    header += ["fitted range bias a (m)", "fitted range bias b (m/m)", "in use range bias (a, b)"]
-    rows = []
-    for m, f in fits.items():
-        rows.append(
-            [m, f["n"], f["range_mean_m"], f["range_rms_m"], f["bearing_rms_rad"]]
-            + [f[k] for k in keys]
-            + list(DEFAULT_CONSTANT_NOISE[m])
-            + [f["normalised_var_range"], f["normalised_var_bearing"]]
-            + [f["range_bias_a_m"], f["range_bias_b_per_m"], list(SlamConfig().range_bias_for(m))]
+    records: list[dict] = []
+    labels: dict = {}
+
+    def add(method, source, quantity, unit, value, label) -> None:
+        labels[(source, quantity, unit)] = label
+        records.append(
+            {"method": method, "source": source, "quantity": quantity, "unit": unit, "value": value}
         )
-    ctx.outputs += write_table(
+
+    noise = (  # the constant-noise model's fields: (fits key, quantity, unit)
+        ("range_sigma_m", "range_sigma", "m"),
+        ("range_sigma_per_m", "range_sigma_per_range", "m/m"),
+        ("bearing_sigma_rad", "bearing_sigma", "rad"),
+        ("cross_range_sigma_m", "cross_range_sigma", "m"),
+    )
+    for m, f in fits.items():
+        add(m, "measured", "circles", "count", f["n"], "circles")
+        add(m, "measured", "range_error_mean", "m", f["range_mean_m"], "range mean (m)")
+        add(m, "measured", "range_error_rms", "m", f["range_rms_m"], "range RMS (m)")
+        add(m, "measured", "bearing_error_rms", "rad", f["bearing_rms_rad"], "bearing RMS (rad)")
+        for key, q, unit in noise:
+            add(m, "fitted", q, unit, f[key], f"fitted {key}")
+        for (key, q, unit), v in zip(noise, DEFAULT_CONSTANT_NOISE[m]):
+            add(m, "in_use", q, unit, v, f"in use {key}")
+        for q in ("normalised_var_range", "normalised_var_bearing"):
+            add(m, "fitted", q, "1", f[q], q.replace("_", " "))
+        add(m, "fitted", "range_bias_a", "m", f["range_bias_a_m"], "fitted range bias a (m)")
+        b_fit = f["range_bias_b_per_m"]
+        add(m, "fitted", "range_bias_b", "m/m", b_fit, "fitted range bias b (m/m)")
+        a_use, b_use = SlamConfig().range_bias_for(m)
+        add(m, "in_use", "range_bias_a", "m", a_use, "in use range bias a (m)")
+        add(m, "in_use", "range_bias_b", "m/m", b_use, "in use range bias b (m/m)")
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "noise_calibration",
-        header,
-        rows,
+        records,
+        index=["method"],
+        columns=["source", "quantity", "unit"],
+        labels=labels,
         title="Constant measurement-noise model: maximum-likelihood fits (tree park)",
         notes=(
             f"Seeds {list(SEEDS)}, 240 scans each, circles whose beams with a return mostly hit "
@@ -205,21 +225,36 @@ def run(ctx) -> None:
     )
     fl = calibrate_fit_floor()
     ctx.config["noise-calibration"]["fit_floor"] = fl
-    ctx.outputs += write_table(
+    floor = [
+        ("measured", "circles", "count", fl["n"], "circles"),
+        ("fitted", "floor_range", "m", fl["floor_range_m"], "floor range (m)"),
+        ("fitted", "floor_bearing", "rad", fl["floor_bearing_rad"], "floor bearing (rad)"),
+        ("in_use", "floor_range", "m", DEFAULT_FIT_FLOOR[0], "in use range (m)"),
+        ("in_use", "floor_bearing", "rad", DEFAULT_FIT_FLOOR[1], "in use bearing (rad)"),
+        (
+            "fitted",
+            "nis_per_dof_fit_covariance",
+            "1",
+            fl["nis_per_dof_fit"],
+            "NIS per dof, fit covariance",
+        ),
+        (
+            "fitted",
+            "nis_per_dof_with_floors",
+            "1",
+            fl["nis_per_dof_floors"],
+            "NIS per dof, with floors",
+        ),
+    ]
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "noise_calibration_floor",
-        ["method", "circles", "floor range (m)", "floor bearing (rad)", "in use range (m)"]
-        + ["in use bearing (rad)", "NIS per dof, fit covariance", "NIS per dof, with floors"],
         [
-            [
-                "geometric",
-                fl["n"],
-                fl["floor_range_m"],
-                fl["floor_bearing_rad"],
-                *DEFAULT_FIT_FLOOR,
-                fl["nis_per_dof_fit"],
-                fl["nis_per_dof_floors"],
-            ]
+            {"method": "geometric", "source": s_, "quantity": q, "unit": u, "value": v}
+            for s_, q, u, v, _ in floor
         ],
+        index=["method"],
+        columns=["source", "quantity", "unit"],
+        labels={(s_, q, u): lab for s_, q, u, _, lab in floor},
         title="Floors of the geometric fit's covariance: maximum-likelihood fit (tree park)",
         notes=(
             f"Seeds {list(SEEDS)}, the circles of noise_calibration.md. R = R_fit + diag(f_r^2, "

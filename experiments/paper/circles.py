@@ -30,7 +30,7 @@ import numpy as np
 from experiments.eval.circles import center_error, circle_crlb, radius_error
 from experiments.eval.detections import assign_circles
 from experiments.exec import SerialExecutor, spawn_seeds
-from experiments.io.writers import write_table
+from experiments.io.writers import write_tidy_table
 from experiments.render import plots
 from experiments.sim import load_scene, scene_from_dict, sensor_preset, simulate_scan
 from features import extract_features
@@ -50,8 +50,8 @@ METHODS = ("paper", "geometric", "bailey", "taubin")
 TABLE_PILLARS = ("d", "e", "f", "g")
 # The paper's Table 1 (CE). Its Table 2 (RE) values did not survive in our copy of the paper.
 PAPER_TABLE1 = {
-    "paper (published)": {"d": 0.0373, "e": 0.0011, "f": 0.1057, "g": 0.0588},
-    "bailey (published)": {"d": 0.2096, "e": 0.2326, "f": 0.2626, "g": 0.1384},
+    "paper": {"d": 0.0373, "e": 0.0011, "f": 0.1057, "g": 0.0588},
+    "bailey": {"d": 0.2096, "e": 0.2326, "f": 0.2626, "g": 0.1384},
 }
 
 
@@ -249,31 +249,39 @@ def paired(mc: MonteCarlo, a: str = "paper", b: str = "bailey") -> list[list]:
     return rows
 
 
-def _table(summary, pillars, key, methods, published: dict | None):
-    header = ["method", "statistic", *pillars]
-    # the paper's statistic is the mean; RMS is what compares with the Cramer-Rao bound
-    stat_names = {"mean": f"{key}_mean", "median": f"{key}_median", "RMS": f"{key}_rms"}
-    rows = []
-    for m in methods:
-        for label, field_ in stat_names.items():
-            rows.append(
-                [
-                    m,
-                    f"{label} {key.upper()}",
-                    *[summary[m][p].get(field_, math.nan) for p in pillars],
-                ]
+def _table(summary, pillars, key, methods, published: dict | None) -> list[dict]:
+    """Table 1 (key "ce") or 2 ("re") as tidy records: source, method, pillar, statistic, unit,
+    value. The paper's statistic is the mean; RMS is what compares with the Cramer-Rao bound;
+    the paper's published numbers (its means) are the rows of source "paper_published"."""
+    out = []
+
+    def add(source, method, statistic, unit, values: dict) -> None:
+        for p in pillars:
+            if source == "paper_published" and p not in values:
+                continue  # the paper gives pillars d-g only
+            out.append(
+                {
+                    "source": source,
+                    "method": method,
+                    "pillar": p,
+                    "statistic": statistic,
+                    "unit": unit,
+                    "value": values.get(p, math.nan),
+                }
             )
-        rows.append([m, "miss rate", *[summary[m][p]["miss"] for p in pillars]])
-    rows.append(
-        [
-            "Cramer-Rao bound",
-            f"RMS {key.upper()}",
-            *[summary["crlb"].get(p, {}).get(f"{key}_rms", math.nan) for p in pillars],
-        ]
-    )
+
+    for m in methods:
+        for stat in ("mean", "median", "rms"):
+            field_ = f"{key}_{stat}"
+            add(
+                "simulation", m, field_, "relative", {p: summary[m][p].get(field_) for p in pillars}
+            )
+        add("simulation", m, "miss_rate", "fraction", {p: summary[m][p]["miss"] for p in pillars})
+    bound = {p: summary["crlb"].get(p, {}).get(f"{key}_rms") for p in pillars}
+    add("simulation", "crlb", f"{key}_rms", "relative", bound)
     for name, vals in (published or {}).items():
-        rows.append([name, key.upper(), *[vals.get(p, math.nan) for p in pillars]])
-    return header, rows
+        add("paper_published", name, f"{key}_mean", "relative", vals)
+    return out
 
 
 def run_tables(ctx) -> None:
@@ -303,7 +311,8 @@ def run_tables(ctx) -> None:
         f"{n} noise draws at each of the six positions; CE eq. (10), RE eq. (11), relative to "
         "the pillar's distance and radius; mean (the paper's statistic), median and RMS over "
         "the scans in which the method extracted the pillar. Compare the Cramer-Rao bound "
-        "(an RMS) with the RMS rows: a mean of 2-D Gaussian errors is about 0.89 of their RMS."
+        "(method crlb, an RMS) with the RMS rows: a mean of 2-D Gaussian errors is about 0.89 "
+        "of their RMS. Source paper_published: the paper's numbers (means)."
     )
     for stem, key, pillars, pub, extra in (
         ("table1_ce", "ce", TABLE_PILLARS, PAPER_TABLE1, ""),
@@ -317,55 +326,62 @@ def run_tables(ctx) -> None:
         ("table1_ce_all", "ce", tuple(mc.names), PAPER_TABLE1, ""),
         ("table2_re_all", "re", tuple(mc.names), None, ""),
     ):
-        header, rows = _table(s, pillars, key, METHODS, pub)
-        ctx.outputs += write_table(
+        ctx.outputs += write_tidy_table(
             ctx.out_dir / stem,
-            header,
-            rows,
+            _table(s, pillars, key, METHODS, pub),
+            index=["source", "method", "statistic", "unit"],
+            columns=["pillar"],
             title=f"{'Table 1' if key == 'ce' else 'Table 2'}: {key.upper()} of pillars "
             f"{', '.join(pillars)} (simulated pillar court)",
             notes=note + extra,
         )
-    header = [
-        "method",
-        "pillar",
-        "radius bias (m)",
-        "centre-range bias (m)",
-        "RMS centre error (m)",
-        "extracted scans",
-    ]
-    rows = [
-        [
-            m,
-            p,
-            s[m][p].get("r_bias_m", math.nan),
-            s[m][p].get("range_bias_m", math.nan),
-            s[m][p].get("rms_center_m", math.nan),
-            s[m][p]["n"],
-        ]
+    bias = [
+        {
+            "method": m,
+            "pillar": p,
+            "radius_bias_m": s[m][p].get("r_bias_m", math.nan),
+            "centre_range_bias_m": s[m][p].get("range_bias_m", math.nan),
+            "rms_centre_error_m": s[m][p].get("rms_center_m", math.nan),
+            "extracted_scans": s[m][p]["n"],
+        }
         for m in METHODS
         for p in mc.names
     ]
-    ctx.outputs += write_table(
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "circle_bias",
-        header,
-        rows,
+        bias,
+        index=["method", "pillar"],
+        values=list(bias[0])[2:],
+        labels={
+            "radius_bias_m": "radius bias (m)",
+            "centre_range_bias_m": "centre-range bias (m)",
+            "rms_centre_error_m": "RMS centre error (m)",
+            "extracted_scans": "extracted scans",
+        },
         title="Signed errors (bias) per method",
         notes="Negative radius bias = circle too small; negative centre-range bias = centre too "
         "near the sensor (the Kasa bias of the paper's fit on short arcs).",
     )
     pr = paired(mc)
-    ctx.outputs += write_table(
+    pairs = [
+        {"pillar": r[0], "scans_both": r[1], "method": m, "ce_mean": ce, "re_mean": re}
+        for r in pr
+        for m, ce, re in (("paper", r[2], r[4]), ("bailey", r[3], r[5]))
+    ]
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "paper_vs_bailey",
-        [
-            "pillar",
-            "scans extracted by both",
-            "mean CE paper",
-            "mean CE bailey",
-            "mean RE paper",
-            "mean RE bailey",
-        ],
-        pr,
+        pairs,
+        index=["pillar", "scans_both"],
+        columns=["method"],
+        values=["ce_mean", "re_mean"],
+        labels={
+            "scans_both": "scans extracted by both",
+            **{
+                (m, v): f"mean {v[:2].upper()} {m}"
+                for m in ("paper", "bailey")
+                for v in ("ce_mean", "re_mean")
+            },
+        },
         title="The paper's fit against the Bailey detector on the same scans",
         notes="Only the scans in which both methods extracted the pillar.",
     )
@@ -377,18 +393,17 @@ def run_tables(ctx) -> None:
     cfg["crlb_ratio_median"] = float(np.median(ratios)) if len(ratios) else None
     cfg["crlb_ratio_max"] = float(ratios.max()) if len(ratios) else None
     cfg["crlb_within_1p5"] = float(np.mean(ratios <= 1.5)) if len(ratios) else None
-    ctx.outputs += write_table(
+    eff_fields = ("position", "pillar", "beams", "crlb_rms_centre_m", "geometric_rms_centre_m")
+    eff_fields += ("ratio", "scans")
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "crlb_efficiency",
-        [
-            "position",
-            "pillar",
-            "beams",
-            "CRLB RMS centre (m)",
-            "geometric RMS centre (m)",
-            "ratio",
-            "scans",
-        ],
-        eff,
+        [dict(zip(eff_fields, r)) for r in eff],
+        index=["position", "pillar"],
+        values=list(eff_fields[2:]),
+        labels={
+            "crlb_rms_centre_m": "CRLB RMS centre (m)",
+            "geometric_rms_centre_m": "geometric RMS centre (m)",
+        },
         title="Geometric fit against the Cramer-Rao bound (positions with >= 5 beams)",
         notes=f"Ratio median {cfg['crlb_ratio_median']:.3f}, max {cfg['crlb_ratio_max']:.3f}; "
         f"{100 * cfg['crlb_within_1p5']:.0f}% of cells within 1.5x. The bound assumes "
@@ -511,11 +526,27 @@ def run_sweep(ctx) -> None:
     for (var, v), res in zip(points, got):
         results[var][v] = res
         for m, (ce, re, frac) in res.items():
-            rows.append([var, v, m, ce, re, frac])
-    ctx.outputs += write_table(
+            rows.append(
+                {
+                    "sweep": var,
+                    "sweep_value": v,
+                    "method": m,
+                    "rms_ce": ce,
+                    "rms_re": re,
+                    "extracted_fraction": frac,
+                }
+            )
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "circle_sweep",
-        ["varied", "value", "method", "RMS CE", "RMS RE", "extracted fraction"],
         rows,
+        index=["sweep", "sweep_value", "method"],
+        values=["rms_ce", "rms_re", "extracted_fraction"],
+        labels={
+            "sweep_value": "value",
+            "rms_ce": "RMS CE",
+            "rms_re": "RMS RE",
+            "extracted_fraction": "extracted fraction",
+        },
         title="Circle accuracy against range, radius and range noise",
         notes=f"One pillar straight ahead of a PLS200, {n} scans per point; the others held at "
         f"{SWEEP_DEFAULT}. The crlb rows are the Cramer-Rao bound (RMS, relative).",

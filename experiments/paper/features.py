@@ -13,7 +13,7 @@ from __future__ import annotations
 import logging
 
 from experiments.errors import MissingDataError
-from experiments.io.writers import write_table
+from experiments.io.writers import write_tidy_table
 from experiments.paper.classification import RADII_M, RANGES_M, classification_study
 from experiments.render import plots
 from experiments.render.viz import open_recording
@@ -34,23 +34,17 @@ def classification(ctx) -> None:
     res = classification_study(
         ctx.rng("classification"), n, sigma, progress=ctx.progress, executor=ctx.executor
     )
-    header = [
-        "radius (m)",
-        "range (m)",
-        "beams on trunk",
-        "circle rate (lrt)",
-        "circle rate (paper eq. 5)",
-    ]
-    rows = [
-        [
-            r,
-            d,
-            round(res.beams[(r, d)], 1),
-            res.circle_rate["lrt"][(r, d)],
-            res.circle_rate["paper"][(r, d)],
-        ]
+    records = [
+        {
+            "radius_m": r,
+            "range_m": d,
+            "beams_on_trunk": res.beams[(r, d)],
+            "line_test": test,
+            "circle_rate": res.circle_rate[test][(r, d)],
+        }
         for r in RADII_M
         for d in RANGES_M
+        for test in ("lrt", "paper")
     ]
     notes = (
         f"{n} trials per cell, PLS200 with {sigma} m range noise and 1 cm quantisation.\n\n"
@@ -62,10 +56,19 @@ def classification(ctx) -> None:
         f"| bushes extracted as a circle | {res.bush_circle_rate['lrt']:.3f} | "
         f"{res.bush_circle_rate['paper']:.3f} |\n"
     )
-    ctx.outputs += write_table(
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "classification",
-        header,
-        rows,
+        records,
+        index=["radius_m", "range_m", "beams_on_trunk"],
+        columns=["line_test"],
+        values="circle_rate",
+        labels={
+            "radius_m": "radius (m)",
+            "range_m": "range (m)",
+            "beams_on_trunk": "beams on trunk",
+            "lrt": "circle rate (lrt)",
+            "paper": "circle rate (paper eq. 5)",
+        },
         title="Classification of simulated trunks, walls and bushes",
         notes=notes,
     )

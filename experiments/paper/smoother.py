@@ -22,7 +22,6 @@ scans of the full run.
 from __future__ import annotations
 
 import logging
-import math
 import time
 
 import numpy as np
@@ -31,7 +30,7 @@ from experiments.errors import MissingDataError
 from experiments.eval.gps import score_sequence
 from experiments.io.config_file import load_slam_config
 from experiments.io.victoria_park import gtsam_graph, load_victoria_park
-from experiments.io.writers import write_table
+from experiments.io.writers import write_tidy_table
 from slam import run as slam_run
 from slam import se2
 from slam.smoother import problem_from_log, smooth, solve_graph_file
@@ -42,20 +41,20 @@ log = logging.getLogger(__name__)
 
 GRAPH_CHUNK = 25  # poses per iSAM2 update on GTSAM's graph (the sweep in the README)
 PRESET = "victoria_park_ute"
-HEADER = [
-    "problem",
-    "solver",
-    "poses",
-    "landmarks",
-    "chi2 per dof",
-    "RMSE vs GPS (m)",
-    "median (m)",
-    "RMSE without jumps (m)",
-    "RMSE aligned (m)",
-    "landmark sigma median (m)",
-    "iterations",
-    "seconds",
-]
+LABELS = {  # the table's fields and their Markdown headers
+    "problem": "problem",
+    "solver": "solver",
+    "poses": "poses",
+    "landmarks": "landmarks",
+    "chi2_per_dof": "chi2 per dof",
+    "rmse_m": "RMSE vs GPS (m)",
+    "median_m": "median (m)",
+    "rmse_clean_m": "RMSE without jumps (m)",
+    "rmse_aligned_m": "RMSE aligned (m)",
+    "landmark_sigma_median_m": "landmark sigma median (m)",
+    "iterations": "iterations",
+    "seconds": "seconds",
+}
 
 
 def smoother_trial(job: tuple, seed=None) -> dict:
@@ -66,8 +65,15 @@ def smoother_trial(job: tuple, seed=None) -> dict:
     kind, arg = job
     if kind == "graph":
         g = solve_graph_file(gtsam_graph(), "isam2-chunks", GRAPH_CHUNK)
-        row = ["GTSAM victoria_park.txt", g.method, g.n_poses, g.n_landmarks]
-        row += [_r(g.chi2_per_dof), *[""] * 5, g.iterations, _r(g.seconds)]
+        row = {
+            "problem": "GTSAM victoria_park.txt",
+            "solver": g.method,
+            "poses": g.n_poses,
+            "landmarks": g.n_landmarks,
+            "chi2_per_dof": float(g.chi2_per_dof),
+            "iterations": g.iterations,
+            "seconds": float(g.seconds),
+        }
         return {"rows": [row], "method": g.method}
     return _victoria_park(arg)
 
@@ -91,7 +97,7 @@ def run(ctx) -> None:
         jobs.append(("victoria-park", ctx.quick))
     if not jobs:
         return
-    rows: list[list] = []
+    rows: list[dict] = []
     got_all = ctx.map(smoother_trial, jobs, desc="smoother", chunksize=1)
     for (kind, _), got in zip(jobs, got_all):
         rows += got["rows"]
@@ -125,7 +131,15 @@ def run(ctx) -> None:
         "square root of the largest eigenvalue of each landmark's marginal covariance."
     )
     title = "The GTSAM smoother against the EKF"
-    ctx.outputs += write_table(ctx.out_dir / "smoother", HEADER, rows, title, notes)
+    ctx.outputs += write_tidy_table(
+        ctx.out_dir / "smoother",
+        [{k: r.get(k) for k in LABELS} for r in rows],
+        index=["problem", "solver"],
+        values=list(LABELS)[2:],
+        labels=LABELS,
+        title=title,
+        notes=notes,
+    )
 
 
 def _victoria_park(quick: bool) -> dict:
@@ -146,28 +160,26 @@ def _victoria_park(quick: bool) -> dict:
     sig_e = np.sqrt(np.linalg.eigvalsh(lg.landmark_cov)[:, -1])
     label = f"Victoria Park, {n} scans"
     rows = [
-        [
-            label,
-            "EKF",
-            n,
-            lg.landmark_id.size,
-            "",
-            *_gps(sc_e),
-            _r(np.median(sig_e)),
-            "",
-            _r(ekf_s),
-        ],
-        [
-            label,
-            f"smoother ({sm.solver})",
-            n,
-            sm.landmark_id.size,
-            _r(sm.chi2_per_dof),
-            *_gps(sc_s),
-            _r(np.median(sig)),
-            sm.iterations,
-            _r(sm.seconds),
-        ],
+        {
+            "problem": label,
+            "solver": "EKF",
+            "poses": n,
+            "landmarks": lg.landmark_id.size,
+            **_gps(sc_e),
+            "landmark_sigma_median_m": float(np.median(sig_e)),
+            "seconds": ekf_s,
+        },
+        {
+            "problem": label,
+            "solver": f"smoother ({sm.solver})",
+            "poses": n,
+            "landmarks": sm.landmark_id.size,
+            "chi2_per_dof": float(sm.chi2_per_dof),
+            **_gps(sc_s),
+            "landmark_sigma_median_m": float(np.median(sig)),
+            "iterations": sm.iterations,
+            "seconds": float(sm.seconds),
+        },
     ]
     ant = {
         "EKF": np.array([se2.compose(p, laser)[:2] for p in lg.pose]),
@@ -183,10 +195,10 @@ def _victoria_park(quick: bool) -> dict:
     }
 
 
-def _gps(sc) -> list:
-    return [_r(sc.all_rmse), _r(sc.all_median), _r(sc.clean_rmse), _r(sc.all_rmse_aligned)]
-
-
-def _r(v) -> float:
-    v = float(v)
-    return round(v, 3) if math.isfinite(v) else math.nan
+def _gps(sc) -> dict:
+    return {
+        "rmse_m": float(sc.all_rmse),
+        "median_m": float(sc.all_median),
+        "rmse_clean_m": float(sc.clean_rmse),
+        "rmse_aligned_m": float(sc.all_rmse_aligned),
+    }

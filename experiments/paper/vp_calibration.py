@@ -47,7 +47,7 @@ from scipy.optimize import minimize
 from experiments.errors import MissingDataError
 from experiments.io.config_file import config_toml
 from experiments.io.victoria_park import load_victoria_park
-from experiments.io.writers import write_atomic, write_table
+from experiments.io.writers import write_atomic, write_tidy_table
 from slam import OdometryNoise, SlamConfig
 from slam import run as slam_run
 from slam.measurement import NoiseModel
@@ -160,17 +160,26 @@ def run(ctx) -> None:
         "fitted": fit["values"],
         "seconds": round(time.perf_counter() - t0, 1),
     }
-    rows = [
-        ["start (SLAM-school model, 0.5 m/s, 3 deg)", *_row(START), start_J, start_info],
-        ["maximum likelihood", *_row(fit["theta"]), fit["J"], fit],
+    records = [
+        {
+            "parameters": name,
+            **dict(zip(CALIBRATION_LABELS, _row(theta)[:6])),
+            "j": J,
+            "landmarks": info["landmarks"],
+            "nis_per_dof": info["nis_per_dof"],
+            "unexplained_measurements": info["unexplained"],
+        }
+        for name, theta, J, info in (
+            ("start (SLAM-school model, 0.5 m/s, 3 deg)", START, start_J, start_info),
+            ("maximum likelihood", fit["theta"], fit["J"], fit),
+        )
     ]
-    header = ["parameters", "laser yaw (deg)", "speed sigma (m/s)", "steer sigma (deg)"]
-    header += ["range sigma a (m)", "range sigma b (per m)", "bearing sigma c (deg)", "J"]
-    header += ["landmarks", "NIS per dof", "unexplained measurements"]
-    ctx.outputs += write_table(
+    ctx.outputs += write_tidy_table(
         ctx.out_dir / "victoria_park_calibration",
-        header,
-        [r[:-1] + [r[-1]["landmarks"], r[-1]["nis_per_dof"], r[-1]["unexplained"]] for r in rows],
+        records,
+        index=["parameters"],
+        values=list(records[0])[1:],
+        labels=CALIBRATION_LABELS,
         title="Victoria Park: the ute's noise and laser yaw by maximum likelihood (scans 1-2000)",
         notes=(
             f"{fit['evaluations']} evaluations of the run over scans 1-{FIT_SCANS} with the "
@@ -185,6 +194,19 @@ def run(ctx) -> None:
             config_toml(cfg, "Victoria Park ute: `trunkslam reproduce victoria-park-calibration`"),
         )
     )
+
+
+CALIBRATION_LABELS = {  # the fitted parameters' fields (in `_row`'s order) and the table's headers
+    "laser_yaw_deg": "laser yaw (deg)",
+    "speed_sigma_m_s": "speed sigma (m/s)",
+    "steer_sigma_deg": "steer sigma (deg)",
+    "range_sigma_a_m": "range sigma a (m)",
+    "range_sigma_b_per_m": "range sigma b (per m)",
+    "bearing_sigma_c_deg": "bearing sigma c (deg)",
+    "j": "J",
+    "nis_per_dof": "NIS per dof",
+    "unexplained_measurements": "unexplained measurements",
+}
 
 
 def _row(theta) -> list:

@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 import pytest
+from support import assert_tidy_tables
 
 from experiments.errors import ConfigError, ExperimentFailed
 from experiments.exec import SerialExecutor, TrialsFailed, describe_seed, spawn_seeds
@@ -102,6 +103,9 @@ def test_reproduce_tables_identical_with_1_and_2_workers_and_dask(tmp_path, exec
         assert m["executor"]["executor"] == ex.name
     assert out["serial"].count(b"\n") > 60
     assert out["processes"] == out["serial"] and out["dask"] == out["serial"]
+    assert assert_tidy_tables(tmp_path / "serial") == {"circle_sweep.csv"}
+    head = out["serial"].decode().splitlines()[0]
+    assert head == "sweep,sweep_value,method,rms_ce,rms_re,extracted_fraction"
 
 
 POINT = {"range_m": 10.0, "radius_m": 0.3, "noise_m": 0.01, "n_trials": 2}

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from support import assert_outputs, quick_reproduce
+from support import assert_outputs, assert_tidy_tables, quick_reproduce
 
 from association import wrap_angle
 from experiments.sim.landmarks import LandmarkSimConfig, simulate_landmark_scans
@@ -60,9 +60,15 @@ def test_quick_run_writes_tables_plot_and_optimality(quick_run):
     assert methods == {"IHGR (single scan)", "IHGR (K = 3 window)", "JCBB", "NN"}
     assert {r["sweep"] for r in rows} == {"clutter", "density", "pose"}
     for r in rows:
-        assert 0.5 <= float(r["correct rate"]) <= 1.0
-        total = float(r["correct rate"]) + float(r["false pairing rate"])
+        assert 0.5 <= float(r["correct_rate"]) <= 1.0
+        total = float(r["correct_rate"]) + float(r["false_pair_rate"])
         assert total <= 1.0 + 1e-9
+        assert (r["jcbb_budget_hits"] != "") == (r["method"] == "JCBB")
+
+
+def test_quick_run_tables_are_tidy(quick_run):
+    # association_optimality.csv (every instance) is summarised, not pivoted, in its Markdown
+    assert assert_tidy_tables(quick_run) == {"association.csv", "association_loop.csv"}
 
 
 def test_quick_run_has_the_in_the_loop_section(quick_run):
@@ -79,14 +85,15 @@ def test_quick_run_has_the_in_the_loop_section(quick_run):
         "NN",
     }
     for r in tree:
-        assert 0 <= int(r["false pairings"]) <= int(r["updates"])
-        assert 4 <= float(r["landmarks"]) <= 12 and int(r["missed trees"]) <= 2
-        assert 0 < float(r["pose error (m)"]) < 0.5
+        assert 0 <= int(r["false_pairings"]) <= int(r["updates"])
+        assert 4 <= float(r["landmarks"]) <= 12 and int(r["missed_trees"]) <= 2
+        assert 0 < float(r["pose_error_m"]) < 0.5
         window = r["method"].startswith("IHGR window")
-        assert bool(r["window LPs fractional"]) == window
+        assert bool(r["window_lps_fractional"]) == bool(r["window_steps"]) == window
         if window:
-            frac, steps = map(int, r["window LPs fractional"].split("/"))
+            frac, steps = int(r["window_lps_fractional"]), int(r["window_steps"])
             assert steps == 2 * 120 and 0 <= frac <= steps
+            assert 0 <= int(r["window_steps_rounded"]) <= steps
 
 
 def test_quick_run_single_scan_ihgr_is_always_optimal(quick_run):
@@ -104,7 +111,10 @@ def test_quick_run_single_scan_ihgr_is_always_optimal(quick_run):
 def test_bench_rows():
     from experiments.bench.association import bench, format_table
 
-    rows = bench(repeats=3, seed=1)
+    calls = []
+    rows = bench(repeats=3, seed=1, progress=lambda *a: calls.append(a))
+    n = calls[-1][2]  # the scans, warm-up ones included
+    assert calls[0] == ("association scans", 0, n) and calls[-1] == ("association scans", n, n)
     assert [r["method"] for r in rows][1:] == [
         "IHGR single scan",
         "IHGR single scan, presolve off",

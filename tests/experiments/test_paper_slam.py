@@ -10,13 +10,14 @@ import json
 import numpy as np
 import pytest
 from regenerate_golden import FILES, slam_rng
+from support import assert_tidy_tables
 
 from experiments.eval.detections import false_detections
 from experiments.io.results import MAP_COLUMNS, TRAJECTORY_COLUMNS
 from experiments.io.sequence_file import save_sequence
 from experiments.paper.reproduce import run_experiments
 from experiments.paper.runner import RunContext
-from experiments.paper.slam import Exp2Config, key_figures, monte_carlo
+from experiments.paper.slam import PAPER_TABLE3, SCAN_SETS, Exp2Config, key_figures, monte_carlo
 from experiments.paper.slam import run as run_experiment2
 from experiments.pipeline.slam import run_slam
 from experiments.render.viz import NullRecorder, Recorder
@@ -137,9 +138,22 @@ def test_experiment2_writes_every_output(tmp_path):
     ):
         assert n in names and (tmp_path / n).stat().st_size > 0, n
     assert ctx.config["table3"]["n_runs"] == 2
-    rows = list(csv.reader((tmp_path / "table3.csv").open()))
-    assert rows[0][:4] == ["quantity", "unit", "paper mean", "paper std"]
-    assert float(rows[1][2]) == pytest.approx(res.abs_err["paper"][:, 0].mean(), abs=1e-4)
+    rows = list(csv.DictReader((tmp_path / "table3.csv").open()))
+    assert list(rows[0]) == ["source", "method", "estimator", "quantity", "unit", "statistic"] + [
+        "value"
+    ]
+    dx = [r for r in rows if r["quantity"] == "dx" and r["source"] == "simulation"]
+    got = {(r["method"], r["estimator"], r["statistic"]): float(r["value"]) for r in dx}
+    assert got[("paper", "ekf", "mean")] == res.abs_err["paper"][:, 0].mean()  # full precision
+    assert got[("paper", "ekf", "std")] == res.abs_err["paper"][:, 0].std(ddof=1)
+    pub = [r for r in rows if r["source"] == "paper_published"]
+    assert [float(r["value"]) for r in pub if r["method"] == "paper"] == list(PAPER_TABLE3["paper"])
+    t4 = list(csv.DictReader((tmp_path / "table4.csv").open()))
+    rates = [r for r in t4 if r["quantity"] == "false_detection_rate"]
+    assert {(int(r["first_scan"]), int(r["last_scan"])) for r in rates} == set(SCAN_SETS)
+    cons = list(csv.DictReader((tmp_path / "consistency.csv").open()))
+    assert float(cons[0]["nees_bound_low"]) < 3 < float(cons[0]["nees_bound_high"])
+    assert assert_tidy_tables(tmp_path) == {"table3.csv", "table4.csv", "consistency.csv"}
 
 
 def test_table3_and_table4_are_one_run_with_the_config_under_both_names(tmp_path, monkeypatch):

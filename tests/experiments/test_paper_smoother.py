@@ -6,7 +6,7 @@ from __future__ import annotations
 import csv
 
 import pytest
-from support import assert_outputs, quick_reproduce
+from support import assert_outputs, assert_tidy_tables, quick_reproduce
 
 from experiments.bench.smoother import format_table
 
@@ -26,12 +26,16 @@ def test_table_rows(quick_run):
     rows = list(csv.DictReader((quick_run / "smoother.csv").open()))
     graph, ekf, smoothed = rows
     assert graph["poses"] == "6969" and graph["landmarks"] == "151"
-    assert float(graph["chi2 per dof"]) <= 1.0
+    assert float(graph["chi2_per_dof"]) <= 1.0 and graph["rmse_m"] == ""
     assert ekf["solver"] == "EKF" and smoothed["solver"] == "smoother (batch)"
     assert ekf["landmarks"] == smoothed["landmarks"] and ekf["poses"] == "1500"
-    assert 0.1 < float(smoothed["chi2 per dof"]) < 5
+    assert 0.1 < float(smoothed["chi2_per_dof"]) < 5
     # both within a few metres of the GPS on the first 1500 scans
-    assert float(ekf["RMSE vs GPS (m)"]) < 5 and float(smoothed["RMSE vs GPS (m)"]) < 5
+    assert float(ekf["rmse_m"]) < 5 and float(smoothed["rmse_m"]) < 5
+
+
+def test_table_is_tidy(quick_run):
+    assert assert_tidy_tables(quick_run) == {"smoother.csv"}
 
 
 def test_skipped_and_said_without_data(tmp_path, monkeypatch):

@@ -6,7 +6,7 @@ import csv
 import json
 
 import pytest
-from support import assert_outputs, quick_reproduce
+from support import assert_outputs, assert_tidy_tables, quick_reproduce
 
 
 @pytest.fixture(scope="module")
@@ -47,9 +47,14 @@ def test_manifest_records_how_to_recreate(quick_run):
 
 def test_classification_table_is_consistent(quick_run):
     rows = list(csv.DictReader((quick_run / "classification.csv").open()))
-    assert len(rows) == 25
-    big = [r for r in rows if float(r["beams on trunk"]) >= 8]
-    assert big and all(float(r["circle rate (lrt)"]) >= 0.75 for r in big)
+    assert list(rows[0]) == ["radius_m", "range_m", "beams_on_trunk", "line_test", "circle_rate"]
+    assert len(rows) == 25 * 2  # 5 radii x 5 ranges x 2 line tests
+    big = [r for r in rows if float(r["beams_on_trunk"]) >= 8 and r["line_test"] == "lrt"]
+    assert big and all(float(r["circle_rate"]) >= 0.75 for r in big)
+
+
+def test_classification_table_is_tidy(quick_run):
+    assert assert_tidy_tables(quick_run) == {"classification.csv"}
 
 
 def test_features_recording_carries_its_layout(quick_run, vp_dir):
