@@ -267,6 +267,24 @@ class Filter(_Estimate):
         self.landmark_ids = np.concatenate([self.landmark_ids, np.array([landmark_id], np.int64)])
         self.first_xy = np.concatenate([self.first_xy, m[None, :]])
 
+    def remove_landmarks(self, landmark_ids) -> None:
+        """Remove these landmarks from the state: their rows and columns of x and P go
+        (marginalisation, exact for a Gaussian); the others keep their order."""
+        ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
+        pos = np.flatnonzero(np.isin(self.landmark_ids, ids))
+        if pos.size != np.unique(ids).size:
+            missing = sorted(set(ids.tolist()) - set(self.landmark_ids[pos].tolist()))
+            raise SlamError(f"remove_landmarks: landmark ids {missing} are not in the state")
+        if not pos.size:
+            return
+        keep = np.ones(self.dim, bool)
+        keep[3 + 2 * pos] = False
+        keep[4 + 2 * pos] = False
+        self.x = self.x[keep]
+        self.P = np.ascontiguousarray(self.P[np.ix_(keep, keep)])
+        self.landmark_ids = np.delete(self.landmark_ids, pos)
+        self.first_xy = np.delete(self.first_xy, pos, axis=0)
+
 
 def _add_symmetric(P: np.ndarray, K: np.ndarray, A: np.ndarray) -> None:
     """P += K A^T + A K^T in place, P symmetric (d, d), K and A (d, r).

@@ -44,7 +44,7 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -198,6 +198,8 @@ class _Run:
     book: LogBuilder
     next_id: int = 0
     n_used: int = 0  # measurements used in the last scan's update
+    # landmark id -> [scans expected in view, scans associated] since it joined the map
+    vis_count: dict[int, list[int]] = field(default_factory=dict)
 
     @classmethod
     def start(cls, s: _Setup, pose0: np.ndarray, cov0: np.ndarray) -> _Run:
@@ -236,6 +238,8 @@ class _Run:
             self.next_id, n_pending = _manage_window(
                 s, state, self.win, z, R, a, status, track, book, k, self.next_id
             )
+        if s.cfg.map_policy.prunes:
+            _prune(s, state, self.vis_count, status, k)
         t.append(time.perf_counter())
         radius = np.asarray(f.circle_params, float).reshape(-1, 3)[:, 2]
         book.scan_done(k, state, n_pending, z, R, status, track, n_used, nis, 2 * n_used, t, radius)
@@ -617,6 +621,40 @@ def _manage_window(
     if closed:
         win.assoc.mark_mapped(closed)
     return next_id, n_open
+
+
+def _prune(s: _Setup, state: Filter, count: dict[int, list[int]], status, k: int) -> None:
+    """Map policy's pruning, after the scan's update and map management: count for every
+    landmark already in the map before this scan whether it was expected (predicted inside the
+    field of view, no margins, and within the pruning and usable range) and whether it was
+    associated; remove those expected often enough and seen too rarely (`MapPolicy`)."""
+    policy = s.cfg.map_policy
+    ids = state.landmark_ids
+    if not ids.size:
+        return
+    z_hat, _ = se2.observe(state.pose, state.landmarks_xy, s.laser)
+    fov0, fov1 = s.fov
+    expected = (
+        (z_hat[:, 1] >= fov0)
+        & (z_hat[:, 1] <= fov1)
+        & (z_hat[:, 0] <= min(s.max_range, policy.prune_range_m))
+    )
+    seen = set(status[status >= 0].tolist())
+    drop = []
+    for lid, e in zip(ids.tolist(), expected.tolist()):
+        c = count.get(lid)
+        if c is None:  # joined the map in this scan: counted from the next one
+            count[lid] = [0, 0]
+            continue
+        if e:
+            c[0] += 1
+            c[1] += lid in seen
+            if c[0] >= policy.prune_after_expected and c[1] < policy.prune_hit_ratio * c[0]:
+                drop.append(lid)
+    if drop:
+        state.remove_landmarks(drop)
+        for lid in drop:
+            del count[lid]
 
 
 # ---- helpers ------------------------------------------------------------------------------------

@@ -209,6 +209,7 @@ def problem_from_log(log: SlamLog, measurements: str = "ekf") -> Problem:
     measurements: "ekf" (the measurements the filter used: its updates and each landmark's
         initialising measurement) or "all" (also the tentative sightings of the landmarks that
         joined the map, which the filter never uses).
+    Measurements of landmarks that left the map (`MapPolicy` pruning) are left out.
     """
     if measurements not in ("ekf", "all"):
         raise SlamError(f"measurements: expected 'ekf' or 'all', got {measurements!r}")
@@ -221,7 +222,8 @@ def problem_from_log(log: SlamLog, measurements: str = "ekf") -> Problem:
             log.meas_track, log.landmark_id
         )
         kind[tentative] = MEAS_TENTATIVE
-    use = kind >= 0
+    # a landmark the map policy pruned is not in the final map: its measurements stay out
+    use = (kind >= 0) & np.isin(log.meas_track, log.landmark_id)
     return Problem(
         scan_t=log.scan_t,
         prior_pose=log.start_pose,

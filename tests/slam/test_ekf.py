@@ -213,3 +213,23 @@ def test_symmetric_rank_update_in_place_equals_the_plain_sum():
         strided = np.asfortranarray(P)
         _add_symmetric(strided, K, A)
         np.testing.assert_allclose(strided, expected, rtol=1e-12, atol=1e-10)
+
+
+def test_removing_a_landmark_keeps_the_marginal_of_the_rest():
+    from slam.ekf import Filter
+    from slam.errors import SlamError
+
+    rng = np.random.default_rng(3)
+    d = 3 + 2 * 3
+    A = rng.standard_normal((d, d))
+    x = rng.standard_normal(d)
+    st0 = EkfState(x, A @ A.T + d * np.eye(d), np.array([4, 7, 9]))
+    f = Filter(st0)
+    f.remove_landmarks([7])
+    keep = np.r_[0, 1, 2, 3, 4, 7, 8]
+    np.testing.assert_array_equal(f.x, x[keep])
+    np.testing.assert_array_equal(f.P, st0.P[np.ix_(keep, keep)])
+    np.testing.assert_array_equal(f.landmark_ids, [4, 9])
+    assert f.P.flags.c_contiguous and f.first_xy.shape == (2, 2)
+    with pytest.raises(SlamError, match=r"landmark ids \[7\] are not in the state"):
+        f.remove_landmarks([7])

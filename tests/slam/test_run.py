@@ -437,3 +437,62 @@ def test_warm_up_takes_the_first_call_costs_out_of_the_timed_loop(monkeypatch):
     assert cold.timing_s["total"][0] == 5000.0  # every step's first call, on scan 0
     for name in ("pose", "pose_cov", "landmark_xy", "scan_nis", "meas_status"):
         np.testing.assert_array_equal(getattr(warm, name), getattr(cold, name), err_msg=name)
+
+
+def _in_laser_frame(seq: Sequence, world_xy, scans) -> dict:
+    """scan -> [laser-frame (x, y) of the world point] for the given scans (a false feature)."""
+    truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    out = {}
+    for k in scans:
+        lw = se2.compose(truth[k], LASER)
+        c, s = math.cos(lw[2]), math.sin(lw[2])
+        dx, dy = world_xy[0] - lw[0], world_xy[1] - lw[1]
+        out[k] = [(c * dx + s * dy, -s * dx + c * dy)]
+    return out
+
+
+def test_pruning_removes_a_mapped_ghost_the_laser_stops_seeing_and_keeps_the_trees():
+    """A bush seen in scans 2-4 joins the map at scan 4; it stays in view and is never seen
+    again. With pruning after 5 expected scans below a 0.3 hit ratio it leaves the map at scan
+    9 (expected in 5-9, seen in none); the trees, seen whenever in view, all stay. The smoother
+    leaves the pruned landmark's measurements out."""
+    from slam.smoother import problem_from_log
+
+    seq = drive_sequence(1.5, 0.0, n_scans=40)
+    truth0 = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)[0]
+    bush = se2.compose(truth0, (35.0, 10.0, 0.0))[:2]  # ahead, 36 m to 25 m away, always in view
+    feats = point_features(
+        seq, LANDMARKS, np.random.default_rng(2), extra=_in_laser_frame(seq, bush, (2, 3, 4))
+    )
+    base = run(seq, features=feats)
+    assert base.landmark_xy.shape[0] == 5  # the bush is a landmark for good
+    policy = MapPolicy(prune_after_expected=5, prune_hit_ratio=0.3, prune_range_m=40.0)
+    log = run(seq, features=feats, config=SlamConfig(map_policy=policy))
+    assert log.n_map[8] == 5 and log.n_map[9] == 4 and log.n_map[-1] == 4
+    d = np.hypot(*(log.landmark_xy[:, None, :] - LANDMARKS[None]).transpose(2, 0, 1))
+    assert np.all(d.min(axis=1) < 0.05) and len(set(d.argmin(axis=1))) == 4
+    bush_id = set(base.landmark_id.tolist()) - set(log.landmark_id.tolist())
+    assert len(bush_id) == 1 and (log.meas_track == bush_id.pop()).sum() == 3
+    np.testing.assert_allclose(log.pose[:9], base.pose[:9], atol=1e-12)  # same until pruned
+    pb = problem_from_log(log)
+    assert np.isin(pb.meas_landmark, log.landmark_id).all()
+    # beyond the pruning range the bush is never expected, so it stays
+    near = MapPolicy(prune_after_expected=5, prune_hit_ratio=0.3, prune_range_m=20.0)
+    assert run(seq, features=feats, config=SlamConfig(map_policy=near)).n_map[-1] == 5
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"prune_after_expected": -1},
+        {"prune_after_expected": 2.5},
+        {"prune_hit_ratio": 1.5},
+        {"prune_hit_ratio": -0.1},
+        {"prune_range_m": 0.0},
+        {"prune_range_m": float("nan")},
+    ],
+)
+def test_pruning_settings_are_checked(bad):
+    (name,) = bad
+    with pytest.raises(SlamError, match=f"MapPolicy.{name}"):
+        MapPolicy(**bad)
