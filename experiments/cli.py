@@ -94,6 +94,7 @@ class ExperimentName(StrEnum):
     smoother = "smoother"
     noise_calibration = "noise-calibration"
     victoria_park_calibration = "victoria-park-calibration"
+    victoria_park_pruning = "victoria-park-pruning"
 
 
 def project_errors() -> tuple[type[BaseException], ...]:
@@ -311,7 +312,9 @@ def simulate_drive(
 def reproduce(
     names: Annotated[
         list[ExperimentName] | None,
-        typer.Argument(help="experiments to run (default: all but victoria-park-calibration)"),
+        typer.Argument(
+            help="experiments to run (default: all but the two victoria-park-* calibrations)"
+        ),
     ] = None,
     quick: Annotated[bool, typer.Option(help="small-sample version")] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("results"),
@@ -337,7 +340,7 @@ def reproduce(
     The trials run on every local core (--workers), or on a Dask cluster (--dask); the numbers
     are the same whichever, bit for bit (wall times aside).
 
-    Experiments (NAMES; several may be given, none means all but the calibration):
+    Experiments (NAMES; several may be given, none means all but the two calibrations):
 
     - features: classification of simulated trunks, the Victoria Park scan figure, features.rrd
 
@@ -357,6 +360,9 @@ def reproduce(
     - noise-calibration: measurement-noise model of each extractor (3 s)
 
     - victoria-park-calibration: the ute's noise and laser yaw (15 min; only when named)
+
+    - victoria-park-pruning: the map policy's pruning settings from scans 1-2000 (seconds; only
+    when named)
     """
     from experiments.exec import make_executor
     from experiments.paper.reproduce import run_experiments

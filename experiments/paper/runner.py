@@ -108,6 +108,11 @@ EXPERIMENTS: dict[str, Experiment] = {
         about="the ute's noise and laser yaw from scans 1-2000 (15 min; not in the default run)",
         default=False,
     ),
+    "victoria-park-pruning": Experiment(
+        "experiments.paper.vp_pruning:run",
+        about="the map policy's pruning settings from scans 1-2000 (seconds; only when named)",
+        default=False,
+    ),
 }
 DEFAULT_EXPERIMENTS = tuple(name for name, e in EXPERIMENTS.items() if e.default)
 
