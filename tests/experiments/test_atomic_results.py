@@ -245,6 +245,13 @@ def test_slam_under_a_full_disk_keeps_the_old_outputs(drive, tmp_path, monkeypat
 # ---- Ctrl-C: a real subprocess sent SIGINT at several points ------------------------------------
 
 
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT back to its default. A test suite started in the
+    background (`make test &`) inherits SIGINT ignored, and Python then never raises
+    KeyboardInterrupt: the interruption tests would test nothing."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(args: list[str], cwd: Path) -> subprocess.Popen:
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     return subprocess.Popen(
@@ -254,6 +261,7 @@ def _start(args: list[str], cwd: Path) -> subprocess.Popen:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_default_sigint,
     )
 
 
@@ -312,7 +320,14 @@ def test_reproduce_interrupted_at_several_points_is_old_or_new(old_set, tmp_path
 def _run_interrupted_at(point: str, args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     """Run trunkslam with a SIGINT raised at the named `interruption_point` (deterministic)."""
     env = dict(os.environ, PYTHONUNBUFFERED="1", TRUNKSLAM_INTERRUPT_AT=point)
-    return subprocess.run(TRUNKSLAM + args, cwd=cwd, env=env, capture_output=True, text=True)
+    return subprocess.run(
+        TRUNKSLAM + args,
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        preexec_fn=_default_sigint,
+    )
 
 
 @pytest.mark.slow
