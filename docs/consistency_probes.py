@@ -1,0 +1,210 @@
+"""Probes behind the README's "What is left" of the NEES study: where the tree park's pose NEES
+misses its bounds. A script, not part of the package; it runs on calibration seeds (children of
+`numpy.random.SeedSequence(ROOT)`, ROOT 1000-1003 by default), never on the reported runs.
+
+    .venv/bin/python docs/consistency_probes.py shuffled --runs 16 --root 1001
+    .venv/bin/python docs/consistency_probes.py by-beams
+
+shuffled: for every extractor, the EKF run four ways on the same drives: its own extracted
+    circles ("extracted"); the trunks it found, each centre rebuilt as the truth plus its own
+    normalised error ("own errors", constant noise model: equals "extracted" for paper and
+    bailey up to the false circles); the same errors permuted across the run ("shuffled": same
+    values, no tie to the tree, range or time they came from); and Gaussian errors of the noise
+    model ("gaussian"). Prints NEES mean, share of scans in bounds (bounds for --runs runs),
+    share above.
+by-beams: the mean squared normalised range and bearing errors (constant noise model, range bias
+    removed) of the circles on trunks, by beams on the trunk and by range, on seeds 1000-1003;
+    then the same after a log-linear variance model ln sigma^2 = a + b ln(beams) + c ln(range)
+    fitted by maximum likelihood, and that model's coefficients.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+from scipy.optimize import minimize
+
+import experiments.paper.slam as ps
+from experiments.eval.detections import dominant_label, false_detections, run_labels
+from experiments.eval.poses import consistency, nees, pose_errors
+from experiments.exec.trials import spawn_seeds
+from experiments.sim.trajectory import CycabParams, simulate_cycab_run
+from features import extract_features
+from slam import run as slam_run
+from slam import se2
+from slam.measurement import DEFAULT_RANGE_BIAS
+
+METHODS = ("paper", "geometric", "bailey")
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def trunk_errors(seq, feats, laser_w, model, bias) -> np.ndarray:
+    """(n, 9) rows (scan, circle, true range, true bearing, normalised range error, normalised
+    bearing error, radius, range sigma, bearing sigma) of the circles on trunks."""
+    s_r, s_rm, s_b, s_t = model
+    a0, b0 = bias
+    lm = seq.truth_landmarks
+    rows = []
+    for k, f in enumerate(feats):
+        lw = laser_w[k]
+        for i, ((a, b), p) in enumerate(zip(f.circle_beams, f.circle_params)):
+            one = SimpleNamespace(
+                n_circles=1, circle_beams=np.array([[a, b]]), circle_params=np.array([p])
+            )
+            if false_detections(one, seq.scan_labels[k], lw, lm, 0.5)[1]:
+                continue
+            j = dominant_label(run_labels(seq.scan_labels[k], a, b), returns_only=True)[0]
+            d = lm[j, :2] - lw[:2]
+            tr, tb = float(np.hypot(*d)), math.atan2(d[1], d[0]) - lw[2]
+            r = math.hypot(p[0], p[1])
+            r -= a0 + b0 * r
+            sr, sb = s_r + s_rm * tr, math.sqrt(s_b**2 + (s_t / tr) ** 2)
+            eb = _wrap(math.atan2(p[1], p[0]) - tb)
+            rows.append((k, i, tr, tb, (r - tr) / sr, eb / sb, p[2], sr, sb))
+    return np.array(rows).reshape(-1, 9)
+
+
+def rebuilt(feats, rows, zr, zb) -> list:
+    """The features with only the trunk circles, each centre at truth + (zr, zb) sigmas."""
+    by_scan: dict[int, list] = {}
+    for row, a, b in zip(rows, zr, zb):
+        k, _, tr, tb, _, _, rad, sr, sb = row
+        r2, b2 = tr + a * sr, tb + b * sb
+        by_scan.setdefault(int(k), []).append([r2 * math.cos(b2), r2 * math.sin(b2), rad])
+    out = []
+    for k, f in enumerate(feats):
+        P = np.array(by_scan.get(k, [])).reshape(-1, 3)
+        n = P.shape[0]
+        out.append(
+            replace(
+                f,
+                circle_params=P,
+                circle_cov=np.zeros((n, 3, 3)),
+                circle_beams=np.zeros((n, 2), np.int64),
+                circle_rms_m=np.zeros(n),
+            )
+        )
+    return out
+
+
+def shuffled(runs: int, root: int) -> None:
+    cfg = ps.Exp2Config(n_runs=runs, sensitivity=False, smoother=False)
+    seeds = spawn_seeds(np.random.SeedSequence(root), runs)
+    N = cfg.cycab.n_scans
+    kinds = ("extracted", "own errors", "shuffled", "gaussian")
+    res = {
+        (m, v): (np.full((runs, N), np.nan), np.full((runs, N), np.nan), np.zeros((runs, N), int))
+        for m in METHODS
+        for v in kinds
+    }
+    for r in range(runs):
+        rng = np.random.default_rng(seeds[r])
+        prng = np.random.default_rng([root, r])
+        seq = simulate_cycab_run(rng, cfg.scene, cfg.cycab)
+        truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+        laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
+        for m in METHODS:
+            params = ps.extractor_params(m, cfg.cycab)
+            fs = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
+            model = cfg.slam.noise_for(m, has_cov=False)[1]
+            rows = trunk_errors(seq, fs, laser_w, model, DEFAULT_RANGE_BIAS.get(m, (0.0, 0.0)))
+            perm = prng.permutation(rows.shape[0])
+            const = replace(cfg.slam, measurement_noise="constant", range_bias={m: (0.0, 0.0)})
+            n = rows.shape[0]
+            variants = {
+                "extracted": (fs, cfg.slam),
+                "own errors": (rebuilt(fs, rows, rows[:, 4], rows[:, 5]), const),
+                "shuffled": (rebuilt(fs, rows, rows[perm, 4], rows[perm, 5]), const),
+                "gaussian": (
+                    rebuilt(fs, rows, prng.standard_normal(n), prng.standard_normal(n)),
+                    const,
+                ),
+            }
+            for v, (F, C) in variants.items():
+                lg = slam_run(seq, features=F, association="ihgr", config=C)
+                e = pose_errors(lg.pose, truth)
+                out = res[(m, v)]
+                out[0][r, 1:] = nees(e[1:], lg.pose_cov[1:])
+                out[1][r], out[2][r] = lg.scan_nis, lg.scan_nis_dof
+    print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs})")
+    print("| method | centres | NEES mean | in 95% bounds | above |")
+    print("|---|---|---|---|---|")
+    for (m, v), a in res.items():
+        c = consistency(*a)
+        print(f"| {m} | {v} | {c['nees_mean']:.2f} | {c['nees_in']:.2f} | {c['nees_above']:.2f} |")
+
+
+def _nll(q, e, X) -> float:
+    """Negative log-likelihood of zero-mean errors e with ln variance X q."""
+    ls = X @ q
+    return 0.5 * float(np.sum(e**2 * np.exp(-ls) + ls))
+
+
+def by_beams(roots=(1000, 1001, 1002, 1003)) -> None:
+    cyc = CycabParams()
+    cfg = ps.Exp2Config()
+    for m in METHODS:
+        rows = []
+        model = cfg.slam.noise_for(m, has_cov=False)[1]
+        for s in roots:
+            seq = simulate_cycab_run(np.random.default_rng(s), "tree_park", cyc)
+            truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+            laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
+            params = ps.extractor_params(m, cyc)
+            fs = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
+            t = trunk_errors(seq, fs, laser_w, model, DEFAULT_RANGE_BIAS.get(m, (0.0, 0.0)))
+            beams = np.array([fs[int(k)].circle_beams[int(i)] for k, i in t[:, :2]])
+            rows.append(np.column_stack([t, beams[:, 1] - beams[:, 0] + 1]))
+        t = np.vstack(rows)
+        er, eb = t[:, 4] * t[:, 7], t[:, 5] * t[:, 8]  # errors in m and rad
+        n, r = t[:, 9], t[:, 2]
+        X = np.column_stack([np.ones_like(n), np.log(n), np.log(r)])
+
+        qr = minimize(_nll, [np.log(np.var(er)), 0, 0], args=(er, X), method="BFGS").x
+        qb = minimize(_nll, [np.log(np.var(eb)), 0, 0], args=(eb, X), method="BFGS").x
+        vr, vb = np.exp(X @ qr), np.exp(X @ qb)
+        print(
+            f"{m}: {t.shape[0]} circles on trunks; log-linear range coefficients "
+            f"{np.round(qr, 2)}, bearing {np.round(qb, 2)}"
+        )
+        print(
+            "| bin | circles | range z^2 (constant) | bearing z^2 (constant) | range (log-linear) "
+            "| bearing (log-linear) |"
+        )
+        print("|---|---|---|---|---|---|")
+        bins = [("beams", n, (1, 5, 8, 12, 1000)), ("range m", r, (0, 4, 8, 12, 80))]
+        for label, v, edges in bins:
+            for lo, hi in zip(edges[:-1], edges[1:]):
+                s = (v >= lo) & (v < hi)
+                if s.sum() < 10:
+                    continue
+                print(
+                    f"| {label} {lo}-{hi} | {s.sum()} | {np.mean(t[s, 4] ** 2):.2f} | "
+                    f"{np.mean(t[s, 5] ** 2):.2f} | {np.mean(er[s] ** 2 / vr[s]):.2f} | "
+                    f"{np.mean(eb[s] ** 2 / vb[s]):.2f} |"
+                )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="probe", required=True)
+    p = sub.add_parser("shuffled")
+    p.add_argument("--runs", type=int, default=16)
+    p.add_argument("--root", type=int, default=1001)
+    sub.add_parser("by-beams")
+    a = ap.parse_args()
+    if a.probe == "shuffled":
+        shuffled(a.runs, a.root)
+    else:
+        by_beams()
+
+
+if __name__ == "__main__":
+    main()
