@@ -539,7 +539,9 @@ def slam_cmd(
     if smooth:
         from experiments.pipeline.smooth import smooth_run
 
-        _echo_smoothed(smooth_run(out))
+        with Progress() as progress:
+            summary = smooth_run(out, progress=_smoother_progress(progress))
+        _echo_smoothed(summary)
 
 
 def _echo_smoothed(s: dict) -> None:
@@ -578,6 +580,7 @@ def smooth_cmd(
     """Re-solve a `trunkslam slam` run with the GTSAM smoother (same odometry, measurements and
     associations): trajectory_smoothed.tum/.csv, map_smoothed.csv, smoother.json."""
     from experiments.pipeline.smooth import smooth_run
+    from experiments.render.progress import Progress
     from slam.smoother import SmootherOptions
 
     options = SmootherOptions(
@@ -587,7 +590,19 @@ def smooth_cmd(
         isam2_every=isam2_every,
         marginals=covariances,
     )
-    _echo_smoothed(smooth_run(run_dir, options, measurements.value))
+    with Progress() as progress:
+        summary = smooth_run(run_dir, options, measurements.value, _smoother_progress(progress))
+    _echo_smoothed(summary)
+
+
+def _smoother_progress(progress):
+    """The smoother's stages as progress tasks; iSAM2 every 50th update."""
+
+    def report(stage: str, done: int, total: int) -> None:
+        if stage != "isam2" or done % 50 == 0 or done == total:
+            progress(f"smoother: {stage}", done, total)
+
+    return report
 
 
 @app.command("export-reference")

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -408,8 +409,17 @@ def _lm_params(o: SmootherOptions) -> gtsam.LevenbergMarquardtParams:
     return prm
 
 
-def smooth(problem: Problem, options: SmootherOptions | None = None) -> SmootherResult:
-    """Solve the smoothing problem; see the module doc for the graph and the solvers."""
+def smooth(
+    problem: Problem,
+    options: SmootherOptions | None = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> SmootherResult:
+    """Solve the smoothing problem; see the module doc for the graph and the solvers.
+
+    progress: callback(stage, done, total): "isam2" after each update (done = scans fed), then
+    "optimise" (0 of 1, then 1 of 1) around a batch or polishing solve and "covariances"
+    around the marginals."""
+    report = progress or (lambda stage, done, total: None)
     if not isinstance(problem, Problem):
         raise SlamError(f"problem: expected a slam.smoother.Problem, got {type(problem).__name__}")
     o = options or SmootherOptions()
@@ -424,19 +434,27 @@ def smooth(problem: Problem, options: SmootherOptions | None = None) -> Smoother
         for lid, xy in zip(problem.landmark_id, problem.init_landmark):
             values.insert(_landmark_key(int(lid)), np.asarray(xy, dtype=np.float64))
         initial = g.chi2(values)
+        report("optimise", 0, 1)
         opt = gtsam.LevenbergMarquardtOptimizer(g.all(), values, _lm_params(o))
         values = opt.optimize()
         iterations = int(opt.iterations())
+        report("optimise", 1, 1)
     else:
-        values, iterations = _isam2(g, o)
+        values, iterations = _isam2(g, o, report)
         initial = g.chi2(values)
         if o.polish:
+            report("optimise", 0, 1)
             opt = gtsam.LevenbergMarquardtOptimizer(g.all(), values, _lm_params(o))
             values = opt.optimize()
             iterations = int(opt.iterations())
+            report("optimise", 1, 1)
     seconds = time.perf_counter() - t0
     t1 = time.perf_counter()
+    if o.marginals:
+        report("covariances", 0, 1)
     pose, pose_cov, lm_xy, lm_cov = _read(g, values, o.marginals)
+    if o.marginals:
+        report("covariances", 1, 1)
     return SmootherResult(
         pose=pose,
         pose_cov=pose_cov,
@@ -454,7 +472,7 @@ def smooth(problem: Problem, options: SmootherOptions | None = None) -> Smoother
     )
 
 
-def _isam2(g: _Graph, o: SmootherOptions) -> tuple[gtsam.Values, int]:
+def _isam2(g: _Graph, o: SmootherOptions, report) -> tuple[gtsam.Values, int]:
     """iSAM2 fed scan by scan (`isam2_every` scans per update): a new pose starts at the
     previous estimate composed with the odometry, a new landmark at its first measurement."""
     prm = gtsam.ISAM2Params()
@@ -489,6 +507,7 @@ def _isam2(g: _Graph, o: SmootherOptions) -> tuple[gtsam.Values, int]:
             updates += 1
             graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
             prev = isam.calculateEstimatePose2(_pose_key(k))
+            report("isam2", k + 1, p.n_scans)
     return isam.calculateEstimate(), updates
 
 

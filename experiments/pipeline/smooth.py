@@ -21,7 +21,10 @@ __all__ = ["smooth_run", "smoother_summary"]
 
 
 def smooth_run(
-    run_dir: Path | str, options: SmootherOptions | None = None, measurements: str = "ekf"
+    run_dir: Path | str,
+    options: SmootherOptions | None = None,
+    measurements: str = "ekf",
+    progress=None,
 ) -> dict:
     """Solve the run in `run_dir` (its `run_log.npz`) and write beside it
 
@@ -35,12 +38,13 @@ def smooth_run(
                               (as summary.json's) when the run's input file is still there
 
     Returns the smoother.json summary. measurements: "ekf" or "all" (`slam.smoother`).
+    progress: callback(stage, done, total), as `slam.smoother.smooth`'s.
     """
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise DataError(f"{run_dir}: not a folder (expected the output folder of trunkslam slam)")
     problem, names = read_run_log(run_dir, measurements)
-    result = smooth(problem, options)
+    result = smooth(problem, options, progress)
     write_atomic(run_dir / "trajectory_smoothed.tum", trajectory_tum(problem.scan_t, result.pose))
     write_atomic(
         run_dir / "trajectory_smoothed.csv",

@@ -389,3 +389,23 @@ def test_gtsam_victoria_park_graph_reaches_the_optimum(vp_dir):
     assert r.initial_chi2 / r.dof > 1000
     with pytest.raises(SlamError, match="no such graph file"):
         solve_graph_file(path.with_name("nope.txt"))
+
+
+def test_progress_reports_each_stage():
+    p, _ = exact_problem(0.3, np.random.default_rng(5), perturb=0.1)
+    calls = []
+    opts = SmootherOptions(solver="isam2", polish=True, isam2_every=10)
+    smooth(p, opts, progress=lambda *a: calls.append(a))
+    isam = [c for c in calls if c[0] == "isam2"]
+    n = p.n_scans
+    assert [c[1] for c in isam] == [*range(10, n + 1, 10), *([n] if n % 10 else [])]
+    assert {c[2] for c in isam} == {n}
+    assert calls[len(isam) :] == [
+        ("optimise", 0, 1),
+        ("optimise", 1, 1),
+        ("covariances", 0, 1),
+        ("covariances", 1, 1),
+    ]
+    calls.clear()
+    smooth(p, SmootherOptions(marginals=False), progress=lambda *a: calls.append(a))
+    assert calls == [("optimise", 0, 1), ("optimise", 1, 1)]
