@@ -191,3 +191,29 @@ def assert_tidy_tables(folder) -> set[str]:
     stray = {p.name for p in folder.glob("*.csv")} - checked - NOT_PIVOTED
     assert not stray, f"CSVs with no Markdown pivot: {stray}"
     return checked
+
+
+# columns rerun fills differently in every file: row ids, the time a row was logged
+VOLATILE_RECORDING_COLUMNS = ("rerun.controls.RowId", "log_time", "log_tick")
+
+
+def recording_rows(path, skip_entities=()) -> dict[str, list[str]]:
+    """Everything a `.rrd` file's recording holds (its main store, not the blueprint), as rows
+    per entity path: every column but the volatile ones (row ids, log times, the recording's
+    start time), in a canonical order (rerun groups rows into chunks as its batcher flushes,
+    which differs between runs). Two recordings of the same content compare equal; entities in
+    `skip_entities` (e.g. series of wall times) are left out."""
+    from rerun.chunk import RrdReader
+
+    rows: dict[str, list[str]] = {}
+    for chunk in RrdReader(path).store().stream().to_chunks():
+        entity = str(chunk.entity_path)
+        if entity.lstrip("/") in skip_entities:
+            continue
+        data = chunk.to_record_batch().to_pydict()
+        cols = sorted(
+            k for k in data if k not in VOLATILE_RECORDING_COLUMNS and not k.endswith("start_time")
+        )
+        for i in range(chunk.num_rows):
+            rows.setdefault(entity, []).append(repr([(k, data[k][i]) for k in cols]))
+    return {k: sorted(v) for k, v in rows.items()}

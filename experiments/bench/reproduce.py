@@ -1,6 +1,11 @@
 """`trunkslam bench reproduce`: wall time of `trunkslam reproduce` on 1 worker, on every core
 (and on a Dask scheduler when given), and whether the tables came out the same.
 
+Beside the wall time, each row gives the CPU time of this (the main) process
+(`time.process_time`, all its threads; not the workers'): with workers, that is the work that
+does not run on them (reducing, writing; waiting costs none), the part that does not shrink
+with more cores.
+
 Each run writes into its own temporary folder; the CSV tables of every run are compared cell
 for cell with the first run's. The tables that hold wall times (columns `ms_per_scan`,
 `seconds`, `ms_ihgr`, ...: association, association_loop, consistency, victoria_park, smoother,
@@ -46,8 +51,8 @@ def bench_reproduce(
     progress=None,
 ) -> list[dict]:
     """Run `reproduce` (default: every default experiment) once per entry of `workers` (None:
-    every core) and once on `dask` when given; rows: executor, workers, seconds, speed-up over
-    the first, tables identical to the first's."""
+    every core) and once on `dask` when given; rows: executor, workers, seconds, this process's
+    CPU seconds, speed-up over the first, tables identical to the first's."""
     runs = [(w, None) for w in workers] + ([(None, dask)] if dask else [])
     rows: list[dict] = []
     first: dict | None = None
@@ -55,9 +60,10 @@ def bench_reproduce(
         for k, (w, d) in enumerate(runs):
             out = Path(tmp) / f"run{k}"
             with make_executor(w, d) as ex:
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 run_experiments(list(names or []), out, quick=quick, executor=ex, progress=progress)
                 seconds = time.perf_counter() - t0
+                cpu = time.process_time() - c0
                 described = ex.describe()
             tables = {p.name: timeless_table(p) for p in sorted(out.glob("*.csv"))}
             if first is None:
@@ -69,6 +75,7 @@ def bench_reproduce(
                     "executor": described["executor"],
                     "workers": described["workers"],
                     "seconds": round(seconds, 1),
+                    "main-process CPU s": round(cpu, 1),
                     "speed-up": round(rows[0]["seconds"] / seconds, 2) if rows else 1.0,
                     "tables identical": f"{len(same)}/{len(tables)}",
                     "differ": ", ".join(differ) or "-",

@@ -6,7 +6,8 @@ returns a small, picklable record. An executor runs a list of them and returns t
 trial order, whatever finished first, so a study reduces its records in the same order and gets
 the same numbers, bit for bit, on one core, on all local cores or on a Dask cluster.
 
-- `trials`: `Executor` (the interface, and the in-process `SerialExecutor`), `spawn_seeds`,
+- `trials`: `Executor` (the interface, and the in-process `SerialExecutor`), `Batch` (trials
+  handed over by `Executor.submit`, running while this process goes on), `spawn_seeds`,
   `TrialsFailed` (trials that raised, each with its seed; the others' records kept)
 - `local`: `ProcessExecutor`, local worker processes with one BLAS thread each
 - `cluster`: `DaskExecutor`, a `dask.distributed` scheduler (the only module importing dask)
@@ -17,6 +18,7 @@ numpy loads.
 """
 
 from experiments.exec.trials import (
+    Batch,
     Executor,
     SerialExecutor,
     TrialFailure,
@@ -27,6 +29,7 @@ from experiments.exec.trials import (
 )
 
 __all__ = [
+    "Batch",
     "Executor",
     "SerialExecutor",
     "TrialFailure",

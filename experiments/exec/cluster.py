@@ -57,14 +57,22 @@ class DaskExecutor(Executor):
         n = sum(self.client.nthreads().values())
         return max(n, 1)
 
-    def _run(self, fn, chunks):
-        from distributed import as_completed
-
+    def _submit(self, fn, chunks):
         token = uuid.uuid4().hex[:8]
         futures = {
             self.client.submit(run_chunk, fn, c, pure=False, key=f"trials-{token}-{k}"): c
             for k, c in enumerate(chunks)
         }
+
+        def cancel() -> None:
+            self.client.cancel(list(futures))
+
+        return self._finished(futures, cancel), cancel
+
+    @staticmethod
+    def _finished(futures: dict, cancel):
+        from distributed import as_completed
+
         try:
             for f in as_completed(futures):
                 chunk = futures[f]
@@ -74,7 +82,7 @@ class DaskExecutor(Executor):
                     out = [(i, False, (f"{type(exc).__name__}: {exc}", "")) for i, *_ in chunk]
                 yield chunk, out
         finally:
-            self.client.cancel(list(futures))
+            cancel()
 
     def describe(self) -> dict:
         return {"executor": self.name, "scheduler": self.address, "workers": self.workers}

@@ -90,9 +90,18 @@ class ProcessExecutor(Executor):
             log.info("%d worker processes started", self.workers)
         return self._pool
 
-    def _run(self, fn, chunks):
+    def _submit(self, fn, chunks):
         pool = self._start()
         pending = {pool.submit(run_chunk, fn, c): c for c in chunks}
+
+        def cancel() -> None:
+            for f in pending:
+                f.cancel()
+
+        return self._finished(pending, cancel), cancel
+
+    @staticmethod
+    def _finished(pending: dict, cancel):
         try:
             while pending:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
@@ -104,8 +113,7 @@ class ProcessExecutor(Executor):
                         out = [(i, False, (f"{type(exc).__name__}: {exc}", "")) for i, *_ in chunk]
                     yield chunk, out
         finally:
-            for f in pending:
-                f.cancel()
+            cancel()
 
     def close(self) -> None:
         if self._pool is not None:

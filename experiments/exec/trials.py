@@ -4,7 +4,9 @@
 trials sent to wherever the executor runs them; it returns the records in trial order once all
 have finished, reporting progress as chunks finish. A trial that raises does not stop the
 others: `TrialsFailed` is raised after all of them, naming each failed trial with its index,
-its seed and its error, and carries the records of the others.
+its seed and its error, and carries the records of the others. `Executor.submit` is `map`
+without the wait: it hands the trials over and returns their `Batch` at once, so this process
+can work (render, write) while the workers run them; `Batch.result()` is what `map` returns.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import Any
 from experiments.errors import ConfigError, TrunkslamError
 
 __all__ = [
+    "Batch",
     "Executor",
     "SerialExecutor",
     "TrialFailure",
@@ -108,14 +111,105 @@ def run_chunk(fn: Callable, tasks: Sequence[Task]) -> list[tuple[int, bool, Any]
     return out
 
 
+class Batch:
+    """Trials handed to an executor by `Executor.submit`: queued or running where the executor
+    runs them while this process goes on. `result()` waits for them and returns their records in
+    trial order (reporting progress as chunks finish, raising `TrialsFailed` after all of them
+    when any raised), as `map` does; asked again, it gives the same answer. `cancel()` drops the
+    chunks not yet started (a batch whose result is no longer wanted)."""
+
+    def __init__(self, desc: str, seeds: list, finished: Iterator, cancel: Callable[[], None]):
+        self.desc = desc
+        self._seeds = seeds
+        self._finished = finished
+        self._cancel = cancel
+        self._records: list | None = None
+        self._failed: TrialsFailed | None = None
+        self._cancelled = False
+
+    def result(self, progress: Progress | None = None) -> list:
+        """The records, in trial order, once every trial has finished."""
+        if self._cancelled:
+            raise RuntimeError(f"{self.desc}: the batch was cancelled; it has no result")
+        if self._records is None and self._failed is None:
+            self._gather(progress)
+        if self._failed is not None:
+            raise self._failed
+        return self._records
+
+    def _gather(self, progress: Progress | None) -> None:
+        n = len(self._seeds)
+        records: list = [None] * n
+        failures: list[TrialFailure] = []
+        done = 0
+        if progress is not None:
+            progress(self.desc, 0, n)
+        try:
+            for chunk, out in self._finished:
+                for i, ok, value in out:
+                    if ok:
+                        records[i] = value
+                    else:
+                        failures.append(TrialFailure(i, describe_seed(self._seeds[i]), *value))
+                        log.error(
+                            "%s: trial %d (seed %s) failed:\n%s",
+                            self.desc,
+                            i,
+                            failures[-1].seed,
+                            value[1],
+                        )
+                done += len(chunk)
+                if progress is not None:
+                    progress(self.desc, done, n)
+        except BaseException:  # interrupted: the rest is not wanted
+            self._cancel()
+            raise
+        if failures:
+            failures.sort(key=lambda f: f.index)
+            self._failed = TrialsFailed(self.desc, failures, records)
+        else:
+            self._records = records
+
+    def cancel(self) -> None:
+        """Drop the chunks not started yet; the batch has no result afterwards."""
+        self._cancel()
+        self._cancelled = True
+
+
 class Executor:
-    """Runs trials somewhere. Subclasses say where (`_run`); `map` is the same for all.
+    """Runs trials somewhere. Subclasses say where (`_submit`); `submit` and `map` are the same
+    for all.
 
     workers: how many trials run at once (the chunk size is chosen from it).
     """
 
     name = "executor"
     workers = 1
+
+    def submit(
+        self,
+        fn: Callable[[Any, Any], Any],
+        configs: Sequence,
+        seeds: Sequence | None = None,
+        *,
+        desc: str = "trials",
+        chunksize: int | None = None,
+    ) -> Batch:
+        """Hand the trials `fn(configs[i], seeds[i])` to the executor and return at once: their
+        `Batch`, whose `result()` waits for them. Worker processes and a Dask cluster start them
+        now, in submission order after what is already queued; this process
+        (`SerialExecutor`) runs them when the result is asked for. Arguments as `map`."""
+        configs = list(configs)
+        n = len(configs)
+        seeds = [None] * n if seeds is None else list(seeds)
+        if len(seeds) != n:
+            raise ConfigError(f"{desc}: {n} trial configurations but {len(seeds)} seeds")
+        tasks = [(i, configs[i], seeds[i]) for i in range(n)]
+        size = chunksize or (1 if self.workers == 1 else math.ceil(n / (4 * self.workers)))
+        size = max(size, 1)
+        chunks = [tasks[a : a + size] for a in range(0, n, size)]
+        finished, cancel = self._submit(fn, chunks)
+        return Batch(desc, seeds, finished, cancel)
 
     def map(
         self,
@@ -133,40 +227,15 @@ class Executor:
         one per trial (None: every trial gets None). chunksize: trials sent together (default:
         about four chunks per worker; one trial at a time in this process). Raises
         `TrialsFailed` after all trials when any raised."""
-        configs = list(configs)
-        n = len(configs)
-        seeds = [None] * n if seeds is None else list(seeds)
-        if len(seeds) != n:
-            raise ConfigError(f"{desc}: {n} trial configurations but {len(seeds)} seeds")
-        tasks = [(i, configs[i], seeds[i]) for i in range(n)]
-        size = chunksize or (1 if self.workers == 1 else math.ceil(n / (4 * self.workers)))
-        size = max(size, 1)
-        chunks = [tasks[a : a + size] for a in range(0, n, size)]
-        records: list = [None] * n
-        failures: list[TrialFailure] = []
-        done = 0
-        if progress is not None:
-            progress(desc, 0, n)
-        for chunk, out in self._run(fn, chunks):
-            for i, ok, value in out:
-                if ok:
-                    records[i] = value
-                else:
-                    failures.append(TrialFailure(i, describe_seed(seeds[i]), *value))
-                    log.error(
-                        "%s: trial %d (seed %s) failed:\n%s", desc, i, failures[-1].seed, value[1]
-                    )
-            done += len(chunk)
-            if progress is not None:
-                progress(desc, done, n)
-        if failures:
-            raise TrialsFailed(desc, sorted(failures, key=lambda f: f.index), records)
-        return records
+        batch = self.submit(fn, configs, seeds, desc=desc, chunksize=chunksize)
+        return batch.result(progress)
 
-    def _run(
+    def _submit(
         self, fn: Callable, chunks: list[list[Task]]
-    ) -> Iterator[tuple[list[Task], list[tuple[int, bool, Any]]]]:
-        """Yield (chunk, run_chunk's output) as chunks finish, in any order."""
+    ) -> tuple[Iterator[tuple[list[Task], list[tuple[int, bool, Any]]]], Callable[[], None]]:
+        """Start the chunks where they run and return (an iterator yielding (chunk, run_chunk's
+        output) as chunks finish, in any order; a function that cancels the chunks not yet
+        started)."""
         raise NotImplementedError
 
     def describe(self) -> dict:
@@ -188,9 +257,8 @@ class SerialExecutor(Executor):
 
     name = "serial"
 
-    def _run(self, fn, chunks):
-        for chunk in chunks:
-            yield chunk, run_chunk(fn, chunk)
+    def _submit(self, fn, chunks):
+        return ((chunk, run_chunk(fn, chunk)) for chunk in chunks), lambda: None
 
 
 def make_executor(workers: int | None = None, dask: str | None = None) -> Executor:

@@ -7,4 +7,6 @@
 - `association`: IHGR, JCBB and NN: correct-association rates and IHGR's optimality
 - `calibration`: the constant measurement-noise model's fit (`noise-calibration`)
 - `reproduce.run_experiments`: runs them into a results folder with `manifest.json`
+- `products`: figures and recordings made as trials on the executor (their files' bytes as
+  records), written by the main process
 """

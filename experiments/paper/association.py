@@ -32,6 +32,7 @@ from association.inputs import prepare
 from association.single import single_scan_problem
 from experiments.exec import SerialExecutor
 from experiments.io.writers import markdown_table, write_atomic, write_tidy_table
+from experiments.paper import products
 from experiments.render import plots
 from experiments.sim.landmarks import LandmarkScan, LandmarkSimConfig, simulate_landmark_scans
 
@@ -39,6 +40,8 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "cost_model_for",
+    "instances_trial",
+    "optimality_instances",
     "optimality_study",
     "optimality_trial",
     "rate_study",
@@ -321,17 +324,9 @@ def optimality_trial(instance: tuple, seed=None) -> list[dict]:
     return rows
 
 
-def optimality_study(
-    rng: np.random.Generator,
-    n_per_family: dict[str, int],
-    progress=lambda d, i, n: None,
-    executor=None,
-) -> list[dict]:
-    """Rows per instance: family, variant, ihgr cost, optimum, lp bound, fractional, solves.
-
-    The instances are drawn here, one family after the other from `rng` (as they always were);
-    solving them, the expensive part, is one trial per instance (`optimality_trial`) on
-    `executor`."""
+def optimality_instances(rng: np.random.Generator, n_per_family: dict[str, int]) -> list[tuple]:
+    """The instances of the optimality study, (family, k, c, A, e) each, drawn one family after
+    the other from `rng` (as they always were)."""
     families = {
         "single-scan (simulated)": lambda n: _single_scan_instances(rng, n),
         "K=3 window (simulated SLAM)": lambda n: _window_instances(rng, n, empty_map=False),
@@ -340,11 +335,34 @@ def optimality_study(
             _random_multiscan_instance(rng) for _ in range(n)
         ],
     }
-    instances = [
+    return [
         (fam, k, c, A, e)
         for fam, make in families.items()
         for k, (c, A, e) in enumerate(make(n_per_family[fam]))
     ]
+
+
+def instances_trial(n_per_family: dict[str, int], seed) -> list[tuple]:
+    """`optimality_instances` drawn from `numpy.random.default_rng(seed)`, as a trial: the
+    drawing is sequential (one generator for all), so it is one trial, run on a worker beside
+    other trials instead of in this process."""
+    return optimality_instances(np.random.default_rng(seed), n_per_family)
+
+
+def optimality_study(
+    rng: np.random.Generator,
+    n_per_family: dict[str, int],
+    progress=lambda d, i, n: None,
+    executor=None,
+    instances: list[tuple] | None = None,
+) -> list[dict]:
+    """Rows per instance: family, variant, ihgr cost, optimum, lp bound, fractional, solves.
+
+    The instances are drawn from `rng` (`optimality_instances`; or given, drawn beforehand
+    from the same generator by `instances_trial`); solving them, the expensive part, is one
+    trial per instance (`optimality_trial`) on `executor`."""
+    if instances is None:
+        instances = optimality_instances(rng, n_per_family)
     got = (executor or SerialExecutor()).map(
         optimality_trial, instances, desc="association optimality", progress=progress
     )
@@ -496,6 +514,14 @@ def run(ctx) -> None:
         }
     )
 
+    # the optimality study's instances, drawn on a worker while the rate study runs
+    opt_rng = ctx.rng("association_optimality")
+    drawn = ctx.submit(
+        instances_trial,
+        [n_opt],
+        [opt_rng.bit_generator.seed_seq],
+        desc="association optimality instances",
+    )
     rows = rate_study(ctx.rng("association_rates"), n_seq, base, sweeps, ctx.progress, ctx.executor)
     notes = _rate_notes(base, n_seq, rows)
     records = _rate_records(rows)
@@ -508,16 +534,20 @@ def run(ctx) -> None:
         title="Correct-association rate on simulated maps",
         notes=notes,
     )
-    plots.plot_association(
-        rows,
-        ctx.path("association.png"),
-        METHOD_LABELS,
-        {k: lab for k, (_, lab, _) in SWEEPS.items()},
+    labels = {k: lab for k, (_, lab, _) in SWEEPS.items()}
+    spec = (
+        "association.png",
+        plots.plot_association,
+        (rows,),
+        {"method_labels": METHOD_LABELS, "sweep_xlabels": labels},
     )
+    products.figures(ctx, [spec], desc="association figure")
 
     _loop_section(ctx, cfg_out)
 
-    orows = optimality_study(ctx.rng("association_optimality"), n_opt, ctx.progress, ctx.executor)
+    orows = optimality_study(
+        opt_rng, n_opt, ctx.progress, ctx.executor, instances=drawn.result(ctx.progress)[0]
+    )
     summary = summarise_optimality(orows)
     oc = odd_cycle()
     md = "# IHGR against the exact integer optimum\n\n" + markdown_table(OPT_HEADER, summary)
@@ -537,6 +567,14 @@ def _loop_section(ctx, cfg_out: dict) -> None:
     from experiments.paper import association_loop as al
 
     n_runs, n_scans, vp_scans = (2, 120, 300) if ctx.quick else (al.TREE_PARK_RUNS, None, None)
+    # the Victoria Park runs (few and long) first: the tree park's (many, short) fill the
+    # workers around them
+    vp_note, vp = "", None
+    try:
+        vp = al.victoria_park_batch(vp_scans, executor=ctx.executor)
+    except MissingDataError as exc:
+        log.warning("association in the loop: Victoria Park skipped: %s", exc)
+        vp_note = f"Victoria Park skipped: {exc}\n"
     rows = al.tree_park_loop(
         ctx.rng("association_loop"),
         n_runs,
@@ -544,12 +582,8 @@ def _loop_section(ctx, cfg_out: dict) -> None:
         progress=ctx.progress,
         executor=ctx.executor,
     )
-    vp_note = ""
-    try:
-        rows += al.victoria_park_loop(vp_scans, progress=ctx.progress, executor=ctx.executor)
-    except MissingDataError as exc:
-        log.warning("association in the loop: Victoria Park skipped: %s", exc)
-        vp_note = f"Victoria Park skipped: {exc}\n"
+    if vp is not None:
+        rows += vp.result(ctx.progress)
     cfg_out["in_the_loop"] = {
         "tree_park_runs": n_runs,
         "tree_park_scans": n_scans or 240,

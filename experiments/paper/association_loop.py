@@ -49,6 +49,7 @@ __all__ = [
     "loop_records",
     "tree_park_loop",
     "tree_park_trial",
+    "victoria_park_batch",
     "victoria_park_loop",
     "victoria_park_trial",
 ]
@@ -200,16 +201,21 @@ def victoria_park_loop(
     """The full Victoria Park run (or its first n_scans) with the published detections and the
     preset `victoria_park_ute`, one row per method, each a trial (`victoria_park_trial`) on
     `executor`. Raises MissingDataError without the data."""
+    return victoria_park_batch(n_scans, methods, executor).result(progress)
+
+
+def victoria_park_batch(n_scans: int | None = None, methods=LOOP_METHODS, executor=None):
+    """`victoria_park_loop`'s trials handed to `executor` without waiting for them: their
+    `experiments.exec.Batch`. Raises MissingDataError without the data, before any trial."""
     from experiments.exec.trials import SerialExecutor
     from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 
     load_victoria_park(full=True)  # missing or corrupt data: said here, before any trial
     load_ss2002_reference()
-    return (executor or SerialExecutor()).map(
+    return (executor or SerialExecutor()).submit(
         victoria_park_trial,
         [(n_scans, m) for m in methods],
         desc="association in the loop (Victoria Park)",
-        progress=progress,
         chunksize=1,
     )
 

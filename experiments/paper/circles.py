@@ -31,6 +31,7 @@ from experiments.eval.circles import center_error, circle_crlb, radius_error
 from experiments.eval.detections import assign_circles
 from experiments.exec import SerialExecutor, spawn_seeds
 from experiments.io.writers import write_tidy_table
+from experiments.paper import products
 from experiments.render import plots
 from experiments.sim import load_scene, scene_from_dict, sensor_preset, simulate_scan
 from features import extract_features
@@ -39,8 +40,11 @@ from slam import se2
 __all__ = [
     "METHODS",
     "PAPER_TABLE1",
+    "log_first_draws",
+    "pillar_figures",
     "pillar_monte_carlo",
     "pillar_trial",
+    "products_trial",
     "run_tables",
     "run_sweep",
     "sweep_trial",
@@ -152,14 +156,38 @@ def pillar_monte_carlo(
         for m, k, *xyr in found:
             mc.est[m][k].append((p, t, *xyr))
     if rec is not None:  # the first draw of each position, drawn again here
-        rec.log_circles("world/truth/pillars", truth, labels=mc.names, static=True)
-        for p, pose in enumerate(scene.scan_positions):
-            scan, _, feats = _pillar_draw(p, methods, noise_m, seeds[P + p * n_trials])
-            rec.set_scan(p)
-            rec.log_scan(scan, pose=pose)
-            for m, f in feats.items():
-                rec.log_circles(f"world/circles/{m}", f.circle_params, pose=pose, method=m)
+        log_first_draws(rec, methods, noise_m, [seeds[P + p * n_trials] for p in range(P)])
     return mc
+
+
+def log_first_draws(rec, methods, noise_m: float, seeds: list) -> None:
+    """The true pillars, and at each scan position p the scan drawn with seeds[p] (the first
+    trial's seed there) with every method's circles, into the recording `rec`."""
+    scene = _court()
+    truth = scene.truth_landmarks
+    rec.log_circles(
+        "world/truth/pillars", truth, labels=[c.name for c in scene.circles], static=True
+    )
+    for p, pose in enumerate(scene.scan_positions):
+        scan, _, feats = _pillar_draw(p, methods, noise_m, seeds[p])
+        rec.set_scan(p)
+        rec.log_scan(scan, pose=pose)
+        for m, f in feats.items():
+            rec.log_circles(f"world/circles/{m}", f.circle_params, pose=pose, method=m)
+
+
+def products_trial(job: tuple, seed) -> dict[str, bytes]:
+    """circles.rrd and Figs. 2(a), 2(b), 3 and 4 (`job` = (methods, noise_m, the first trial's
+    seed at each position); `seed`: the figures' scans' seed): {file name: bytes}. The
+    recording holds the first draws (`log_first_draws`) and the figure scans
+    (`pillar_figures`)."""
+    from experiments.render.viz import MemoryRecorder
+
+    methods, noise_m, draw_seeds = job
+    with MemoryRecorder("circles") as rec:
+        log_first_draws(rec, methods, noise_m, list(draw_seeds))
+        files = pillar_figures(np.random.default_rng(seed), rec)
+    return {"circles.rrd": rec.data, **files}
 
 
 def summarise(mc: MonteCarlo, methods=METHODS) -> dict:
@@ -286,8 +314,6 @@ def _table(summary, pillars, key, methods, published: dict | None) -> list[dict]
 
 def run_tables(ctx) -> None:
     """Tables 1 and 2 (and their all-pillar versions), the bias and efficiency tables, figures."""
-    from experiments.render.viz import open_recording
-
     n = 20 if ctx.quick else 200
     cfg = ctx.config.setdefault("table1", {})
     cfg.update(
@@ -300,11 +326,14 @@ def run_tables(ctx) -> None:
             "methods": list(METHODS),
         }
     )
-    with open_recording(ctx.path("circles.rrd"), "circles") as rec:
-        mc = pillar_monte_carlo(
-            n, ctx.rng("table1"), progress=ctx.progress, rec=rec, executor=ctx.executor
-        )
-        pillar_figures(ctx, rec)
+    # the recording and the figures: one trial, first, beside the Monte Carlo's
+    P = len(_court().scan_positions)
+    seeds = spawn_seeds(ctx.rng("table1"), P * (n + 1))  # as pillar_monte_carlo draws them
+    job = (METHODS, 0.01, tuple(seeds[P + p * n] for p in range(P)))
+    figures_seed = ctx.rng("pillar_figures").bit_generator.seed_seq
+    made = ctx.submit(products_trial, [job], [figures_seed], desc="pillar court figures")
+    ctx.later(made, lambda got: products.write(ctx, got[0]))
+    mc = pillar_monte_carlo(n, ctx.rng("table1"), progress=ctx.progress, executor=ctx.executor)
     s = summarise(mc)
     cfg["extractor_sigma_r_m"] = mc.sigma_m
     note = (
@@ -411,14 +440,14 @@ def run_tables(ctx) -> None:
     )
 
 
-def pillar_figures(ctx, rec) -> None:
-    """Figs. 2(a), 2(b), 3 and 4 on the simulated pillar court."""
-    scene = load_scene("pillar_court")
+def pillar_figures(rng: np.random.Generator, rec) -> dict[str, bytes]:
+    """Figs. 2(a), 2(b), 3 and 4 on the simulated pillar court, {file name: PNG bytes}: one
+    noise draw per position from `rng`, logged to `rec` (scans 100-105) with every feature."""
+    scene = _court()
     sensor = _sensor()
     sigma = sensor.effective_sigma_m
-    rng = ctx.rng("pillar_figures")
     truth = scene.truth_landmarks
-    ctx.outputs.append(plots.plot_scene(scene, ctx.out_dir / "fig2a_scene.png"))
+    files = {"fig2a_scene.png": products.png(plots.plot_scene, scene)}
     for k, pose in enumerate(scene.scan_positions):
         ranges, _ = simulate_scan(scene, pose, sensor, rng)
         scan = sensor.scan(ranges, stamp_s=float(k))
@@ -429,29 +458,26 @@ def pillar_figures(ctx, rec) -> None:
             rec.log_features(scan, f, pose=pose, path=f"figures/laser/{m}")
         truth_l = np.column_stack([_to_sensor(truth, pose), truth[:, 2]])
         if k == 0:
-            ctx.outputs.append(
-                plots.plot_raw_scan(
-                    scan.points_xy,
-                    "Fig. 2(b): one whole scan (simulated pillar court, position 1; laser frame)",
-                    ctx.out_dir / "fig2b_raw_scan.png",
-                )
+            files["fig2b_raw_scan.png"] = products.png(
+                plots.plot_raw_scan,
+                scan.points_xy,
+                "Fig. 2(b): one whole scan (simulated pillar court, position 1; laser frame)",
             )
         if k in (1, 3):
             fig = {1: "fig3_position2.png", 3: "fig4_position4.png"}[k]
             f = feats["paper"]
             circles = [(m, feats[m].circle_params, plots.METHOD_COLORS[m]) for m in feats]
-            ctx.outputs.append(
-                plots.plot_features(
-                    scan.points_xy,
-                    plots.segments_of(f),
-                    circles,
-                    f.edge_xy,
-                    f"Circles and edges at position {k + 1} (simulated; laser frame)",
-                    ctx.out_dir / fig,
-                    zoom=plots.zoom_box(truth_l),
-                    truth_xyr=truth_l,
-                )
+            files[fig] = products.png(
+                plots.plot_features,
+                scan.points_xy,
+                plots.segments_of(f),
+                circles,
+                f.edge_xy,
+                f"Circles and edges at position {k + 1} (simulated; laser frame)",
+                zoom=plots.zoom_box(truth_l),
+                truth_xyr=truth_l,
             )
+    return files
 
 
 SWEEPS = {
@@ -551,6 +577,5 @@ def run_sweep(ctx) -> None:
         notes=f"One pillar straight ahead of a PLS200, {n} scans per point; the others held at "
         f"{SWEEP_DEFAULT}. The crlb rows are the Cramer-Rao bound (RMS, relative).",
     )
-    ctx.outputs.append(
-        plots.plot_sweep(results, ctx.out_dir / "circle_sweep.png", held=SWEEP_DEFAULT)
-    )
+    spec = ("circle_sweep.png", plots.plot_sweep, (results,), {"held": SWEEP_DEFAULT})
+    products.figures(ctx, [spec], desc="circle sweep figure")

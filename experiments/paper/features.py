@@ -4,8 +4,10 @@ Writes
   classification.md/.csv/.png   how trunks, walls and bushes are classified (lrt vs paper eq. 5)
   fig_vp_scan.png               a real Victoria Park scan: paper and Bailey circles, edges, zoom
   features.rrd                  the Victoria Park scans in rerun (timeline `scan`)
-The paper's Figs. 2-4 on the simulated pillar court come from experiment `table1`
-(experiments/paper/circles.py).
+The Victoria Park scans (the recording and the figure) are one trial on the executor
+(`victoria_park_trial`), running beside the classification trials; their files are written
+after the other experiments have started (`RunContext.later`). The paper's Figs. 2-4 on the
+simulated pillar court come from experiment `table1` (experiments/paper/circles.py).
 """
 
 from __future__ import annotations
@@ -14,12 +16,16 @@ import logging
 
 from experiments.errors import MissingDataError
 from experiments.io.writers import write_tidy_table
+from experiments.paper import products
 from experiments.paper.classification import RADII_M, RANGES_M, classification_study
 from experiments.render import plots
-from experiments.render.viz import open_recording
 from features import extract_features
 
+__all__ = ["classification", "run", "victoria_park_scans", "victoria_park_trial"]
+
 log = logging.getLogger(__name__)
+
+SERIES = [("circles_per_scan", "circles per scan (paper, Bailey)")]
 
 
 def classification(ctx) -> None:
@@ -76,19 +82,37 @@ def classification(ctx) -> None:
         f"Simulated trunks ahead of a PLS200 (0.5 deg beams), {100 * sigma:g} cm range noise, "
         f"1 cm quantisation, {n} trials per point"
     )
-    ctx.outputs.append(plots.plot_circle_rates(res, ctx.out_dir / "classification.png", setup))
+    spec = ("classification.png", plots.plot_circle_rates, (res,), {"setup": setup})
+    products.figures(ctx, [spec], desc="classification figure")
 
 
-def victoria_park_figure(ctx, rec) -> None:
+def victoria_park_trial(quick: bool, seed=None) -> dict:
+    """The Victoria Park scans (`victoria_park_scans`) as a trial (deterministic: the seed is
+    unused): {"files": {file name: bytes} (features.rrd, and fig_vp_scan.png unless the data
+    are absent), "victoria_park": what the manifest says of it}."""
+    from experiments.render.viz import MemoryRecorder
+
+    with MemoryRecorder("features", series=SERIES) as rec:
+        note, figure = victoria_park_scans(quick, rec)
+    files = {"features.rrd": rec.data}
+    if figure is not None:
+        files["fig_vp_scan.png"] = figure
+    return {"files": files, "victoria_park": note}
+
+
+def victoria_park_scans(quick: bool, rec) -> tuple[dict | str, bytes | None]:
+    """Every raw Victoria Park scan (--quick: the first 300) through the paper's and Bailey's
+    extractors, logged to `rec`, and the figure of the scan with the most paper circles: returns
+    (scan index and scans logged, or "skipped: why" when the data are absent; the figure's PNG
+    bytes, or None). Corrupt data raise."""
     from experiments.io.victoria_park import load_victoria_park
 
     try:
         seq = load_victoria_park()
     except MissingDataError as exc:
         log.warning("Victoria Park figure skipped: %s", exc)
-        ctx.config["features"]["victoria_park"] = f"skipped: {exc}"
-        return
-    n = 300 if ctx.quick else seq.n_scans
+        return f"skipped: {exc}", None
+    n = 300 if quick else seq.n_scans
     best_k, best_n = 0, -1
     for k in range(n):
         scan = seq.scan(k)
@@ -101,28 +125,23 @@ def victoria_park_figure(ctx, rec) -> None:
         rec.log_circles("laser/features/bailey/circles", b.circle_params, method="bailey")
         if f.n_circles > best_n:
             best_k, best_n = k, f.n_circles
-        if k % 100 == 0:
-            ctx.progress("victoria park scans", k + 1, n)
-    ctx.progress("victoria park scans", n, n)
     scan = seq.scan(best_k)
     f = extract_features(scan, "paper")
     b = extract_features(scan, "bailey")
-    ctx.config["features"]["victoria_park"] = {"scan_index": best_k, "scans_logged": n}
-    ctx.outputs.append(
-        plots.plot_features(
-            scan.points_xy,
-            plots.segments_of(f),
-            [
-                ("paper", f.circle_params, plots.METHOD_COLORS["paper"]),
-                ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"]),
-            ],
-            f.edge_xy,
-            f"Victoria Park scan index {best_k} (0-based, as in the manifest and the recording; "
-            f"t = {scan.stamp_s:.2f} s; laser frame)",
-            ctx.out_dir / "fig_vp_scan.png",
-            zoom=plots.zoom_box(f.circle_params),
-        )
+    figure = products.png(
+        plots.plot_features,
+        scan.points_xy,
+        plots.segments_of(f),
+        [
+            ("paper", f.circle_params, plots.METHOD_COLORS["paper"]),
+            ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"]),
+        ],
+        f.edge_xy,
+        f"Victoria Park scan index {best_k} (0-based, as in the manifest and the recording; "
+        f"t = {scan.stamp_s:.2f} s; laser frame)",
+        zoom=plots.zoom_box(f.circle_params),
     )
+    return {"scan_index": best_k, "scans_logged": n}, figure
 
 
 def run(ctx) -> None:
@@ -134,10 +153,12 @@ def run(ctx) -> None:
     ctx.config.setdefault("features", {})
     ctx.config["features"]["extractor_defaults"] = ExtractorParams().to_dict()
     ctx.config["features"]["bailey"] = asdict(BaileyParams())
+    # the Victoria Park scans first, on a worker, beside the classification trials
+    vp = ctx.submit(victoria_park_trial, [ctx.quick], desc="victoria park scans")
+
+    def finish(got: list) -> None:
+        products.write(ctx, got[0]["files"])
+        ctx.config["features"]["victoria_park"] = got[0]["victoria_park"]
+
+    ctx.later(vp, finish)
     classification(ctx)
-    with open_recording(
-        ctx.path("features.rrd"),
-        "features",
-        series=[("circles_per_scan", "circles per scan (paper, Bailey)")],
-    ) as rec:
-        victoria_park_figure(ctx, rec)

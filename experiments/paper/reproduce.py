@@ -9,6 +9,13 @@ errors) is recorded under "failed" in the manifest, its partial files are remove
 still run, and the run ends with `ExperimentFailed` (exit code 1); the previous set, including
 that experiment's old outputs, is replaced, so nothing stale looks current. A bug (any other
 exception) or an OSError stops the run at once and leaves the previous set untouched.
+
+Experiments hand parts of their work to the executor without waiting for it (recordings,
+figures, runs whose table can wait: `RunContext.later`); those parts are finished, and their
+files written, after the last experiment has started, so that their trials share the workers
+with the next experiments' trials instead of leaving workers idle while this process works or
+waits. An error there fails its experiment as above. The seconds in the manifest are this
+process's time on each experiment: its body, and the wait for and writing of its deferred parts.
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from experiments.errors import ExperimentFailed, input_errors
-from experiments.exec import Executor, SerialExecutor
+from experiments.exec import Batch, Executor, SerialExecutor
 from experiments.io.provenance import git_commit, versions
 from experiments.io.writers import atomic_folder, check_output_folder, dumps_json, write_atomic
 from experiments.paper.runner import DEFAULT_EXPERIMENTS, RunContext, get_experiment
@@ -75,29 +82,79 @@ def run_experiments(
         if progress is not None:
             ctx.progress = progress
         step = ctx.progress
+        # per experiment: the files and configuration keys it added, and its deferred parts
+        owned: dict[str, tuple[set[str], set[str]]] = {}
+        deferred: list[tuple[str, Batch, Callable]] = []
+
+        def fail(name: str, exc: BaseException, files: set[str], keys: set[str]) -> None:
+            log.error("experiment %s failed: %s", name, exc)
+            failed[name] = f"{type(exc).__name__}: {exc}"
+            timings.pop(name, None)
+            _remove(stage, files)
+            for k in keys:
+                ctx.config.pop(k, None)
+            for n, batch, _ in deferred:
+                if n == name:
+                    batch.cancel()
+
         for i, (fn, group) in enumerate(groups.items()):
             step("experiments", i, len(groups))
             name = " ".join(group)
             log.info("running %s", name)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             before_files, before_config = _files(stage), set(ctx.config)
+            n_deferred = len(ctx.deferred)
             try:
                 fn(ctx)
             except failures as exc:
-                log.error("experiment %s failed: %s", name, exc)
-                failed[name] = f"{type(exc).__name__}: {exc}"
-                _remove(stage, _files(stage) - before_files)
-                for k in set(ctx.config) - before_config:
-                    del ctx.config[k]
+                deferred += [(name, b, f) for b, f in ctx.deferred[n_deferred:]]
+                fail(name, exc, _files(stage) - before_files, set(ctx.config) - before_config)
                 continue
+            except BaseException:
+                for b, _ in ctx.deferred:  # a bug or an interruption: nothing more is wanted
+                    b.cancel()
+                raise
+            deferred += [(name, b, f) for b, f in ctx.deferred[n_deferred:]]
             timings[name] = round(time.perf_counter() - t0, 2)
             # the resolved parameters, under every name the run stands for
             written = [k for k in ctx.config if k not in before_config and ctx.config[k]]
             shared = ctx.config[written[0]] if written else {}
             for n in group:
                 ctx.config[n] = ctx.config.get(n) or shared
-            log.info("%s done in %.1f s", name, timings[name])
+            owned[name] = (_files(stage) - before_files, set(ctx.config) - before_config)
+            log.info(
+                "%s done in %.1f s (%.1f s CPU in this process)",
+                name,
+                timings[name],
+                time.process_time() - c0,
+            )
             step("experiments", i + 1, len(groups))
+        # the parts the experiments deferred (`RunContext.later`), in the order handed over:
+        # their trials ran beside the later experiments' trials
+        for k, (name, batch, finish) in enumerate(deferred):
+            if name in failed:
+                continue
+            t0, c0 = time.perf_counter(), time.process_time()
+            before_files = _files(stage)
+            try:
+                finish(batch.result(ctx.progress))
+            except failures as exc:
+                files, keys = owned[name]
+                fail(name, exc, files | (_files(stage) - before_files), keys)
+                continue
+            except BaseException:
+                for _, b, _ in deferred[k + 1 :]:
+                    b.cancel()
+                raise
+            owned[name][0].update(_files(stage) - before_files)
+            timings[name] = round(timings[name] + time.perf_counter() - t0, 2)
+            log.info(
+                "%s: deferred part (%s) done in %.1f s (%.1f s CPU in this process)",
+                name,
+                batch.desc,
+                time.perf_counter() - t0,
+                time.process_time() - c0,
+            )
         outputs = sorted(_files(stage))
         manifest = {
             "experiments": names,

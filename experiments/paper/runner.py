@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import ConfigError
-from experiments.exec import Executor, SerialExecutor
+from experiments.exec import Batch, Executor, SerialExecutor
 
 __all__ = [
     "DEFAULT_EXPERIMENTS",
@@ -32,6 +32,8 @@ class RunContext:
     progress: callback(description, done, total) for long loops; no-op by default.
     config: the resolved parameters each experiment used, written to manifest.json.
     executor: where the experiments' trials run (`experiments.exec`; default: this process).
+    deferred: (batch, finish) pairs handed over by `later`, finished by `run_experiments` after
+        every experiment has started.
     """
 
     out_dir: Path
@@ -41,6 +43,7 @@ class RunContext:
     config: dict = field(default_factory=dict)
     outputs: list[Path] = field(default_factory=list)
     executor: Executor = field(default_factory=SerialExecutor)
+    deferred: list[tuple[Batch, Callable[[list], None]]] = field(default_factory=list)
 
     def map(self, fn, configs, seeds=None, desc: str = "trials", chunksize=None) -> list:
         """The records of trials `fn(configs[i], seeds[i])`, in order, run on `executor` with
@@ -48,6 +51,27 @@ class RunContext:
         return self.executor.map(
             fn, configs, seeds, desc=desc, progress=self.progress, chunksize=chunksize
         )
+
+    def submit(self, fn, configs, seeds=None, desc: str = "trials", chunksize=None) -> Batch:
+        """The trials of `map`, handed to `executor` without waiting (`Executor.submit`): this
+        process goes on while the workers run them; `result(ctx.progress)` waits for them."""
+        return self.executor.submit(fn, configs, seeds, desc=desc, chunksize=chunksize)
+
+    def later(self, batch: Batch, finish: Callable[[list], None]) -> None:
+        """Finish part of the running experiment after the others: once every experiment of the
+        run has started, `run_experiments` calls `finish(batch's records)` (which writes the
+        outputs made from them, as the experiment would have). Meanwhile the batch's trials run
+        beside the next experiments' trials, on workers that would otherwise wait. An error in
+        the batch or in `finish` fails this experiment as an error in its body does."""
+        self.deferred.append((batch, finish))
+
+    def finish(self) -> None:
+        """Finish the deferred parts now, in the order handed over (waiting for their trials):
+        for a caller that runs an experiment by itself; `run_experiments` does this after all
+        of its experiments."""
+        while self.deferred:
+            batch, finish = self.deferred.pop(0)
+            finish(batch.result(self.progress))
 
     def rng(self, name: str) -> np.random.Generator:
         """A generator for one experiment, independent of the others and of their order."""

@@ -54,6 +54,8 @@ from experiments.eval.poses import nees, nees_bounds, pose_errors
 from experiments.eval.series import slam_panels, slam_series
 from experiments.exec import SerialExecutor, spawn_seeds
 from experiments.io.writers import dumps_json, json_types, write_atomic, write_tidy_table
+from experiments.paper import products
+from experiments.paper.products import FigureSpec
 from experiments.sim import sensor_preset
 from experiments.sim.trajectory import CycabParams, simulate_cycab_run
 from features import extract_features
@@ -72,6 +74,7 @@ __all__ = [
     "extractor_params",
     "key_figures",
     "monte_carlo",
+    "recording_trial",
     "run",
     "slam_trial",
     "table4_rates",
@@ -628,7 +631,9 @@ def _tree_of_landmarks(lg, lm: np.ndarray, tol: float) -> dict[int, int]:
     return out
 
 
-def _write_figures(res: Exp2Results, out_dir: Path) -> list[Path]:
+def _figure_specs(res: Exp2Results) -> list[FigureSpec]:
+    """Figs. 7, 10, 11 and the NEES figure: (file name, plot function, arguments, keyword
+    arguments) each, drawn on the executor (`experiments.paper.products`)."""
     from experiments.render import plots
     from experiments.sim import load_scene
 
@@ -636,20 +641,25 @@ def _write_figures(res: Exp2Results, out_dir: Path) -> list[Path]:
     seq = res.seq0
     scene = load_scene(cfg.scene)
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-    paths = []
+    specs: list[FigureSpec] = []
     main = "paper" if "paper" in res.logs0 else next(iter(res.logs0))
     lg = res.logs0[main]
-    paths.append(
-        plots.plot_slam_path(
-            truth[:, :2],
-            lg.pose[:, :2],
-            seq.truth_landmarks,
-            lg.landmark_xy,
-            lg.landmark_cov,
-            f"Fig. 7: true (dashed) and estimated path, {main} features, IHGR (run 0)",
-            out_dir / "fig7_slam_path.png",
-            walls=[w.points_xy for w in scene.walls],
-            bushes=[b.points_xy for b in scene.bushes],
+    specs.append(
+        (
+            "fig7_slam_path.png",
+            plots.plot_slam_path,
+            (
+                truth[:, :2],
+                lg.pose[:, :2],
+                seq.truth_landmarks,
+                lg.landmark_xy,
+                lg.landmark_cov,
+                f"Fig. 7: true (dashed) and estimated path, {main} features, IHGR (run 0)",
+            ),
+            {
+                "walls": [w.points_xy for w in scene.walls],
+                "bushes": [b.points_xy for b in scene.bushes],
+            },
         )
     )
     pair = [m for m in ("paper", "bailey") if m in res.logs0] or list(res.logs0)
@@ -679,11 +689,12 @@ def _write_figures(res: Exp2Results, out_dir: Path) -> list[Path]:
             }
         )
     name = scene.circles[best].name if best is not None else "-"
-    paths.append(
-        plots.plot_innovations(
-            series,
-            f"Fig. 10: innovations of tree {name} with 3 sigma bounds (run 0)",
-            out_dir / "fig10_innovations.png",
+    specs.append(
+        (
+            "fig10_innovations.png",
+            plots.plot_innovations,
+            (series, f"Fig. 10: innovations of tree {name} with 3 sigma bounds (run 0)"),
+            {},
         )
     )
     # Fig. 11: errors of the prediction with 3 sigma
@@ -701,35 +712,41 @@ def _write_figures(res: Exp2Results, out_dir: Path) -> list[Path]:
                 "style": STYLE.get(m, "-"),
             }
         )
-    paths.append(
-        plots.plot_pose_errors(
-            series,
-            "Fig. 11: predicted pose errors with 3 sigma bounds (run 0)",
-            out_dir / "fig11_pose_errors.png",
+    specs.append(
+        (
+            "fig11_pose_errors.png",
+            plots.plot_pose_errors,
+            (series, "Fig. 11: predicted pose errors with 3 sigma bounds (run 0)"),
+            {},
         )
     )
     lo, hi = nees_bounds(cfg.n_runs)
-    paths.append(
-        plots.plot_consistency(
-            {n: consistency(res, n)["nees_avg"] for n in cfg.methods},
-            (lo, hi),
-            f"Average vehicle-pose NEES over {cfg.n_runs} runs",
-            "NEES (3 dof)",
-            out_dir / "nees.png",
-            expected=3.0,
+    specs.append(
+        (
+            "nees.png",
+            plots.plot_consistency,
+            (
+                {n: consistency(res, n)["nees_avg"] for n in cfg.methods},
+                (lo, hi),
+                f"Average vehicle-pose NEES over {cfg.n_runs} runs",
+                "NEES (3 dof)",
+            ),
+            {"expected": 3.0},
         )
     )
-    return paths
+    return specs
 
 
-def _write_recording(res: Exp2Results, path: Path) -> Path:
-    from experiments.render.viz import Recorder
+def recording_trial(cfg: Exp2Config, seed) -> dict[str, bytes]:
+    """slam.rrd, {file name: bytes}: run 0 of the Monte Carlo study (`seed`: its seed, so the
+    same drive as `slam_trial`'s run 0) with the paper's features, recorded as it goes. A trial
+    of its own, so that it runs on a worker beside the study's runs."""
+    from experiments.render.viz import MemoryRecorder
 
-    cfg = res.config
-    seq = res.seq0
+    seq = simulate_cycab_run(np.random.default_rng(seed), cfg.scene, cfg.cycab)
     m = "paper" if "paper" in cfg.methods else cfg.methods[0]
     params = extractor_params(m, cfg.cycab)
-    with Recorder(path, "slam", series=slam_panels(True)) as rec:
+    with MemoryRecorder("slam", series=slam_panels(True)) as rec:
         rec.log_truth_trees(seq.truth_landmarks)
         lg = slam_run(
             seq,
@@ -740,7 +757,7 @@ def _write_recording(res: Exp2Results, path: Path) -> Path:
             visualiser=rec,
         )
         rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
-    return path
+    return {"slam.rrd": rec.data}
 
 
 # ---- the registered experiment ------------------------------------------------------------------
@@ -761,13 +778,16 @@ def run(ctx, cfg: Exp2Config | None = None) -> Exp2Results:
         "extractor_params": {m: extractor_params(m, cfg.cycab) for m in cfg.methods},
         "sensitivity": [v[0] for v in SENSITIVITY] if cfg.sensitivity else [],
     }
+    # the recording first, on a worker, beside the study's runs; written after the experiments
+    run0 = spawn_seeds(ctx.rng("slam"), cfg.n_runs)[0]  # the seed monte_carlo gives run 0
+    recording = ctx.submit(recording_trial, [cfg], [run0], desc="slam recording")
+    ctx.later(recording, lambda got: products.write(ctx, got[0]))
     res = monte_carlo(cfg, ctx.rng("slam"), progress=ctx.progress, executor=ctx.executor)
     out = Path(ctx.out_dir)
-    written = _write_tables(res, out) + _write_figures(res, out)
-    written.append(_write_recording(res, ctx.path("slam.rrd")))
-    written.append(
+    ctx.outputs += _write_tables(res, out)
+    products.figures(ctx, _figure_specs(res), desc="slam figures")
+    ctx.outputs.append(
         write_atomic(out / "slam_key_figures.json", dumps_json(json_types(key_figures(res))))
     )
-    ctx.outputs += written
     log.info("experiment 2: %d runs in %.1f s", cfg.n_runs, res.seconds)
     return res

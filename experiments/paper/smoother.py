@@ -31,6 +31,7 @@ from experiments.eval.gps import score_sequence
 from experiments.io.config_file import load_slam_config
 from experiments.io.victoria_park import gtsam_graph, load_victoria_park
 from experiments.io.writers import write_tidy_table
+from experiments.paper import products
 from slam import run as slam_run
 from slam import se2
 from slam.smoother import problem_from_log, smooth, solve_graph_file
@@ -61,7 +62,7 @@ def smoother_trial(job: tuple, seed=None) -> dict:
     """One part of the experiment, a deterministic trial (seed None): ("graph", None) solves
     GTSAM's graph file (found where this process looks for the data); ("victoria-park", quick)
     runs the EKF over the full run (--quick: 1500 scans) and smooths it. Returns the table rows
-    and what the figures need."""
+    and, for the run, its figures as files ({file name: PNG bytes})."""
     kind, arg = job
     if kind == "graph":
         g = solve_graph_file(gtsam_graph(), "isam2-chunks", GRAPH_CHUNK)
@@ -79,7 +80,10 @@ def smoother_trial(job: tuple, seed=None) -> dict:
 
 
 def run(ctx) -> None:
-    """The registered experiment `smoother`: its two parts are trials (`smoother_trial`)."""
+    """The registered experiment `smoother`: its two parts are trials (`smoother_trial`), the
+    second also drawing the figures; the table is written after the other experiments have
+    started (`RunContext.later`): the two parts, of unequal length, share the workers with the
+    next experiments' trials."""
     cfg_out = ctx.config.setdefault("smoother", {})
     jobs = []
     try:
@@ -89,7 +93,7 @@ def run(ctx) -> None:
         log.warning("smoother: GTSAM's graph skipped: %s", exc)
         cfg_out["gtsam_graph"] = f"skipped: {exc}"
     try:
-        full = load_victoria_park(full=True)
+        load_victoria_park(full=True)
     except MissingDataError as exc:
         log.warning("smoother: the Victoria Park run skipped: %s", exc)
         cfg_out["victoria_park"] = f"skipped: {exc}"
@@ -97,53 +101,46 @@ def run(ctx) -> None:
         jobs.append(("victoria-park", ctx.quick))
     if not jobs:
         return
-    rows: list[dict] = []
-    got_all = ctx.map(smoother_trial, jobs, desc="smoother", chunksize=1)
-    for (kind, _), got in zip(jobs, got_all):
-        rows += got["rows"]
-        if kind == "graph":
-            cfg_out["gtsam_graph"] = {"file": str(graph), "method": got["method"]}
-            continue
-        from experiments.render import plots
+    # the longer part (the Victoria Park run) first, the graph beside it
+    jobs.sort(key=lambda job: job[0] == "graph")
+    batch = ctx.submit(smoother_trial, jobs, desc="smoother", chunksize=1)
 
-        cfg_out["victoria_park"] = {"preset": PRESET, "scans": got["n"]}
-        title = "Victoria Park: EKF and smoothed antenna paths over the GPS fixes (smoothed map)"
-        ctx.outputs.append(
-            plots.plot_vp_map(
-                full.gps_xy, got["ant"], got["map"], title, ctx.out_dir / "vp_smoother_map.png"
-            )
+    def finish(got_all: list) -> None:
+        rows: list[dict] = []  # the graph's row first, as the table has always had it
+        for (kind, _), got in sorted(zip(jobs, got_all), key=lambda jg: jg[0][0] != "graph"):
+            rows += got["rows"]
+            if kind == "graph":
+                cfg_out["gtsam_graph"] = {"file": str(graph), "method": got["method"]}
+                continue
+            cfg_out["victoria_park"] = {"preset": PRESET, "scans": got["n"]}
+            products.write(ctx, got["files"])
+        notes = (
+            "chi2 per dof: twice GTSAM's graph error over residuals minus unknowns. GTSAM's "
+            f"graph: iSAM2 fed {GRAPH_CHUNK} poses per update, then batch Levenberg-Marquardt "
+            "(the file's counts checked against GTSAM's unit test: 10,608 factors, 7,120 "
+            "values). Victoria Park run: published detections, IHGR, "
+            "datasets/configs/victoria_park_ute.toml; the smoother has the EKF's odometry, "
+            "measurements and associations and starts from its path and map; scored against "
+            "GPS at the antenna as in victoria_park.md. Landmark sigma: the square root of the "
+            "largest eigenvalue of each landmark's marginal covariance."
         )
-        ctx.outputs.append(
-            plots.plot_gps_errors(
-                got["errors"],
-                got["jump"],
-                "Victoria Park: distance to the GPS fixes (jumps marked x)",
-                ctx.out_dir / "vp_smoother_errors.png",
-            )
+        title = "The GTSAM smoother against the EKF"
+        ctx.outputs += write_tidy_table(
+            ctx.out_dir / "smoother",
+            [{k: r.get(k) for k in LABELS} for r in rows],
+            index=["problem", "solver"],
+            values=list(LABELS)[2:],
+            labels=LABELS,
+            title=title,
+            notes=notes,
         )
-    notes = (
-        "chi2 per dof: twice GTSAM's graph error over residuals minus unknowns. GTSAM's graph: "
-        f"iSAM2 fed {GRAPH_CHUNK} poses per update, then batch Levenberg-Marquardt (the file's "
-        "counts checked against GTSAM's unit test: 10,608 factors, 7,120 values). Victoria Park "
-        "run: published detections, IHGR, datasets/configs/victoria_park_ute.toml; the smoother "
-        "has the EKF's odometry, measurements and associations and starts from its path and "
-        "map; scored against GPS at the antenna as in victoria_park.md. Landmark sigma: the "
-        "square root of the largest eigenvalue of each landmark's marginal covariance."
-    )
-    title = "The GTSAM smoother against the EKF"
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "smoother",
-        [{k: r.get(k) for k in LABELS} for r in rows],
-        index=["problem", "solver"],
-        values=list(LABELS)[2:],
-        labels=LABELS,
-        title=title,
-        notes=notes,
-    )
+
+    ctx.later(batch, finish)
 
 
 def _victoria_park(quick: bool) -> dict:
     from experiments.paper.victoria_park import head
+    from experiments.render import plots
 
     full = load_victoria_park(full=True)
     cfg = load_slam_config(PRESET)
@@ -185,14 +182,20 @@ def _victoria_park(quick: bool) -> dict:
         "EKF": np.array([se2.compose(p, laser)[:2] for p in lg.pose]),
         "smoother": np.array([se2.compose(p, laser)[:2] for p in sm.pose]),
     }
-    return {
-        "rows": rows,
-        "n": n,
-        "ant": ant,
-        "map": sm.landmark_xy,
-        "errors": {"EKF": (sc_e.t_s, sc_e.errors), "smoother": (sc_s.t_s, sc_s.errors)},
-        "jump": sc_e.jump,
+    errors = {"EKF": (sc_e.t_s, sc_e.errors), "smoother": (sc_s.t_s, sc_s.errors)}
+    title = "Victoria Park: EKF and smoothed antenna paths over the GPS fixes (smoothed map)"
+    files = {
+        "vp_smoother_map.png": products.png(
+            plots.plot_vp_map, full.gps_xy, ant, sm.landmark_xy, title
+        ),
+        "vp_smoother_errors.png": products.png(
+            plots.plot_gps_errors,
+            errors,
+            sc_e.jump,
+            "Victoria Park: distance to the GPS fixes (jumps marked x)",
+        ),
     }
+    return {"rows": rows, "n": n, "files": files}
 
 
 def _gps(sc) -> dict:

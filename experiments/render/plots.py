@@ -1,16 +1,24 @@
-"""Static figures (PNG) like the paper's; the only module that imports matplotlib."""
+"""Static figures (PNG) like the paper's; the only module that imports matplotlib.
+
+Every `plot_*` function draws one figure and writes it to `path`: a file (written atomically)
+or a binary file object (`io.BytesIO`: a figure drawn in a worker, its bytes written by the
+main process). Figures are `matplotlib.figure.Figure` objects, not pyplot's: pyplot keeps a
+global list of open figures, and figures may be drawn in several threads of one process at
+once (a Dask worker's threads).
+"""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from typing import BinaryIO
 
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle as CirclePatch  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
@@ -20,6 +28,8 @@ from experiments.render.shapes import ellipse_polyline  # noqa: E402
 __all__ = ["plot_raw_scan", "plot_features", "save", "METHOD_COLORS"]
 
 # one colour per circle-fitting method, in every figure
+Output = Path | BinaryIO  # where a figure goes: a file, or a binary file object
+
 METHOD_COLORS = {
     "paper": "tab:green",
     "geometric": "m",
@@ -29,19 +39,28 @@ METHOD_COLORS = {
 }
 
 
-def save(fig, path: Path) -> Path:
-    """Write the figure as PNG atomically (see `write_atomic`) and close it."""
-    try:
-        return write_atomic(
-            path, lambda fh: fig.savefig(fh, format="png", dpi=130, bbox_inches="tight")
-        )
-    finally:
-        plt.close(fig)
+def _subplots(nrows: int = 1, ncols: int = 1, *, figsize, layout=None, **kwargs):
+    """(figure, axes) as `pyplot.subplots` makes them, without pyplot's global figure list."""
+    fig = Figure(figsize=figsize, layout=layout)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
-def plot_raw_scan(points_xy: np.ndarray, title: str, path: Path) -> Path:
+def save(fig, path: Output) -> Output:
+    """Write the figure as PNG: to the file `path` atomically (see `write_atomic`), or into the
+    binary file object `path` (an `io.BytesIO`); the same bytes either way."""
+
+    def draw(fh) -> None:
+        fig.savefig(fh, format="png", dpi=130, bbox_inches="tight")
+
+    if hasattr(path, "write"):
+        draw(path)
+        return path
+    return write_atomic(path, draw)
+
+
+def plot_raw_scan(points_xy: np.ndarray, title: str, path: Output) -> Output:
     """Fig. 2(b): the points of one whole scan around the sensor at the origin."""
-    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    fig, ax = _subplots(figsize=(6.5, 6.5))
     p = points_xy[np.all(np.isfinite(points_xy), axis=1)]
     ax.plot(p[:, 0], p[:, 1], ".", ms=2.5, color="k", label="scan points")
     ax.plot([0], [0], "r+", ms=12, mew=2, label="laser (two PLS200 back to back)")
@@ -155,17 +174,17 @@ def plot_features(
     circles: Sequence[tuple[str, np.ndarray, str]],
     edges_xy: np.ndarray,
     title: str,
-    path: Path,
+    path: Output,
     zoom: tuple[float, float, float, float] | None = None,
     truth_xyr: np.ndarray | None = None,
-) -> Path:
+) -> Output:
     """Figs. 3 and 4: circles and edges on the scan (left), and a zoom on a box (right).
 
     points_xy: (B, 2) scan points (NaN rows for no return). segments: [((first, last), kind)].
     circles: [(label, (C, 3) [x, y, r], colour)]. zoom: (xmin, xmax, ymin, ymax).
     """
     ncols = 2 if zoom else 1
-    fig, axes = plt.subplots(1, ncols, figsize=(6.5 * ncols, 6.2))
+    fig, axes = _subplots(1, ncols, figsize=(6.5 * ncols, 6.2))
     axes = np.atleast_1d(axes)
     for ax in axes:
         _draw(ax, points_xy, segments, circles, edges_xy, truth_xyr, lw=1.0)
@@ -186,11 +205,11 @@ def plot_features(
     return save(fig, path)
 
 
-def plot_rates(table: dict[str, dict[str, float]], title: str, ylabel: str, path: Path) -> Path:
+def plot_rates(table: dict[str, dict[str, float]], title: str, ylabel: str, path: Output) -> Output:
     """Grouped bars: table[group][series] = value."""
     groups = list(table)
     series = sorted({s for g in table.values() for s in g})
-    fig, ax = plt.subplots(figsize=(7, 4))
+    fig, ax = _subplots(figsize=(7, 4))
     w = 0.8 / max(len(series), 1)
     for i, s in enumerate(series):
         ax.bar(
@@ -204,11 +223,11 @@ def plot_rates(table: dict[str, dict[str, float]], title: str, ylabel: str, path
     return save(fig, path)
 
 
-def plot_circle_rates(res, path: Path, setup: str = "") -> Path:
+def plot_circle_rates(res, path: Output, setup: str = "") -> Output:
     """Circle-extraction rate of simulated trunks against range, per radius and line test;
     setup: a line saying how they were simulated (the figure's title)."""
     tests = list(res.circle_rate)
-    fig, axes = plt.subplots(1, len(tests), figsize=(5.5 * len(tests), 4), sharey=True)
+    fig, axes = _subplots(1, len(tests), figsize=(5.5 * len(tests), 4), sharey=True)
     axes = np.atleast_1d(axes)
     for ax, t in zip(axes, tests):
         cells = res.circle_rate[t]
@@ -227,9 +246,9 @@ def plot_circle_rates(res, path: Path, setup: str = "") -> Path:
     return save(fig, path)
 
 
-def plot_scene(scene, path: Path) -> Path:
+def plot_scene(scene, path: Output) -> Output:
     """Fig. 2(a): the scene from above, pillars labelled, scan positions as numbered crosses."""
-    fig, ax = plt.subplots(figsize=(8, 6.5))
+    fig, ax = _subplots(figsize=(8, 6.5))
     for w in scene.walls:
         p = np.vstack([w.points_xy, w.points_xy[:1]]) if w.closed else w.points_xy
         style = dict(color="0.2", lw=2.0) if w.kind == "wall" else dict(color="0.5", lw=1.2, ls=":")
@@ -262,7 +281,7 @@ SWEEP_AXES = {
 }
 
 
-def plot_sweep(results: dict, path: Path, held: dict | None = None) -> Path:
+def plot_sweep(results: dict, path: Output, held: dict | None = None) -> Output:
     """CE and RE (rows) against each swept variable (columns), one line per method.
 
     results[var][value][method] = (RMS CE, RMS RE, extracted fraction); held: the values of the
@@ -270,7 +289,7 @@ def plot_sweep(results: dict, path: Path, held: dict | None = None) -> Path:
     so, so a curve that stops has its reason on it.
     """
     variables = list(results)
-    fig, axes = plt.subplots(2, len(variables), figsize=(5 * len(variables), 7.8), squeeze=False)
+    fig, axes = _subplots(2, len(variables), figsize=(5 * len(variables), 7.8), squeeze=False)
     styles = {"paper": "o-", "geometric": "s-", "bailey": "^-", "taubin": "d-", "crlb": "--"}
     ylabels = ("RMS CE (eq. 10): centre error / range", "RMS RE (eq. 11): radius error / radius")
     for j, var in enumerate(variables):
@@ -338,14 +357,14 @@ def plot_slam_path(
     map_xy: np.ndarray,
     map_cov: np.ndarray,
     title: str,
-    path: Path,
+    path: Output,
     walls: Sequence[np.ndarray] = (),
     bushes: Sequence[np.ndarray] = (),
-) -> Path:
+) -> Output:
     """Fig. 7: estimated path (wide, translucent) under the true path (dashed, the simulated
     pose itself), trees (stars), the map's landmarks with 95% ellipses (magnified x10 to be
     visible), walls and bushes of the scene (grey), the start (dot)."""
-    fig, ax = plt.subplots(figsize=(8, 6))
+    fig, ax = _subplots(figsize=(8, 6))
     for w in walls:
         ax.plot(w[:, 0], w[:, 1], "-", color="0.4", lw=2)
     for b in bushes:
@@ -396,13 +415,13 @@ def plot_slam_path(
     return save(fig, path)
 
 
-def plot_innovations(series: Sequence[dict], title: str, path: Path) -> Path:
+def plot_innovations(series: Sequence[dict], title: str, path: Output) -> Output:
     """Fig. 10: range and bearing innovations with their 3-sigma bounds.
 
     series: dicts with label, scan (k,), innov (k, 2) [m, rad], sigma (k, 2) and style (a
     matplotlib line style such as "-." or "-").
     """
-    fig, axes = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, axes = _subplots(2, 1, figsize=(8, 6), sharex=True)
     _plot_with_bounds(axes, series, "innov", "innovation")
     axes[0].set_ylabel("range innovation (m)")
     axes[1].set_ylabel("bearing innovation (rad)")
@@ -414,12 +433,12 @@ def plot_innovations(series: Sequence[dict], title: str, path: Path) -> Path:
     return save(fig, path)
 
 
-def plot_pose_errors(series: Sequence[dict], title: str, path: Path) -> Path:
+def plot_pose_errors(series: Sequence[dict], title: str, path: Output) -> Output:
     """Fig. 11: x, y and heading errors of the vehicle with their 3-sigma bounds.
 
     series: dicts with label, scan (N,), err (N, 3) [m, m, rad], sigma (N, 3), style.
     """
-    fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
+    fig, axes = _subplots(3, 1, figsize=(8, 7.5), sharex=True)
     names = ["x error (m)", "y error (m)", "heading error (rad)"]
     _plot_with_bounds(axes, series, "err", "error")
     for ax, n in zip(axes, names):
@@ -436,11 +455,11 @@ def plot_consistency(
     bounds: tuple[float, float],
     title: str,
     ylabel: str,
-    path: Path,
+    path: Output,
     expected: float | None = None,
-) -> Path:
+) -> Output:
     """Average NEES (or NIS) per scan over Monte Carlo runs, with its 95% chi-square bounds."""
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = _subplots(figsize=(8, 4))
     for label, v in series.items():
         ax.plot(np.arange(len(v)), v, "-", lw=1.0, label=label)
     ax.axhline(bounds[0], color="k", ls="--", lw=0.8, label="95% bounds")
@@ -456,8 +475,8 @@ def plot_consistency(
 
 
 def plot_association(
-    rows: list[dict], path: Path, method_labels: dict[str, str], sweep_xlabels: dict[str, str]
-) -> Path:
+    rows: list[dict], path: Output, method_labels: dict[str, str], sweep_xlabels: dict[str, str]
+) -> Output:
     """Correct-association and false-pairing rates against each sweep, one column per sweep.
 
     rows: dicts with keys sweep, value, method, correct_rate, false_pair_rate (as `rate_study`
@@ -465,7 +484,7 @@ def plot_association(
     sweep -> x-axis label.
     """
     sweeps = list(dict.fromkeys(r["sweep"] for r in rows))
-    fig, axes = plt.subplots(2, len(sweeps), figsize=(4.6 * len(sweeps), 7.2), squeeze=False)
+    fig, axes = _subplots(2, len(sweeps), figsize=(4.6 * len(sweeps), 7.2), squeeze=False)
     styles = ["o-", "s--", "^-", "v:", "d-."]
     colors = ["tab:blue", "tab:cyan", "tab:red", "tab:gray", "tab:green"]
     n_methods = len(method_labels)
@@ -524,12 +543,12 @@ def plot_vp_map(
     paths: dict[str, np.ndarray],
     map_xy: np.ndarray,
     title: str,
-    path: Path,
+    path: Output,
     reference_xy: np.ndarray | None = None,
-) -> Path:
+) -> Output:
     """The GPS fixes (grey dots), estimated antenna paths (one line each), the map's landmarks
     (black +) and, when given, reference landmarks (open circles), world frame."""
-    fig, ax = plt.subplots(figsize=(9, 9))
+    fig, ax = _subplots(figsize=(9, 9))
     ax.plot(gps_xy[:, 0], gps_xy[:, 1], ".", ms=2, color="0.6", label="GPS fixes", zorder=1)
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
     for (label, xy), c in zip(paths.items(), colors):
@@ -558,12 +577,12 @@ def plot_vp_timeseries(
     nis_in: np.ndarray,
     map_size: dict[str, np.ndarray],
     title: str,
-    path: Path,
-) -> Path:
+    path: Output,
+) -> Output:
     """Three panels against time: distance to each GPS fix (jumps marked x, GPS gaps over 2 s
     shaded), the fraction of recent scans whose NIS is inside its 95% bounds (100-scan window),
     and the map size."""
-    fig, axes = plt.subplots(3, 1, figsize=(11, 9), sharex=True)
+    fig, axes = _subplots(3, 1, figsize=(11, 9), sharex=True)
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
     for a, b in gaps:
         for ax in axes:
@@ -590,11 +609,11 @@ def plot_vp_timeseries(
 
 
 def plot_gps_errors(
-    series: dict[str, tuple[np.ndarray, np.ndarray]], jumps: np.ndarray, title: str, path: Path
-) -> Path:
+    series: dict[str, tuple[np.ndarray, np.ndarray]], jumps: np.ndarray, title: str, path: Output
+) -> Output:
     """Distance of each estimated antenna path to the GPS fixes against time: series label ->
     (fix times (s), distances (m)), all on the same fixes; fixes flagged as jumps marked x."""
-    fig, ax = plt.subplots(figsize=(10, 4))
+    fig, ax = _subplots(figsize=(10, 4))
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
     for (label, (t, e)), c in zip(series.items(), colors):
         rmse = float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
@@ -610,7 +629,7 @@ def plot_gps_errors(
     return save(fig, path)
 
 
-def plot_sweep_field(rows: list, swept: list, k: int, title: str, path: Path) -> Path:
+def plot_sweep_field(rows: list, swept: list, k: int, title: str, path: Output) -> Output:
     """One panel per metric of a sweep (`experiments.paper.sweep.sweep_rows`: [point, *swept
     values, method, metric, mean, std, n]): the mean against swept field k with +-1 standard
     error, one line per method and combination of the other swept fields."""
@@ -621,7 +640,7 @@ def plot_sweep_field(rows: list, swept: list, k: int, title: str, path: Path) ->
     pos = {x: (x if numeric else i) for i, x in enumerate(xs)}
     ncols = min(len(metrics), 4) or 1
     nrows = max(1, math.ceil(len(metrics) / ncols))
-    fig, axes = plt.subplots(
+    fig, axes = _subplots(
         nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False, layout="constrained"
     )
     for ax, metric in zip(axes.flat, metrics):

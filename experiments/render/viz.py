@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -49,7 +50,7 @@ from experiments.render.shapes import circle_polyline, ellipse_polyline
 from features.types import Features, Scan
 from slam import se2
 
-__all__ = ["KINDS", "NullRecorder", "Recorder", "blueprint", "open_recording"]
+__all__ = ["KINDS", "MemoryRecorder", "NullRecorder", "Recorder", "blueprint", "open_recording"]
 
 KINDS = ("slam", "features", "circles")
 KIND_COLORS = np.array([[255, 150, 40], [60, 120, 255], [40, 200, 90]], dtype=np.uint8)
@@ -516,6 +517,35 @@ class Recorder(NullRecorder):
             self.rec.disconnect()
         self._tmp.unlink(missing_ok=True)
         self._tmp = None
+
+
+class MemoryRecorder(Recorder):
+    """A `Recorder` whose recording ends as bytes (`data`, once closed) instead of a file at a
+    chosen path: a recording made where it is not written (a trial on a worker process, perhaps
+    on another machine; the main process writes the bytes). It records into a private temporary
+    folder, removed when the recorder is closed or aborted; the bytes are those of the file a
+    `Recorder` would have written."""
+
+    def __init__(self, kind: str = "slam", **kwargs) -> None:
+        self._dir = Path(tempfile.mkdtemp(prefix="trunkslam-rrd-"))
+        self.data: bytes | None = None
+        try:
+            super().__init__(self._dir / f"{kind}.rrd", kind, **kwargs)
+        except BaseException:
+            shutil.rmtree(self._dir, ignore_errors=True)
+            raise
+
+    def close(self) -> None:
+        try:
+            super().close()
+            if self.data is None:
+                self.data = self.path.read_bytes()
+        finally:
+            shutil.rmtree(self._dir, ignore_errors=True)
+
+    def abort(self) -> None:
+        super().abort()
+        shutil.rmtree(self._dir, ignore_errors=True)
 
 
 def open_recording(

@@ -1,6 +1,7 @@
 """The executors (issue 13): the same seeded study gives the same numbers, bit for bit, in this
-process, in 2 worker processes and on a Dask LocalCluster; a trial that raises is reported with
-its seed and the others are kept; trunkslam sweep."""
+process, in 2 worker processes and on a Dask LocalCluster; so do the figures and recordings
+made as trials, and `submit` (trials handed over without waiting); a trial that raises is
+reported with its seed and the others are kept; trunkslam sweep."""
 
 from __future__ import annotations
 
@@ -9,13 +10,14 @@ import json
 
 import numpy as np
 import pytest
-from support import assert_tidy_tables
+from support import assert_tidy_tables, read_recording, recording_rows
 
 from experiments.errors import ConfigError, ExperimentFailed
 from experiments.exec import SerialExecutor, TrialsFailed, describe_seed, spawn_seeds
 from experiments.exec.local import ProcessExecutor
 from experiments.paper.association import rate_study
 from experiments.paper.circles import pillar_monte_carlo, summarise, sweep_trial
+from experiments.paper.products import figure_trial
 from experiments.paper.reproduce import run_experiments
 from experiments.paper.slam import Exp2Config, key_figures, monte_carlo
 from experiments.paper.sweep import load_sweep, run_sweep, run_sweep_file
@@ -93,19 +95,124 @@ def test_slam_study_identical_on_every_executor(executors):
             assert np.array_equal(det[m], ref[3][m]), name
 
 
-def test_reproduce_tables_identical_with_1_and_2_workers_and_dask(tmp_path, executors):
-    """The written tables (CSV bytes) of `reproduce circle-sweep --quick`."""
+def test_reproduce_outputs_identical_with_1_and_2_workers_and_dask(tmp_path, executors):
+    """`reproduce circle-sweep table1 --quick`: the tables (CSV bytes), the figures (PNG bytes,
+    drawn as trials on the executor) and circles.rrd (made by a trial; compared row by row,
+    rerun's row ids and log times aside) are the same on every executor."""
     out = {}
     for name, ex in executors.items():
-        run_experiments(["circle-sweep"], tmp_path / name, quick=True, seed=3, executor=ex)
-        out[name] = (tmp_path / name / "circle_sweep.csv").read_bytes()
-        m = json.loads((tmp_path / name / "manifest.json").read_text())
-        assert m["executor"]["executor"] == ex.name
-    assert out["serial"].count(b"\n") > 60
-    assert out["processes"] == out["serial"] and out["dask"] == out["serial"]
-    assert assert_tidy_tables(tmp_path / "serial") == {"circle_sweep.csv"}
-    head = out["serial"].decode().splitlines()[0]
+        folder = tmp_path / name
+        run_experiments(["circle-sweep", "table1"], folder, quick=True, seed=3, executor=ex)
+        files = {p.name: p.read_bytes() for p in folder.iterdir() if p.suffix in (".csv", ".png")}
+        out[name] = (files, recording_rows(folder / "circles.rrd"))
+        m = json.loads((folder / "manifest.json").read_text())
+        assert m["executor"]["executor"] == ex.name and not m["failed"]
+    files, rec = out["serial"]
+    assert files["circle_sweep.csv"].count(b"\n") > 60
+    assert {"circle_sweep.png", "fig2a_scene.png", "fig3_position2.png"} <= set(files)
+    assert {"circle_sweep.csv", "table1_ce.csv"} <= assert_tidy_tables(tmp_path / "serial")
+    head = files["circle_sweep.csv"].decode().splitlines()[0]
     assert head == "sweep,sweep_value,method,rms_ce,rms_re,extracted_fraction"
+    assert {"world/truth/pillars", "figures/laser/paper/circles"} <= {e.lstrip("/") for e in rec}
+    for name in ("processes", "dask"):
+        assert out[name][0].keys() == files.keys(), name
+        for f, data in out[name][0].items():
+            assert data == files[f], (name, f)
+        assert out[name][1] == rec, name
+
+
+def test_submitted_trials_give_the_records_of_map(executors):
+    """`submit` hands the trials over and returns their batch; this process can go on (here:
+    other trials) before `result()`, which gives what `map` gives, and the same again when
+    asked twice; a trial that raises is reported there; a cancelled batch has no result."""
+    seeds = spawn_seeds(21, 3)
+    ref = SerialExecutor().map(sweep_trial, [POINT] * 3, seeds)
+    for name, ex in executors.items():
+        batch = ex.submit(sweep_trial, [POINT] * 3, seeds, desc="submitted")
+        meanwhile = ex.map(sweep_trial, [POINT], seeds[:1])
+        calls: list = []
+        got = batch.result(lambda *call, calls=calls: calls.append(call))
+        assert repr(got) == repr(ref) and repr(meanwhile[0]) == repr(ref[0]), name
+        assert calls[0] == ("submitted", 0, 3) and calls[-1] == ("submitted", 3, 3), name
+        assert batch.result() is got
+        bad = ex.submit(sweep_trial, [POINT, dict(POINT, radius_m=-0.3)], seeds[:2], desc="bad")
+        with pytest.raises(TrialsFailed) as info:
+            bad.result()
+        assert [f.index for f in info.value.failures] == [1], name
+        assert repr(info.value.records[0]) == repr(ref[0]), name
+        dropped = ex.submit(sweep_trial, [POINT], seeds[:1], desc="dropped")
+        dropped.cancel()
+        with pytest.raises(RuntimeError, match="cancelled"):
+            dropped.result()
+
+
+def test_figures_drawn_on_every_executor_are_the_files_drawn_here(tmp_path, executors):
+    """A figure drawn as a trial (`figure_trial`: in this process, in a worker process, on a
+    Dask worker) is byte for byte the PNG file its plot function writes here."""
+    from experiments.render import plots
+
+    rng = np.random.default_rng(4)
+    pts = rng.normal(size=(200, 2)) * 4.0
+    sig = np.abs(rng.normal(size=(30, 3)))
+    series = [{"label": "a", "scan": np.arange(30), "err": rng.normal(size=(30, 3)), "sigma": sig}]
+    specs = [
+        ("raw.png", plots.plot_raw_scan, (pts, "a scan"), {}),
+        ("errors.png", plots.plot_pose_errors, (series, "errors"), {}),
+    ]
+    plots.plot_raw_scan(pts, "a scan", tmp_path / "raw.png")
+    plots.plot_pose_errors(series, "errors", tmp_path / "errors.png")
+    for name, ex in executors.items():
+        got = ex.map(figure_trial, specs, chunksize=1)
+        assert [list(files) for files in got] == [["raw.png"], ["errors.png"]], name
+        for files in got:
+            for f, data in files.items():
+                assert data.startswith(b"\x89PNG") and data == (tmp_path / f).read_bytes(), name
+
+
+def test_recordings_made_on_every_executor_hold_what_one_made_here_holds(tmp_path, executors):
+    """circles.rrd and the pillar court's figures made by a trial (`products_trial`, which
+    records with a `MemoryRecorder`) on every executor: the figures are byte for byte, and the
+    recording row for row (with its layout), those made here with a `Recorder` writing a file."""
+    from experiments.paper.circles import log_first_draws, pillar_figures, products_trial
+    from experiments.render.viz import Recorder
+
+    seeds = spawn_seeds(8, 7)
+    job = (("paper", "bailey"), 0.01, tuple(seeds[:6]))
+    with Recorder(tmp_path / "here.rrd", "circles") as rec:
+        log_first_draws(rec, job[0], job[1], list(job[2]))
+        here = pillar_figures(np.random.default_rng(seeds[6]), rec)
+
+    def layout(path) -> dict:  # the views in a set: the blueprint's ids are random
+        return {**read_recording(path), "views": sorted(read_recording(path)["views"])}
+
+    rows, views = recording_rows(tmp_path / "here.rrd"), layout(tmp_path / "here.rrd")
+    assert sum(len(v) for v in rows.values()) > 50 and len(here) == 4
+    for name, ex in executors.items():
+        [files] = ex.map(products_trial, [job], [seeds[6]])
+        (tmp_path / f"{name}.rrd").write_bytes(files.pop("circles.rrd"))
+        assert recording_rows(tmp_path / f"{name}.rrd") == rows, name
+        assert layout(tmp_path / f"{name}.rrd") == views, name
+        assert files == here, name
+
+
+def test_a_deferred_part_that_fails_fails_its_experiment(tmp_path, monkeypatch):
+    """The circle sweep's figure is drawn after the experiments (`RunContext.later`); when that
+    raises a project error, circle-sweep is listed as failed with it, its files (the table,
+    written earlier) and configuration are removed, and the other experiment is kept."""
+    import experiments.render.plots as plots
+    from experiments.errors import DataError
+
+    def broken(*args, **kwargs):
+        raise DataError("no room for the figure (test)")
+
+    monkeypatch.setattr(plots, "plot_sweep", broken)
+    with pytest.raises(ExperimentFailed, match="circle-sweep"):
+        run_experiments(["circle-sweep", "noise-calibration"], tmp_path / "r", quick=True)
+    m = json.loads((tmp_path / "r" / "manifest.json").read_text())
+    assert "no room for the figure (test)" in m["failed"]["circle-sweep"]
+    assert not [f for f in m["outputs"] if f.startswith("circle_sweep")]
+    assert "circle-sweep" not in m["config"] and "circle-sweep" not in m["seconds"]
+    assert "noise_calibration.csv" in m["outputs"] and "noise-calibration" in m["seconds"]
 
 
 POINT = {"range_m": 10.0, "radius_m": 0.3, "noise_m": 0.01, "n_trials": 2}

@@ -417,8 +417,7 @@ def test_corrupt_victoria_park_data_fails_the_experiment_instead_of_skipping(
 ):
     """Missing data skips the Victoria Park parts (with a note); corrupt data is a failure."""
     from experiments.errors import DataError
-    from experiments.paper.features import victoria_park_figure
-    from experiments.paper.runner import RunContext
+    from experiments.paper.features import victoria_park_scans
     from experiments.render.viz import NullRecorder
 
     copy = tmp_path / "data" / "victoria_park"
@@ -427,10 +426,8 @@ def test_corrupt_victoria_park_data_fails_the_experiment_instead_of_skipping(
     dr.chmod(0o644)
     dr.write_bytes(dr.read_bytes()[:-10] + b"0123456789")
     monkeypatch.setenv("TRUNKSLAM_DATA", str(tmp_path / "data"))
-    ctx = RunContext(out_dir=tmp_path)
-    ctx.config["features"] = {}
     with pytest.raises(DataError, match="aa3_dr.mat"):
-        victoria_park_figure(ctx, NullRecorder())
+        victoria_park_scans(True, NullRecorder())
 
 
 # ---- property: hostile sequence files and option values -----------------------------------------

@@ -122,6 +122,9 @@ def test_experiment2_writes_every_output(tmp_path):
     ctx = RunContext(out_dir=tmp_path, seed=3)
     cfg = Exp2Config(n_runs=2, cycab=CycabParams(n_scans=40), sensitivity=False)
     res = run_experiment2(ctx, cfg)
+    assert ctx.deferred  # the recording and the figures are made on the executor
+    ctx.finish()
+    assert not ctx.deferred
     names = sorted(p.name for p in ctx.outputs)
     for n in (
         "table3.md",

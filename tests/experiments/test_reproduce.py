@@ -24,16 +24,19 @@ def test_victoria_park_figure_with_data(quick_run, vp_dir):
 
 
 def test_victoria_park_figure_skipped_and_said_without_data(tmp_path, monkeypatch):
-    from experiments.paper.features import victoria_park_figure
-    from experiments.paper.runner import RunContext
-    from experiments.render.viz import NullRecorder
+    """Without the data, the Victoria Park trial says so (for the manifest) and returns the
+    recording (its layout, no scans) but no figure."""
+    from support import read_recording
+
+    from experiments.paper.features import victoria_park_trial
 
     monkeypatch.setenv("TRUNKSLAM_DATA", str(tmp_path / "nowhere"))
-    ctx = RunContext(out_dir=tmp_path)
-    ctx.config["features"] = {}
-    victoria_park_figure(ctx, NullRecorder())
-    assert ctx.config["features"]["victoria_park"].startswith("skipped")
-    assert not (tmp_path / "fig_vp_scan.png").exists()
+    got = victoria_park_trial(True)
+    assert got["victoria_park"].startswith("skipped")
+    assert set(got["files"]) == {"features.rrd"}
+    (tmp_path / "features.rrd").write_bytes(got["files"]["features.rrd"])
+    rec = read_recording(tmp_path / "features.rrd")
+    assert rec["blueprints"] == 1 and not any(e.startswith("laser/scan") for e in rec["entities"])
 
 
 def test_manifest_records_how_to_recreate(quick_run):
