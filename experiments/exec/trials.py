@@ -253,12 +253,36 @@ class Executor:
 
 
 class SerialExecutor(Executor):
-    """Every trial in this process, one after the other (`--workers 1`)."""
+    """Every trial in this process, one after the other (`--workers 1`).
+
+    Each chunk runs with numpy's BLAS held to one thread (`threadpoolctl`), as in the worker
+    processes: a multi-threaded BLAS splits its sums differently and changes the last bits of
+    a result, which a long filter run (Victoria Park) carries into its tables."""
 
     name = "serial"
 
     def _submit(self, fn, chunks):
-        return ((chunk, run_chunk(fn, chunk)) for chunk in chunks), lambda: None
+        def run():
+            for chunk in chunks:
+                with _blas_controller().limit(limits=1, user_api="blas"):
+                    out = run_chunk(fn, chunk)
+                yield chunk, out
+
+        return run(), lambda: None
+
+
+_CONTROLLER = None
+
+
+def _blas_controller():
+    """The process's `threadpoolctl.ThreadpoolController` (made once: it scans the loaded
+    libraries)."""
+    global _CONTROLLER
+    if _CONTROLLER is None:
+        from threadpoolctl import ThreadpoolController
+
+        _CONTROLLER = ThreadpoolController()
+    return _CONTROLLER
 
 
 def make_executor(workers: int | None = None, dask: str | None = None) -> Executor:

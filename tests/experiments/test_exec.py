@@ -43,6 +43,28 @@ def executors():
     cluster.close()
 
 
+def blas_threads(cfg, seed) -> list[int]:
+    """A trial: the thread counts of the BLAS libraries where it runs."""
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_trials_in_this_process_use_one_blas_thread_as_the_workers_do(executors):
+    """A multi-threaded BLAS rounds its sums differently (the full Victoria Park run's tables
+    differed in their last digits between --workers 1 and 2): trials run with one BLAS thread
+    wherever they run, and this process gets its own setting back afterwards."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+        assert before and set(before) == {2}
+        assert executors["serial"].map(blas_threads, [None], [None]) == [[1] * len(before)]
+        assert executors["processes"].map(blas_threads, [None], [None]) == [[1] * len(before)]
+        after = [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+        assert after == before
+
+
 def test_spawn_seeds_are_the_generators_spawn():
     """A study that drew run i as rng.spawn(R)[i] keeps its numbers with spawn_seeds."""
     old = [g.random(3) for g in np.random.default_rng(42).spawn(4)]
