@@ -633,12 +633,7 @@ def _prune(s: _Setup, state: Filter, count: dict[int, list[int]], status, k: int
     if not ids.size:
         return
     z_hat, _ = se2.observe(state.pose, state.landmarks_xy, s.laser)
-    fov0, fov1 = s.fov
-    expected = (
-        (z_hat[:, 1] >= fov0)
-        & (z_hat[:, 1] <= fov1)
-        & (z_hat[:, 0] <= min(s.max_range, policy.prune_range_m))
-    )
+    expected = _in_view(z_hat, min(s.max_range, policy.prune_range_m), s.fov)
     seen = set(status[status >= 0].tolist())
     drop = []
     for lid, e in zip(ids.tolist(), expected.tolist()):
@@ -660,16 +655,20 @@ def _prune(s: _Setup, state: Filter, count: dict[int, list[int]], status, k: int
 # ---- helpers ------------------------------------------------------------------------------------
 
 
-def _in_view(z_hat: np.ndarray, max_range: float, fov: tuple[float, float], cfg: SlamConfig):
-    """(n,) bool: predictions within range and field of view, plus margins."""
+def _in_view(
+    z_hat: np.ndarray, max_range: float, fov: tuple[float, float], cfg: SlamConfig | None = None
+):
+    """(n,) bool: predictions within range and field of view, plus the margins of `cfg`
+    (`view_margin_rad`, `view_margin_m`; None: no margins)."""
     if z_hat.shape[0] == 0:
         return np.zeros(0, bool)
+    m_rad, m_m = (cfg.view_margin_rad, cfg.view_margin_m) if cfg is not None else (0.0, 0.0)
     fov0, fov1 = fov
     b = z_hat[:, 1]
-    in_fov = (b >= fov0 - cfg.view_margin_rad) & (b <= fov1 + cfg.view_margin_rad)
-    if fov1 - fov0 + 2 * cfg.view_margin_rad >= 2 * math.pi:
+    in_fov = (b >= fov0 - m_rad) & (b <= fov1 + m_rad)
+    if fov1 - fov0 + 2 * m_rad >= 2 * math.pi:
         in_fov[:] = True
-    return in_fov & (z_hat[:, 0] <= max_range + cfg.view_margin_m)
+    return in_fov & (z_hat[:, 0] <= max_range + m_m)
 
 
 def _gates(z, R, z_hat, H5, C5, gate: float) -> np.ndarray:

@@ -451,7 +451,11 @@ def pivot(
 def pivot_cells(records, index, columns=(), values="value") -> list[list[str]]:
     """The Markdown cells of the pivot (`pivot`): per row, the index values, then the cells
     (`format_cell`; "" where no record has that combination)."""
-    row_keys, col_keys, cells = pivot(records, index, columns, values)
+    return _formatted(*pivot(records, index, columns, values))
+
+
+def _formatted(row_keys, col_keys, cells) -> list[list[str]]:
+    """`pivot`'s output as Markdown cells (see `pivot_cells`)."""
     return [
         [format_cell(v) for v in rk]
         + [format_cell(cells[(rk, ck)]) if (rk, ck) in cells else "" for ck in col_keys]
@@ -481,7 +485,7 @@ def tidy_markdown(
     a comment naming the CSV `source` and the pivot so that it can be checked against it."""
     labels = dict(labels or {})
     names = [values] if isinstance(values, str) else list(values)
-    row_keys, col_keys, _ = pivot(records, index, columns, values)
+    row_keys, col_keys, cells = pivot(records, index, columns, values)
     header = [labels.get(f, f) for f in index]
     header += [_label(ck, labels, len(names) > 1, columns) for ck in col_keys]
     spec = {"index": list(index), "columns": list(columns), "values": names}
@@ -489,9 +493,7 @@ def tidy_markdown(
     return (
         mark
         + markdown_table(header, [])
-        + "".join(
-            "| " + " | ".join(r) + " |\n" for r in pivot_cells(records, index, columns, values)
-        )
+        + "".join("| " + " | ".join(r) + " |\n" for r in _formatted(row_keys, col_keys, cells))
     )
 
 
