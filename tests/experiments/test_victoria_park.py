@@ -259,3 +259,43 @@ def test_ss2002_reference_is_read(vp_dir):
     assert ground.shape == (2000, 3) and trees.shape == (145, 3)
     np.testing.assert_allclose(ground[0], 0.0, atol=1e-12)
     assert 0.05 < np.median(trees[:, 2]) < 0.5
+
+
+# ---- the preset's consistency step (experiments/paper/vp_calibration.py) --------------------
+
+
+def test_scale_measurement_noise_scales_every_sigma_and_rejects_bad_factors():
+    from experiments.io.config_file import load_slam_config, preset_path
+    from experiments.paper.vp_calibration import scale_measurement_noise
+
+    cfg = load_slam_config(preset_path("victoria_park_ute"))
+    half = scale_measurement_noise(cfg, 0.5)
+    assert set(half.constant_noise) == set(cfg.constant_noise)
+    for name, m in cfg.constant_noise.items():
+        h = half.constant_noise[name]
+        assert h.range_sigma_m == 0.5 * m.range_sigma_m
+        assert h.range_sigma_per_m == 0.5 * m.range_sigma_per_m
+        assert h.bearing_sigma_rad == 0.5 * m.bearing_sigma_rad
+    assert half.odometry_noise == cfg.odometry_noise and half.laser_pose == cfg.laser_pose
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match="k: the noise factor"):
+            scale_measurement_noise(cfg, bad)
+
+
+@pytest.mark.data
+def test_consistency_scale_brings_nis_per_dof_to_one(vp_dir):
+    """On the first 300 scans: NIS per dof falls as the measurement sigmas grow, the bisection
+    lands within 5% of 1, and a bracket that misses the crossing is an error naming it."""
+    from experiments.io.config_file import load_slam_config, preset_path
+    from experiments.paper.vp_calibration import consistency_scale
+
+    seq = load_victoria_park(vp_dir, n_scans=300)
+    cfg = load_slam_config(preset_path("victoria_park_ute"))
+    got = consistency_scale(seq, cfg, bracket=(0.5, 2.0), iterations=5)
+    ks, v = np.array(got["evaluations"]).T
+    order = np.argsort(ks)
+    assert np.all(np.diff(v[order]) < 0)  # monotone over the evaluated factors
+    assert got["nis_per_dof"] == pytest.approx(1.0, abs=0.05)
+    assert 0.5 < got["k"] < 2.0
+    with pytest.raises(ValueError, match="bracket: NIS per dof is"):
+        consistency_scale(seq, cfg, bracket=(3.0, 4.0), iterations=1)
