@@ -52,7 +52,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize
 
-from experiments.errors import MissingDataError
+from experiments.errors import ConfigError, MissingDataError
 from experiments.io.config_file import config_toml
 from experiments.io.victoria_park import load_victoria_park
 from experiments.io.writers import write_atomic, write_tidy_table
@@ -75,12 +75,18 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 FIT_SCANS = 2000
+MAX_WIDENINGS = 4  # of the consistency step's bracket (x16 either way)
 LN_AREA = math.log(80.0 * math.pi)  # the measurement space of the ute's laser, m x rad
 BASE = SlamConfig(
     first_estimates_jacobians=True,
     gps_start_fit_m=50.0,
     gps_sigma_m=0.3,
     initial_heading_sigma_rad=math.radians(1.0),
+    # the simulated extractors' fit floors and range biases belong to the simulated LMS200 and
+    # tree park; on the real ute they are unknown: none (as in the preset)
+    fit_floor_range_m=0.0,
+    fit_floor_bearing_rad=0.0,
+    range_bias={"paper": (0.0, 0.0), "bailey": (0.0, 0.0)},
 )
 # laser yaw (rad), ln speed sigma (m/s), ln steer sigma (rad), ln a (m), ln b (-), ln c (rad)
 START = np.array([0.0, *np.log([0.5, math.radians(3.0), 0.05, 0.01, math.radians(0.5)])])
@@ -162,7 +168,7 @@ def scale_measurement_noise(cfg: SlamConfig, k: float) -> SlamConfig:
     """`cfg` with the sigmas (range a and b, bearing c, cross-range) of every constant
     measurement-noise model multiplied by k > 0."""
     if not (math.isfinite(k) and k > 0):
-        raise ValueError(f"k: the noise factor must be a positive number, got {k!r}")
+        raise ConfigError(f"k: the noise factor must be a positive number, got {k!r}")
     scaled = {
         name: NoiseModel(
             m.range_sigma_m * k,
@@ -188,10 +194,13 @@ def consistency_scale(
     seq, cfg: SlamConfig, bracket=(0.5, 2.0), iterations: int = 7, progress=None
 ) -> dict:
     """The factor k on the measurement sigmas (`scale_measurement_noise`) that makes the run's
-    NIS per dof 1, by bisection on ln k inside `bracket` (NIS falls as k grows).
+    NIS per dof 1, by bisection on ln k (NIS falls as k grows).
 
-    Returns {"k", "nis_per_dof" (at k), "evaluations": [(k, nis_per_dof), ...]}. Raises
-    ValueError when the bracket does not contain the crossing (both ends on one side)."""
+    The search starts from `bracket` and widens it (each end x2 outward, at most
+    `MAX_WIDENINGS` times) until NIS per dof is >= 1 at its low end and <= 1 at its high end;
+    then `iterations` bisection steps. Returns {"k" (the evaluated factor closest to NIS per
+    dof 1), "nis_per_dof" (at k), "evaluations": [(k, nis_per_dof), ...]}. Raises ConfigError
+    for a bad bracket or when no widened bracket contains the crossing."""
     evals: list[tuple[float, float]] = []
 
     def f(k: float) -> float:
@@ -202,13 +211,22 @@ def consistency_scale(
         return v
 
     lo, hi = (float(b) for b in bracket)
-    if not (0 < lo < hi):
-        raise ValueError(f"bracket: expected 0 < low < high, got {bracket!r}")
+    if not (0 < lo < hi and math.isfinite(hi)):
+        raise ConfigError(f"bracket: expected 0 < low < high, got {bracket!r}")
     f_lo, f_hi = f(lo), f(hi)
+    for _ in range(MAX_WIDENINGS):
+        if f_lo < 1.0:  # noise still too wide at the low end: go lower
+            lo, hi, f_hi = lo / 2.0, lo, f_lo
+            f_lo = f(lo)
+        elif f_hi > 1.0:
+            lo, hi, f_lo = hi, hi * 2.0, f_hi
+            f_hi = f(hi)
+        else:
+            break
     if not (f_lo >= 1.0 >= f_hi):
-        raise ValueError(
-            f"bracket: NIS per dof is {f_lo:.3g} at k = {lo:g} and {f_hi:.3g} at k = {hi:g}; "
-            "1 is not between them"
+        raise ConfigError(
+            f"bracket: NIS per dof is {f_lo:.3g} at k = {lo:g} and {f_hi:.3g} at k = {hi:g} "
+            f"after widening {bracket!r} {MAX_WIDENINGS} times; 1 is not between them"
         )
     for _ in range(iterations):
         mid = math.sqrt(lo * hi)
@@ -216,7 +234,7 @@ def consistency_scale(
             lo = mid
         else:
             hi = mid
-    best = min(evals, key=lambda e: abs(e[1] - 1.0))  # the evaluated k closest to NIS/dof 1
+    best = min(evals, key=lambda e: abs(e[1] - 1.0))
     return {"k": best[0], "nis_per_dof": best[1], "evaluations": evals}
 
 

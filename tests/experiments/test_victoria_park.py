@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import experiments.io.paths as data
-from experiments.errors import DataError
+from experiments.errors import ConfigError, DataError
 from experiments.io.sequence_file import load_sequence, save_sequence
 from experiments.io.victoria_park import (
     VP_FILES,
@@ -278,14 +278,15 @@ def test_scale_measurement_noise_scales_every_sigma_and_rejects_bad_factors():
         assert h.bearing_sigma_rad == 0.5 * m.bearing_sigma_rad
     assert half.odometry_noise == cfg.odometry_noise and half.laser_pose == cfg.laser_pose
     for bad in (0.0, -1.0, math.nan, math.inf):
-        with pytest.raises(ValueError, match="k: the noise factor"):
+        with pytest.raises(ConfigError, match="k: the noise factor"):
             scale_measurement_noise(cfg, bad)
 
 
 @pytest.mark.data
 def test_consistency_scale_brings_nis_per_dof_to_one(vp_dir):
     """On the first 300 scans: NIS per dof falls as the measurement sigmas grow, the bisection
-    lands within 5% of 1, and a bracket that misses the crossing is an error naming it."""
+    lands within 5% of 1 from a bracket that holds the crossing and from one that must be
+    widened, and a bracket that cannot reach it is an error naming it."""
     from experiments.io.config_file import load_slam_config, preset_path
     from experiments.paper.vp_calibration import consistency_scale
 
@@ -297,5 +298,48 @@ def test_consistency_scale_brings_nis_per_dof_to_one(vp_dir):
     assert np.all(np.diff(v[order]) < 0)  # monotone over the evaluated factors
     assert got["nis_per_dof"] == pytest.approx(1.0, abs=0.05)
     assert 0.5 < got["k"] < 2.0
-    with pytest.raises(ValueError, match="bracket: NIS per dof is"):
-        consistency_scale(seq, cfg, bracket=(3.0, 4.0), iterations=1)
+    wide = consistency_scale(seq, cfg, bracket=(3.0, 4.0), iterations=5)
+    assert wide["evaluations"][2][0] == 1.5  # widened downwards: 3 -> 1.5 (-> 0.75 ...)
+    assert wide["nis_per_dof"] == pytest.approx(1.0, abs=0.05)
+    with pytest.raises(ConfigError, match="bracket: NIS per dof is"):
+        consistency_scale(seq, cfg, bracket=(60.0, 70.0), iterations=1)
+    with pytest.raises(ConfigError, match="bracket: expected 0 < low < high"):
+        consistency_scale(seq, cfg, bracket=(2.0, 1.0))
+
+
+def test_calibration_writes_what_the_preset_holds():
+    """The calibration's fixed settings (BASE) and its parameter vector rebuild the shipped
+    preset exactly, so `reproduce victoria-park-calibration` writes the preset's settings."""
+    from experiments.io.config_file import load_slam_config, preset_path
+    from experiments.paper.vp_calibration import config_from
+
+    preset = load_slam_config(preset_path("victoria_park_ute"))
+    m = preset.constant_noise["bailey"]
+    theta = [
+        preset.laser_pose[2],
+        *np.log(
+            [
+                preset.odometry_noise.speed_sigma_mps,
+                preset.odometry_noise.steer_sigma_rad,
+                m.range_sigma_m,
+                m.range_sigma_per_m,
+                m.bearing_sigma_rad,
+            ]
+        ),
+    ]
+    got, want = config_from(theta).to_dict(), preset.to_dict()
+
+    def flat(d, pre=""):
+        for k, v in d.items():
+            if isinstance(v, dict):
+                yield from flat(v, f"{pre}{k}.")
+            else:
+                yield f"{pre}{k}", v
+
+    got, want = dict(flat(got)), dict(flat(want))
+    assert got.keys() == want.keys()
+    for k, v in want.items():
+        if isinstance(v, float) or (isinstance(v, list) and v and isinstance(v[0], float)):
+            np.testing.assert_allclose(got[k], v, rtol=1e-12, err_msg=k)
+        else:
+            assert got[k] == v, k
