@@ -803,7 +803,11 @@ def _resolve_association(association) -> Callable:
     method = association
 
     def call(z, R, z_hat, H, P, gate_prob=0.99, **params):
-        return associate(z, R, z_hat, H, P, method=method, gate_prob=gate_prob, **params)
+        # The loop's inputs are valid by construction (finite, P symmetric PSD as the filter
+        # keeps it): the trusted path, without the checks that would cost more than the solve.
+        return associate(
+            z, R, z_hat, H, P, method=method, gate_prob=gate_prob, validate=False, **params
+        )
 
     call.method = method
     return call
