@@ -21,10 +21,13 @@ the d x d covariance:
   (Cholesky) and W = P H^T L^-T (d, q), the optimal gain is K = W L^-1, so x += W (L^-1 nu),
   NIS = |L^-1 nu|^2, ln|S| = 2 sum ln L_ii, and the Joseph form
   (I - K H) P (I - K H)^T + K R K^T, which for this gain equals P - K S K^T, is P - W W^T: a
-  symmetric rank-q update (q = 2 x measurements) subtracted in place by BLAS `dsyrk` on one
-  triangle and mirrored to the other (`_subtract_gram`), so P stays symmetric to the last bit
-  and no d x d temporary is made. (The expanded Joseph form P + K A^T + A K^T, A = K S / 2 -
-  P H^T, by `dsyr2k`, gave the same estimates up to rounding at twice the flops.)
+  symmetric rank-q update (q = 2 x measurements) subtracted in place by BLAS `dsyrk` from P's
+  lower triangle (`_subtract_gram`), with no d x d temporary. (The expanded Joseph form
+  P + K A^T + A K^T, A = K S / 2 - P H^T, by `dsyr2k`, gave the same estimates up to rounding
+  at twice the flops.) The filter leaves the upper triangle behind and mirrors it only when
+  `Filter.P` is read (then symmetric to the last bit); the steps and the run loop read the
+  blocks they need from the lower triangle (`cov`, `pose_cov`), so a scan does not pay the
+  O(d^2) mirror, whose writes across the cold upper triangle cost more than the update.
 - `add_landmark`: initialisation from one measurement with its cross covariances:
   m = g(pose, z), P_mm = Gx P_vv Gx^T + Gz R Gz^T, P_m* = Gx P_v* (this one grows P: a copy).
 The functions `predict`, `update` and `add_landmark` do the same on an immutable `EkfState`
@@ -62,11 +65,18 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 
 
 class _Estimate:
-    """Read-only views shared by `EkfState` and `Filter` (both have x, P, landmark_ids)."""
+    """Read-only views shared by `EkfState` and `Filter` (both have x, P, landmark_ids).
+
+    Covariances are read from the lower triangle of `_lower` (P itself for an `EkfState`; the
+    filter's storage, whose upper triangle may lag, for a `Filter`)."""
 
     x: np.ndarray
     P: np.ndarray
     landmark_ids: np.ndarray
+
+    @property
+    def _lower(self) -> np.ndarray:
+        return self.P
 
     @property
     def dim(self) -> int:
@@ -83,7 +93,8 @@ class _Estimate:
 
     @property
     def pose_cov(self) -> np.ndarray:
-        return self.P[:3, :3]
+        """(3, 3) covariance of the pose (a copy)."""
+        return _sym_blocks(self._lower, _POSE_COLS)[0]
 
     @property
     def landmarks_xy(self) -> np.ndarray:
@@ -95,12 +106,21 @@ class _Estimate:
         """(n, 2, 2) marginal covariances of the landmarks."""
         n = self.n_landmarks
         i = 3 + 2 * np.arange(n)
+        P = self._lower
         out = np.empty((n, 2, 2))
-        out[:, 0, 0] = self.P[i, i]
-        out[:, 0, 1] = self.P[i, i + 1]
-        out[:, 1, 0] = self.P[i + 1, i]
-        out[:, 1, 1] = self.P[i + 1, i + 1]
+        out[:, 0, 0] = P[i, i]
+        out[:, 0, 1] = P[i + 1, i]
+        out[:, 1, 0] = P[i + 1, i]
+        out[:, 1, 1] = P[i + 1, i + 1]
         return out
+
+    def cov(self, idx) -> np.ndarray:
+        """P[idx][:, idx]: the covariance of the state entries at positions idx (k,) as
+        (k, k), or of each row of idx (n, k) as (n, k, k) (e.g. `landmark_columns`). A copy,
+        read from the lower triangle (a `Filter` does not mirror P for it)."""
+        idx = np.asarray(idx, dtype=np.int64)
+        flat = np.ascontiguousarray(idx.reshape(math.prod(idx.shape[:-1]), idx.shape[-1]))
+        return _sym_blocks(self._lower, flat).reshape(idx.shape + idx.shape[-1:])
 
     def index_of(self, landmark_id: int) -> int:
         """Position (0..n-1) of a landmark id in the state."""
@@ -164,15 +184,32 @@ class Filter(_Estimate):
 
     Built from an `EkfState` (copied); `snapshot()` returns an immutable `EkfState`. Views such
     as `pose` or `P` change with the filter: copy what must be kept.
+
+    The steps keep only P's lower triangle current (`update` subtracts W W^T from it alone):
+    reading `P` mirrors it to the upper one first (O(d^2), once per update at most), which the
+    run loop avoids by reading what it needs through `cov`, `pose_cov` and `landmark_covs`.
     """
 
     def __init__(self, state: EkfState, first_estimates: bool = False) -> None:
         self.x = np.array(state.x, dtype=np.float64)
-        self.P = np.array(state.P, dtype=np.float64)
+        self._P = np.array(state.P, dtype=np.float64, order="C")
+        self._mirrored = True  # whether the upper triangle of _P is current
         self.landmark_ids = np.array(state.landmark_ids, dtype=np.int64)
         self.first_estimates = bool(first_estimates)
         self.first_xy = self.landmarks_xy.copy()  # each landmark's first estimate
         self.prior_pose = self.x[:3].copy()  # the pose after the last prediction
+
+    @property
+    def P(self) -> np.ndarray:
+        """(d, d) covariance, symmetric (mirrored from the lower triangle when it lags)."""
+        if not self._mirrored:
+            _mirror_lower(self._P)
+            self._mirrored = True
+        return self._P
+
+    @property
+    def _lower(self) -> np.ndarray:
+        return self._P
 
     def snapshot(self) -> EkfState:
         return EkfState(self.x, self.P, self.landmark_ids)
@@ -191,11 +228,11 @@ class Filter(_Estimate):
                 ]
             )
             self.prior_pose = np.array(pose1, dtype=np.float64)
-        P = self.P
-        Pvv = F @ P[:3, :3] @ F.T + Q
+        P = self._P
+        Pvv = F @ self.pose_cov @ F.T + Q
         P[:3, :3] = 0.5 * (Pvv + Pvv.T)
-        if self.dim > 3:
-            P[:3, 3:] = F @ P[:3, 3:]
+        if self.dim > 3:  # from the lower triangle's copy of P_vm, written to both
+            P[:3, 3:] = F @ P[3:, :3].T
             P[3:, :3] = P[:3, 3:].T
         self.x[:3] = pose1
         self.x[2] = float(wrap_angle(self.x[2]))
@@ -233,8 +270,8 @@ class Filter(_Estimate):
         Hc[:, 3:] = H_lm.reshape(q, q)
         R_blk = np.zeros((k, 2, k, 2))
         R_blk[j, :, j, :] = R
-        P = self.P
-        HP = Hc @ P[cols, :]  # (q, d) = (P H^T)^T, from whole rows of P (P is symmetric)
+        P = self._P
+        HP = Hc @ _sym_rows(P, cols)  # (q, d) = (P H^T)^T, from whole rows of P
         S = Hc @ HP[:, cols].T + R_blk.reshape(q, q)
         S = 0.5 * (S + S.T)
         L = np.linalg.cholesky(S)  # S = L L^T
@@ -245,7 +282,9 @@ class Filter(_Estimate):
         logdet = 2.0 * float(np.log(np.diag(L)).sum())
         self.x += W @ v  # K nu
         self.x[2] = float(wrap_angle(self.x[2]))
-        _subtract_gram(P, W)  # Joseph form with the optimal gain: P - K S K^T = P - W W^T
+        # Joseph form with the optimal gain: P - K S K^T = P - W W^T (lower triangle only)
+        _subtract_gram(P, W, mirror=False)
+        self._mirrored = False
         return UpdateResult(nu, S, nis, logdet)
 
     def add_landmark(
@@ -261,13 +300,13 @@ class Filter(_Estimate):
         m, Gx, Gz = inverse_observe(self.pose, z, laser_pose)
         d = self.dim
         P = np.zeros((d + 2, d + 2))
-        P[:d, :d] = self.P
-        cross = Gx @ self.P[:3, :]  # (2, d)
+        P[:d, :d] = self._P  # its upper triangle lags as much as the old one did
+        cross = Gx @ _sym_rows(self._P, _POSE_COLS[0])  # (2, d)
         P[d:, :d] = cross
         P[:d, d:] = cross.T
-        Pmm = Gx @ self.P[:3, :3] @ Gx.T + Gz @ np.asarray(R) @ Gz.T
+        Pmm = Gx @ self.pose_cov @ Gx.T + Gz @ np.asarray(R) @ Gz.T
         P[d:, d:] = 0.5 * (Pmm + Pmm.T)
-        self.P = P
+        self._P = P
         self.x = np.concatenate([self.x, m])
         self.landmark_ids = np.concatenate([self.landmark_ids, np.array([landmark_id], np.int64)])
         self.first_xy = np.concatenate([self.first_xy, m[None, :]])
@@ -286,16 +325,17 @@ class Filter(_Estimate):
         keep[3 + 2 * pos] = False
         keep[4 + 2 * pos] = False
         self.x = self.x[keep]
-        self.P = np.ascontiguousarray(self.P[np.ix_(keep, keep)])
+        self._P = np.ascontiguousarray(self._P[np.ix_(keep, keep)])  # keeps the triangles
         self.landmark_ids = np.delete(self.landmark_ids, pos)
         self.first_xy = np.delete(self.first_xy, pos, axis=0)
 
 
-def _subtract_gram(P: np.ndarray, W: np.ndarray) -> None:
+def _subtract_gram(P: np.ndarray, W: np.ndarray, mirror: bool = True) -> None:
     """P -= W W^T in place, P symmetric (d, d), W (d, r).
 
     BLAS `dsyrk` updates one triangle of P's Fortran view P^T (P's lower triangle) and
-    `_mirror_lower` copies it to the other, so the result is symmetric to the last bit.
+    `_mirror_lower` copies it to the other, so the result is symmetric to the last bit;
+    mirror=False leaves the upper triangle as it was (only the lower one is current).
     A P that is not a C-contiguous float64 array takes the plain numpy route."""
     if P.dtype != np.float64 or not P.flags.c_contiguous:
         P -= W @ W.T
@@ -303,7 +343,8 @@ def _subtract_gram(P: np.ndarray, W: np.ndarray) -> None:
     out = blas.dsyrk(-1.0, W, beta=1.0, c=P.T, lower=0, overwrite_c=1)
     if not np.shares_memory(out, P):  # BLAS made a copy after all: use it
         P[...] = out.T
-    _mirror_lower(P)
+    if mirror:
+        _mirror_lower(P)
 
 
 @njit(cache=True)
@@ -314,6 +355,37 @@ def _mirror_lower(P: np.ndarray) -> None:
     for i in range(d):
         for j in range(i):
             P[j, i] = P[i, j]
+
+
+_POSE_COLS = np.array([[0, 1, 2]], np.int64)
+
+
+@njit(cache=True)
+def _sym_blocks(P: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """out[n, a, b] = P[idx[n, a], idx[n, b]] of a symmetric P, read from its lower triangle."""
+    n, k = idx.shape
+    out = np.empty((n, k, k))
+    for t in range(n):
+        for a in range(k):
+            r = idx[t, a]
+            for b in range(k):
+                c = idx[t, b]
+                out[t, a, b] = P[r, c] if r >= c else P[c, r]
+    return out
+
+
+@njit(cache=True)
+def _sym_rows(P: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """P[rows, :] (k, d) of a symmetric P, read from its lower triangle."""
+    d = P.shape[0]
+    out = np.empty((rows.size, d))
+    for a in range(rows.size):
+        r = rows[a]
+        for c in range(r + 1):
+            out[a, c] = P[r, c]
+        for c in range(r + 1, d):
+            out[a, c] = P[c, r]
+    return out
 
 
 def initial_state(pose: np.ndarray, pose_cov: np.ndarray | None = None) -> EkfState:

@@ -372,8 +372,8 @@ def _associate(s: _Setup, state: Filter, tent: Tentatives, z, R, usable) -> _Ass
     H5 = np.concatenate([H_lm[lm_idx], H_t[t_idx]])  # (n, 2, 5)
     C5 = np.zeros((n, 5, 5))  # covariance of [pose, point] of each candidate
     cols = landmark_columns(lm_idx)
-    C5[:n_l] = state.P[cols[:, :, None], cols[:, None, :]]
-    C5[n_l:, :3, :3] = state.P[:3, :3]
+    C5[:n_l] = state.cov(cols)
+    C5[n_l:, :3, :3] = state.pose_cov
     C5[n_l:, 3:, 3:] = tent.cov[t_idx]
     gated = _gates(z[use], R[use], zh, H5, C5, s.gate_new)  # (m_use, n)
     ambiguous[use] = gated.any(axis=1)
@@ -387,7 +387,7 @@ def _associate(s: _Setup, state: Filter, tent: Tentatives, z, R, usable) -> _Ass
         P_sub = np.zeros((3 + 2 * nc, 3 + 2 * nc))
         c_lm = cand[cand < n_l]
         sub = np.concatenate([[0, 1, 2], landmark_columns(lm_idx[c_lm])[:, 3:].ravel()])
-        P_sub[: sub.size, : sub.size] = state.P[np.ix_(sub, sub)]
+        P_sub[: sub.size, : sub.size] = state.cov(sub)
         for j, c in enumerate(cand[cand >= n_l]):
             a = sub.size + 2 * j
             P_sub[a : a + 2, a : a + 2] = tent.cov[t_idx[c - n_l]]
@@ -535,14 +535,14 @@ def _associate_window(
     use = np.flatnonzero(usable)
     cols = landmark_columns(lm_idx)  # (n, 5)
     if use.size and n:
-        C5 = state.P[cols[:, :, None], cols[:, None, :]]
+        C5 = state.cov(cols)
         ambiguous[use] = _gates(z[use], R[use], z_lm[lm_idx], H_lm[lm_idx], C5, s.gate_new).any(1)
     H = np.zeros((n, 2, 3 + 2 * n))
     H[:, :, :3] = H_lm[lm_idx, :, :3]
     for j in range(n):
         H[j, :, 3 + 2 * j : 5 + 2 * j] = H_lm[lm_idx[j], :, 3:5]
     sub = np.concatenate([[0, 1, 2], cols[:, 3:].ravel()]).astype(np.int64)
-    P_sub = state.P[np.ix_(sub, sub)]
+    P_sub = state.cov(sub)
     drift = Q + sum((q for _, _, q in win.scans[len(win.scans) - (K - 2) :]), np.zeros((3, 3)))
     if K < 2:
         drift = np.zeros((3, 3))

@@ -239,6 +239,43 @@ def test_update_equals_the_expanded_joseph_form_it_replaced():
         s = s2
 
 
+def test_filter_reads_blocks_from_the_lower_triangle_while_the_upper_lags():
+    """After an update only P's lower triangle is current; `cov`, `pose_cov`, `landmark_covs`
+    and the next steps read from it, and `P` is mirrored when read: the same numbers as the
+    immutable path (which mirrors every time)."""
+    from slam.ekf import Filter, landmark_columns
+
+    rng = np.random.default_rng(8)
+    s = random_state(rng, 8)
+    f = Filter(s)
+    for step in range(6):
+        F = np.eye(3) + rng.normal(size=(3, 3)) * 0.05
+        pose1, Q = s.pose + rng.normal(size=3) * 0.1, np.diag([1e-3, 1e-3, 1e-4])
+        s = predict(s, pose1, F, Q)
+        f.predict(pose1, F, Q)
+        idx = rng.choice(s.n_landmarks, size=3, replace=False)
+        z = observe(s.pose, s.landmarks_xy[idx], LASER)[0] + rng.normal(size=(3, 2)) * 0.01
+        R = np.array([np.diag([1e-4, 1e-6])] * 3)
+        s, _ = update(s, idx, z, R, LASER)
+        f.update(idx, z, R, LASER)
+        if step == 2:
+            zn = np.array([7.0, 0.2])
+            s = add_landmark(s, zn, R[0], LASER, 99)
+            f.add_landmark(zn, R[0], LASER, 99)
+        assert not f._mirrored
+        cols = landmark_columns([0, 2, 5])
+        np.testing.assert_array_equal(f.cov(cols), s.P[cols[:, :, None], cols[:, None, :]])
+        sub = np.array([0, 1, 2, 9, 10, 5, 6])
+        np.testing.assert_array_equal(f.cov(sub), s.P[np.ix_(sub, sub)])
+        np.testing.assert_array_equal(f.pose_cov, s.pose_cov)
+        np.testing.assert_array_equal(f.landmark_covs, s.landmark_covs)
+    np.testing.assert_array_equal(f.x, s.x)
+    np.testing.assert_array_equal(f.P, s.P)  # mirrored on reading
+    assert f._mirrored
+    np.testing.assert_array_equal(f.P, f.P.T)
+    assert f.cov(np.zeros((0, 5), np.int64)).shape == (0, 5, 5)
+
+
 def test_removing_a_landmark_keeps_the_marginal_of_the_rest():
     from slam.ekf import Filter
     from slam.errors import SlamError
