@@ -382,15 +382,16 @@ def _associate(s: _Setup, state: Filter, tent: Tentatives, z, R, usable) -> _Ass
         nc = cand.size
         H = np.zeros((nc, 2, 3 + 2 * nc))
         H[:, :, :3] = H5[cand, :, :3]
-        for j in range(nc):
-            H[j, :, 3 + 2 * j : 5 + 2 * j] = H5[cand[j], :, 3:5]
+        j = np.arange(nc)[:, None, None]
+        # candidate j's point occupies columns 3 + 2 j, 4 + 2 j
+        H[j, _PAIR[:, None], 3 + 2 * j + _PAIR] = H5[cand, :, 3:5]
         P_sub = np.zeros((3 + 2 * nc, 3 + 2 * nc))
         c_lm = cand[cand < n_l]
         sub = np.concatenate([[0, 1, 2], landmark_columns(lm_idx[c_lm])[:, 3:].ravel()])
         P_sub[: sub.size, : sub.size] = state.cov(sub)
-        for j, c in enumerate(cand[cand >= n_l]):
-            a = sub.size + 2 * j
-            P_sub[a : a + 2, a : a + 2] = tent.cov[t_idx[c - n_l]]
+        c_t = t_idx[cand[cand >= n_l] - n_l]  # the tentatives, after the landmarks
+        a = sub.size + 2 * np.arange(c_t.size)[:, None, None]
+        P_sub[a + _PAIR[:, None], a + _PAIR] = tent.cov[c_t]
         a_use = s.associate(
             z[use], R[use], zh[cand], H, P_sub, gate_prob=cfg.gate_prob, **cfg.association_params
         )
@@ -669,6 +670,9 @@ def _in_view(
     if fov1 - fov0 + 2 * m_rad >= 2 * math.pi:
         in_fov[:] = True
     return in_fov & (z_hat[:, 0] <= max_range + m_m)
+
+
+_PAIR = np.array([0, 1])
 
 
 def _gates(z, R, z_hat, H5, C5, gate: float) -> np.ndarray:
