@@ -54,7 +54,16 @@ def _rounding_options(params: dict) -> dict:
 
 
 def associate_detailed(
-    z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float = 0.99, **params
+    z,
+    R,
+    z_hat,
+    H,
+    P,
+    method: str = "ihgr",
+    gate_prob: float = 0.99,
+    *,
+    validate: bool = True,
+    **params,
 ) -> Association:
     """`associate` with the method's statistics; see `associate` for the arguments."""
     if method not in METHODS:
@@ -65,7 +74,7 @@ def associate_detailed(
         raise AssociationError(
             f"{sorted(unknown)}: not parameters of method {method!r} (allowed: {allowed})"
         )
-    prep = prepare(z, R, z_hat, H, P, gate_prob)
+    prep = prepare(z, R, z_hat, H, P, gate_prob, validate=validate)
     extra: dict = {}
     if method == "ihgr":
         model = CostModel(**{k: params[k] for k in _COST_KEYS if k in params})
@@ -91,7 +100,16 @@ def associate_detailed(
 
 
 def associate(
-    z, R, z_hat, H, P, method: str = "ihgr", gate_prob: float = 0.99, **params
+    z,
+    R,
+    z_hat,
+    H,
+    P,
+    method: str = "ihgr",
+    gate_prob: float = 0.99,
+    *,
+    validate: bool = True,
+    **params,
 ) -> np.ndarray:
     """Associate the m measurements of one scan with the n map features.
 
@@ -103,6 +121,10 @@ def associate(
     method: "ihgr" (LP + iterative heuristic greedy rounding, costs of `CostModel`),
         "jcbb" (joint compatibility branch and bound) or "nn" (gated nearest neighbour).
     gate_prob: probability of the chi-square gates (individual: 2 dof; JCBB joint: 2k dof).
+    validate: False skips the checks of z, R, z_hat, H, P and gate_prob (shapes, finite,
+        symmetric, positive (semi-)definite; `association.inputs.prepare`), for callers whose
+        inputs are valid by construction, such as the SLAM loop: the same answer for valid
+        input, undefined for invalid input. The method and its parameters are still checked.
     params: ihgr: p_detect, clutter_density, birth_density (`CostModel`), and the rounding
         options eps, fix_ones, presolve (`ihgr_round`); jcbb: max_nodes (node budget).
 
@@ -112,4 +134,6 @@ def associate(
     malformed input (shapes, NaN or inf, negative ranges, R not positive definite, P not
     symmetric positive semi-definite on the blocks used).
     """
-    return associate_detailed(z, R, z_hat, H, P, method, gate_prob, **params).assignment
+    return associate_detailed(
+        z, R, z_hat, H, P, method, gate_prob, validate=validate, **params
+    ).assignment

@@ -18,6 +18,10 @@ feature's Jacobian must be symmetric and positive semi-definite (blocks of up to
 `_MAX_PSD_BLOCK` columns get an exact check; larger, dense Jacobians only get the projected
 check H_j P H_j^T >= 0). A full eigen-decomposition of a 400 x 400 P would cost more than the
 whole association.
+
+`prepare(..., validate=False)` skips every check, for callers whose inputs are valid by
+construction (the SLAM loop, thousands of small problems a run, where the checks cost more than
+the association); it computes the same numbers as the checked path.
 """
 
 from __future__ import annotations
@@ -147,6 +151,23 @@ def block_psd_ok(P, idx, tol_rel):
 
 
 @njit(cache=True)
+def _project_one(H, P, j, idx, S):
+    """S[j] = H_j P H_j^T over the columns idx of H_j (the arithmetic of both kernels below)."""
+    q = idx.shape[0]
+    for r in range(2):
+        for s in range(r, 2):
+            acc = 0.0
+            for a in range(q):
+                ha = H[j, r, idx[a]]
+                inner = 0.0
+                for b in range(q):
+                    inner += P[idx[a], idx[b]] * H[j, s, idx[b]]
+                acc += ha * inner
+            S[j, r, s] = acc
+    S[j, 1, 0] = S[j, 0, 1]
+
+
+@njit(cache=True)
 def _project_cov_kernel(H, P, sym_rtol, psd_rtol, max_block):
     """S[j] = H_j P H_j^T over the non-zero columns of H_j, with checks of the block of P used.
 
@@ -172,20 +193,20 @@ def _project_cov_kernel(H, P, sym_rtol, psd_rtol, max_block):
                     if dlt > worst:
                         worst = dlt
         asym[j] = worst / big if big > 0.0 else 0.0
-        for r in range(2):
-            for s in range(r, 2):
-                acc = 0.0
-                for a in range(q):
-                    ha = H[j, r, idx[a]]
-                    inner = 0.0
-                    for b in range(q):
-                        inner += P[idx[a], idx[b]] * H[j, s, idx[b]]
-                    acc += ha * inner
-                S[j, r, s] = acc
-        S[j, 1, 0] = S[j, 0, 1]
+        _project_one(H, P, j, idx, S)
         if q <= max_block:
             psd_ok[j] = block_psd_ok(P, idx, psd_rtol)
     return S, asym, psd_ok
+
+
+@njit(cache=True)
+def _project_cov_trusted(H, P):
+    """`_project_cov_kernel`'s S (n, 2, 2) without its checks (trusted inputs)."""
+    n = H.shape[0]
+    S = np.zeros((n, 2, 2))
+    for j in range(n):
+        _project_one(H, P, j, _nonzero_cols(H, j), S)
+    return S
 
 
 @njit(cache=True)
@@ -334,8 +355,57 @@ def check_gate_prob(gate_prob) -> float:
     return g
 
 
-def prepare(z, R, z_hat, H, P, gate_prob: float) -> Prepared:
-    """Check the inputs of `associate`, compute S_j and the individually gated pairings."""
+def prepare(z, R, z_hat, H, P, gate_prob: float, *, validate: bool = True) -> Prepared:
+    """Check the inputs of `associate`, compute S_j and the individually gated pairings.
+
+    validate=False is the trusted path for callers whose inputs are valid by construction (the
+    SLAM loop): z (m, 2), R (m, 2, 2) or (2, 2), z_hat (n, 2), H (n, 2, d), P (d, d) as float64
+    arrays, gate_prob in (0, 1), P symmetric positive semi-definite. Nothing is checked (no
+    error is raised for bad input, the answer is then undefined); for valid input the result is
+    the checked path's, to the bit (the same kernels and arithmetic).
+    """
+    if validate:
+        z, R, z_hat, H, P, S_feat, gate_prob = _checked(z, R, z_hat, H, P, gate_prob)
+    else:
+        z, z_hat = np.asarray(z, np.float64), np.asarray(z_hat, np.float64)
+        m = z.shape[0]
+        R = np.asarray(R, np.float64)
+        if R.shape == (2, 2):
+            R = np.broadcast_to(R, (m, 2, 2))
+        H = np.ascontiguousarray(H, np.float64)
+        P = np.ascontiguousarray(P, np.float64)
+        S_feat = _project_cov_trusted(H, P) if z_hat.shape[0] else np.zeros((0, 2, 2))
+    m, n = z.shape[0], z_hat.shape[0]
+    gate = gate_threshold(gate_prob)
+    # Canonical ranks: lexicographic on the data, so results do not depend on input order.
+    rank_meas = _ranks(np.column_stack([z, R.reshape(m, 4)]))
+    rank_feat = _ranks(np.column_stack([z_hat, S_feat.reshape(n, 4)]))
+
+    if m and n:
+        nu = z[:, None, :] - z_hat[None, :, :]  # (m, n, 2)
+        nu[..., 1] = wrap_angle(nu[..., 1])
+        S = S_feat[None, :, :, :] + R[:, None, :, :]  # (m, n, 2, 2)
+        d2, logdet, ok = chol2_solve(S, nu)
+        if not ok.all():  # cannot happen with R > 0 and H P H^T >= 0, kept as a guard
+            i, j = np.argwhere(~ok)[0]
+            raise AssociationError(
+                f"P, R: innovation covariance S[{i}, {j}] is not positive definite"
+            )
+        ii, jj = np.nonzero(d2 <= gate)  # eq. individual compatibility gate
+        if validate:
+            _check_joint_psd(H, P, np.unique(jj))
+        order = np.lexsort((rank_feat[jj], rank_meas[ii]))
+        ii, jj = ii[order], jj[order]
+        pairs = (ii, jj, nu[ii, jj], S[ii, jj], d2[ii, jj], logdet[ii, jj])
+    else:
+        e = np.zeros(0, np.int64)
+        pairs = (e, e, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0))
+    return Prepared(z, R, z_hat, S_feat, H, P, gate, rank_meas, rank_feat, *pairs)
+
+
+def _checked(z, R, z_hat, H, P, gate_prob):
+    """The checks of `prepare`: (z, R, z_hat, H, P) as checked float arrays, S_feat and
+    gate_prob (a float)."""
     gate_prob = check_gate_prob(gate_prob)
     z = check_measurements("z", z, "(m, 2)")
     m = z.shape[0]
@@ -389,31 +459,7 @@ def prepare(z, R, z_hat, H, P, gate_prob: float) -> Prepared:
             raise AssociationError(
                 f"P: H[{k}] P H[{k}]^T is not positive semi-definite ({S_feat[k].tolist()})"
             )
-
-    gate = gate_threshold(gate_prob)
-    # Canonical ranks: lexicographic on the data, so results do not depend on input order.
-    rank_meas = _ranks(np.column_stack([z, R.reshape(m, 4)]))
-    rank_feat = _ranks(np.column_stack([z_hat, S_feat.reshape(n, 4)]))
-
-    if m and n:
-        nu = z[:, None, :] - z_hat[None, :, :]  # (m, n, 2)
-        nu[..., 1] = wrap_angle(nu[..., 1])
-        S = S_feat[None, :, :, :] + R[:, None, :, :]  # (m, n, 2, 2)
-        d2, logdet, ok = chol2_solve(S, nu)
-        if not ok.all():  # cannot happen with R > 0 and H P H^T >= 0, kept as a guard
-            i, j = np.argwhere(~ok)[0]
-            raise AssociationError(
-                f"P, R: innovation covariance S[{i}, {j}] is not positive definite"
-            )
-        ii, jj = np.nonzero(d2 <= gate)  # eq. individual compatibility gate
-        _check_joint_psd(H, P, np.unique(jj))
-        order = np.lexsort((rank_feat[jj], rank_meas[ii]))
-        ii, jj = ii[order], jj[order]
-        pairs = (ii, jj, nu[ii, jj], S[ii, jj], d2[ii, jj], logdet[ii, jj])
-    else:
-        e = np.zeros(0, np.int64)
-        pairs = (e, e, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0))
-    return Prepared(z, R, z_hat, S_feat, H, P, gate, rank_meas, rank_feat, *pairs)
+    return z, R, z_hat, H, P, S_feat, gate_prob
 
 
 def _check_joint_psd(H: np.ndarray, P: np.ndarray, feats: np.ndarray) -> None:

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from scipy.optimize import Bounds, LinearConstraint, linprog, milp
 from scipy.sparse.csgraph import connected_components
 
@@ -156,31 +157,123 @@ def _check(costs, A, exact):
 
 
 def _components(n_rows: int, indptr: np.ndarray, indices: np.ndarray):
-    """Connected components of the row-column graph: (count, row labels, column labels)."""
+    """Connected components of the row-column graph: (count, row labels, column labels).
+
+    Labels number the components in the order of their smallest union-find root (rows joined by
+    a column hang under the column's first row); large problems go to scipy's labelling."""
     n_cols = indptr.size - 1
     if indices.size > 2000:
         col = np.repeat(np.arange(n_cols), np.diff(indptr)) + n_rows
         g = sp.coo_array((np.ones(indices.size), (indices, col)), shape=(n_rows + n_cols,) * 2)
         k, labels = connected_components(g, directed=False)
         return k, labels[:n_rows], labels[n_rows:]
-    parent = list(range(n_rows))
+    return _union_find(n_rows, indptr, indices)
 
-    def find(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
 
-    ip, ix = indptr.tolist(), indices.tolist()
+@njit(cache=True)
+def _find(parent: np.ndarray, a: int) -> int:
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@njit(cache=True)
+def _union_find(n_rows, indptr, indices):
+    """`_components` of a small problem: union-find with path halving over the columns."""
+    n_cols = indptr.size - 1
+    parent = np.arange(n_rows)
     for h in range(n_cols):
-        r0 = find(ix[ip[h]])
-        for t in range(ip[h] + 1, ip[h + 1]):
-            r = find(ix[t])
+        r0 = _find(parent, indices[indptr[h]])
+        for t in range(indptr[h] + 1, indptr[h + 1]):
+            r = _find(parent, indices[t])
             if r != r0:
                 parent[r] = r0
-    roots = np.array([find(r) for r in range(n_rows)], np.int64)
-    uniq, row_lab = np.unique(roots, return_inverse=True)
-    return uniq.size, row_lab, row_lab[indices[indptr[:-1]]]
+    label_of_root = np.full(n_rows, -1, np.int64)
+    is_root = np.zeros(n_rows, np.bool_)
+    roots = np.empty(n_rows, np.int64)
+    for r in range(n_rows):
+        roots[r] = _find(parent, r)
+        is_root[roots[r]] = True
+    n_comp = 0
+    for r in range(n_rows):  # roots in ascending order: the labels of np.unique(roots)
+        if is_root[r]:
+            label_of_root[r] = n_comp
+            n_comp += 1
+    row_lab = np.empty(n_rows, np.int64)
+    for r in range(n_rows):
+        row_lab[r] = label_of_root[roots[r]]
+    col_lab = np.empty(n_cols, np.int64)
+    for h in range(n_cols):
+        col_lab[h] = row_lab[indices[indptr[h]]]
+    return n_comp, row_lab, col_lab
+
+
+@njit(cache=True)
+def _presolve(c, n_rows, indptr, indices, exact, n_comp, row_lab, col_lab, chosen, active):
+    """The presolve of `ihgr_round_csc`, in place on `chosen` and `active`; returns the cost of
+    the columns it chose (summed in component order).
+
+    A component whose columns all cover its only exact row (or, with no exact row, all share
+    one row) is a choice of at most one column: the cheapest (ties: the lowest index) is taken
+    when a row must be covered or its cost is negative, and the component is closed."""
+    n_cols = c.size
+    n_exact = np.zeros(n_comp, np.int64)
+    n_rows_k = np.zeros(n_comp, np.int64)
+    for r in range(n_rows):
+        n_rows_k[row_lab[r]] += 1
+        if exact[r]:
+            n_exact[row_lab[r]] += 1
+    # the columns of each component in ascending order (a stable counting sort by label)
+    starts = np.zeros(n_comp + 1, np.int64)
+    for h in range(n_cols):
+        starts[col_lab[h] + 1] += 1
+    for k in range(n_comp):
+        starts[k + 1] += starts[k]
+    fill = starts[:-1].copy()
+    col_order = np.empty(n_cols, np.int64)
+    for h in range(n_cols):
+        col_order[fill[col_lab[h]]] = h
+        fill[col_lab[h]] += 1
+    count = np.zeros(n_rows, np.int64)
+    bound = 0.0
+    for k in range(n_comp):
+        k0, k1 = starts[k], starts[k + 1]
+        n_k = k1 - k0
+        if n_exact[k] > 1 or n_k == 0:
+            continue
+        if n_k > 1 or n_rows_k[k] > 1:
+            for t in range(k0, k1):
+                h = col_order[t]
+                for e in range(indptr[h], indptr[h + 1]):
+                    count[indices[e]] += 1
+            n_common = 0
+            common_exact = False
+            for t in range(k0, k1):  # the rows of component k are among its columns' rows
+                h = col_order[t]
+                for e in range(indptr[h], indptr[h + 1]):
+                    r = indices[e]
+                    if count[r] == n_k:
+                        n_common += 1
+                        common_exact |= exact[r]
+            for t in range(k0, k1):
+                h = col_order[t]
+                for e in range(indptr[h], indptr[h + 1]):
+                    count[indices[e]] = 0
+            if n_common == 0:
+                continue
+            if n_exact[k] == 1 and not common_exact:
+                continue
+        best = col_order[k0]
+        for t in range(k0 + 1, k1):  # cheapest; ties: lower index (col_order ascends)
+            if c[col_order[t]] < c[best]:
+                best = col_order[t]
+        if n_exact[k] == 1 or c[best] < 0.0:
+            chosen[best] = True
+            bound += c[best]
+        for t in range(k0, k1):
+            active[col_order[t]] = False
+    return bound
 
 
 def _solve_lp(c, n_rows, indptr, indices, cols, rows, exact):
@@ -254,33 +347,12 @@ def ihgr_round_csc(
     active = np.ones(n_cols, bool)  # columns still in play
     bound = 0.0
 
-    # Presolve: a component whose columns all cover its only exact row (or, with no exact row,
-    # all share one row) is a choice of at most one column: take the cheapest.
-    if presolve:
-        col_order = np.argsort(col_lab, kind="stable")
-        starts = np.searchsorted(col_lab[col_order], np.arange(n_comp + 1))
-        n_exact = np.bincount(row_lab[exact], minlength=n_comp)
-        n_rows_k = np.bincount(row_lab, minlength=n_comp)
-        for k in range(n_comp):
-            cols = col_order[starts[k] : starts[k + 1]]
-            if n_exact[k] > 1 or cols.size == 0:
-                continue
-            if cols.size > 1 or n_rows_k[k] > 1:
-                ent = np.concatenate([indices[indptr[h] : indptr[h + 1]] for h in cols])
-                common = np.flatnonzero(np.bincount(ent, minlength=n_rows) == cols.size)
-                if common.size == 0:
-                    continue
-                if n_exact[k] == 1 and not exact[common].any():
-                    continue
-            best = cols[np.lexsort((cols, c[cols]))[0]]
-            if n_exact[k] == 1 or c[best] < 0.0:
-                chosen[best] = True
-                bound += c[best]
-            active[cols] = False
-
+    if presolve:  # single-choice components settled without an LP (`_presolve`)
+        bound += _presolve(
+            c, n_rows, indptr, indices, exact, n_comp, row_lab, col_lab, chosen, active
+        )
     covered = np.zeros(n_rows, bool)
-    for h in np.flatnonzero(chosen):
-        covered[indices[indptr[h] : indptr[h + 1]]] = True
+    covered[indices[np.repeat(chosen, counts)]] = True
     solves = 0
     fractional = False
     while active.any():

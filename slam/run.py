@@ -372,8 +372,8 @@ def _associate(s: _Setup, state: Filter, tent: Tentatives, z, R, usable) -> _Ass
     H5 = np.concatenate([H_lm[lm_idx], H_t[t_idx]])  # (n, 2, 5)
     C5 = np.zeros((n, 5, 5))  # covariance of [pose, point] of each candidate
     cols = landmark_columns(lm_idx)
-    C5[:n_l] = state.P[cols[:, :, None], cols[:, None, :]]
-    C5[n_l:, :3, :3] = state.P[:3, :3]
+    C5[:n_l] = state.cov(cols)
+    C5[n_l:, :3, :3] = state.pose_cov
     C5[n_l:, 3:, 3:] = tent.cov[t_idx]
     gated = _gates(z[use], R[use], zh, H5, C5, s.gate_new)  # (m_use, n)
     ambiguous[use] = gated.any(axis=1)
@@ -382,15 +382,16 @@ def _associate(s: _Setup, state: Filter, tent: Tentatives, z, R, usable) -> _Ass
         nc = cand.size
         H = np.zeros((nc, 2, 3 + 2 * nc))
         H[:, :, :3] = H5[cand, :, :3]
-        for j in range(nc):
-            H[j, :, 3 + 2 * j : 5 + 2 * j] = H5[cand[j], :, 3:5]
+        j = np.arange(nc)[:, None, None]
+        # candidate j's point occupies columns 3 + 2 j, 4 + 2 j
+        H[j, _PAIR[:, None], 3 + 2 * j + _PAIR] = H5[cand, :, 3:5]
         P_sub = np.zeros((3 + 2 * nc, 3 + 2 * nc))
         c_lm = cand[cand < n_l]
         sub = np.concatenate([[0, 1, 2], landmark_columns(lm_idx[c_lm])[:, 3:].ravel()])
-        P_sub[: sub.size, : sub.size] = state.P[np.ix_(sub, sub)]
-        for j, c in enumerate(cand[cand >= n_l]):
-            a = sub.size + 2 * j
-            P_sub[a : a + 2, a : a + 2] = tent.cov[t_idx[c - n_l]]
+        P_sub[: sub.size, : sub.size] = state.cov(sub)
+        c_t = t_idx[cand[cand >= n_l] - n_l]  # the tentatives, after the landmarks
+        a = sub.size + 2 * np.arange(c_t.size)[:, None, None]
+        P_sub[a + _PAIR[:, None], a + _PAIR] = tent.cov[c_t]
         a_use = s.associate(
             z[use], R[use], zh[cand], H, P_sub, gate_prob=cfg.gate_prob, **cfg.association_params
         )
@@ -535,14 +536,14 @@ def _associate_window(
     use = np.flatnonzero(usable)
     cols = landmark_columns(lm_idx)  # (n, 5)
     if use.size and n:
-        C5 = state.P[cols[:, :, None], cols[:, None, :]]
+        C5 = state.cov(cols)
         ambiguous[use] = _gates(z[use], R[use], z_lm[lm_idx], H_lm[lm_idx], C5, s.gate_new).any(1)
     H = np.zeros((n, 2, 3 + 2 * n))
     H[:, :, :3] = H_lm[lm_idx, :, :3]
     for j in range(n):
         H[j, :, 3 + 2 * j : 5 + 2 * j] = H_lm[lm_idx[j], :, 3:5]
     sub = np.concatenate([[0, 1, 2], cols[:, 3:].ravel()]).astype(np.int64)
-    P_sub = state.P[np.ix_(sub, sub)]
+    P_sub = state.cov(sub)
     drift = Q + sum((q for _, _, q in win.scans[len(win.scans) - (K - 2) :]), np.zeros((3, 3)))
     if K < 2:
         drift = np.zeros((3, 3))
@@ -669,6 +670,9 @@ def _in_view(
     if fov1 - fov0 + 2 * m_rad >= 2 * math.pi:
         in_fov[:] = True
     return in_fov & (z_hat[:, 0] <= max_range + m_m)
+
+
+_PAIR = np.array([0, 1])
 
 
 def _gates(z, R, z_hat, H5, C5, gate: float) -> np.ndarray:
@@ -803,7 +807,11 @@ def _resolve_association(association) -> Callable:
     method = association
 
     def call(z, R, z_hat, H, P, gate_prob=0.99, **params):
-        return associate(z, R, z_hat, H, P, method=method, gate_prob=gate_prob, **params)
+        # The loop's inputs are valid by construction (finite, P symmetric PSD as the filter
+        # keeps it): the trusted path, without the checks that would cost more than the solve.
+        return associate(
+            z, R, z_hat, H, P, method=method, gate_prob=gate_prob, validate=False, **params
+        )
 
     call.method = method
     return call

@@ -9,7 +9,10 @@ vehicle (`observe`, `inverse_observe`). Headings are not wrapped unless a functi
 
 Single poses use `math.cos`/`math.sin` and write each coordinate out, in the order the inline
 code they replaced used, so the project's results did not move by a bit when it came here.
-The Jacobians are checked against numerical derivatives in tests/slam/test_se2.py.
+`observe` runs as one numba loop over the points (the SLAM loop calls it four times a scan);
+its d/d theta column is the two-term sum written out, which may differ in the last bit from
+the BLAS dot product the numpy version used (its twin in tests/slam/test_se2.py). The
+Jacobians are checked against numerical derivatives in tests/slam/test_se2.py.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 __all__ = [
     "compose",
@@ -99,24 +103,40 @@ def observe(pose, landmarks_xy, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
     Returns z (k, 2) [range_m, bearing_rad] and H (k, 2, 5), the Jacobian of each prediction
     with respect to [x, y, theta, m_x, m_y].
     """
-    m = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
+    m = np.ascontiguousarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
     pL, dpL = sensor_position(pose, sensor_pose)
-    dx = m[:, 0] - pL[0]
-    dy = m[:, 1] - pL[1]
-    q = dx * dx + dy * dy
-    r = np.sqrt(q)
-    z = np.empty((m.shape[0], 2))
-    z[:, 0] = r
-    z[:, 1] = wrap_angle(np.arctan2(dy, dx) - pose[2] - sensor_pose[2])
-    H = np.zeros((m.shape[0], 2, 5))
-    dr_dm = np.stack([dx / r, dy / r], axis=1)  # (k, 2)
-    db_dm = np.stack([-dy / q, dx / q], axis=1)
-    H[:, 0, 0:2] = -dr_dm
-    H[:, 0, 2] = -(dr_dm @ dpL)
-    H[:, 0, 3:5] = dr_dm
-    H[:, 1, 0:2] = -db_dm
-    H[:, 1, 2] = -(db_dm @ dpL) - 1.0
-    H[:, 1, 3:5] = db_dm
+    return _observe_kernel(m, pL[0], pL[1], dpL[0], dpL[1], float(pose[2]), float(sensor_pose[2]))
+
+
+@njit(cache=True)
+def _observe_kernel(m, px, py, dpx, dpy, th, sth):
+    """`observe` for the sensor at world position (px, py), d p_S / d theta = (dpx, dpy),
+    vehicle heading th and sensor yaw sth: one pass over the points (the per-call cost of the
+    numpy version, some 20 array operations, dominated the run loop's)."""
+    k = m.shape[0]
+    z = np.empty((k, 2))
+    H = np.zeros((k, 2, 5))
+    b = np.empty(k)
+    for i in range(k):
+        dx = m[i, 0] - px
+        dy = m[i, 1] - py
+        q = dx * dx + dy * dy
+        r = math.sqrt(q)
+        z[i, 0] = r
+        b[i] = math.atan2(dy, dx) - th - sth
+        rx, ry = dx / r, dy / r  # d range / d m
+        bx, by = -dy / q, dx / q  # d bearing / d m
+        H[i, 0, 0] = -rx
+        H[i, 0, 1] = -ry
+        H[i, 0, 2] = -(rx * dpx + ry * dpy)
+        H[i, 0, 3] = rx
+        H[i, 0, 4] = ry
+        H[i, 1, 0] = -bx
+        H[i, 1, 1] = -by
+        H[i, 1, 2] = -(bx * dpx + by * dpy) - 1.0
+        H[i, 1, 3] = bx
+        H[i, 1, 4] = by
+    z[:, 1] = np.pi - np.mod(np.pi - b, 2.0 * np.pi)  # `wrap_angle`
     return z, H
 
 

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from scipy.stats import chi2
 
 from association import (
+    AssociationError,
     CostModel,
     SlidingWindowAssociator,
     associate,
@@ -197,6 +198,50 @@ def test_window_does_not_depend_on_order(seed, n_clutter, data):
         expect = np.where(a[pm] >= 0, np.argsort(pf)[np.maximum(a[pm], 0)], -1)
         np.testing.assert_array_equal(b, expect)
         np.testing.assert_array_equal(w_b.last.sightings, w_a.last.sightings[pm])
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_lm=st.integers(0, 12),
+    n_clutter=st.integers(0, 6),
+    sigma_xy=st.sampled_from([0.05, 0.5, 1.5]),
+)
+def test_trusted_path_gives_the_checked_answer(seed, n_lm, n_clutter, sigma_xy):
+    """validate=False (the SLAM loop's path) skips the checks and answers as the checked path,
+    to the bit: assignment, distances, cost and the method's statistics."""
+    rng = np.random.default_rng(seed)
+    lm = rng.uniform(-15, 15, (n_lm, 2))
+    lm = lm[np.hypot(*lm.T) > 1.0]
+    z, R, z_hat, H, P, _ = scene(
+        rng, lm, sigma_xy=sigma_xy, sigma_th=sigma_xy / 20, n_clutter=n_clutter, p_detect=0.8
+    )
+    Rm = np.broadcast_to(R, (z.shape[0], 2, 2)) * rng.uniform(0.5, 2.0, (z.shape[0], 1, 1))
+    for method in METHODS:
+        for R_arg in (R, Rm):
+            a = associate_detailed(z, R_arg, z_hat, H, P, method, 0.999)
+            b = associate_detailed(z, R_arg, z_hat, H, P, method, 0.999, validate=False)
+            np.testing.assert_array_equal(b.assignment, a.assignment)
+            np.testing.assert_array_equal(b.d2, a.d2)
+            stats = ("cost", "gated_pairs", "lp_solves", "fractional", "nodes", "budget_exhausted")
+            np.testing.assert_equal([getattr(b, k) for k in stats], [getattr(a, k) for k in stats])
+
+
+def test_trusted_path_skips_the_checks_only():
+    """validate=False does not check the data (a P not PSD in its cross terms passes), but the
+    method and its parameters are still checked."""
+    P = np.eye(7) * 0.1
+    P[3, 5] = P[5, 3] = 0.5
+    H = np.zeros((2, 2, 7))
+    H[0, :, 3:5] = np.eye(2)
+    H[1, :, 5:7] = np.eye(2)
+    z_hat = np.array([[5.0, 0.1], [5.2, 0.12]])
+    z = np.array([[5.1, 0.11], [5.15, 0.115]])
+    with pytest.raises(AssociationError, match="joint block"):
+        associate(z, np.eye(2) * 0.01, z_hat, H, P)
+    assert associate(z, np.eye(2) * 0.01, z_hat, H, P, validate=False).shape == (2,)
+    with pytest.raises(AssociationError, match="not parameters"):
+        associate(z, np.eye(2) * 0.01, z_hat, H, P, validate=False, max_nodes=3)
 
 
 # ---- exactness and method-specific checks -------------------------------------------------

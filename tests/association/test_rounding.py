@@ -151,3 +151,31 @@ def test_infeasible_and_unknown_method():
         solve_set_partition([0.0], [[1.0]], np.array([True]), method="simplex")
     with pytest.raises(ValueError, match="eps"):
         ihgr_round([0.0], [[1.0]], np.array([True]), eps=0.7)
+
+
+def test_small_problem_components_partition_as_scipy_does():
+    """The union-find of small problems (numba) and scipy's labelling of large ones find the
+    same components."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from association.rounding import _components
+
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        n_rows, n_cols = int(rng.integers(1, 30)), int(rng.integers(1, 40))
+        rows = [
+            rng.choice(n_rows, size=int(rng.integers(1, min(n_rows, 3) + 1)), replace=False)
+            for _ in range(n_cols)
+        ]
+        indptr = np.concatenate([[0], np.cumsum([r.size for r in rows])]).astype(np.int64)
+        indices = np.concatenate(rows).astype(np.int64)
+        k, row_lab, col_lab = _components(n_rows, indptr, indices)
+        col = np.repeat(np.arange(n_cols), np.diff(indptr)) + n_rows
+        g = sp.coo_array((np.ones(indices.size), (indices, col)), shape=(n_rows + n_cols,) * 2)
+        k_ref, ref = connected_components(g, directed=False)
+        assert k == k_ref
+        # the same partition: the labels map one to one
+        pairs = set(zip(np.r_[row_lab, col_lab].tolist(), ref.tolist()))
+        assert len(pairs) == k
+        np.testing.assert_array_equal(col_lab, row_lab[indices[indptr[:-1]]])

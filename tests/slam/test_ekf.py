@@ -193,26 +193,87 @@ def test_nees_with_known_association_lies_inside_its_bounds():
     assert 2.7 <= avg.mean() <= 3.3
 
 
-def test_symmetric_rank_update_in_place_equals_the_plain_sum():
-    """Joseph's P + K A^T + A K^T: BLAS on one triangle plus the mirror, in place, equals the
-    numpy sum and is symmetric to the last bit; a non-contiguous P takes the numpy route."""
-    from slam.ekf import _add_symmetric
+def test_symmetric_rank_downdate_in_place_equals_the_plain_difference():
+    """Joseph's P - W W^T: BLAS on one triangle plus the mirror, in place, equals the numpy
+    difference and is symmetric to the last bit; a non-contiguous P takes the numpy route."""
+    from slam.ekf import _subtract_gram
 
     rng = np.random.default_rng(3)
-    for d in (5, 70, 300):  # below, across and over the 64-wide mirror blocks
+    for d in (1, 5, 70, 300):
         M = rng.standard_normal((d, d))
         P = M @ M.T
-        K, A = rng.standard_normal((2, d, 6))
-        expected = P + K @ A.T + A @ K.T
+        W = rng.standard_normal((d, 6))
+        expected = P - W @ W.T
         got = P.copy()
         ref = got
-        _add_symmetric(got, K, A)
+        _subtract_gram(got, W)
         assert got is ref
         np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-10)
         np.testing.assert_array_equal(got, got.T)
         strided = np.asfortranarray(P)
-        _add_symmetric(strided, K, A)
+        _subtract_gram(strided, W)
         np.testing.assert_allclose(strided, expected, rtol=1e-12, atol=1e-10)
+
+
+def test_update_equals_the_expanded_joseph_form_it_replaced():
+    """The rank-q downdate P - W W^T (W = P H^T L^-T) gives the estimate of the expanded Joseph
+    form P + K A^T + A K^T (A = K S / 2 - P H^T, K from np.linalg.solve) up to rounding."""
+    rng = np.random.default_rng(5)
+    s = random_state(rng, 40)
+    for _ in range(20):
+        idx = rng.choice(s.n_landmarks, size=int(rng.integers(1, 8)), replace=False)
+        z = observe(s.pose, s.landmarks_xy[idx], LASER)[0] + rng.normal(size=(idx.size, 2)) * 0.02
+        R = np.array([np.diag([0.03**2, 0.004**2])] * idx.size)
+        s2, res = update(s, idx, z, R, LASER)
+        zh, H = observe_jacobian_full(s, idx, LASER)
+        H = H.reshape(2 * idx.size, -1)
+        S = H @ s.P @ H.T + np.kron(np.eye(idx.size), R[0])
+        PHt = s.P @ H.T
+        K = np.linalg.solve(S, PHt.T).T
+        A = 0.5 * (K @ S) - PHt
+        P_old = s.P + K @ A.T + A @ K.T
+        x_old = s.x + K @ wrapped(z - zh).reshape(-1)
+        np.testing.assert_allclose(s2.P, P_old, rtol=0, atol=1e-12 * np.abs(P_old).max())
+        np.testing.assert_allclose(s2.x[3:], x_old[3:], rtol=0, atol=1e-11)
+        assert res.logdet == pytest.approx(np.linalg.slogdet(S)[1], rel=1e-12)
+        s = s2
+
+
+def test_filter_reads_blocks_from_the_lower_triangle_while_the_upper_lags():
+    """After an update only P's lower triangle is current; `cov`, `pose_cov`, `landmark_covs`
+    and the next steps read from it, and `P` is mirrored when read: the same numbers as the
+    immutable path (which mirrors every time)."""
+    from slam.ekf import Filter, landmark_columns
+
+    rng = np.random.default_rng(8)
+    s = random_state(rng, 8)
+    f = Filter(s)
+    for step in range(6):
+        F = np.eye(3) + rng.normal(size=(3, 3)) * 0.05
+        pose1, Q = s.pose + rng.normal(size=3) * 0.1, np.diag([1e-3, 1e-3, 1e-4])
+        s = predict(s, pose1, F, Q)
+        f.predict(pose1, F, Q)
+        idx = rng.choice(s.n_landmarks, size=3, replace=False)
+        z = observe(s.pose, s.landmarks_xy[idx], LASER)[0] + rng.normal(size=(3, 2)) * 0.01
+        R = np.array([np.diag([1e-4, 1e-6])] * 3)
+        s, _ = update(s, idx, z, R, LASER)
+        f.update(idx, z, R, LASER)
+        if step == 2:
+            zn = np.array([7.0, 0.2])
+            s = add_landmark(s, zn, R[0], LASER, 99)
+            f.add_landmark(zn, R[0], LASER, 99)
+        assert not f._mirrored
+        cols = landmark_columns([0, 2, 5])
+        np.testing.assert_array_equal(f.cov(cols), s.P[cols[:, :, None], cols[:, None, :]])
+        sub = np.array([0, 1, 2, 9, 10, 5, 6])
+        np.testing.assert_array_equal(f.cov(sub), s.P[np.ix_(sub, sub)])
+        np.testing.assert_array_equal(f.pose_cov, s.pose_cov)
+        np.testing.assert_array_equal(f.landmark_covs, s.landmark_covs)
+    np.testing.assert_array_equal(f.x, s.x)
+    np.testing.assert_array_equal(f.P, s.P)  # mirrored on reading
+    assert f._mirrored
+    np.testing.assert_array_equal(f.P, f.P.T)
+    assert f.cov(np.zeros((0, 5), np.int64)).shape == (0, 5, 5)
 
 
 def test_removing_a_landmark_keeps_the_marginal_of_the_rest():

@@ -62,6 +62,35 @@ def test_wrap_angle_range():
     assert se2.wrap_angle(-np.pi) == np.pi
 
 
+def observe_numpy(pose, landmarks_xy, sensor_pose):
+    """The plain-numpy twin of `se2.observe` (its numba kernel's test oracle)."""
+    m = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
+    pL, dpL = se2.sensor_position(pose, sensor_pose)
+    dx, dy = m[:, 0] - pL[0], m[:, 1] - pL[1]
+    q = dx * dx + dy * dy
+    r = np.sqrt(q)
+    z = np.column_stack([r, se2.wrap_angle(np.arctan2(dy, dx) - pose[2] - sensor_pose[2])])
+    dr_dm = np.stack([dx / r, dy / r], axis=1)
+    db_dm = np.stack([-dy / q, dx / q], axis=1)
+    H = np.zeros((m.shape[0], 2, 5))
+    H[:, 0, 0:2], H[:, 0, 2], H[:, 0, 3:5] = -dr_dm, -(dr_dm @ dpL), dr_dm
+    H[:, 1, 0:2], H[:, 1, 2], H[:, 1, 3:5] = -db_dm, -(db_dm @ dpL) - 1.0, db_dm
+    return z, H
+
+
+@settings(max_examples=50, deadline=None)
+@given(poses, st.integers(0, 2**32 - 1), st.integers(0, 30))
+def test_observe_kernel_matches_its_numpy_twin(pose, seed, n):
+    rng = np.random.default_rng(seed)
+    lm = pose[:2] + rng.uniform(-40, 40, (n, 2))
+    for laser in (LASER, np.array([3.78, 0.5, -0.0188])):
+        z, H = se2.observe(pose, lm, laser)
+        z_ref, H_ref = observe_numpy(pose, lm, laser)
+        np.testing.assert_array_equal(z, z_ref)
+        np.testing.assert_allclose(H, H_ref, rtol=1e-14, atol=1e-15)
+    assert se2.observe(pose, np.zeros((0, 2)), LASER)[1].shape == (0, 2, 5)
+
+
 @pytest.mark.parametrize("laser", [np.zeros(3), LASER, np.array([3.78, 0.5, 0.0])])
 def test_observation_jacobian_matches_numerical(laser):
     x = np.array([1.0, 2.0, 0.7, 9.0, 6.5])
