@@ -344,7 +344,25 @@ def _measure(s: _Setup, k: int):
     status = np.full(z.shape[0], NEW_TENTATIVE, np.int64)
     usable = (z[:, 0] <= s.max_range) & np.all(np.isfinite(z), axis=1)
     status[~usable] = OUT_OF_RANGE
+    _check_noise(k, R, usable, s.cfg.measurement_noise)
     return scan, f, z, R, status
+
+
+def _check_noise(k: int, R: np.ndarray, usable: np.ndarray, model: str) -> None:
+    """Every usable measurement's R is finite and positive definite. The association gets the
+    loop's inputs unchecked (its trusted path), so a degenerate R (the "fit" model of a
+    degenerate fit with no floors) is named here rather than failing inside the solver."""
+    a, b, c = R[:, 0, 0], 0.5 * (R[:, 0, 1] + R[:, 1, 0]), R[:, 1, 1]
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(R).all(axis=(1, 2)) & (a > 0) & (c > 0) & (a * c - b * b > 0)
+    bad = np.flatnonzero(usable & ~ok)
+    if bad.size:
+        i = int(bad[0])
+        raise SlamError(
+            f"measurement noise: scan {k}, feature {i} has a covariance R that is not positive "
+            f"definite ({R[i].tolist()}; noise model {model!r}); give the fit floors "
+            "(fit_floor_range_m, fit_floor_bearing_rad) or a constant noise model"
+        )
 
 
 def _associate(s: _Setup, state: Filter, tent: Tentatives, z, R, usable) -> _Association:

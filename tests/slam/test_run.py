@@ -386,6 +386,11 @@ def test_detections_noise_model_and_errors():
     np.testing.assert_allclose(np.sqrt(lg.meas_R[:, 0, 0]), expected)
     with pytest.raises(SlamError, match="'fit' needs det_cov"):
         run(det, features="detections", config=SlamConfig(measurement_noise="fit"))
+    # circles with a zero covariance, their own ("fit") noise and no floors: named before the
+    # loop hands them to the (unchecked) association
+    fit_no_floor = dataclasses.replace(no_floor, measurement_noise="fit")
+    with pytest.raises(SlamError, match="scan 0, feature 0 has a covariance R that is not posi"):
+        run(seq, features=feats, config=fit_no_floor)
     with pytest.raises(SlamError, match="has none"):
         run(seq, features="detections")
     no_ranges = dataclasses.replace(det, scan_ranges=None, scan_n_beams=361)
