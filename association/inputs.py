@@ -382,25 +382,83 @@ def prepare(z, R, z_hat, H, P, gate_prob: float, *, validate: bool = True) -> Pr
     rank_feat = _ranks(np.column_stack([z_hat, S_feat.reshape(n, 4)]))
 
     if m and n:
-        nu = z[:, None, :] - z_hat[None, :, :]  # (m, n, 2)
-        nu[..., 1] = wrap_angle(nu[..., 1])
-        S = S_feat[None, :, :, :] + R[:, None, :, :]  # (m, n, 2, 2)
-        d2, logdet, ok = chol2_solve(S, nu)
-        if not ok.all():  # cannot happen with R > 0 and H P H^T >= 0, kept as a guard
-            i, j = np.argwhere(~ok)[0]
+        ii, jj, nu, S, d2, l11, l22, bad = _gated_pairs(
+            z, np.ascontiguousarray(R), z_hat, S_feat, gate
+        )
+        if bad[0] >= 0:  # cannot happen with R > 0 and H P H^T >= 0, kept as a guard
             raise AssociationError(
-                f"P, R: innovation covariance S[{i}, {j}] is not positive definite"
+                f"P, R: innovation covariance S[{bad[0]}, {bad[1]}] is not positive definite"
             )
-        ii, jj = np.nonzero(d2 <= gate)  # eq. individual compatibility gate
         if validate:
             _check_joint_psd(H, P, np.unique(jj))
         order = np.lexsort((rank_feat[jj], rank_meas[ii]))
-        ii, jj = ii[order], jj[order]
-        pairs = (ii, jj, nu[ii, jj], S[ii, jj], d2[ii, jj], logdet[ii, jj])
+        logdet = 2.0 * (np.log(l11[order]) + np.log(l22[order]))  # as `chol2_solve`
+        pairs = (ii[order], jj[order], nu[order], S[order], d2[order], logdet)
     else:
         e = np.zeros(0, np.int64)
         pairs = (e, e, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0))
     return Prepared(z, R, z_hat, S_feat, H, P, gate, rank_meas, rank_feat, *pairs)
+
+
+@njit(cache=True)
+def _gated_pairs(z, R, z_hat, S_feat, gate):
+    """The individually gated pairings of m measurements and n features, in one pass over the
+    m x n pairs (the vectorised form built (m, n, 2, 2) arrays of every pair, and its dozen
+    array operations cost more than the arithmetic).
+
+    For each pair: nu_ij = z_i - z_hat_j (bearing wrapped as `wrap_angle`), S_ij = S_feat_j +
+    R_i, and d2_ij with the arithmetic of `chol2_solve`, so the same numbers to the bit.
+    Returns the pairs with d2 <= gate in row-major order: ii, jj (k,), nu (k, 2),
+    S (k, 2, 2), d2 (k,), and the Cholesky diagonals l11, l22 (k,) (ln|S| = 2 ln(l11 l22));
+    bad (2,): the first pair whose S is not positive definite, or (-1, -1)."""
+    m, n = z.shape[0], z_hat.shape[0]
+    cap = m * n
+    ii = np.empty(cap, np.int64)
+    jj = np.empty(cap, np.int64)
+    nu = np.empty((cap, 2))
+    S = np.empty((cap, 2, 2))
+    d2 = np.empty(cap)
+    l11s = np.empty(cap)
+    l22s = np.empty(cap)
+    bad = np.full(2, -1, np.int64)
+    two_pi = 2.0 * np.pi
+    k = 0
+    for i in range(m):
+        for j in range(n):
+            nu0 = z[i, 0] - z_hat[j, 0]
+            nu1 = np.pi - np.mod(np.pi - (z[i, 1] - z_hat[j, 1]), two_pi)  # `wrap_angle`
+            s00 = S_feat[j, 0, 0] + R[i, 0, 0]
+            s01 = S_feat[j, 0, 1] + R[i, 0, 1]
+            s10 = S_feat[j, 1, 0] + R[i, 1, 0]
+            s11 = S_feat[j, 1, 1] + R[i, 1, 1]
+            # `chol2_solve`, operation for operation
+            s21 = 0.5 * (s10 + s01)
+            l11 = math.sqrt(s00) if s00 >= 0.0 else math.nan
+            l21 = s21 / l11
+            q = s11 - l21 * l21
+            l22 = math.sqrt(q) if q >= 0.0 else math.nan
+            if not (s00 > 0.0 and q > 0.0):
+                if bad[0] < 0:
+                    bad[0] = i
+                    bad[1] = j
+                continue
+            y1 = nu0 / l11
+            y2 = (nu1 - l21 * y1) / l22
+            dd = y1 * y1 + y2 * y2
+            if dd <= gate:  # eq. individual compatibility gate
+                ii[k] = i
+                jj[k] = j
+                nu[k, 0] = nu0
+                nu[k, 1] = nu1
+                S[k, 0, 0] = s00
+                S[k, 0, 1] = s01
+                S[k, 1, 0] = s10
+                S[k, 1, 1] = s11
+                d2[k] = dd
+                l11s[k] = l11
+                l22s[k] = l22
+                k += 1
+    return ii[:k], jj[:k], nu[:k], S[:k], d2[:k], l11s[:k], l22s[:k], bad
 
 
 def _checked(z, R, z_hat, H, P, gate_prob):

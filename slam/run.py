@@ -47,6 +47,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from features.types import Features
 from slam import se2
@@ -393,25 +394,17 @@ def _associate(s: _Setup, state: Filter, tent: Tentatives, z, R, usable) -> _Ass
     C5[:n_l] = state.cov(cols)
     C5[n_l:, :3, :3] = state.pose_cov
     C5[n_l:, 3:, 3:] = tent.cov[t_idx]
-    gated = _gates(z[use], R[use], zh, H5, C5, s.gate_new)  # (m_use, n)
+    z_use, R_use = z[use], R[use]
+    gated = _gates_kernel(z_use, R_use, zh, H5, C5, s.gate_new)  # (m_use, n)
     ambiguous[use] = gated.any(axis=1)
     cand = np.flatnonzero(gated.any(axis=0))
     if cand.size:
-        nc = cand.size
-        H = np.zeros((nc, 2, 3 + 2 * nc))
-        H[:, :, :3] = H5[cand, :, :3]
-        j = np.arange(nc)[:, None, None]
-        # candidate j's point occupies columns 3 + 2 j, 4 + 2 j
-        H[j, _PAIR[:, None], 3 + 2 * j + _PAIR] = H5[cand, :, 3:5]
-        P_sub = np.zeros((3 + 2 * nc, 3 + 2 * nc))
         c_lm = cand[cand < n_l]
-        sub = np.concatenate([[0, 1, 2], landmark_columns(lm_idx[c_lm])[:, 3:].ravel()])
-        P_sub[: sub.size, : sub.size] = state.cov(sub)
+        sub = np.concatenate([_POSE, landmark_columns(lm_idx[c_lm])[:, 3:].ravel()])
         c_t = t_idx[cand[cand >= n_l] - n_l]  # the tentatives, after the landmarks
-        a = sub.size + 2 * np.arange(c_t.size)[:, None, None]
-        P_sub[a + _PAIR[:, None], a + _PAIR] = tent.cov[c_t]
+        H, P_sub = _sub_problem(H5, cand, state.cov(sub), tent.cov[c_t])
         a_use = s.associate(
-            z[use], R[use], zh[cand], H, P_sub, gate_prob=cfg.gate_prob, **cfg.association_params
+            z_use, R_use, zh[cand], H, P_sub, gate_prob=cfg.gate_prob, **cfg.association_params
         )
         a_use = np.asarray(a_use, dtype=np.int64)
         assign[use] = np.where(a_use >= 0, cand[np.maximum(a_use, 0)], -1)
@@ -690,7 +683,7 @@ def _in_view(
     return in_fov & (z_hat[:, 0] <= max_range + m_m)
 
 
-_PAIR = np.array([0, 1])
+_POSE = np.array([0, 1, 2], np.int64)
 
 
 def _gates(z, R, z_hat, H5, C5, gate: float) -> np.ndarray:
@@ -705,6 +698,62 @@ def _gates(z, R, z_hat, H5, C5, gate: float) -> np.ndarray:
         a * c - b * b
     )
     return d2 <= gate
+
+
+@njit(cache=True)
+def _gates_kernel(z, R, z_hat, H5, C5, gate: float) -> np.ndarray:
+    """`_gates` in one pass (its twin and test oracle): the scan loop's every-scan gating of all
+    candidates, where the dozen array operations of the vectorised form cost more than the
+    arithmetic. The same formulas; H5 C5 H5^T is summed in its own order, so d2 may differ
+    from `_gates`' in the last bits."""
+    m, n = z.shape[0], z_hat.shape[0]
+    out = np.zeros((m, n), np.bool_)
+    HPH = np.zeros((n, 2, 2))
+    for t in range(n):
+        for i in range(2):
+            for u in range(2):
+                acc = 0.0
+                for j in range(5):
+                    hij = H5[t, i, j]
+                    for k in range(5):
+                        acc += hij * C5[t, j, k] * H5[t, u, k]
+                HPH[t, i, u] = acc
+    for i in range(m):
+        for t in range(n):
+            a = HPH[t, 0, 0] + R[i, 0, 0]
+            b = 0.5 * ((HPH[t, 0, 1] + R[i, 0, 1]) + (HPH[t, 1, 0] + R[i, 1, 0]))
+            c = HPH[t, 1, 1] + R[i, 1, 1]
+            n0 = z[i, 0] - z_hat[t, 0]
+            n1 = np.pi - np.mod(np.pi - (z[i, 1] - z_hat[t, 1]), 2.0 * np.pi)  # `wrap_angle`
+            d2 = (c * (n0 * n0) - 2.0 * b * n0 * n1 + a * (n1 * n1)) / (a * c - b * b)
+            out[i, t] = d2 <= gate
+    return out
+
+
+@njit(cache=True)
+def _sub_problem(H5, cand, P_lm, cov_t):
+    """The association's sub-problem on the state [pose, candidate landmarks, candidate
+    tentatives]: H (nc, 2, 3 + 2 nc), candidate j's point in columns 3 + 2 j, 4 + 2 j, and its
+    covariance P_sub, which is P_lm (the pose and the candidate landmarks, from the filter)
+    followed by the tentatives' own 2 x 2 blocks cov_t (no correlation with anything). The
+    candidates `cand` index H5, landmarks first."""
+    nc = cand.size
+    d = 3 + 2 * nc
+    H = np.zeros((nc, 2, d))
+    for j in range(nc):
+        c = cand[j]
+        for r in range(2):
+            for q in range(3):
+                H[j, r, q] = H5[c, r, q]
+            H[j, r, 3 + 2 * j] = H5[c, r, 3]
+            H[j, r, 4 + 2 * j] = H5[c, r, 4]
+    P_sub = np.zeros((d, d))
+    n_sub = P_lm.shape[0]
+    P_sub[:n_sub, :n_sub] = P_lm
+    for t in range(cov_t.shape[0]):
+        a = n_sub + 2 * t
+        P_sub[a : a + 2, a : a + 2] = cov_t[t]
+    return H, P_sub
 
 
 def _check_runnable(seq: Sequence, n_features: int | None, cfg: SlamConfig) -> None:
