@@ -66,6 +66,19 @@ def associate_detailed(
     **params,
 ) -> Association:
     """`associate` with the method's statistics; see `associate` for the arguments."""
+    prep, out, cost, extra = _solve(z, R, z_hat, H, P, method, gate_prob, validate, params)
+    d2 = np.full(prep.m, np.nan)
+    if prep.pair_i.size:
+        lookup = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(prep.pair_i, prep.pair_j))}
+        for i in np.flatnonzero(out >= 0):
+            d2[i] = prep.d2[lookup[(int(i), int(out[i]))]]
+    if method == "nn":
+        cost = float(np.nansum(d2))
+    return Association(out, method, d2, float(cost), int(prep.pair_i.size), **extra)
+
+
+def _solve(z, R, z_hat, H, P, method, gate_prob, validate, params):
+    """(prepared inputs, assignment, cost (NaN for nn), statistics) of `associate_detailed`."""
     if method not in METHODS:
         raise AssociationError(f"method: expected one of {METHODS}, got {method!r}")
     unknown = set(params) - set(_PARAMS[method])
@@ -89,14 +102,7 @@ def associate_detailed(
     else:
         out = nn_assign(prep)
         cost = math.nan
-    d2 = np.full(prep.m, np.nan)
-    if prep.pair_i.size:
-        lookup = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(prep.pair_i, prep.pair_j))}
-        for i in np.flatnonzero(out >= 0):
-            d2[i] = prep.d2[lookup[(int(i), int(out[i]))]]
-    if method == "nn":
-        cost = float(np.nansum(d2))
-    return Association(out, method, d2, float(cost), int(prep.pair_i.size), **extra)
+    return prep, out, cost, extra
 
 
 def associate(
@@ -134,6 +140,5 @@ def associate(
     malformed input (shapes, NaN or inf, negative ranges, R not positive definite, P not
     symmetric positive semi-definite on the blocks used).
     """
-    return associate_detailed(
-        z, R, z_hat, H, P, method, gate_prob, validate=validate, **params
-    ).assignment
+    # without `associate_detailed`'s per-pair distances and cost, which it does not return
+    return _solve(z, R, z_hat, H, P, method, gate_prob, validate, params)[1]

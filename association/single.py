@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from association.errors import AssociationError
 from association.inputs import Prepared
@@ -98,25 +99,56 @@ def _csc_problem(prep: Prepared, model: CostModel):
     """(costs, n_rows, indptr, indices, exact, col_meas, col_feat) of the single-scan program:
     rows are the m measurements (exact) followed by the gated features (at most once); columns
     are the gated pairs in canonical order, then one new/clutter singleton per measurement."""
-    m = prep.m
-    feats = np.unique(prep.pair_j)
-    feats = feats[np.argsort(prep.rank_feat[feats])]
-    row_of_feat = np.full(prep.n, -1, np.int64)
-    row_of_feat[feats] = m + np.arange(feats.size)
-    k = prep.pair_i.size
-    meas_order = np.argsort(prep.rank_meas)
-    col_meas = np.concatenate([prep.pair_i, meas_order])
-    col_feat = np.concatenate([prep.pair_j, np.full(m, -1, np.int64)])
     costs = np.concatenate(
-        [model.pair_cost(prep.d2, prep.logdet_S), np.full(m, model.unexplained_cost())]
+        [model.pair_cost(prep.d2, prep.logdet_S), np.full(prep.m, model.unexplained_cost())]
     )
-    # a pair column covers its measurement's row and (below it) its feature's row
-    pair_rows = np.stack([prep.pair_i, row_of_feat[prep.pair_j]], axis=1).reshape(-1)
-    indices = np.concatenate([pair_rows, meas_order]).astype(np.int64)
-    indptr = np.concatenate([np.arange(0, 2 * k + 1, 2), 2 * k + np.arange(1, m + 1)])
-    exact = np.zeros(m + feats.size, bool)
+    n_rows, indptr, indices, exact, col_meas, col_feat = _csc_index(
+        prep.pair_i, prep.pair_j, prep.rank_meas, prep.rank_feat
+    )
+    return costs, n_rows, indptr, indices, exact, col_meas, col_feat
+
+
+@njit(cache=True)
+def _csc_index(pair_i, pair_j, rank_meas, rank_feat):
+    """The index part of `_csc_problem` in one pass (its array operations cost more than the
+    work): (n_rows, indptr, indices, exact, col_meas, col_feat). The gated features' rows
+    follow the m measurement rows in canonical (rank) order; the singletons' columns take the
+    measurements in canonical order. Ranks are permutations of 0..m-1 and 0..n-1."""
+    m, n, k = rank_meas.size, rank_feat.size, pair_i.size
+    meas_order = np.empty(m, np.int64)  # argsort of a permutation: its inverse
+    for i in range(m):
+        meas_order[rank_meas[i]] = i
+    gated = np.zeros(n, np.bool_)
+    for t in range(k):
+        gated[pair_j[t]] = True
+    by_rank = np.full(n, -1, np.int64)
+    for j in range(n):
+        if gated[j]:
+            by_rank[rank_feat[j]] = j
+    row_of_feat = np.full(n, -1, np.int64)
+    n_rows = m
+    for r in range(n):
+        if by_rank[r] >= 0:
+            row_of_feat[by_rank[r]] = n_rows
+            n_rows += 1
+    col_meas = np.empty(k + m, np.int64)
+    col_feat = np.full(k + m, -1, np.int64)
+    indptr = np.empty(k + m + 1, np.int64)
+    indices = np.empty(2 * k + m, np.int64)
+    for t in range(k):  # a pair column covers its measurement's row and (below it) its feature's
+        col_meas[t] = pair_i[t]
+        col_feat[t] = pair_j[t]
+        indptr[t] = 2 * t
+        indices[2 * t] = pair_i[t]
+        indices[2 * t + 1] = row_of_feat[pair_j[t]]
+    for i in range(m):
+        col_meas[k + i] = meas_order[i]
+        indptr[k + i] = 2 * k + i
+        indices[2 * k + i] = meas_order[i]
+    indptr[k + m] = 2 * k + m
+    exact = np.zeros(n_rows, np.bool_)
     exact[:m] = True
-    return costs, m + feats.size, indptr.astype(np.int64), indices, exact, col_meas, col_feat
+    return n_rows, indptr, indices, exact, col_meas, col_feat
 
 
 def single_scan_problem(prep: Prepared, model: CostModel):

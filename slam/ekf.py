@@ -260,19 +260,10 @@ class Filter(_Estimate):
         nu = z - z_hat
         nu[:, 1] = wrap_angle(nu[:, 1])
         # The columns the batch touches, [x, y, theta, then each landmark's pair], and H on them.
-        cols = np.concatenate([[0, 1, 2], np.stack([3 + 2 * idx, 4 + 2 * idx], 1).reshape(-1)])
-        q = 2 * k
-        j = np.arange(k)
-        Hc = np.zeros((q, 3 + q))
-        Hc[:, :3] = H5[:, :, :3].reshape(q, 3)
-        H_lm = np.zeros((k, 2, k, 2))  # block diagonal: landmark j's 2 x 2 block in row pair j
-        H_lm[j, :, j, :] = H5[:, :, 3:5]
-        Hc[:, 3:] = H_lm.reshape(q, q)
-        R_blk = np.zeros((k, 2, k, 2))
-        R_blk[j, :, j, :] = R
+        cols, Hc, R_blk = _batch_blocks(idx, H5, R)
         P = self._P
         HP = Hc @ _sym_rows(P, cols)  # (q, d) = (P H^T)^T, from whole rows of P
-        S = Hc @ HP[:, cols].T + R_blk.reshape(q, q)
+        S = Hc @ HP[:, cols].T + R_blk
         S = 0.5 * (S + S.T)
         L = np.linalg.cholesky(S)  # S = L L^T
         # W = P H^T L^-T (d, q), in Fortran order for BLAS: K = W L^-1, K S K^T = W W^T.
@@ -328,6 +319,33 @@ class Filter(_Estimate):
         self._P = np.ascontiguousarray(self._P[np.ix_(keep, keep)])  # keeps the triangles
         self.landmark_ids = np.delete(self.landmark_ids, pos)
         self.first_xy = np.delete(self.first_xy, pos, axis=0)
+
+
+@njit(cache=True)
+def _batch_blocks(idx: np.ndarray, H5: np.ndarray, R: np.ndarray):
+    """The blocks of a batch update of the landmarks at positions idx (k,): the state columns
+    it touches cols (3 + q,) = [x, y, theta, then each landmark's pair], H on them Hc (q, 3 + q)
+    (pose columns, then landmark j's 2 x 2 block in row pair j) and the block-diagonal
+    measurement covariance (q, q), q = 2 k; from the 5-column Jacobians H5 (k, 2, 5) and
+    R (k, 2, 2)."""
+    k = idx.size
+    q = 2 * k
+    cols = np.empty(3 + q, np.int64)
+    cols[0], cols[1], cols[2] = 0, 1, 2
+    Hc = np.zeros((q, 3 + q))
+    R_blk = np.zeros((q, q))
+    for j in range(k):
+        cols[3 + 2 * j] = 3 + 2 * idx[j]
+        cols[4 + 2 * j] = 4 + 2 * idx[j]
+        for r in range(2):
+            row = 2 * j + r
+            for c in range(3):
+                Hc[row, c] = H5[j, r, c]
+            Hc[row, 3 + 2 * j] = H5[j, r, 3]
+            Hc[row, 4 + 2 * j] = H5[j, r, 4]
+            R_blk[row, 2 * j] = R[j, r, 0]
+            R_blk[row, 2 * j + 1] = R[j, r, 1]
+    return cols, Hc, R_blk
 
 
 def _subtract_gram(P: np.ndarray, W: np.ndarray, mirror: bool = True) -> None:

@@ -909,6 +909,8 @@ def _detections_source(seq: Sequence, noise, cfg: SlamConfig) -> Callable:
     kind, model = noise
     floor = np.diag([cfg.fit_floor_range_m**2, cfg.fit_floor_bearing_rad**2])
     bias = cfg.range_bias_for(seq.det_method)
+    # the arrays of no lines, edges or segments, shared by every scan's Features (read-only)
+    empty = Features.empty(0.0, seq.det_method, seq.n_beams)
 
     def measure(k, scan):
         stored, radius, cov = seq.detections(k)
@@ -918,7 +920,8 @@ def _detections_source(seq: Sequence, noise, cfg: SlamConfig) -> Callable:
         n = z.shape[0]
         c, s_ = np.cos(z[:, 1]), np.sin(z[:, 1])
         f = dataclasses.replace(
-            Features.empty(float(seq.scan_t[k]), seq.det_method, seq.n_beams),
+            empty,
+            stamp_s=float(seq.scan_t[k]),
             circle_params=np.column_stack([stored[:, 0] * c, stored[:, 0] * s_, radius]),
             circle_cov=np.zeros((n, 3, 3)),
             circle_beams=np.zeros((n, 2), np.int64),

@@ -1,0 +1,85 @@
+"""The run loop's and the filter's numba kernels against the vectorised code they replaced."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slam.ekf import _batch_blocks
+from slam.run import _gates, _gates_kernel, _sub_problem
+
+_PAIR = np.array([0, 1])
+
+
+def _sub_problem_numpy(H5, cand, P_lm, cov_t):
+    """The vectorised build `_sub_problem` replaced (`slam.run._associate`)."""
+    nc = cand.size
+    H = np.zeros((nc, 2, 3 + 2 * nc))
+    H[:, :, :3] = H5[cand, :, :3]
+    j = np.arange(nc)[:, None, None]
+    H[j, _PAIR[:, None], 3 + 2 * j + _PAIR] = H5[cand, :, 3:5]
+    P_sub = np.zeros((3 + 2 * nc, 3 + 2 * nc))
+    P_sub[: P_lm.shape[0], : P_lm.shape[0]] = P_lm
+    a = P_lm.shape[0] + 2 * np.arange(cov_t.shape[0])[:, None, None]
+    P_sub[a + _PAIR[:, None], a + _PAIR] = cov_t
+    return H, P_sub
+
+
+def _batch_blocks_numpy(idx, H5, R):
+    """The vectorised blocks of `Filter.update` that `_batch_blocks` replaced."""
+    k = idx.size
+    cols = np.concatenate([[0, 1, 2], np.stack([3 + 2 * idx, 4 + 2 * idx], 1).reshape(-1)])
+    q = 2 * k
+    j = np.arange(k)
+    Hc = np.zeros((q, 3 + q))
+    Hc[:, :3] = H5[:, :, :3].reshape(q, 3)
+    H_lm = np.zeros((k, 2, k, 2))
+    H_lm[j, :, j, :] = H5[:, :, 3:5]
+    Hc[:, 3:] = H_lm.reshape(q, q)
+    R_blk = np.zeros((k, 2, k, 2))
+    R_blk[j, :, j, :] = R
+    return cols, Hc, R_blk.reshape(q, q)
+
+
+def _spd(rng, n, k, scale):
+    A = rng.normal(size=(n, k, k))
+    return A @ A.transpose(0, 2, 1) * scale + 1e-4 * np.eye(k)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_gates_kernel_gives_the_gates_of_the_vectorised_twin(seed):
+    rng = np.random.default_rng(seed)
+    m, n = int(rng.integers(0, 9)), int(rng.integers(0, 40))
+    z = np.column_stack([rng.uniform(1, 30, m), rng.uniform(-1.6, 1.6, m)])
+    z_hat = np.column_stack([rng.uniform(1, 30, n), rng.uniform(-3.2, 3.2, n)])
+    R = _spd(rng, m, 2, 0.01)
+    H5 = rng.normal(size=(n, 2, 5))
+    C5 = _spd(rng, n, 5, 0.1)
+    for gate in (1.0, 9.21, 30.0):
+        assert np.array_equal(
+            _gates_kernel(z, R, z_hat, H5, C5, gate), _gates(z, R, z_hat, H5, C5, gate)
+        )
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_sub_problem_equals_the_vectorised_build(seed):
+    rng = np.random.default_rng(50 + seed)
+    n = int(rng.integers(1, 15))
+    H5 = rng.normal(size=(n, 2, 5))
+    cand = np.sort(rng.choice(n, int(rng.integers(1, n + 1)), replace=False)).astype(np.int64)
+    n_lm = int(rng.integers(0, cand.size + 1))
+    P_lm = _spd(rng, 1, 3 + 2 * n_lm, 0.1)[0]
+    cov_t = _spd(rng, cand.size - n_lm, 2, 0.1)
+    for a, b in zip(_sub_problem(H5, cand, P_lm, cov_t), _sub_problem_numpy(H5, cand, P_lm, cov_t)):
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_batch_blocks_equal_the_vectorised_build(seed):
+    rng = np.random.default_rng(80 + seed)
+    k = int(rng.integers(1, 10))
+    idx = rng.choice(40, k, replace=False).astype(np.int64)
+    H5 = rng.normal(size=(k, 2, 5))
+    R = _spd(rng, k, 2, 0.01)
+    for a, b in zip(_batch_blocks(idx, H5, R), _batch_blocks_numpy(idx, H5, R)):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
