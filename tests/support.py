@@ -217,3 +217,17 @@ def recording_rows(path, skip_entities=()) -> dict[str, list[str]]:
         for i in range(chunk.num_rows):
             rows.setdefault(entity, []).append(repr([(k, data[k][i]) for k in cols]))
     return {k: sorted(v) for k, v in rows.items()}
+
+
+def two_landmarks_with_cross_term(cross: float):
+    """(z, z_hat, H, P) of two measurements near two landmarks whose own 2 x 2 blocks of P are
+    0.1 I and whose cross term P[3, 5] is `cross`: with 0.5 the joint block is not positive
+    semi-definite (correlation 5) though each landmark's block is; with 0.05 it is valid."""
+    P = np.eye(7) * 0.1
+    P[3, 5] = P[5, 3] = cross
+    H = np.zeros((2, 2, 7))
+    H[0, :, 3:5] = np.eye(2)
+    H[1, :, 5:7] = np.eye(2)
+    z_hat = np.array([[5.0, 0.1], [5.2, 0.12]])
+    z = np.array([[5.1, 0.11], [5.15, 0.115]])
+    return z, z_hat, H, P

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.stats import chi2
+from support import two_landmarks_with_cross_term
 
 from association import (
     AssociationError,
@@ -230,13 +231,7 @@ def test_trusted_path_gives_the_checked_answer(seed, n_lm, n_clutter, sigma_xy):
 def test_trusted_path_skips_the_checks_only():
     """validate=False does not check the data (a P not PSD in its cross terms passes), but the
     method and its parameters are still checked."""
-    P = np.eye(7) * 0.1
-    P[3, 5] = P[5, 3] = 0.5
-    H = np.zeros((2, 2, 7))
-    H[0, :, 3:5] = np.eye(2)
-    H[1, :, 5:7] = np.eye(2)
-    z_hat = np.array([[5.0, 0.1], [5.2, 0.12]])
-    z = np.array([[5.1, 0.11], [5.15, 0.115]])
+    z, z_hat, H, P = two_landmarks_with_cross_term(0.5)
     with pytest.raises(AssociationError, match="joint block"):
         associate(z, np.eye(2) * 0.01, z_hat, H, P)
     assert associate(z, np.eye(2) * 0.01, z_hat, H, P, validate=False).shape == (2,)

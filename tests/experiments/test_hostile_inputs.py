@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from support import two_landmarks_with_cross_term
 from typer.testing import CliRunner
 
 from experiments.cli import app
@@ -301,17 +302,11 @@ def test_associate_refuses_p_not_psd_in_its_cross_terms():
     JCBB answered differently; now every method refuses it, naming P."""
     from association import AssociationError, associate
 
-    P = np.eye(7) * 0.1
-    P[3, 5] = P[5, 3] = 0.5
-    H = np.zeros((2, 2, 7))
-    H[0, :, 3:5] = np.eye(2)
-    H[1, :, 5:7] = np.eye(2)
-    z_hat = np.array([[5.0, 0.1], [5.2, 0.12]])
-    z = np.array([[5.1, 0.11], [5.15, 0.115]])
+    z, z_hat, H, P = two_landmarks_with_cross_term(0.5)
     for method in ("ihgr", "jcbb", "nn"):
         with pytest.raises(AssociationError, match="P: not positive semi-definite on the joint"):
             associate(z, np.eye(2) * 0.01, z_hat, H, P, method=method)
-    P[3, 5] = P[5, 3] = 0.05  # a valid correlation: accepted, and the methods agree
+    P = two_landmarks_with_cross_term(0.05)[3]  # a valid correlation: accepted, methods agree
     out = {
         m: associate(z, np.eye(2) * 0.01, z_hat, H, P, method=m).tolist() for m in ("ihgr", "jcbb")
     }
