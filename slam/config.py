@@ -74,6 +74,12 @@ class SlamConfig:
     gps_sigma_m, initial_heading_sigma_rad: floors of the start uncertainty from GPS (the fit's
         own uncertainty is used when it is larger).
     max_odometry_gap_s: a longer stretch without odometry inside the run is an error.
+    min_travel_m: a scan is used (associated, updated, mapped) only when the odometry has moved
+        the vehicle at least this far since the last scan used; the others are predicted only
+        and their measurements logged with status SKIPPED (tentatives are neither seen nor
+        missed in them). 0 (default): every scan. A small value (the preset's 1 mm) skips the
+        scans of a vehicle standing still: a scan from the same place repeats the last one's
+        errors, which a filter that treats scans as independent would count again.
     max_feature_range_m: circles farther away are not used.
     view_margin_m, view_margin_rad: landmarks this far outside the laser's range and field of
         view are still offered to the association.
@@ -101,6 +107,7 @@ class SlamConfig:
     initial_heading_sigma_rad: float = math.radians(5.0)
     first_estimates_jacobians: bool = False
     max_odometry_gap_s: float = 1.0
+    min_travel_m: float = 0.0
     max_feature_range_m: float = math.inf
     view_margin_m: float = 2.0
     view_margin_rad: float = math.radians(10.0)
@@ -132,6 +139,7 @@ class SlamConfig:
             "initial_heading_sigma_rad",
             "view_margin_m",
             "view_margin_rad",
+            "min_travel_m",
         ):
             v = getattr(self, name)
             if not (0 <= v < math.inf):

@@ -11,6 +11,7 @@ __all__ = [
     "CONFIRMED",
     "NEW_TENTATIVE",
     "OUT_OF_RANGE",
+    "SKIPPED",
     "TENTATIVE_HIT",
     "TIMING_KEYS",
     "LogBuilder",
@@ -25,6 +26,7 @@ TENTATIVE_HIT = -2
 CONFIRMED = -3
 AMBIGUOUS = -4
 OUT_OF_RANGE = -5
+SKIPPED = -6
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,10 +45,12 @@ class SlamLog:
     meas_*: one row per circle extracted: meas_scan, meas_feature, meas_z (K, 2), meas_R
         (K, 2, 2), meas_status (landmark id >= 0 when used in an update; -1 new tentative,
         -2 tentative seen again, -3 tentative confirmed into the map, -4 ambiguous (gated but not
-        assigned, ignored), -5 beyond max_feature_range_m), meas_radius_m (K,) the circle's
-        radius (NaN when the features have none).
+        assigned, ignored), -5 beyond max_feature_range_m, -6 in a scan skipped: the vehicle
+        had not moved `SlamConfig.min_travel_m` since the last scan used), meas_radius_m (K,)
+        the circle's radius (NaN when the features have none).
     scan_nis (N,), scan_nis_dof (N,): NIS of each scan's batch update and its degrees of
         freedom (NaN, 0 without an update); scan_logdet (N,): ln |S| of that batch (NaN without).
+    scan_skipped (N,) bool: the scan was predicted only (`SlamConfig.min_travel_m`).
     n_features, n_associated, n_tentative, n_map: (N,) per scan.
     timing_s: {"predict", "features", "associate", "update", "manage", "total"} -> (N,) s.
     meas_track (K,): the landmark or tentative id each measurement was paired with or started
@@ -90,6 +94,7 @@ class SlamLog:
     scan_nis: np.ndarray
     scan_nis_dof: np.ndarray
     scan_logdet: np.ndarray
+    scan_skipped: np.ndarray
     n_features: np.ndarray
     n_associated: np.ndarray
     n_tentative: np.ndarray
@@ -130,6 +135,7 @@ class LogBuilder:
         self.nis = np.full(n, np.nan)
         self.nis_dof = np.zeros(n, np.int64)
         self.logdet = np.full(n, np.nan)
+        self.skipped = np.zeros(n, bool)
         self.counts = {
             k: np.zeros(n, np.int64) for k in ("n_features", "n_associated", "n_tentative", "n_map")
         }
@@ -258,6 +264,7 @@ class LogBuilder:
             scan_nis=self.nis,
             scan_nis_dof=self.nis_dof,
             scan_logdet=self.logdet,
+            scan_skipped=self.skipped,
             **self.counts,
             timing_s=self.timing,
             start_pose=self.start_pose,

@@ -14,6 +14,10 @@ Per scan k (times `scan_t[k]`), five steps, each a function below:
    measurements that gate with no landmark or tentative start new tentatives; tentatives not
    associated are dropped.
 
+A scan after which the odometry has moved the vehicle less than `SlamConfig.min_travel_m` since
+the last scan used (0 by default: none) is predicted only: steps 3-5 are skipped and its
+measurements logged with status SKIPPED.
+
 With association "ihgr-window" steps 3 and 5 are `_associate_window` and `_manage_window`: the
 K-scan `association.SlidingWindowAssociator` (K = `SlamConfig.window_scans`) replaces the
 tentative features. Every scan it is offered the landmarks in view and the laser's world pose
@@ -59,6 +63,7 @@ from slam.log import (
     CONFIRMED,
     NEW_TENTATIVE,
     OUT_OF_RANGE,
+    SKIPPED,
     TENTATIVE_HIT,
     LogBuilder,
     SlamLog,
@@ -199,6 +204,9 @@ class _Run:
     book: LogBuilder
     next_id: int = 0
     n_used: int = 0  # measurements used in the last scan's update
+    n_pending: int = 0  # tentatives (or open window measurements) after the last scan
+    travel_m: float = 0.0  # odometry distance since the last scan used
+    Q_skipped: np.ndarray | None = None  # prediction noise of the scans skipped since then
     # landmark id -> [scans expected in view, scans associated] since it joined the map
     vis_count: dict[int, list[int]] = field(default_factory=dict)
 
@@ -217,11 +225,26 @@ class _Run:
         """Scan k's five steps, timed and logged; returns (scan, features, z, status)."""
         s, state, book = self.s, self.state, self.book
         t = [time.perf_counter()]
-        Q = _predict(s, state, k, book)
+        Q, moved = _predict(s, state, k, book)
         book.predicted(k, state.pose, state.pose_cov)
         t.append(time.perf_counter())
         scan, f, z, R, status = _measure(s, k)
         t.append(time.perf_counter())
+        self.travel_m += moved
+        if k > 0 and self.travel_m < s.cfg.min_travel_m:
+            # predicted only: the vehicle has not moved enough since the last scan used
+            status[:] = SKIPPED
+            book.skipped[k] = True
+            self.Q_skipped = Q if self.Q_skipped is None else self.Q_skipped + Q
+            t += [t[-1]] * 3
+            radius = np.asarray(f.circle_params, float).reshape(-1, 3)[:, 2]
+            track = np.full(z.shape[0], -1, np.int64)
+            book.scan_done(k, state, self.n_pending, z, R, status, track, 0, math.nan, 0, t, radius)
+            self.n_used = 0
+            return scan, f, z, status
+        self.travel_m = 0.0
+        if self.Q_skipped is not None:  # the window's drift covers the skipped scans too
+            Q, self.Q_skipped = Q + self.Q_skipped, None
         if self.win is None:
             a = _associate(s, state, self.tent, z, R, status != OUT_OF_RANGE)
         else:
@@ -244,7 +267,7 @@ class _Run:
         t.append(time.perf_counter())
         radius = np.asarray(f.circle_params, float).reshape(-1, 3)[:, 2]
         book.scan_done(k, state, n_pending, z, R, status, track, n_used, nis, 2 * n_used, t, radius)
-        self.n_used = n_used
+        self.n_used, self.n_pending = n_used, n_pending
         return scan, f, z, status
 
 
@@ -316,15 +339,15 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
 # ---- the five steps -----------------------------------------------------------------------------
 
 
-def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> np.ndarray:
+def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> tuple[np.ndarray, float]:
     """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan).
 
     The increment and its covariance in the frame of the pose at k - 1 go to the log (the
     smoother's odometry factors): the motion model is invariant to where the car is, so the
     world-frame Q is that covariance rotated by the heading. Returns Q (3, 3), world frame
-    (zeros at k = 0)."""
+    (zeros at k = 0), and the distance moved (m)."""
     if k == 0:
-        return np.zeros((3, 3))
+        return np.zeros((3, 3)), 0.0
     t = s.seq.scan_t
     p0 = state.pose.copy()
     p1, F, Q = integrate(s.model, p0, s.odometry, t[k - 1], t[k], s.cfg.odometry_noise)
@@ -334,7 +357,14 @@ def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> np.ndarray:
     A = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])  # world -> frame of p0
     book.odometry(k, delta, A @ Q @ A.T)
     state.predict(p1, F, Q)
-    return Q
+    return Q, _arc_length(s.odometry, t[k - 1], t[k], s.model)
+
+
+def _arc_length(odometry: Odometry, t0: float, t1: float, model: AckermannModel) -> float:
+    """Distance the rear-axle centre drove from t0 to t1 by the odometry (m)."""
+    dt, v, a = odometry.pieces(t0, t1)
+    k = model.encoder_offset_m / model.wheelbase_m
+    return float(np.sum(np.abs(v / (1.0 - k * np.tan(a))) * dt))
 
 
 def _measure(s: _Setup, k: int):

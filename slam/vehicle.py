@@ -19,8 +19,9 @@ form (no Euler error), so exact odometry reproduces a path built by the same hol
 
 with sinc(h) = sin(h) / h (1 at h = 0). Noise: each odometry sample's speed and steering
 readings carry independent zero-mean errors of covariance Q_u = diag(sigma_v^2, sigma_alpha^2)
-(`OdometryNoise`); they enter the pose through the analytic Jacobian G = d pose1 / d(v_e, alpha),
-and the pose's own uncertainty through F = d pose1 / d pose.
+(`OdometryNoise`; the sigmas may grow with the speed and the lateral acceleration of the
+sample); they enter the pose through the analytic Jacobian G = d pose1 / d(v_e, alpha), and the
+pose's own uncertainty through F = d pose1 / d pose.
 """
 
 from __future__ import annotations
@@ -161,12 +162,21 @@ class OdometryNoise:
         actually driven) do move the car; without it the first scans' NEES reached 2000 in
         some runs of the tree park. While driving it is negligible (1 mm and 0.1 mrad per
         square-root second against about 2 cm and 8 mrad per second of odometry noise).
+    speed_sigma_per_speed: the speed sigma grows by this much per m/s of the encoder's reading
+        (a scale error, wheel slip): sigma_v = speed_sigma_mps + speed_sigma_per_speed |v_e|.
+    steer_sigma_per_lateral_mps2: the steering sigma grows by this much (rad) per m/s^2 of the
+        sample's lateral acceleration a = v_c^2 |tan(alpha)| / L (the tyres' slip angles grow
+        with the cornering force): sigma_alpha = steer_sigma_rad + this * a.
+    Both 0 by default (the simulated Cycab's readings carry constant noise); the Victoria Park
+    preset's values are fitted (experiments/paper/vp_calibration.py).
     """
 
     speed_sigma_mps: float = 0.1
     steer_sigma_rad: float = math.radians(2.0)
     floor_xy_m_per_sqrt_s: float = 0.001
     floor_theta_rad_per_sqrt_s: float = 0.0001
+    speed_sigma_per_speed: float = 0.0
+    steer_sigma_per_lateral_mps2: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -174,15 +184,19 @@ class OdometryNoise:
             "steer_sigma_rad",
             "floor_xy_m_per_sqrt_s",
             "floor_theta_rad_per_sqrt_s",
+            "speed_sigma_per_speed",
+            "steer_sigma_per_lateral_mps2",
         ):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
                 raise SlamError(f"OdometryNoise.{name}: must be a finite number >= 0, got {v!r}")
 
-    @property
-    def Q_u(self) -> np.ndarray:
-        """(2, 2) covariance of (v_e, alpha)."""
-        return np.diag([self.speed_sigma_mps**2, self.steer_sigma_rad**2])
+    def Q_u(self, v_enc_mps: float, v_axle_mps: float, steer_rad: float, L: float) -> np.ndarray:
+        """(2, 2) covariance of one sample's (v_e, alpha) readings."""
+        sv = self.speed_sigma_mps + self.speed_sigma_per_speed * abs(v_enc_mps)
+        lateral = v_axle_mps * v_axle_mps * abs(math.tan(steer_rad)) / L
+        sa = self.steer_sigma_rad + self.steer_sigma_per_lateral_mps2 * lateral
+        return np.diag([sv * sv, sa * sa])
 
     @property
     def Q_floor(self) -> np.ndarray:
@@ -266,8 +280,10 @@ def integrate(
             alphas,
             model.wheelbase_m,
             model.encoder_offset_m,
-            noise.speed_sigma_mps**2,
-            noise.steer_sigma_rad**2,
+            noise.speed_sigma_mps,
+            noise.steer_sigma_rad,
+            noise.speed_sigma_per_speed,
+            noise.steer_sigma_per_lateral_mps2,
             noise.floor_xy_m_per_sqrt_s**2,
             noise.floor_theta_rad_per_sqrt_s**2,
         )
@@ -280,14 +296,15 @@ def _integrate_numpy(model, pose, dts, vs, alphas, noise):
     F = np.eye(3)
     Q = np.zeros((3, 3))
     for dt, v, a in zip(dts, vs, alphas):
+        Q_u = noise.Q_u(float(v), model.axle_speed(float(v), float(a)), float(a), model.wheelbase_m)
         p, Fk, Gk = arc_step_jacobians(model, p, float(v), float(a), float(dt))
         F = Fk @ F
-        Q = Fk @ Q @ Fk.T + Gk @ noise.Q_u @ Gk.T + noise.Q_floor * dt
+        Q = Fk @ Q @ Fk.T + Gk @ Q_u @ Gk.T + noise.Q_floor * dt
     return p, F, 0.5 * (Q + Q.T)
 
 
 @njit(cache=True)
-def _integrate_kernel(pose, dts, vs, alphas, L, H, var_v, var_a, var_xy, var_th):
+def _integrate_kernel(pose, dts, vs, alphas, L, H, sv0, sa0, sv1, sa1, var_xy, var_th):
     x, y, th = pose[0], pose[1], pose[2]
     F = np.eye(3)
     Q = np.zeros((3, 3))
@@ -303,6 +320,10 @@ def _integrate_kernel(pose, dts, vs, alphas, L, H, var_v, var_a, var_xy, var_th)
         dv_da = ve * k * (1.0 + t * t) / (den * den)
         d = v * dt
         h = 0.5 * d * t / L
+        sv = sv0 + sv1 * abs(ve)
+        sa = sa0 + sa1 * v * v * abs(t) / L
+        var_v = sv * sv
+        var_a = sa * sa
         if abs(h) < 1e-4:
             h2 = h * h
             s = 1.0 - h2 / 6.0 + h2 * h2 / 120.0

@@ -501,3 +501,63 @@ def test_pruning_settings_are_checked(bad):
     (name,) = bad
     with pytest.raises(SlamError, match=f"MapPolicy.{name}"):
         MapPolicy(**bad)
+
+
+def stop_and_go_sequence(n_scans: int = 40, stop=(12, 20)) -> Sequence:
+    """drive_sequence at 1.5 m/s, but the car stands still (speed exactly 0) between scans
+    stop[0] and stop[1]; truth by exact arcs."""
+    t = np.arange((n_scans - 1) * 4 + 1) * 0.05
+    v = np.full(t.size, 1.5)
+    v[stop[0] * 4 : stop[1] * 4] = 0.0
+    odo = Odometry(t, v, np.full(t.size, 0.05))
+    car = AckermannModel(1.2)
+    truth = np.zeros((t.size, 3))
+    for i in range(1, t.size):
+        truth[i] = integrate(car, truth[i - 1], odo, t[i - 1], t[i])[0]
+    return Sequence(
+        scan_t=t[::4],
+        scan_ranges=np.full((n_scans, 361), np.nan),
+        scan_angle_min=-math.pi / 2,
+        scan_angle_increment=math.pi / 360,
+        laser_pose=np.array(LASER),
+        scan_max_range=80.0,
+        odo_t=t,
+        odo_speed=v,
+        odo_steer=odo.steer_rad,
+        vehicle=CAR,
+        truth_t=t,
+        truth_pose=truth,
+    )
+
+
+def test_scans_at_rest_are_skipped_as_if_they_were_not_there():
+    """min_travel_m = 1 mm: the scans after which the car has not moved (13-20) are
+    predicted only, their measurements logged as SKIPPED and no tentative seen or missed; the
+    estimate equals that of the same run with those scans taken out of the sequence."""
+    from slam.log import SKIPPED
+
+    seq = stop_and_go_sequence()
+    feats = point_features(seq, LANDMARKS, np.random.default_rng(2))
+    cfg = SlamConfig(range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001)
+    skip = run(seq, features=feats, config=dataclasses.replace(cfg, min_travel_m=0.001))
+    rest = np.arange(13, 21)  # scan k's interval holds samples 4k - 4 .. 4k - 1; 48-79 are 0
+    at_rest = np.isin(skip.meas_scan, rest)
+    assert at_rest.any() and np.all(skip.meas_status[at_rest] == SKIPPED)
+    assert np.all(skip.meas_status[~at_rest] != SKIPPED)
+    assert np.all(np.isnan(skip.scan_nis[rest])) and np.all(skip.n_associated[rest] == 0)
+    np.testing.assert_array_equal(np.flatnonzero(skip.scan_skipped), rest)
+    np.testing.assert_array_equal(skip.pose[rest], np.repeat(skip.pose[12:13], rest.size, 0))
+    keep = np.setdiff1d(np.arange(seq.n_scans), rest)
+    cut = dataclasses.replace(seq, scan_t=seq.scan_t[keep], scan_ranges=seq.scan_ranges[keep])
+    ref = run(cut, features=[feats[k] for k in keep], config=cfg)
+    np.testing.assert_allclose(skip.pose[keep], ref.pose, atol=1e-9)
+    np.testing.assert_allclose(skip.final_P, ref.final_P, atol=1e-12)
+    np.testing.assert_allclose(skip.landmark_xy, ref.landmark_xy, atol=1e-9)
+    # every scan is used by default, and a longer minimum uses every other scan (0.3 m each)
+    every = run(seq, features=feats, config=cfg)
+    assert not np.any(every.meas_status == SKIPPED)
+    half = run(seq, features=feats, config=dataclasses.replace(cfg, min_travel_m=0.5))
+    used = np.flatnonzero(~np.isnan(half.scan_nis))
+    assert used.size > 5 and np.all(np.diff(used[used < 12]) == 2)
+    with pytest.raises(SlamError, match="min_travel_m"):
+        SlamConfig(min_travel_m=-1.0)

@@ -152,6 +152,51 @@ def test_kernel_matches_numpy_twin_and_noise_propagation():
         assert np.linalg.eigvalsh(Q).min() > 0
 
 
+def test_motion_dependent_noise_kernel_matches_twin_and_monte_carlo():
+    """The speed sigma grows with |v_e|, the steering sigma with the lateral acceleration
+    v_c^2 |tan(alpha)| / L: the kernel equals its numpy twin, a straight drive's along-track
+    variance is the hand-computed sum, and a turn's Q matches the spread of noisy readings
+    drawn with the same per-sample sigmas."""
+    rng = np.random.default_rng(4)
+    t = np.cumsum(rng.uniform(0.01, 0.05, 300))
+    odo = Odometry(t, rng.uniform(-0.5, 4, 300), rng.uniform(-0.5, 0.5, 300))
+    noise = OdometryNoise(0.2, 0.03, 0.001, 0.0002, 0.05, 0.04)
+    a = integrate(VP, np.array([1.0, 2.0, 3.0]), odo, t[10] + 0.003, t[200], noise)
+    b = integrate(VP, np.array([1.0, 2.0, 3.0]), odo, t[10] + 0.003, t[200], noise, kernel="numpy")
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(x, y, atol=1e-12)
+    plain = integrate(
+        VP,
+        np.array([1.0, 2.0, 3.0]),
+        odo,
+        t[10] + 0.003,
+        t[200],
+        OdometryNoise(0.2, 0.03, 0.001, 0.0002),
+    )[2]
+    assert np.all(np.diag(a[2]) > np.diag(plain))
+    # straight at 2 m/s for 1 s in 20 steps: var_x = 20 (dt (0.1 + 0.05 * 2))^2, no floor
+    straight = OdometryNoise(0.1, 0.0, 0.0, 0.0, speed_sigma_per_speed=0.05)
+    _, _, Q = integrate(
+        CYCAB, np.zeros(3), odometry(np.arange(0, 1.0, 0.05), 2.0, 0.0), 0, 1, straight
+    )
+    assert Q[0, 0] == pytest.approx(20 * (0.05 * 0.2) ** 2, rel=1e-12)
+    # a turn: alpha = 0.2 at 1.5 m/s on the Cycab (L = 1.2): lateral acceleration 0.38 m/s^2
+    v, alpha, dt = 1.5, 0.2, 0.05
+    tt = np.arange(0, 1.0, dt)
+    turn = OdometryNoise(0.05, math.radians(0.5), 0.0, 0.0, 0.1, 0.1)
+    _, _, Q = integrate(CYCAB, np.zeros(3), odometry(tt, v, alpha), 0.0, 1.0, turn)
+    sv = 0.05 + 0.1 * v
+    sa = math.radians(0.5) + 0.1 * v * v * math.tan(alpha) / CYCAB.wheelbase_m
+    ends = []
+    for _ in range(4000):
+        noisy = Odometry(
+            tt, v + sv * rng.standard_normal(tt.size), alpha + sa * rng.standard_normal(tt.size)
+        )
+        ends.append(integrate(CYCAB, np.zeros(3), noisy, 0.0, 1.0)[0])
+    C = np.cov(np.array(ends).T)
+    np.testing.assert_allclose(np.diag(C), np.diag(Q), rtol=0.08)
+
+
 def test_integrated_jacobian_matches_numerical():
     rng = np.random.default_rng(5)
     t = np.arange(0, 2, 0.05)
@@ -206,3 +251,7 @@ def test_bad_inputs_raise_clear_errors():
         odometry([0.0, 1.0], 1.0, 0.0).pieces(1.0, 0.5)
     with pytest.raises(ValueError, match="speed_sigma_mps"):
         OdometryNoise(-1.0)
+    with pytest.raises(ValueError, match="speed_sigma_per_speed"):
+        OdometryNoise(speed_sigma_per_speed=-0.1)
+    with pytest.raises(ValueError, match="steer_sigma_per_lateral_mps2"):
+        OdometryNoise(steer_sigma_per_lateral_mps2=math.nan)
