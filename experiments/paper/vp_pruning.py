@@ -9,9 +9,11 @@ in 5 m bins. Established landmarks (associated in more than 30 scans: trees) and
 ones (10 scans or fewer) are counted apart. No GPS error enters it, and scans 2001-7249 never
 do. The rule (`derive`):
 
-- `prune_range_m`: the end of the first run of bins from 0 m where the established landmarks'
-  detection rate is at least 0.5 (beyond it even trees are missed more often than seen);
-- `prune_hit_ratio`: half the lowest established rate inside that range (a landmark reported at
+- `prune_range_m`: the end of the first run of bins where the established landmarks' detection
+  rate is at least 0.5 (beyond it even trees are missed more often than seen); the run starts at
+  the first such bin, so a nearest bin seen less often (trunks within a few metres pass the
+  laser's side, half in view) does not leave the rule without a range;
+- `prune_hit_ratio`: half the lowest established rate inside that run (a landmark reported at
   under half the rate of the worst-seen tree);
 - `prune_after_expected`: the fewest expected scans n for which a tree at that lowest rate
   falls below the ratio by chance with probability at most 1% (binomial).
@@ -70,15 +72,16 @@ def derive(rates: dict[str, np.ndarray], min_rate: float = 0.5, risk: float = 0.
     """The pruning settings from the detection rates (module docstring)."""
     e, d = rates["established_expected"], rates["established_detected"]
     rate = np.where(e > 0, d / np.maximum(e, 1), np.nan)
-    n_in = 0
-    while n_in < rate.size and rate[n_in] >= min_rate:
-        n_in += 1
-    if n_in == 0:
+    good = np.flatnonzero(rate >= min_rate)
+    if not good.size:
         raise DataError(
             "victoria-park-pruning: the established landmarks are seen in under half the scans "
-            "in which they are in view, even in the first range bin: no range to prune within"
+            "in which they are in view in every range bin: no range to prune within"
         )
-    p_min = float(np.min(rate[:n_in]))
+    first = n_in = int(good[0])  # nearer bins seen less often (trunks passing the laser's side)
+    while n_in < rate.size and rate[n_in] >= min_rate:
+        n_in += 1
+    p_min = float(np.min(rate[first:n_in]))
     ratio = p_min / 2
     n = next(
         n

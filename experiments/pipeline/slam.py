@@ -180,6 +180,7 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float, laser_pose=None) -> di
         "landmarks": int(lg.landmark_xy.shape[0]),
         "circles_per_scan": float(lg.n_features.mean()),
         "associated_per_scan": float(lg.n_associated.mean()),
+        "scans_skipped": int(lg.scan_skipped.sum()),  # predicted only (min_travel_m)
         "seconds": seconds,
         "timing": timing,
         "config": json_types(lg.config),

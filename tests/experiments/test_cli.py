@@ -190,8 +190,19 @@ def test_simulate_drive_then_slam(tmp_path):
     res = runner.invoke(app, ["slam", str(run), "--features", "geometric", "--out", str(out)])
     assert res.exit_code == 0, res.output
     s = json.loads((out / "summary.json").read_text())
-    assert s["start"] == "truth" and s["landmarks"] >= 3
+    assert s["start"] == "truth" and s["landmarks"] >= 3 and s["scans_skipped"] == 0
     assert max(s["truth"]["mean_abs_error"].values()) < 0.05
+    # a scan every 0.5 m of driving (about every other scan), with either association
+    cfg = tmp_path / "sparse.toml"
+    cfg.write_text("min_travel_m = 0.5\n")
+    for extra in ([], ["--window", "2"]):
+        res = runner.invoke(
+            app, ["slam", str(run), "--config", str(cfg), "--out", str(out), *extra]
+        )
+        assert res.exit_code == 0, res.output
+        s = json.loads((out / "summary.json").read_text())
+        assert 20 <= s["scans_skipped"] <= 40 and s["config"]["min_travel_m"] == 0.5
+        assert s["landmarks"] >= 3 and max(s["truth"]["mean_abs_error"].values()) < 0.05
 
 
 def test_slam_with_the_ihgr_window(tmp_path):

@@ -307,9 +307,35 @@ def test_consistency_scale_brings_nis_per_dof_to_one(vp_dir):
         consistency_scale(seq, cfg, bracket=(2.0, 1.0))
 
 
+def test_calibration_parameters_with_and_without_the_motion_terms():
+    from experiments.paper.vp_calibration import START, config_from
+
+    plain = config_from(START[:6]).odometry_noise
+    assert plain.speed_sigma_per_speed == 0 and plain.steer_sigma_per_lateral_mps2 == 0
+    grown = config_from(START).odometry_noise
+    assert grown.speed_sigma_per_speed == pytest.approx(0.05)
+    assert grown.steer_sigma_per_lateral_mps2 == pytest.approx(0.05)
+    assert grown.speed_sigma_mps == plain.speed_sigma_mps == pytest.approx(0.5)
+    with pytest.raises(ConfigError, match="theta: expected 6 or 8 parameters, got 7"):
+        config_from(START[:7])
+
+
+def test_the_motion_terms_must_buy_more_likelihood_than_they_cost():
+    """BIC = 2 J + p ln(n): with 10,000 measurements two more parameters cost 18.4 in 2 J, so
+    the 8-parameter fit is chosen only when its J is lower by more than 9.2."""
+    from experiments.paper.vp_calibration import bic, select_model
+
+    constant = {"J": -1000.0, "theta": [0.0] * 6, "measurements": 10_000}
+    assert bic(constant) == pytest.approx(-2000.0 + 6 * math.log(10_000))
+    for gain, chosen in ((9.0, False), (9.5, True), (2816.0, True)):
+        motion = {"J": -1000.0 - gain, "theta": [0.0] * 8, "measurements": 10_000}
+        assert select_model(constant, motion) is chosen
+
+
 def test_calibration_writes_what_the_preset_holds():
-    """The calibration's fixed settings (BASE) and its parameter vector rebuild the shipped
-    preset exactly, so `reproduce victoria-park-calibration` writes the preset's settings."""
+    """The calibration's fixed settings (BASE) and its parameter vector (the motion-dependent
+    model, the one its BIC chose) rebuild the shipped preset exactly, so `reproduce
+    victoria-park-calibration` writes the preset's settings."""
     from experiments.io.config_file import load_slam_config, preset_path
     from experiments.paper.vp_calibration import config_from
 
@@ -324,6 +350,8 @@ def test_calibration_writes_what_the_preset_holds():
                 m.range_sigma_m,
                 m.range_sigma_per_m,
                 m.bearing_sigma_rad,
+                preset.odometry_noise.speed_sigma_per_speed,
+                preset.odometry_noise.steer_sigma_per_lateral_mps2,
             ]
         ),
     ]

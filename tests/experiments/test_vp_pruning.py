@@ -31,11 +31,15 @@ def test_derive_follows_its_rule_on_a_hand_computed_case():
     assert got["lowest_established_rate"] == pytest.approx(0.6)
 
 
-def test_derive_refuses_landmarks_seen_less_than_half_the_time():
+def test_derive_starts_at_the_first_bin_seen_half_the_time_and_refuses_none():
     from experiments.errors import DataError
 
-    with pytest.raises(DataError, match="under half"):
-        derive(rates([0.4, 0.7]))
+    # a nearest bin under half (trunks passing the laser's side) is not the run's start
+    got = derive(rates([0.4, 0.7, 0.65, 0.3]))
+    assert got["prune_range_m"] == 15.0
+    assert got["lowest_established_rate"] == pytest.approx(0.65)
+    with pytest.raises(DataError, match="under half the scans in which they are in view in every"):
+        derive(rates([0.4, 0.3, 0.45]))
 
 
 @pytest.mark.data
