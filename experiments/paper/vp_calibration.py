@@ -29,8 +29,9 @@ Zaragoza SLAM-school model and an odometry noise of 0.5 m/s and 3 degrees, initi
 and x1.35): the laser's yaw on the vehicle, the odometry noise (speed, steering) and the
 measurement noise (a, b, c), twice: with a constant odometry noise, and with its growth with the
 speed and the lateral acceleration as well (`slam.OdometryNoise`; from 0.05 per m/s and 0.05 rad
-per m/s^2), because the constant model's errors depend on the motion (on scans 1-2000 its scans'
-NIS per dof rose from 0.77 at lateral accelerations under 0.05 m/s^2 to 1.59 above 0.6 m/s^2).
+per m/s^2), because a constant model's errors depend on the motion (on scans 1-2000 the scans'
+NIS per dof of the preset before, 0.88 m/s and 9.5 deg a sample, rose from 0.77 at lateral
+accelerations under 0.05 m/s^2 to 1.59 above 0.6 m/s^2, and was 0.32 below 0.5 m/s).
 The model with the lower Bayesian information criterion (2 J + parameters x ln(measurements))
 goes on (`select_model`).
 The objective is the negative log-likelihood of the run:
@@ -122,8 +123,8 @@ NAMES = (
 
 def config_from(theta, base: SlamConfig = BASE, laser=(3.78, 0.50)) -> SlamConfig:
     """The configuration of parameter vector theta (see START for its layout): its first 6
-    entries (the constant odometry noise, the preset's model) or all 8 (with the
-    motion-dependent terms)."""
+    entries (a constant odometry noise) or all 8 (with the motion-dependent terms, the
+    preset's model)."""
     if len(theta) not in (6, 8):
         raise ConfigError(f"theta: expected 6 or 8 parameters, got {len(theta)}")
     yaw, lsv, lsa, la, lb, lc = (float(v) for v in theta[:6])
@@ -166,7 +167,7 @@ def objective(seq, theta) -> tuple[float, dict]:
 def calibrate(seq, max_evaluations: int = 150, progress=None, motion_terms: bool = False) -> dict:
     """Minimise J over theta from START; returns the fitted values, J and the run's figures.
     motion_terms: also fit the odometry noise's growth with speed and lateral acceleration
-    (8 parameters; measured, not the preset's model: see the README)."""
+    (8 parameters; the preset's model since `run` found the lower BIC with it)."""
     n = 8 if motion_terms else 6
     start, steps = START[:n], STEPS[:n]
     evals = []
