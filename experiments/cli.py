@@ -359,7 +359,7 @@ def reproduce(
 
     - noise-calibration: measurement-noise model of each extractor (3 s)
 
-    - victoria-park-calibration: the ute's noise and laser yaw (30 min; only when named)
+    - victoria-park-calibration: the ute's noise and laser yaw (25 min; only when named)
 
     - victoria-park-pruning: the map policy's pruning settings from scans 1-2000 (seconds; only
     when named)

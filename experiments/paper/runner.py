@@ -129,7 +129,7 @@ EXPERIMENTS: dict[str, Experiment] = {
     ),
     "victoria-park-calibration": Experiment(
         "experiments.paper.vp_calibration:run",
-        about="the ute's noise and laser yaw from scans 1-2000 (30 min; not in the default run)",
+        about="the ute's noise and laser yaw from scans 1-2000 (25 min; not in the default run)",
         default=False,
     ),
     "victoria-park-pruning": Experiment(

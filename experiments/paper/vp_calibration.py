@@ -1,6 +1,6 @@
 """Victoria Park: the ute's noise and laser mounting, derived from scans 1-2000 only.
 
-`trunkslam reproduce victoria-park-calibration` (needs the data; about 30 minutes on one core)
+`trunkslam reproduce victoria-park-calibration` (needs the data; about 25 minutes on one core)
 writes victoria_park_calibration.md/.csv and victoria_park_ute.toml; the preset
 datasets/configs/victoria_park_ute.toml is that file. The procedure never looks at the GPS error
 of a SLAM run: it maximises the likelihood of the filter's own innovations (the prediction-error
