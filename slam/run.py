@@ -225,12 +225,13 @@ class _Run:
         """Scan k's five steps, timed and logged; returns (scan, features, z, status)."""
         s, state, book = self.s, self.state, self.book
         t = [time.perf_counter()]
-        Q, moved = _predict(s, state, k, book)
+        Q = _predict(s, state, k, book)
         book.predicted(k, state.pose, state.pose_cov)
         t.append(time.perf_counter())
         scan, f, z, R, status = _measure(s, k)
         t.append(time.perf_counter())
-        self.travel_m += moved
+        if k > 0 and s.cfg.min_travel_m > 0:
+            self.travel_m += _arc_length(s.odometry, s.seq.scan_t[k - 1], s.seq.scan_t[k], s.model)
         if k > 0 and self.travel_m < s.cfg.min_travel_m:
             # predicted only: the vehicle has not moved enough since the last scan used
             status[:] = SKIPPED
@@ -339,15 +340,15 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
 # ---- the five steps -----------------------------------------------------------------------------
 
 
-def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> tuple[np.ndarray, float]:
+def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> np.ndarray:
     """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan).
 
     The increment and its covariance in the frame of the pose at k - 1 go to the log (the
     smoother's odometry factors): the motion model is invariant to where the car is, so the
     world-frame Q is that covariance rotated by the heading. Returns Q (3, 3), world frame
-    (zeros at k = 0), and the distance moved (m)."""
+    (zeros at k = 0)."""
     if k == 0:
-        return np.zeros((3, 3)), 0.0
+        return np.zeros((3, 3))
     t = s.seq.scan_t
     p0 = state.pose.copy()
     p1, F, Q = integrate(s.model, p0, s.odometry, t[k - 1], t[k], s.cfg.odometry_noise)
@@ -357,7 +358,7 @@ def _predict(s: _Setup, state: Filter, k: int, book: LogBuilder) -> tuple[np.nda
     A = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])  # world -> frame of p0
     book.odometry(k, delta, A @ Q @ A.T)
     state.predict(p1, F, Q)
-    return Q, _arc_length(s.odometry, t[k - 1], t[k], s.model)
+    return Q
 
 
 def _arc_length(odometry: Odometry, t0: float, t1: float, model: AckermannModel) -> float:

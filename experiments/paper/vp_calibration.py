@@ -154,12 +154,13 @@ def objective(seq, theta) -> tuple[float, dict]:
             lg.scan_nis[upd] + lg.scan_logdet[upd] + lg.scan_nis_dof[upd] * math.log(2 * math.pi)
         )
     )
-    unexplained = int(np.sum((lg.meas_status < 0) & (lg.meas_status != SKIPPED)))
+    counted = lg.meas_status != SKIPPED  # the measurements J accounts for
+    unexplained = int(np.sum(counted & (lg.meas_status < 0)))
     info = {
         "landmarks": int(lg.landmark_xy.shape[0]),
         "nis_per_dof": float(np.sum(lg.scan_nis[upd]) / max(lg.scan_nis_dof[upd].sum(), 1)),
         "unexplained": unexplained,
-        "measurements": int(lg.meas_status.size),
+        "measurements": int(counted.sum()),
     }
     return nll + unexplained * LN_AREA, info
 

@@ -31,11 +31,15 @@ EXACT = SlamConfig(measurement_noise="constant")
 
 
 def drive_sequence(
-    v: float, steer: float, n_scans: int = 40, with_truth: bool = True, **extra
+    v: float, steer: float, n_scans: int = 40, with_truth: bool = True, stop=None, **extra
 ) -> Sequence:
-    """Constant (v, steer) at 20 Hz, scans at 5 Hz with no returns; truth by exact arcs."""
+    """Constant (v, steer) at 20 Hz, scans at 5 Hz with no returns; truth by exact arcs.
+    stop: (k0, k1), the car stands still (speed exactly 0) from scan k0 to scan k1."""
     t = np.arange((n_scans - 1) * 4 + 1) * 0.05
-    odo = Odometry(t, np.full(t.size, v), np.full(t.size, steer))
+    speed = np.full(t.size, v)
+    if stop is not None:
+        speed[stop[0] * 4 : stop[1] * 4] = 0.0
+    odo = Odometry(t, speed, np.full(t.size, steer))
     car = AckermannModel(1.2)
     truth = np.zeros((t.size, 3))
     truth[0] = [2.0, -1.0, 0.3]
@@ -503,40 +507,13 @@ def test_pruning_settings_are_checked(bad):
         MapPolicy(**bad)
 
 
-def stop_and_go_sequence(n_scans: int = 40, stop=(12, 20)) -> Sequence:
-    """drive_sequence at 1.5 m/s, but the car stands still (speed exactly 0) between scans
-    stop[0] and stop[1]; truth by exact arcs."""
-    t = np.arange((n_scans - 1) * 4 + 1) * 0.05
-    v = np.full(t.size, 1.5)
-    v[stop[0] * 4 : stop[1] * 4] = 0.0
-    odo = Odometry(t, v, np.full(t.size, 0.05))
-    car = AckermannModel(1.2)
-    truth = np.zeros((t.size, 3))
-    for i in range(1, t.size):
-        truth[i] = integrate(car, truth[i - 1], odo, t[i - 1], t[i])[0]
-    return Sequence(
-        scan_t=t[::4],
-        scan_ranges=np.full((n_scans, 361), np.nan),
-        scan_angle_min=-math.pi / 2,
-        scan_angle_increment=math.pi / 360,
-        laser_pose=np.array(LASER),
-        scan_max_range=80.0,
-        odo_t=t,
-        odo_speed=v,
-        odo_steer=odo.steer_rad,
-        vehicle=CAR,
-        truth_t=t,
-        truth_pose=truth,
-    )
-
-
 def test_scans_at_rest_are_skipped_as_if_they_were_not_there():
     """min_travel_m = 1 mm: the scans after which the car has not moved (13-20) are
     predicted only, their measurements logged as SKIPPED and no tentative seen or missed; the
     estimate equals that of the same run with those scans taken out of the sequence."""
     from slam.log import SKIPPED
 
-    seq = stop_and_go_sequence()
+    seq = drive_sequence(1.5, 0.05, stop=(12, 20))
     feats = point_features(seq, LANDMARKS, np.random.default_rng(2))
     cfg = SlamConfig(range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001)
     skip = run(seq, features=feats, config=dataclasses.replace(cfg, min_travel_m=0.001))
