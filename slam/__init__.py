@@ -16,7 +16,7 @@ from slam.measurement import DEFAULT_CONSTANT_NOISE, measurements_from_features
 from slam.run import NullVisualiser, run
 from slam.se2 import interpolate_poses, observe, wrap_angle
 from slam.sequence import Sequence
-from slam.vehicle import AckermannModel, Odometry, OdometryNoise, integrate
+from slam.vehicle import AckermannModel, Odometry, OdometryNoise, SteeringCalibration, integrate
 
 __all__ = [
     "DEFAULT_CONSTANT_NOISE",
@@ -31,6 +31,7 @@ __all__ = [
     "SlamConfig",
     "SlamError",
     "SlamLog",
+    "SteeringCalibration",
     "Tentatives",
     "add_landmark",
     "initial_state",

@@ -24,9 +24,11 @@ from slam.measurement import (
     DEFAULT_RANGE_BIAS,
     NoiseModel,
 )
-from slam.vehicle import OdometryNoise
+from slam.vehicle import OdometryNoise, SteeringCalibration
 
-__all__ = ["SlamConfig", "config_from_dict", "config_to_dict"]
+__all__ = ["GPS_START_TRACKS", "SlamConfig", "config_from_dict", "config_to_dict"]
+
+GPS_START_TRACKS = ("dead-reckoning", "slam")  # SlamConfig.gps_start_track
 
 
 @dataclass(frozen=True)
@@ -34,6 +36,8 @@ class SlamConfig:
     """Parameters of the run; defaults are the ones the experiments use (the simulated Cycab).
 
     odometry_noise: sigma of each odometry sample's speed and steering readings.
+    steering: the front-wheel angle from the steering reading (`slam.vehicle.SteeringCalibration`,
+        offset + gain r + cubic r^3; the identity by default).
     measurement_noise: "auto" (the circles' own covariance when the extractor gives one:
         `geometric` features, or detections carrying det_cov; constant otherwise), "fit" or
         "constant".
@@ -68,9 +72,13 @@ class SlamConfig:
     map_policy: tentative features (`slam.mapping.MapPolicy`).
     initial_pose_sigma: (sigma_x_m, sigma_y_m, sigma_theta_rad) of the start pose when it comes
         from the truth or the origin (0: the map's frame is the start pose).
-    gps_start_fit_m: a start from GPS fits the dead-reckoned antenna track of the first this
-        many metres of driving to the GPS fixes (position and heading, with their uncertainty
-        from the fit); see `slam.start`.
+    gps_start_fit_m: a start from GPS fits the antenna track of the first this many metres of
+        driving to the GPS fixes (position and heading, with their uncertainty from the fit);
+        see `slam.start`.
+    gps_start_track: the track fitted: "dead-reckoning" (the odometry alone; default) or "slam"
+        (the path of a first pass of this filter over those metres from a provisional start:
+        the landmarks keep its shape over hundreds of metres, where dead reckoning drifts by
+        degrees; the pass costs about the run's time over that stretch).
     gps_sigma_m, initial_heading_sigma_rad: floors of the start uncertainty from GPS (the fit's
         own uncertainty is used when it is larger).
     max_odometry_gap_s: a longer stretch without odometry inside the run is an error.
@@ -86,6 +94,7 @@ class SlamConfig:
     """
 
     odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+    steering: SteeringCalibration = field(default_factory=SteeringCalibration)
     measurement_noise: str = "auto"
     constant_noise: Mapping[str, NoiseModel] = field(default_factory=dict)
     range_sigma_m: float | None = None
@@ -103,6 +112,7 @@ class SlamConfig:
     map_policy: MapPolicy = field(default_factory=MapPolicy)
     initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
     gps_start_fit_m: float = 50.0
+    gps_start_track: str = "dead-reckoning"
     gps_sigma_m: float = 1.0
     initial_heading_sigma_rad: float = math.radians(5.0)
     first_estimates_jacobians: bool = False
@@ -117,6 +127,11 @@ class SlamConfig:
             raise SlamError(
                 f"SlamConfig.measurement_noise: expected 'auto', 'fit' or 'constant', got "
                 f"{self.measurement_noise!r}"
+            )
+        if self.gps_start_track not in GPS_START_TRACKS:
+            raise SlamError(
+                f"SlamConfig.gps_start_track: expected one of {list(GPS_START_TRACKS)}, got "
+                f"{self.gps_start_track!r}"
             )
         for name in ("gate_prob", "new_feature_gate_prob"):
             v = getattr(self, name)

@@ -35,8 +35,9 @@ compiles or loads numba kernels and imports lazily, seconds that would otherwise
 scan 0's or 1's `timing_s`. The estimate does not depend on it.
 
 The start pose is the truth at the first scan when the sequence has truth, else a fit of the
-dead-reckoned antenna track to the GPS fixes of the first `gps_start_fit_m` metres
-(`slam.start`; the heading from `initial_heading_rad` when given), else the origin.
+antenna track to the GPS fixes of the first `gps_start_fit_m` metres (`slam.start`; the track
+dead-reckoned, or with `gps_start_track = "slam"` the path of a first pass of the filter from
+the origin; the heading from `initial_heading_rad` when given), else the origin.
 Everything the run did is returned as a `SlamLog` (`slam.log.LogBuilder` assembles it). The
 optional visualiser is any object with the methods of `NullVisualiser` (which does nothing).
 """
@@ -70,8 +71,8 @@ from slam.log import (
 )
 from slam.mapping import Tentatives, sighting
 from slam.measurement import constant_noise, measurements_from_features
-from slam.sequence import Sequence
-from slam.start import fit_gps_start
+from slam.sequence import MAX_STEER_RAD, Sequence
+from slam.start import fit_gps_start, fit_gps_start_to_track
 from slam.vehicle import AckermannModel, Odometry, integrate
 
 __all__ = ["NullVisualiser", "run"]
@@ -326,7 +327,7 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
         features=feat_fn,
         associate=_resolve_association(association),
         model=AckermannModel.from_vehicle(seq.vehicle),
-        odometry=Odometry(seq.odo_t, seq.odo_speed, seq.odo_steer),
+        odometry=Odometry(seq.odo_t, seq.odo_speed, cfg.steering.apply(seq.odo_steer)),
         laser=np.asarray(seq.laser_pose if cfg.laser_pose is None else cfg.laser_pose, float),
         noise=noise,
         floor=(cfg.fit_floor_range_m, cfg.fit_floor_bearing_rad),
@@ -797,14 +798,22 @@ def _check_runnable(seq: Sequence, n_features: int | None, cfg: SlamConfig) -> N
         raise SlamError("sequence.vehicle: missing vehicle model (needed to use the odometry)")
     scan_t, odo_t = seq.scan_t, seq.odo_t
     veh = seq.vehicle
+    steer = cfg.steering.apply(seq.odo_steer)
+    if not cfg.steering.is_identity and np.any(np.abs(steer) > MAX_STEER_RAD):
+        i = int(np.argmax(np.abs(steer)))
+        raise SlamError(
+            f"SlamConfig.steering: turns odo_steer[{i}] = {float(seq.odo_steer[i]):.6g} rad into "
+            f"{float(steer[i]):.6g} rad, beyond +-{MAX_STEER_RAD} rad; check the calibration"
+        )
     k = float(veh.get("encoder_offset_m", 0.0)) / float(veh["wheelbase_m"])
-    den = 1.0 - k * np.tan(seq.odo_steer)
+    den = 1.0 - k * np.tan(steer)
     if np.any(den <= 0):  # v_c = v_e / (1 - (H/L) tan(alpha)) would be infinite or negative
         i = int(np.flatnonzero(den <= 0)[0])
         raise SlamError(
             f"sequence.vehicle: encoder_offset_m / wheelbase_m = {k:.3g} with odo_steer[{i}] = "
-            f"{float(seq.odo_steer[i]):.3g} rad makes the encoder-to-axle speed correction "
-            "infinite or negative; check the vehicle parameters and the steering units"
+            f"{float(seq.odo_steer[i]):.3g} rad (calibrated: {float(steer[i]):.3g} rad) makes "
+            "the encoder-to-axle speed correction infinite or negative; check the vehicle "
+            "parameters and the steering units"
         )
     # The longest stretch of the run [scan_t[0], scan_t[-1]] on stale (held) odometry.
     lead = max(0.0, float(odo_t[0] - scan_t[0]))
@@ -857,20 +866,35 @@ def _start(s: _Setup, initial_heading_rad: float | None):
                 float(seq.gps_t[0]) - t0,
             )
         ant = seq.gps_pose if seq.gps_pose is not None else s.laser
-        fit = fit_gps_start(
-            t0,
-            seq.gps_t,
-            seq.gps_xy,
-            ant,
-            s.model,
-            s.odometry,
-            cfg.gps_start_fit_m,
-            initial_heading_rad,
-        )
         floors = np.array([cfg.gps_sigma_m, cfg.gps_sigma_m, cfg.initial_heading_sigma_rad]) ** 2
+        if cfg.gps_start_track == "slam":
+            track_t, track_pose = _first_pass(s, np.diag(floors), cfg.gps_start_fit_m)
+            fit = fit_gps_start_to_track(
+                track_t,
+                track_pose,
+                seq.gps_t,
+                seq.gps_xy,
+                ant,
+                cfg.gps_start_fit_m,
+                initial_heading_rad,
+            )
+            how = f"a first pass over {track_t.size} scans"
+        else:
+            fit = fit_gps_start(
+                t0,
+                seq.gps_t,
+                seq.gps_xy,
+                ant,
+                s.model,
+                s.odometry,
+                cfg.gps_start_fit_m,
+                initial_heading_rad,
+            )
+            how = "dead reckoning"
         cov = fit.cov + np.diag(np.maximum(floors - np.diag(fit.cov), 0.0))
         log.info(
-            "start from GPS: %d fixes over %.1f m (%d rejected), rms %.2f m, heading %.2f deg",
+            "start from GPS (%s): %d fixes over %.1f m (%d rejected), rms %.2f m, heading %.2f deg",
+            how,
             fit.n_fixes,
             fit.distance_m,
             fit.n_rejected,
@@ -880,6 +904,29 @@ def _start(s: _Setup, initial_heading_rad: float | None):
         return fit.pose, cov, "gps"
     th = 0.0 if initial_heading_rad is None else float(initial_heading_rad)
     return np.array([0.0, 0.0, th]), np.diag(np.square(cfg.initial_pose_sigma)), "origin"
+
+
+def _first_pass(s: _Setup, cov0: np.ndarray, fit_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(scan times, poses) of the filter run from the origin over the scans until its antenna
+    track has covered `fit_m` metres (and one scan more), for `fit_gps_start_to_track`: the
+    start's rigid fit to GPS along a path whose shape the landmarks kept. The estimate of a
+    run is the same up to rounding in any frame, so the pass's frame (the origin, covariance
+    `cov0`: the start's floors) only names where the track starts. Nothing is shared with the
+    run."""
+    seq = s.seq
+    ant = np.asarray(seq.gps_pose if seq.gps_pose is not None else s.laser, dtype=np.float64)
+    loop = _Run.start(s, np.zeros(3), cov0)
+    loop.step(0)
+    poses = [np.zeros(3)]  # the track starts at the prior: the start pose is the prior's mean
+    dist, last = 0.0, ant[:2].copy()
+    for k in range(1, seq.n_scans):
+        loop.step(k)
+        poses.append(loop.state.pose.copy())
+        a = se2.compose(poses[-1], ant)[:2]
+        dist, last = dist + float(np.hypot(*(a - last))), a
+        if dist > fit_m:
+            break
+    return np.asarray(seq.scan_t[: len(poses)], dtype=np.float64), np.array(poses)
 
 
 def _resolve_association(association) -> Callable:

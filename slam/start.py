@@ -8,6 +8,13 @@ transform (rotation theta, translation t) that best maps that path onto the GPS 
 first `fit_m` metres of driving is found in closed form (2D Procrustes / Kabsch, least
 squares). The start pose is then (t, theta): the transform applied to the provisional start.
 
+Dead reckoning keeps its shape for tens of metres only: a steering reading off by a fraction
+of a degree curves the track by degrees over a hundred metres, and the fitted heading follows
+it. `fit_gps_start_to_track` fits any other track that starts at the origin in the same way;
+`slam.run` passes the path of a first pass of the filter (`SlamConfig.gps_start_track =
+"slam"`), which the landmarks keep in shape over hundreds of metres, so a longer stretch of GPS
+averages the fixes' slowly varying errors away.
+
 Uncertainty: the residuals' variance s^2 = sum r_i^2 / (2 n - 3) and the Gauss-Newton normal
 matrix of the same least-squares problem give cov(t_x, t_y, theta) = s^2 (J^T J)^-1 (J_i = [I,
 dR/dtheta a_i]). GPS errors and dead-reckoning drift are correlated over the stretch, so this
@@ -26,7 +33,7 @@ from slam import se2
 from slam.errors import SlamError
 from slam.vehicle import AckermannModel, Odometry, integrate
 
-__all__ = ["GpsStart", "fit_gps_start", "procrustes_2d"]
+__all__ = ["GpsStart", "fit_gps_start", "fit_gps_start_to_track", "procrustes_2d"]
 
 
 @dataclass(frozen=True)
@@ -61,7 +68,8 @@ def fit_gps_start(
     fit_m: float,
     heading_rad: float | None = None,
 ) -> GpsStart:
-    """The start pose at time scan_t0 from the GPS fixes of the first `fit_m` metres of driving.
+    """The start pose at time scan_t0 from the GPS fixes of the first `fit_m` metres of driving,
+    with the dead-reckoned track.
 
     antenna: (3,) the GPS antenna in the vehicle frame. heading_rad: a known start heading
     (only the position is fitted then). Raises SlamError when the fixes cannot fix the pose.
@@ -76,10 +84,56 @@ def fit_gps_start(
         pose, _, _ = integrate(model, pose, odometry, t, float(gps_t[k]))
         t = float(gps_t[k])
         a.append(se2.compose(pose, antenna)[:2])
-    a = np.array(a)
+    return _fit_track(np.array(a), np.asarray(gps_xy, dtype=np.float64)[use], fit_m, heading_rad)
+
+
+def fit_gps_start_to_track(
+    track_t: np.ndarray,
+    track_pose: np.ndarray,
+    gps_t: np.ndarray,
+    gps_xy: np.ndarray,
+    antenna: np.ndarray,
+    fit_m: float,
+    heading_rad: float | None = None,
+) -> GpsStart:
+    """The start pose at track_t[0] from the GPS fixes of the first `fit_m` metres of a track.
+
+    track_pose (T, 3): rear-axle poses at the times track_t (sorted), in a frame whose origin
+    is the first pose (track_pose[0] = (0, 0, 0)): for example the path of a first pass of the
+    filter, which keeps its shape over hundreds of metres where dead reckoning drifts. The
+    fixes from track_t[0] until the track's antenna has travelled `fit_m` metres (along its
+    poses, so gaps in the GPS do not shorten the stretch) are matched to the track's pose at
+    their time (interpolated), and the rigid transform that maps its antenna path onto them is
+    the start pose, as in `fit_gps_start`. Raises SlamError when the track does not start at
+    the origin or the fixes cannot fix the pose.
+    """
+    track_t = np.asarray(track_t, dtype=np.float64)
+    track_pose = np.asarray(track_pose, dtype=np.float64).reshape(-1, 3)
+    if track_t.shape != track_pose.shape[:1] or np.any(np.diff(track_t) <= 0):
+        raise SlamError(
+            f"track_t: expected {track_pose.shape[0]} increasing times, one per pose of the track"
+        )
+    if np.abs(track_pose[0]).max() > 1e-9:
+        raise SlamError(f"track_pose[0]: the track must start at the origin, got {track_pose[0]}")
+    path = np.array([se2.compose(p, antenna)[:2] for p in track_pose])
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+    t_end = track_t[min(int(np.searchsorted(along, fit_m, side="right")), track_t.size - 1)]
+    gps_t = np.asarray(gps_t, dtype=np.float64)
+    use = np.flatnonzero((gps_t >= track_t[0] - 1e-9) & (gps_t <= t_end + 1e-9))
+    if use.size < 3:
+        raise SlamError("gps_t: fewer than 3 GPS fixes along the track; cannot fit the start")
+    poses = se2.interpolate_poses(gps_t[use], track_t, track_pose)
+    a = np.array([se2.compose(p, antenna)[:2] for p in poses])
+    return _fit_track(a, np.asarray(gps_xy, dtype=np.float64)[use], math.inf, heading_rad)
+
+
+def _fit_track(a: np.ndarray, b: np.ndarray, fit_m: float, heading_rad: float | None) -> GpsStart:
+    """The start pose from the antenna track a (n, 2) at the fixes' times, in the frame of a
+    start at the origin, and the fixes b (n, 2): the rigid fit over the fixes of the first
+    `fit_m` metres of a (measured from fix to fix; module docstring)."""
     dist = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(a, axis=0).T))])
     n = max(int(np.searchsorted(dist, fit_m, side="right")), 3)
-    A, B = a[:n], np.asarray(gps_xy, dtype=np.float64)[use[:n]]
+    A, B = a[:n], b[:n]
     keep = np.ones(n, bool)
     for _ in range(2):  # fit, then once more without the outliers
         theta, tr = _fit(A[keep], B[keep], heading_rad)
@@ -87,7 +141,7 @@ def fit_gps_start(
         s = math.sqrt(np.sum(r[keep] ** 2) / max(2 * keep.sum() - 3, 1))
         keep = r <= max(3.0 * s, 1.0)
         if keep.sum() < 3:
-            raise SlamError("gps_xy: the first GPS fixes disagree with the odometry; no start fit")
+            raise SlamError("gps_xy: the first GPS fixes disagree with the track; no start fit")
     theta, tr = _fit(A[keep], B[keep], heading_rad)
     res = B[keep] - (se2.rotate(theta, A[keep]) + tr)
     m = int(keep.sum())

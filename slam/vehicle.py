@@ -41,6 +41,7 @@ __all__ = [
     "AckermannModel",
     "Odometry",
     "OdometryNoise",
+    "SteeringCalibration",
     "arc_step",
     "arc_step_jacobians",
     "integrate",
@@ -203,6 +204,44 @@ class OdometryNoise:
         """(3, 3) pose noise per second (world frame)."""
         a, b = self.floor_xy_m_per_sqrt_s**2, self.floor_theta_rad_per_sqrt_s**2
         return np.diag([a, a, b])
+
+
+@dataclass(frozen=True)
+class SteeringCalibration:
+    """The front-wheel angle from the steering reading r:
+
+        alpha = offset_rad + gain r + cubic_per_rad2 r^3
+
+    A steering sensor reads the wheel angle through a linkage, and a bicycle model's single
+    wheel stands for two that turn by different angles, so the angle that sets the turn rate
+    v tan(alpha) / L need not be the reading itself. The identity by default (the simulated
+    Cycab's readings are the model's angle); the Victoria Park preset's gain and cubic term are
+    fitted (experiments/paper/vp_calibration.py). The odometry noise (`OdometryNoise`) applies to
+    the calibrated angle.
+    """
+
+    offset_rad: float = 0.0
+    gain: float = 1.0
+    cubic_per_rad2: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("offset_rad", "gain", "cubic_per_rad2"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise SlamError(f"SteeringCalibration.{name}: must be a finite number, got {v!r}")
+        if not self.gain > 0:
+            raise SlamError(f"SteeringCalibration.gain: must be > 0, got {self.gain!r}")
+
+    @property
+    def is_identity(self) -> bool:
+        return self.offset_rad == 0.0 and self.gain == 1.0 and self.cubic_per_rad2 == 0.0
+
+    def apply(self, steer_rad: np.ndarray) -> np.ndarray:
+        """The calibrated angles of readings `steer_rad` (the same array when the identity)."""
+        if self.is_identity:
+            return steer_rad
+        r = np.asarray(steer_rad, dtype=np.float64)
+        return self.offset_rad + self.gain * r + self.cubic_per_rad2 * r**3
 
 
 @dataclass(frozen=True, eq=False)

@@ -7,13 +7,19 @@ of a SLAM run: it maximises the likelihood of the filter's own innovations (the 
 method of system identification), on the first 2000 scans (the part with raw laser data), so
 scans 2001-7249 stay untouched by it.
 
+First the steering calibration (`slam.SteeringCalibration`: alpha = offset + gain r +
+cubic r^3 from the reading r), fitted by dead reckoning against the GPS stretches of the same
+scans (experiments/paper/vp_steering.py; no filter involved), then held fixed.
+
 Fixed before the fit (not fitted):
 - the filter: first-estimates Jacobians (FEJ), which keep the global heading unobservable as it
   is (without them the filter grows overconfident in its heading and the map turns by 4-6
   degrees over the first kilometre);
-- the start: the dead-reckoning fit to the GPS of the first 50 m (`slam.start`), with a 1 degree
-  floor on the heading sigma (the fitted heading moves by about +-1.2 degrees between fits over
-  20 and 150 m) and 0.3 m on the position;
+- the start: during the fit, the dead-reckoning fit to the GPS of the first 50 m (`slam.start`;
+  the likelihood of the innovations does not depend on where the map's frame is), with a
+  1 degree floor on the heading sigma and 0.3 m on the position. The preset's start is derived
+  last, with the fitted noise (`vp_start`): the filter's own path fitted to the GPS over the
+  first D metres, D the shortest stretch from which longer ones agree on the heading;
 - the published detections (`det_method` "bailey") with the constant noise model
   sigma_range = a + b r, sigma_bearing = c (t = 0: the detections' bearing error does not grow
   at short range), IHGR association, the default gates and map policy. The preset gives the
@@ -28,12 +34,13 @@ Fitted (Nelder-Mead on the yaw and the sigmas' logarithms, `EVALUATIONS` evaluat
 Zaragoza SLAM-school model and an odometry noise of 0.5 m/s and 3 degrees, initial steps 0.02 rad
 and x1.35): the laser's yaw on the vehicle, the odometry noise (speed, steering) and the
 measurement noise (a, b, c), twice: with a constant odometry noise, and with its growth with the
-speed and the lateral acceleration as well (`slam.OdometryNoise`; from 0.05 per m/s and 0.05 rad
-per m/s^2), because a constant model's errors depend on the motion (on scans 1-2000 the scans'
-NIS per dof of the preset before, 0.88 m/s and 9.5 deg a sample, rose from 0.77 at lateral
-accelerations under 0.05 m/s^2 to 1.59 above 0.6 m/s^2, and was 0.32 below 0.5 m/s).
-The model with the lower Bayesian information criterion (2 J + parameters x ln(measurements))
-goes on (`select_model`).
+speed and the lateral acceleration as well (`slam.OdometryNoise`), because a constant model's
+errors can depend on the motion (before the steering was calibrated, the scans' NIS per dof on
+scans 1-2000 rose from 0.77 at lateral accelerations under 0.05 m/s^2 to 1.59 above 0.6 m/s^2).
+The second model contains the first (growth 0), so its fit starts from the first fit's optimum
+with growth terms of 0.01 per m/s and 0.01 rad per m/s^2 (`GROWTH_START`). The model with the
+lower Bayesian information criterion (2 J + parameters x ln(measurements)) goes on
+(`select_model`).
 The objective is the negative log-likelihood of the run:
 
     J = sum over scans with an update  1/2 (nu^T S^-1 nu + ln |2 pi S|)
@@ -66,7 +73,9 @@ from experiments.errors import ConfigError, MissingDataError
 from experiments.io.config_file import config_toml
 from experiments.io.victoria_park import load_victoria_park
 from experiments.io.writers import write_atomic, write_tidy_table
-from slam import OdometryNoise, SlamConfig
+from experiments.paper import vp_start, vp_steering
+from experiments.paper.vp_steering import fit_steering
+from slam import OdometryNoise, SlamConfig, SteeringCalibration
 from slam import run as slam_run
 from slam.log import SKIPPED
 from slam.measurement import NoiseModel
@@ -79,6 +88,7 @@ __all__ = [
     "consistency_scale",
     "nis_per_dof",
     "objective",
+    "preset_config",
     "run",
     "scale_measurement_noise",
 ]
@@ -108,6 +118,7 @@ START = np.array(
     [0.0, *np.log([0.5, math.radians(3.0), 0.05, 0.01, math.radians(0.5), 0.05, 0.05])]
 )
 STEPS = np.array([0.02, 0.3, 0.3, 0.3, 0.3, 0.3, 0.3, 0.3])
+GROWTH_START = np.log([0.01, 0.01])  # the motion terms where the nested fit starts them
 MEASUREMENT = [3, 4, 5]  # the measurement sigmas' entries of theta
 NAMES = (
     "laser_yaw_rad",
@@ -145,9 +156,11 @@ def config_from(theta, base: SlamConfig = BASE, laser=(3.78, 0.50)) -> SlamConfi
     )
 
 
-def objective(seq, theta) -> tuple[float, dict]:
-    """J(theta) on `seq` and the run's figures (landmarks, NIS per dof, unexplained count)."""
-    lg = slam_run(seq, features="detections", association="ihgr", config=config_from(theta))
+def objective(seq, theta, base: SlamConfig = BASE) -> tuple[float, dict]:
+    """J(theta) on `seq` and the run's figures (landmarks, NIS per dof, unexplained count);
+    `base`: the fixed settings (BASE with the fitted steering calibration)."""
+    cfg = config_from(theta, base)
+    lg = slam_run(seq, features="detections", association="ihgr", config=cfg)
     upd = lg.scan_nis_dof > 0
     nll = 0.5 * float(
         np.sum(
@@ -165,16 +178,26 @@ def objective(seq, theta) -> tuple[float, dict]:
     return nll + unexplained * LN_AREA, info
 
 
-def calibrate(seq, max_evaluations: int = 150, progress=None, motion_terms: bool = False) -> dict:
-    """Minimise J over theta from START; returns the fitted values, J and the run's figures.
-    motion_terms: also fit the odometry noise's growth with speed and lateral acceleration
-    (8 parameters; the preset's model since `run` found the lower BIC with it)."""
+def calibrate(
+    seq,
+    max_evaluations: int = 150,
+    progress=None,
+    motion_terms: bool = False,
+    base: SlamConfig = BASE,
+    start=None,
+) -> dict:
+    """Minimise J over theta from `start` (default START); returns the fitted values, J and
+    the run's figures. motion_terms: also fit the odometry noise's growth with speed and
+    lateral acceleration (8 parameters)."""
     n = 8 if motion_terms else 6
-    start, steps = START[:n], STEPS[:n]
+    start = START[:n] if start is None else np.asarray(start, dtype=float)
+    if start.shape != (n,):
+        raise ConfigError(f"start: expected {n} parameters, got {start.shape}")
+    steps = STEPS[:n]
     evals = []
 
     def f(theta):
-        J, info = objective(seq, theta)
+        J, info = objective(seq, theta, base)
         evals.append((J, info))
         if progress is not None:
             progress("Victoria Park calibration", len(evals), max_evaluations)
@@ -194,7 +217,7 @@ def calibrate(seq, max_evaluations: int = 150, progress=None, motion_terms: bool
             "initial_simplex": simplex,
         },
     )
-    J, info = objective(seq, res.x)
+    J, info = objective(seq, res.x, base)
     theta = res.x
     values = dict(zip(NAMES[:n], [theta[0], *np.exp(theta[1:])]))
     return {"values": values, "theta": theta.tolist(), "J": J, "evaluations": len(evals), **info}
@@ -278,26 +301,42 @@ def run(ctx) -> None:
     """The registered experiment `victoria-park-calibration`."""
     try:
         seq = load_victoria_park(n_scans=FIT_SCANS)
+        full = load_victoria_park(full=True)  # the steering fit's held-out GPS stretches
     except MissingDataError as exc:
         log.warning("Victoria Park calibration skipped: %s", exc)
         ctx.config["victoria-park-calibration"] = f"skipped: {exc}"
         return
     t0 = time.perf_counter()
+    steer = fit_steering(full, FIT_SCANS, 10 if ctx.quick else vp_steering.EVALUATIONS)
+    base = dataclasses.replace(BASE, steering=steer.steering)
     fits = {}
     for motion in (False, True):
         n = 5 if ctx.quick else EVALUATIONS[motion]
-        fits[motion] = calibrate(seq, n, ctx.progress, motion_terms=motion)
+        # the motion-dependent model contains the constant one (growth 0): its fit starts from
+        # the constant fit's optimum with small growth terms, so it can only do better
+        start = np.r_[fits[False]["theta"], GROWTH_START] if motion else None
+        fits[motion] = calibrate(seq, n, ctx.progress, motion_terms=motion, base=base, start=start)
     motion = select_model(fits[False], fits[True])
     fit = fits[motion]
-    start_J, start_info = objective(seq, START[:6])
-    cons = consistency_scale(seq, config_from(fit["theta"]), iterations=1 if ctx.quick else 7)
+    start_J, start_info = objective(seq, START[:6], base)
+    cons = consistency_scale(seq, config_from(fit["theta"], base), iterations=1 if ctx.quick else 7)
     ln_k = math.log(cons["k"])
     theta_c = np.asarray(fit["theta"], dtype=float)
     theta_c[MEASUREMENT] += ln_k
-    cons_J, cons_info = objective(seq, theta_c)
-    cfg = config_from(theta_c)
+    cons_J, cons_info = objective(seq, theta_c, base)
+    start_rows = vp_start.headings(seq, config_from(theta_c, base))
+    start_m = vp_start.derive(start_rows)
+    cfg = preset_config(theta_c, steer.steering, start_m)
     ctx.config["victoria-park-calibration"] = {
         "scans": FIT_SCANS,
+        "steering": {
+            "offset_rad": steer.steering.offset_rad,
+            "gain": steer.steering.gain,
+            "cubic_per_rad2": steer.steering.cubic_per_rad2,
+            "stretches": [steer.fit_stretches, steer.held_out_stretches],
+            "fit_mse_m2": [steer.fit_mse_before, steer.fit_mse_after],
+            "held_out_mse_m2": [steer.held_out_mse_before, steer.held_out_mse_after],
+        },
         "evaluations": {
             "constant": fits[False]["evaluations"],
             "motion": fits[True]["evaluations"],
@@ -308,6 +347,8 @@ def run(ctx) -> None:
         "bic": {"constant": bic(fits[False]), "motion": bic(fits[True])},
         "chosen": "motion" if motion else "constant",
         "consistency_factor": cons["k"],
+        "start_fit_m": start_m,
+        "start_headings_deg": start_rows,
         "consistency_evaluations": cons["evaluations"],
         "seconds": round(time.perf_counter() - t0, 1),
     }
@@ -357,7 +398,30 @@ def run(ctx) -> None:
             "(experiments/paper/vp_calibration.py); BIC = 2 J + parameters x ln(measurements). "
             "Last row: the preset, the fit with the lower BIC, its measurement sigmas scaled by "
             "the factor that makes the NIS per dof 1 on the same scans (bisection). No GPS error "
-            "enters it."
+            "enters it. Steering calibration, fixed in every row (experiments/paper/"
+            f"vp_steering.py, dead reckoning against {steer.fit_stretches} GPS stretches of "
+            f"{vp_steering.STRETCH_S:.0f} s of the same scans): offset "
+            f"{math.degrees(steer.steering.offset_rad):.3f} deg, gain {steer.steering.gain:.4f}, "
+            f"cubic {steer.steering.cubic_per_rad2:.4f} per rad^2; the stretches' mean squared "
+            f"distance {steer.fit_mse_before:.2f} -> {steer.fit_mse_after:.2f} m^2 (the "
+            f"{steer.held_out_stretches} stretches of scans 2001-7249, never fitted: "
+            f"{steer.held_out_mse_before:.2f} -> {steer.held_out_mse_after:.2f} m^2)."
+        ),
+    )
+    ctx.outputs += write_tidy_table(
+        ctx.out_dir / "victoria_park_start",
+        [{"fit_m": d, "start_heading_deg": h, "fixes": n} for d, h, n in start_rows],
+        index=["fit_m"],
+        values=["start_heading_deg", "fixes"],
+        labels=START_LABELS,
+        title="Victoria Park: the start heading against the metres of GPS it is fitted to",
+        notes=(
+            "The filter's path over scans 1-2000 (the preset's noise, published detections, "
+            "IHGR) fitted rigidly to the GPS fixes of its first D metres (slam.start."
+            f"fit_gps_start_to_track); last row: the whole path. Chosen: D = {start_m:.0f} m, "
+            f"the shortest D from which every longer fit is within {vp_start.TOLERANCE_DEG} deg "
+            "of the whole path's (experiments/paper/vp_start.py). No GPS error of a run enters "
+            "it."
         ),
     )
     ctx.outputs.append(
@@ -365,14 +429,32 @@ def run(ctx) -> None:
     )
 
 
+def preset_config(theta, steering: SteeringCalibration, start_fit_m: float) -> SlamConfig:
+    """The preset: the fixed settings (BASE), the fitted parameters `theta` (the model's 6 or
+    8), the steering calibration and the start fitted along the filter's own path over the
+    first `start_fit_m` metres of GPS (`vp_start`)."""
+    base = dataclasses.replace(
+        BASE, steering=steering, gps_start_track="slam", gps_start_fit_m=float(start_fit_m)
+    )
+    return config_from(theta, base)
+
+
 PRESET_HEADER = """\
 The Victoria Park ute: `trunkslam reproduce victoria-park-calibration`
-(experiments/paper/vp_calibration.py) fitted the laser yaw, odometry noise and measurement noise
-by maximum likelihood of the filter's own innovations on scans 1-2000 (320 evaluations; no GPS
-error is used), then scaled the measurement sigmas by the factor that makes the NIS per dof 1 on
-the same scans. Fixed: FEJ, the GPS start fit over 50 m with floors 0.3 m and 1 deg, the same
-constant measurement model for every extractor, scans at rest skipped (min_travel_m 1 mm).
+(experiments/paper/vp_calibration.py) fitted the steering calibration by dead reckoning against
+GPS stretches of scans 1-2000, then the laser yaw, odometry noise and measurement noise by
+maximum likelihood of the filter's own innovations on the same scans (no GPS error of a SLAM run
+is used), then scaled the measurement sigmas by the factor that makes the NIS per dof 1 there,
+then chose the metres of GPS the start is fitted to along the filter's own path (the shortest
+stretch from which longer ones agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
+the same constant measurement model for every extractor, scans at rest skipped (1 mm).
 Use: trunkslam slam vp_full.npz --features detections --config victoria_park_ute"""
+
+START_LABELS = {
+    "fit_m": "GPS stretch D (m of path)",
+    "start_heading_deg": "start heading (deg)",
+    "fixes": "fixes",
+}
 
 CALIBRATION_LABELS = {  # the fitted parameters' fields (in `_row`'s order) and the table's headers
     "laser_yaw_deg": "laser yaw (deg)",

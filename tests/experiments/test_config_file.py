@@ -12,13 +12,14 @@ from typer.testing import CliRunner
 from experiments.cli import app
 from experiments.errors import ConfigError, DataError
 from experiments.io.config_file import PRESETS_DIR, config_toml, load_slam_config
-from slam import MapPolicy, OdometryNoise, SlamConfig
+from slam import MapPolicy, OdometryNoise, SlamConfig, SteeringCalibration
 from slam.measurement import DEFAULT_CONSTANT_NOISE, NoiseModel
 
 runner = CliRunner()
 
 CUSTOM = SlamConfig(
     odometry_noise=OdometryNoise(0.5, 0.07),
+    steering=SteeringCalibration(gain=1.01, cubic_per_rad2=0.2),
     measurement_noise="constant",
     constant_noise={"bailey": NoiseModel(0.03, 0.002, 0.004, 0.0)},
     laser_pose=(3.78, 0.5, -0.02),
@@ -67,6 +68,8 @@ def test_partial_files_keep_the_defaults(tmp_path):
         ("first_estimates_jacobians = 1\n", ["first_estimates_jacobians", "true or false"]),
         ("[constant_noise.bailey]\nrange_sigma_m = 0.1\n", ["constant_noise.bailey", "missing"]),
         ("odometry_noise = 3\n", ["odometry_noise", "table"]),
+        ("[steering]\ngain = -1.0\n", ["SteeringCalibration.gain", "> 0"]),
+        ("[steering]\ncubic = 0.2\n", ["steering.cubic", "unknown setting"]),
     ],
 )
 def test_bad_settings_name_the_key(tmp_path, text, words):

@@ -318,6 +318,10 @@ def test_calibration_parameters_with_and_without_the_motion_terms():
     assert grown.speed_sigma_mps == plain.speed_sigma_mps == pytest.approx(0.5)
     with pytest.raises(ConfigError, match="theta: expected 6 or 8 parameters, got 7"):
         config_from(START[:7])
+    from experiments.paper.vp_calibration import calibrate
+
+    with pytest.raises(ConfigError, match=r"start: expected 8 parameters, got \(6,\)"):
+        calibrate(None, motion_terms=True, start=START[:6])  # checked before any run
 
 
 def test_the_motion_terms_must_buy_more_likelihood_than_they_cost():
@@ -333,11 +337,11 @@ def test_the_motion_terms_must_buy_more_likelihood_than_they_cost():
 
 
 def test_calibration_writes_what_the_preset_holds():
-    """The calibration's fixed settings (BASE) and its parameter vector (the motion-dependent
-    model, the one its BIC chose) rebuild the shipped preset exactly, so `reproduce
-    victoria-park-calibration` writes the preset's settings."""
+    """The calibration's fixed settings (BASE), its parameter vector (the motion-dependent
+    model, the one its BIC chose), steering calibration and start stretch rebuild the shipped
+    preset exactly, so `reproduce victoria-park-calibration` writes the preset's settings."""
     from experiments.io.config_file import load_slam_config, preset_path
-    from experiments.paper.vp_calibration import config_from
+    from experiments.paper.vp_calibration import preset_config
 
     preset = load_slam_config(preset_path("victoria_park_ute"))
     m = preset.constant_noise["bailey"]
@@ -355,7 +359,9 @@ def test_calibration_writes_what_the_preset_holds():
             ]
         ),
     ]
-    got, want = config_from(theta).to_dict(), preset.to_dict()
+    assert preset.gps_start_track == "slam" and not preset.steering.is_identity
+    got = preset_config(theta, preset.steering, preset.gps_start_fit_m).to_dict()
+    want = preset.to_dict()
 
     def flat(d, pre=""):
         for k, v in d.items():
@@ -371,3 +377,30 @@ def test_calibration_writes_what_the_preset_holds():
             np.testing.assert_allclose(got[k], v, rtol=1e-12, err_msg=k)
         else:
             assert got[k] == v, k
+
+
+def test_start_stretch_is_the_shortest_from_which_the_heading_holds():
+    """`vp_start.derive`: the shortest D from which every longer fit is within the tolerance
+    of the whole path's heading, even when a shorter one came close before."""
+    from experiments.paper.vp_start import derive
+
+    rows = [(50.0, 36.9, 10), (100.0, 35.0, 20), (150.0, 36.6, 30), (200.0, 36.8, 40)]
+    assert derive(rows, 0.3) == 150.0
+    assert derive(rows, 0.1) == 200.0
+    assert derive(rows, 2.0) == 50.0
+    assert derive([(300.0, 35.0, 9)]) == 300.0
+
+
+@pytest.mark.data
+def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
+    """The preset's gps_start_fit_m is what `vp_start` derives on scans 1-2000 with the
+    preset's noise; the start headings of fits longer than it agree within the tolerance."""
+    from experiments.io.config_file import load_slam_config, preset_path
+    from experiments.paper import vp_start
+
+    cfg = load_slam_config(preset_path("victoria_park_ute"))
+    rows = vp_start.headings(load_victoria_park(vp_dir, n_scans=2000), cfg)
+    assert vp_start.derive(rows) == cfg.gps_start_fit_m
+    later = [h for d, h, _ in rows if d >= cfg.gps_start_fit_m]
+    assert max(later) - min(later) <= 2 * vp_start.TOLERANCE_DEG
+    assert rows[-1][0] > 900  # scans 1-2000 drive about a kilometre

@@ -16,6 +16,7 @@ from slam import (
     Sequence,
     SlamConfig,
     SlamError,
+    SteeringCalibration,
     interpolate_poses,
     run,
     se2,
@@ -214,6 +215,65 @@ def test_start_from_gps_with_heading_from_motion_or_option():
     assert origin.start == "origin" and np.all(origin.pose[0] == 0)
 
 
+def test_gps_start_from_a_first_pass_outlasts_drifting_dead_reckoning():
+    """Steering readings 0.3 deg off on a straight drive past a row of trees: dead reckoning
+    curves, so its rigid fit to 60 m of GPS (0.1 m noise) misses the start heading by 7.9 deg,
+    while the filter's first pass, held nearly straight by the trees (it bends by 0.9 deg over
+    the run while the biased steering is learnt), misses it by 0.87 deg."""
+    truth_seq = drive_sequence(2.0, 0.0, n_scans=200)
+    trees = np.array([[x, y] for x in np.arange(6.0, 90.0, 7.0) for y in (-4.0, 5.0)])
+    feats = point_features(truth_seq, trees, np.random.default_rng(8))
+    rng = np.random.default_rng(9)
+    t = truth_seq.odo_t[::4]
+    truth = interpolate_poses(t, truth_seq.truth_t, truth_seq.truth_pose)
+    xy = np.array([se2.compose(p, LASER)[:2] for p in truth]) + 0.1 * rng.standard_normal(
+        (t.size, 2)
+    )
+    seq = dataclasses.replace(
+        truth_seq,
+        truth_t=None,
+        truth_pose=None,
+        odo_steer=truth_seq.odo_steer + math.radians(0.3),
+        gps_t=t,
+        gps_xy=xy,
+    )
+    cfg = SlamConfig(
+        range_sigma_m=0.01,
+        range_sigma_per_m=0.0,
+        bearing_sigma_rad=0.001,
+        gps_start_fit_m=60.0,
+        initial_heading_sigma_rad=math.radians(1.0),
+    )
+    dr = run(seq, features=feats, config=cfg)
+    two = run(seq, features=feats, config=dataclasses.replace(cfg, gps_start_track="slam"))
+    assert dr.start == two.start == "gps"
+    dr_err = abs(dr.pose[0, 2] - 0.3)
+    two_err = abs(two.pose[0, 2] - 0.3)
+    assert dr_err > math.radians(2.0)
+    assert two_err < 0.15 * dr_err and two_err < math.radians(1.0)
+    dr_off, two_off = (np.hypot(*(g.pose[0, :2] - [2.0, -1.0])) for g in (dr, two))
+    assert two_off < 0.2 < dr_off  # measured 0.16 and 1.60 m
+    assert two.pose_cov[0, 2, 2] == pytest.approx(math.radians(1.0) ** 2)  # the floor
+    with pytest.raises(SlamError, match="gps_start_track: expected one of"):
+        SlamConfig(gps_start_track="gps")
+
+
+def test_gps_start_to_track_checks_its_track():
+    from slam.start import fit_gps_start_to_track
+
+    t = np.arange(5.0)
+    track = np.column_stack([t, np.zeros(5), np.zeros(5)])
+    gps = track[:, :2] + [1.0, 2.0]
+    got = fit_gps_start_to_track(t, track, t, gps, np.zeros(3), 100.0)
+    np.testing.assert_allclose(got.pose, [1.0, 2.0, 0.0], atol=1e-12)
+    with pytest.raises(SlamError, match="must start at the origin"):
+        fit_gps_start_to_track(t, track + 1.0, t, gps, np.zeros(3), 100.0)
+    with pytest.raises(SlamError, match="track_t: expected 5 increasing times"):
+        fit_gps_start_to_track(t[::-1], track, t, gps, np.zeros(3), 100.0)
+    with pytest.raises(SlamError, match="fewer than 3 GPS fixes along the track"):
+        fit_gps_start_to_track(t, track, t + 10.0, gps, np.zeros(3), 100.0)
+
+
 class Recording(NullVisualiser):
     def __init__(self):
         self.calls: dict[str, int] = {}
@@ -287,6 +347,26 @@ def test_config_validation():
     assert kind == "fit"
     kind, model = SlamConfig(range_sigma_m=0.5).noise_for("bailey")
     assert kind == "constant" and model[0] == 0.5
+
+
+def test_steering_calibration_equals_calibrated_readings():
+    """A run with `SlamConfig.steering` equals the same run on a sequence whose steering
+    readings were calibrated beforehand, and a calibration that drives the angle past the
+    limit is refused naming the setting and the sample."""
+    seq = drive_sequence(1.5, 0.25, n_scans=30)
+    feats = point_features(seq, LANDMARKS, np.random.default_rng(4))
+    cal = SteeringCalibration(offset_rad=0.002, gain=1.02, cubic_per_rad2=0.2)
+    cfg = SlamConfig(range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001)
+    got = run(seq, features=feats, config=dataclasses.replace(cfg, steering=cal))
+    pre = dataclasses.replace(seq, odo_steer=cal.apply(seq.odo_steer))
+    want = run(pre, features=feats, config=cfg)
+    np.testing.assert_array_equal(got.pose, want.pose)
+    np.testing.assert_array_equal(got.final_P, want.final_P)
+    plain = run(seq, features=feats, config=cfg)
+    assert np.abs(plain.pred_pose[1:, 2] - got.pred_pose[1:, 2]).max() > 1e-4  # it matters
+    wild = dataclasses.replace(cfg, steering=SteeringCalibration(cubic_per_rad2=100.0))
+    with pytest.raises(SlamError, match=r"SlamConfig.steering: turns odo_steer\[0\] = 0.25 rad"):
+        run(seq, features=feats, config=wild)
 
 
 def test_truth_that_starts_after_the_first_scan_is_not_the_start():

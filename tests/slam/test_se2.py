@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from support import num_jac
 
@@ -80,13 +80,17 @@ def observe_numpy(pose, landmarks_xy, sensor_pose):
 
 @settings(max_examples=50, deadline=None)
 @given(poses, st.integers(0, 2**32 - 1), st.integers(0, 30))
+@example(np.array([0.0, 0.0, 1.0]), 0, 1)
 def test_observe_kernel_matches_its_numpy_twin(pose, seed, n):
     rng = np.random.default_rng(seed)
     lm = pose[:2] + rng.uniform(-40, 40, (n, 2))
     for laser in (LASER, np.array([3.78, 0.5, -0.0188])):
         z, H = se2.observe(pose, lm, laser)
         z_ref, H_ref = observe_numpy(pose, lm, laser)
-        np.testing.assert_array_equal(z, z_ref)
+        # the kernel's math.atan2 (libm) and numpy's vectorised arctan2 can round the last bit
+        # differently (seen: 8.9e-16 at pose (0, 0, 1), seed 0); the ranges are equal
+        np.testing.assert_array_equal(z[:, 0], z_ref[:, 0])
+        np.testing.assert_allclose(z[:, 1], z_ref[:, 1], rtol=0, atol=4 * np.spacing(np.pi))
         np.testing.assert_allclose(H, H_ref, rtol=1e-14, atol=1e-15)
     assert se2.observe(pose, np.zeros((0, 2)), LASER)[1].shape == (0, 2, 5)
 

@@ -13,6 +13,7 @@ from slam.vehicle import (
     AckermannModel,
     Odometry,
     OdometryNoise,
+    SteeringCalibration,
     arc_step,
     arc_step_jacobians,
     integrate,
@@ -255,3 +256,19 @@ def test_bad_inputs_raise_clear_errors():
         OdometryNoise(speed_sigma_per_speed=-0.1)
     with pytest.raises(ValueError, match="steer_sigma_per_lateral_mps2"):
         OdometryNoise(steer_sigma_per_lateral_mps2=math.nan)
+    with pytest.raises(ValueError, match="SteeringCalibration.gain: must be > 0"):
+        SteeringCalibration(gain=0.0)
+    with pytest.raises(ValueError, match="SteeringCalibration.cubic_per_rad2: must be a finite"):
+        SteeringCalibration(cubic_per_rad2=math.inf)
+    with pytest.raises(ValueError, match="SteeringCalibration.offset_rad: must be a finite"):
+        SteeringCalibration(offset_rad="0.1")
+
+
+def test_steering_calibration_maps_readings():
+    """alpha = offset + gain r + cubic r^3, by hand; the identity returns its input unchanged."""
+    r = np.array([-0.5, 0.0, 0.2])
+    cal = SteeringCalibration(offset_rad=0.01, gain=1.1, cubic_per_rad2=0.2)
+    np.testing.assert_allclose(cal.apply(r), [0.01 - 0.55 - 0.025, 0.01, 0.01 + 0.22 + 0.0016])
+    assert not cal.is_identity
+    ident = SteeringCalibration()
+    assert ident.is_identity and ident.apply(r) is r
