@@ -4,6 +4,9 @@ misses its bounds. A script, not part of the package; it runs on calibration see
 
     .venv/bin/python docs/consistency_probes.py shuffled --runs 16 --root 1001
     .venv/bin/python docs/consistency_probes.py by-beams
+    .venv/bin/python docs/consistency_probes.py occluded --runs 16 --root 1000
+    .venv/bin/python docs/consistency_probes.py track-correlation
+    .venv/bin/python docs/consistency_probes.py scale --runs 16 --root 1000
 
 shuffled: for every extractor, the EKF run four ways on the same drives: its own extracted
     circles ("extracted"); the trunks it found, each centre rebuilt as the truth plus its own
@@ -16,6 +19,16 @@ by-beams: the mean squared normalised range and bearing errors (constant noise m
     removed) of the circles on trunks, by beams on the trunk and by range, on seeds 1000-1003;
     then the same after a log-linear variance model ln sigma^2 = a + b ln(beams) + c ln(range)
     fitted by maximum likelihood, and that model's coefficients.
+scale: `paper`'s constant sigmas scaled by 0.8-2: NEES mean, in bounds, and NIS per dof (--runs
+    runs, --root).
+occluded: the circles on trunks whose arc ends next to a nearer return (a beam beside the arc
+    more than `OCCLUDER_M` in front of the centre: the trunk partly hidden), their normalised
+    errors against the others', and the EKF's NEES with them dropped (--runs runs, --root).
+track-correlation: the errors of one trunk along a run, normalised by the filter's own R
+    (range bias, floors and the fit's covariance as the runs use them): tau = sum over tracks
+    of (sum of z)^2 over sum of z^2, 1 when a trunk's errors are independent from scan to scan
+    (the factor by which the filter overrates what a track tells it); for whole tracks and for
+    10- and 30-scan windows, on seeds 1000-1003.
 """
 
 from __future__ import annotations
@@ -192,6 +205,171 @@ def by_beams(roots=(1000, 1001, 1002, 1003)) -> None:
                 )
 
 
+def scale(runs: int, root: int, factors=(0.8, 1.0, 1.25, 1.5, 2.0)) -> None:
+    from slam.measurement import NoiseModel
+
+    cfg = ps.Exp2Config(n_runs=runs, sensitivity=False, smoother=False)
+    seeds = spawn_seeds(np.random.SeedSequence(root), runs)
+    N = cfg.cycab.n_scans
+    base = cfg.slam.constant_noise["paper"]
+    res = {
+        s: (np.full((runs, N), np.nan), np.full((runs, N), np.nan), np.zeros((runs, N), int))
+        for s in factors
+    }
+    for r in range(runs):
+        seq = simulate_cycab_run(np.random.default_rng(seeds[r]), cfg.scene, cfg.cycab)
+        truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+        params = ps.extractor_params("paper", cfg.cycab)
+        fs = [extract_features(seq.scan(k), "paper", **params) for k in range(seq.n_scans)]
+        for s in factors:
+            noise = {**cfg.slam.constant_noise, "paper": NoiseModel(*(v * s for v in base))}
+            lg = slam_run(seq, features=fs, config=replace(cfg.slam, constant_noise=noise))
+            out = res[s]
+            out[0][r, 1:] = nees(pose_errors(lg.pose, truth)[1:], lg.pose_cov[1:])
+            out[1][r], out[2][r] = lg.scan_nis, lg.scan_nis_dof
+    print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs}); paper, constant noise")
+    print("| sigmas x | NEES mean | in 95% bounds | below | above | NIS per dof |")
+    print("|---|---|---|---|---|---|")
+    for s, a in res.items():
+        c = consistency(*a)
+        print(
+            f"| {s} | {c['nees_mean']:.2f} | {c['nees_in']:.2f} | {c['nees_below']:.2f} | "
+            f"{c['nees_above']:.2f} | {c['nis_per_dof']:.2f} |"
+        )
+
+
+OCCLUDER_M = 0.3
+
+
+def occluded_edges(f, ranges: np.ndarray) -> np.ndarray:
+    """(C,) bool: circle i's first or last beam has a neighbour whose return is more than
+    OCCLUDER_M nearer than the centre (something in front hides part of the trunk)."""
+    n = ranges.size
+    out = np.zeros(f.n_circles, bool)
+    for i, ((a, b), p) in enumerate(zip(f.circle_beams, f.circle_params)):
+        rc = math.hypot(p[0], p[1])
+        for j in (a - 1, b + 1):
+            if 0 <= j < n and np.isfinite(ranges[j]) and ranges[j] < rc - OCCLUDER_M:
+                out[i] = True
+    return out
+
+
+def occluded(runs: int, root: int) -> None:
+    cfg = ps.Exp2Config(n_runs=runs, sensitivity=False, smoother=False)
+    seeds = spawn_seeds(np.random.SeedSequence(root), runs)
+    N = cfg.cycab.n_scans
+    res: dict = {}
+    errs: dict = {}
+    for r in range(runs):
+        seq = simulate_cycab_run(np.random.default_rng(seeds[r]), cfg.scene, cfg.cycab)
+        truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+        laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
+        for m in METHODS:
+            params = ps.extractor_params(m, cfg.cycab)
+            fs = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
+            occ = [occluded_edges(f, np.asarray(seq.scan(k).ranges_m)) for k, f in enumerate(fs)]
+            model = cfg.slam.noise_for(m, has_cov=False)[1]
+            rows = trunk_errors(seq, fs, laser_w, model, DEFAULT_RANGE_BIAS.get(m, (0.0, 0.0)))
+            hid = np.array([occ[int(k)][int(i)] for k, i in rows[:, :2]], bool)
+            errs.setdefault(m, []).append(np.column_stack([rows[:, 4:6], hid]))
+            kept = [
+                replace(
+                    f,
+                    circle_params=f.circle_params[~o],
+                    circle_cov=f.circle_cov[~o],
+                    circle_beams=f.circle_beams[~o],
+                    circle_rms_m=f.circle_rms_m[~o],
+                )
+                for f, o in zip(fs, occ)
+            ]
+            for v, F in (("all circles", fs), ("partly hidden dropped", kept)):
+                lg = slam_run(seq, features=F, association="ihgr", config=cfg.slam)
+                e = pose_errors(lg.pose, truth)
+                out = res.setdefault(
+                    (m, v),
+                    (
+                        np.full((runs, N), np.nan),
+                        np.full((runs, N), np.nan),
+                        np.zeros((runs, N), int),
+                    ),
+                )
+                out[0][r, 1:] = nees(e[1:], lg.pose_cov[1:])
+                out[1][r], out[2][r] = lg.scan_nis, lg.scan_nis_dof
+    print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs})")
+    print(
+        "| method | circles on trunks | partly hidden | range z^2 (hidden / rest) | bearing z^2 |"
+    )
+    print("|---|---|---|---|---|")
+    for m, parts in errs.items():
+        t = np.vstack(parts)
+        h = t[:, 2] > 0
+
+        def ms(v: np.ndarray) -> str:
+            return f"{np.mean(v**2):.2f}" if v.size else "-"
+
+        print(
+            f"| {m} | {t.shape[0]} | {h.sum()} | {ms(t[h, 0])} / {ms(t[~h, 0])} | "
+            f"{ms(t[h, 1])} / {ms(t[~h, 1])} |"
+        )
+    print("| method | circles | NEES mean | in 95% bounds | above |")
+    print("|---|---|---|---|---|")
+    for (m, v), a in res.items():
+        c = consistency(*a)
+        print(f"| {m} | {v} | {c['nees_mean']:.2f} | {c['nees_in']:.2f} | {c['nees_above']:.2f} |")
+
+
+def _tau(z: np.ndarray, groups: np.ndarray) -> float:
+    """sum over groups of (sum of z)^2 over sum of z^2."""
+    _, inv = np.unique(groups, axis=0, return_inverse=True)
+    sums = np.bincount(inv.ravel(), weights=z)
+    return float(np.sum(sums**2) / np.sum(z**2))
+
+
+def track_correlation(roots=(1000, 1001, 1002, 1003)) -> None:
+    from slam.measurement import measurements_from_features
+
+    cyc = CycabParams()
+    slam_cfg = ps.Exp2Config().slam
+    floor = (slam_cfg.fit_floor_range_m, slam_cfg.fit_floor_bearing_rad)
+    print(f"seeds {list(roots)}; tau: 1 when a trunk's errors are independent from scan to scan")
+    print("| method | component | circles | E[z^2] | tau, whole track | 10 scans | 30 scans |")
+    print("|---|---|---|---|---|---|---|")
+    for m in METHODS:
+        rows = []
+        noise, bias = slam_cfg.noise_for(m), slam_cfg.range_bias_for(m)
+        for s in roots:
+            seq = simulate_cycab_run(np.random.default_rng(s), "tree_park", cyc)
+            truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+            lm = seq.truth_landmarks
+            for k in range(seq.n_scans):
+                f = extract_features(seq.scan(k), m, **ps.extractor_params(m, cyc))
+                if not f.n_circles:
+                    continue
+                lw = se2.compose(truth[k], seq.laser_pose)
+                z, R = measurements_from_features(f, noise, floor, bias)
+                for i, (a, b) in enumerate(f.circle_beams):
+                    lab = run_labels(seq.scan_labels[k], a, b)
+                    j, _, n_ret = dominant_label(lab, returns_only=True)
+                    if n_ret == 0 or j >= lm.shape[0]:
+                        continue
+                    d = lm[j, :2] - lw[:2]
+                    er = z[i, 0] - math.hypot(*d)
+                    eb = _wrap(z[i, 1] - (math.atan2(d[1], d[0]) - lw[2]))
+                    zr, zb = er / math.sqrt(R[i, 0, 0]), eb / math.sqrt(R[i, 1, 1])
+                    rows.append((s, j, k, zr, zb))
+        t = np.array(rows)
+        track = t[:, :2]
+        for c, name in ((3, "range"), (4, "bearing")):
+            taus = [_tau(t[:, c], track)] + [
+                _tau(t[:, c], np.column_stack([track, t[:, 2] // w])) for w in (10, 30)
+            ]
+            print(
+                f"| {m} | {name} | {t.shape[0]} | {np.mean(t[:, c] ** 2):.2f} | "
+                + " | ".join(f"{v:.2f}" for v in taus)
+                + " |"
+            )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="probe", required=True)
@@ -199,9 +377,22 @@ def main() -> None:
     p.add_argument("--runs", type=int, default=16)
     p.add_argument("--root", type=int, default=1001)
     sub.add_parser("by-beams")
+    p = sub.add_parser("occluded")
+    p.add_argument("--runs", type=int, default=16)
+    p.add_argument("--root", type=int, default=1000)
+    sub.add_parser("track-correlation")
+    p = sub.add_parser("scale")
+    p.add_argument("--runs", type=int, default=16)
+    p.add_argument("--root", type=int, default=1000)
     a = ap.parse_args()
     if a.probe == "shuffled":
         shuffled(a.runs, a.root)
+    elif a.probe == "scale":
+        scale(a.runs, a.root)
+    elif a.probe == "occluded":
+        occluded(a.runs, a.root)
+    elif a.probe == "track-correlation":
+        track_correlation()
     else:
         by_beams()
 
