@@ -61,19 +61,24 @@ DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
 }
 
 # Mean range error of each extractor's centres as a function of range, bias(r) = a + b r
-# (a in m, b in m per m of range), subtracted from its ranges: a least-squares line through the
-# range errors of the circles found on trunks in the calibration runs (noise-calibration, seeds
-# 1000-1003, never the experiment's). paper (-0.0106, 0.00067): Kasa's fit pulls the centre
-# toward the sensor, -7.5 mm below 6 m, none beyond 12 m (mean -4.3 mm; a constant correction
-# left +-4 mm by range, the line +-2 mm); bailey (-0.0088, 0.00045): its radius from the
-# angular width is too small (mean -3.7 mm); geometric: +1.0 mm, not corrected (below a tenth of
-# its spread). A bias that every tree shares is not noise: a filter that treats scans as
-# independent averages it into the pose with ever-growing confidence (NEES above its bounds).
-# Applied to every circle of that method (extracted, or a sequence's detections); the Victoria
-# Park preset sets them to 0 (the simulated sensor's biases say nothing of the real one).
+# (a in m, b in m per m of range), subtracted from its ranges: the line through the range errors
+# of the circles found on trunks in the calibration runs (noise-calibration, seeds 1000-1003,
+# never the experiment's) by maximum likelihood under the filter's own sigmas (least squares
+# weighted by 1 / sigma^2; `experiments.paper.calibration.range_bias_line`), rounded to 0.1 mm
+# and 0.01 mm per m. paper (-0.0107, 0.00067): Kasa's fit pulls the centre toward the sensor,
+# -7.5 mm below 6 m, none beyond 12 m (mean -4.3 mm, -0.25 of the filter's sigma); bailey
+# (-0.0095, 0.00051): its radius from the angular width is too small (mean -3.7 mm, -0.20
+# sigma); geometric (-0.0011, -0.00016): +1.0 mm on average, but -0.09 of the sigma the filter
+# gives each fit, the same in every beam count, so biased where the fit is precise (an
+# unweighted line, +0.26 mm per m, made its NEES worse). A bias that every tree shares is not
+# noise: a filter that treats scans as independent averages it into the pose with ever-growing
+# confidence (NEES above its bounds). Applied to every circle of that method (extracted, or a
+# sequence's detections); the Victoria Park preset sets them to 0 (the simulated sensor's
+# biases say nothing of the real one).
 DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
-    "paper": (-0.0106, 0.00067),
-    "bailey": (-0.0088, 0.00045),
+    "paper": (-0.0107, 0.00067),
+    "geometric": (-0.0011, -0.00016),
+    "bailey": (-0.0095, 0.00051),
 }
 
 # Floors (range m, bearing rad) added in quadrature to a fit's own covariance ("fit" noise):

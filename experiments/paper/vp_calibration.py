@@ -108,7 +108,7 @@ BASE = SlamConfig(
     # tree park; on the real ute they are unknown: none (as in the preset)
     fit_floor_range_m=0.0,
     fit_floor_bearing_rad=0.0,
-    range_bias={"paper": (0.0, 0.0), "bailey": (0.0, 0.0)},
+    range_bias={"paper": (0.0, 0.0), "geometric": (0.0, 0.0), "bailey": (0.0, 0.0)},
     # the scans of a ute standing still repeat the last one's errors: not used
     min_travel_m=0.001,
 )

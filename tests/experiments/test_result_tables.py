@@ -152,6 +152,28 @@ def test_noise_calibration_in_use_values_are_slams(quick_tables):
     assert in_use[:4] == list(DEFAULT_CONSTANT_NOISE["paper"])
 
 
+def test_range_biases_in_use_are_the_calibrations_lines(quick_tables):
+    """slam.measurement.DEFAULT_RANGE_BIAS holds the calibration's maximum-likelihood lines,
+    rounded to 0.1 mm and 0.01 mm per m, for every extractor."""
+    from slam.measurement import DEFAULT_RANGE_BIAS
+
+    rows = read_tidy_csv(quick_tables / "noise_calibration.csv")
+
+    def value(method, source, quantity):
+        (v,) = [
+            r["value"]
+            for r in rows
+            if (r["method"], r["source"], r["quantity"]) == (method, source, quantity)
+        ]
+        return v
+
+    assert set(DEFAULT_RANGE_BIAS) == {"paper", "geometric", "bailey"}
+    for m, (a, b) in DEFAULT_RANGE_BIAS.items():
+        assert value(m, "fitted", "range_bias_a") == pytest.approx(a, abs=0.5e-4)
+        assert value(m, "fitted", "range_bias_b") == pytest.approx(b, abs=0.5e-5)
+        assert (value(m, "in_use", "range_bias_a"), value(m, "in_use", "range_bias_b")) == (a, b)
+
+
 @pytest.fixture(scope="module")
 def quick_victoria_park(tmp_path_factory, vp_dir):
     """`trunkslam reproduce victoria-park --quick` on shorter data (the first 150 scans of the
