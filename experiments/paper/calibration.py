@@ -5,6 +5,9 @@ Cycab runs in the tree park on seeds 1000-1003, apart from experiment 2's, extra
 each method, and fits sigma_range = a + b r and sigma_bearing^2 = c^2 + (t / r)^2 to the centre
 errors of the circles found on trunks by maximum likelihood. Writes noise_calibration.md/.csv.
 The values in `slam.measurement.DEFAULT_CONSTANT_NOISE` are these fits rounded up to two digits.
+It also fits each extractor's mean range error a + b r by maximum likelihood under the sigmas
+the filter gives its circles (`range_bias_line`; `slam.measurement.DEFAULT_RANGE_BIAS`), and
+the floors of the geometric fit's covariance (`calibrate_fit_floor`, noise_calibration_floor).
 """
 
 from __future__ import annotations
@@ -245,7 +248,7 @@ def run(ctx) -> None:
             "covariance with its floors). 'fitted range bias': the line a + b r through the "
             "range errors by maximum likelihood under those sigmas (least squares weighted by "
             "1 / sigma^2, experiments/paper/calibration.py range_bias_line); 'in use': "
-            "slam.measurement.DEFAULT_RANGE_BIAS (the fits to two significant digits), "
+            "slam.measurement.DEFAULT_RANGE_BIAS (the fits rounded to 0.1 mm and 0.01 mm per m), "
             "subtracted from the ranges in slam.run."
         ),
     )
