@@ -65,8 +65,10 @@ DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
 # of the circles found on trunks in the calibration runs (noise-calibration, seeds 1000-1003,
 # never the experiment's) by maximum likelihood under the filter's own sigmas (least squares
 # weighted by 1 / sigma^2; `experiments.paper.calibration.range_bias_line`), rounded to 0.1 mm
-# and 0.01 mm per m. paper (-0.0107, 0.00067): Kasa's fit pulls the centre toward the sensor,
-# -7.5 mm below 6 m, none beyond 12 m (mean -4.3 mm, -0.25 of the filter's sigma); bailey
+# and 0.01 mm per m. paper (-0.0079, 0.00015): its Gauss-Newton fit pulls the centre toward the
+# sensor, -7.5 mm below 6 m, none beyond 12 m (mean -4.3 mm, -0.41 of the sigma of its own
+# covariance, which the filter uses for it; -10.7 mm + 0.67 mm per m under the constant model
+# it had before, `SlamConfig.measurement_noise = "constant"`); bailey
 # (-0.0095, 0.00051): its radius from the angular width is too small (mean -3.7 mm, -0.20
 # sigma); geometric (-0.0011, -0.00016): +1.0 mm on average, but -0.09 of the sigma the filter
 # gives each fit, the same in every beam count, so biased where the fit is precise (an
@@ -76,7 +78,7 @@ DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
 # sequence's detections); the Victoria Park preset sets them to 0 (the simulated sensor's
 # biases say nothing of the real one).
 DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
-    "paper": (-0.0107, 0.00067),
+    "paper": (-0.0079, 0.00015),
     "geometric": (-0.0011, -0.00016),
     "bailey": (-0.0095, 0.00051),
 }

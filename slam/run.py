@@ -56,7 +56,7 @@ from numba import njit
 
 from features.types import Features
 from slam import se2
-from slam.config import SlamConfig
+from slam.config import OWN_COVARIANCE, SlamConfig
 from slam.ekf import Filter, initial_state, landmark_columns
 from slam.errors import SlamError
 from slam.log import (
@@ -310,7 +310,8 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
         if feature_params and not isinstance(features, str):
             raise SlamError("feature_params: only for a features method name")
         raw, n_pre = _resolve_features(features, dict(feature_params or {}))
-        noise = cfg.noise_for(raw.method)
+        own = raw.method in OWN_COVARIANCE and getattr(raw, "has_cov", True)
+        noise = cfg.noise_for(raw.method, own)
         floor = (cfg.fit_floor_range_m, cfg.fit_floor_bearing_rad)
         feat_fn = _from_features(raw, noise, floor, cfg.range_bias_for(raw.method))
         if isinstance(features, str) and not seq.has_ranges:
@@ -1012,7 +1013,9 @@ def _detections_source(seq: Sequence, noise, cfg: SlamConfig) -> Callable:
 
 
 def _resolve_features(features, feature_params: dict) -> tuple[Callable, int | None]:
-    """(callable (k, scan) -> Features carrying `.method`, number of precomputed sets or None)."""
+    """(callable (k, scan) -> Features carrying `.method` (and, for precomputed sets,
+    `.has_cov`: whether any circle has a non-zero covariance), number of precomputed sets or
+    None)."""
     if isinstance(features, str):
         from features import extract_features
 
@@ -1047,6 +1050,9 @@ def _resolve_features(features, feature_params: dict) -> tuple[Callable, int | N
         return feats[k]
 
     given.method = feats[0].method if feats and hasattr(feats[0], "method") else "custom"
+    # circles whose covariance is zero throughout carry none of their own ("auto" noise then
+    # takes the constant model, not the fit floors alone)
+    given.has_cov = any(np.any(np.asarray(f.circle_cov)) for f in feats if f.n_circles)
     return given, len(feats)
 
 

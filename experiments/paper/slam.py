@@ -130,8 +130,14 @@ class Exp2Config:
 # constant noise model (same detections, ideal errors, no bias to correct); "": as extracted.
 NO_PAPER_BIAS = {"range_bias": {"paper": (0.0, 0.0)}}
 SENSITIVITY = (
-    ("paper detections, synthetic centres", "paper", NO_PAPER_BIAS, "synthetic"),
+    (  # the synthetic centres' noise is the constant model's, so the filter is told that one
+        "paper detections, synthetic centres",
+        "paper",
+        {**NO_PAPER_BIAS, "measurement_noise": "constant"},
+        "synthetic",
+    ),
     ("paper, without the range-bias correction", "paper", NO_PAPER_BIAS, ""),
+    ("paper, constant noise instead of the fit's", "paper", {"measurement_noise": "constant"}, ""),
     (
         "geometric, without the fit floors",
         "geometric",
