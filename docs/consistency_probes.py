@@ -107,16 +107,25 @@ def rebuilt(feats, rows, zr, zb) -> list:
     return out
 
 
+def _run_arrays(runs: int, n_scans: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(pose NEES, scan NIS, NIS dof), each (runs, n_scans): a study's arrays as
+    `experiments.eval.poses.consistency` takes them."""
+    nan = np.full((runs, n_scans), np.nan)
+    return nan, nan.copy(), np.zeros((runs, n_scans), int)
+
+
+def _record(out: tuple, r: int, lg, truth: np.ndarray) -> None:
+    """Run r's pose NEES (the scans after the first) and scan NIS into `out` (`_run_arrays`)."""
+    out[0][r, 1:] = nees(pose_errors(lg.pose, truth)[1:], lg.pose_cov[1:])
+    out[1][r], out[2][r] = lg.scan_nis, lg.scan_nis_dof
+
+
 def shuffled(runs: int, root: int) -> None:
     cfg = ps.Exp2Config(n_runs=runs, sensitivity=False, smoother=False)
     seeds = spawn_seeds(np.random.SeedSequence(root), runs)
     N = cfg.cycab.n_scans
     kinds = ("extracted", "own errors", "shuffled", "gaussian")
-    res = {
-        (m, v): (np.full((runs, N), np.nan), np.full((runs, N), np.nan), np.zeros((runs, N), int))
-        for m in METHODS
-        for v in kinds
-    }
+    res = {(m, v): _run_arrays(runs, N) for m in METHODS for v in kinds}
     for r in range(runs):
         rng = np.random.default_rng(seeds[r])
         prng = np.random.default_rng([root, r])
@@ -142,10 +151,7 @@ def shuffled(runs: int, root: int) -> None:
             }
             for v, (F, C) in variants.items():
                 lg = slam_run(seq, features=F, association="ihgr", config=C)
-                e = pose_errors(lg.pose, truth)
-                out = res[(m, v)]
-                out[0][r, 1:] = nees(e[1:], lg.pose_cov[1:])
-                out[1][r], out[2][r] = lg.scan_nis, lg.scan_nis_dof
+                _record(res[(m, v)], r, lg, truth)
     print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs})")
     print("| method | centres | NEES mean | in 95% bounds | above |")
     print("|---|---|---|---|---|")
@@ -217,10 +223,7 @@ def scale(runs: int, root: int, factors=(0.8, 1.0, 1.25, 1.5, 2.0)) -> None:
     seeds = spawn_seeds(np.random.SeedSequence(root), runs)
     N = cfg.cycab.n_scans
     base = cfg.slam.constant_noise["paper"]
-    res = {
-        s: (np.full((runs, N), np.nan), np.full((runs, N), np.nan), np.zeros((runs, N), int))
-        for s in factors
-    }
+    res = {s: _run_arrays(runs, N) for s in factors}
     for r in range(runs):
         seq = simulate_cycab_run(np.random.default_rng(seeds[r]), cfg.scene, cfg.cycab)
         truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
@@ -235,9 +238,7 @@ def scale(runs: int, root: int, factors=(0.8, 1.0, 1.25, 1.5, 2.0)) -> None:
                 range_bias={**cfg.slam.range_bias, "paper": CONSTANT_MODEL_PAPER_BIAS},
             )
             lg = slam_run(seq, features=fs, config=c)
-            out = res[s]
-            out[0][r, 1:] = nees(pose_errors(lg.pose, truth)[1:], lg.pose_cov[1:])
-            out[1][r], out[2][r] = lg.scan_nis, lg.scan_nis_dof
+            _record(res[s], r, lg, truth)
     print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs}); paper, constant noise")
     print("| sigmas x | NEES mean | in 95% bounds | below | above | NIS per dof |")
     print("|---|---|---|---|---|---|")
@@ -295,17 +296,7 @@ def occluded(runs: int, root: int) -> None:
             ]
             for v, F in (("all circles", fs), ("partly hidden dropped", kept)):
                 lg = slam_run(seq, features=F, association="ihgr", config=cfg.slam)
-                e = pose_errors(lg.pose, truth)
-                out = res.setdefault(
-                    (m, v),
-                    (
-                        np.full((runs, N), np.nan),
-                        np.full((runs, N), np.nan),
-                        np.zeros((runs, N), int),
-                    ),
-                )
-                out[0][r, 1:] = nees(e[1:], lg.pose_cov[1:])
-                out[1][r], out[2][r] = lg.scan_nis, lg.scan_nis_dof
+                _record(res.setdefault((m, v), _run_arrays(runs, N)), r, lg, truth)
     print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs})")
     print(
         "| method | circles on trunks | partly hidden | range z^2 (hidden / rest) | bearing z^2 |"

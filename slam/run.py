@@ -319,7 +319,8 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
                 f"features: {features!r} extracts from raw scans, and this sequence has none; "
                 "use features='detections'"
             )
-    _check_runnable(seq, n_pre, cfg)
+    steer = cfg.steering.apply(seq.odo_steer) if seq.odo_steer is not None else None
+    _check_runnable(seq, n_pre, cfg, steer)
     a0 = float(seq.scan_angle_min)
     window = cfg.window_scans if association == WINDOW else 0
     return _Setup(
@@ -328,7 +329,7 @@ def _setup(seq, features, association, config, feature_params) -> _Setup:
         features=feat_fn,
         associate=_resolve_association(association),
         model=AckermannModel.from_vehicle(seq.vehicle),
-        odometry=Odometry(seq.odo_t, seq.odo_speed, cfg.steering.apply(seq.odo_steer)),
+        odometry=Odometry(seq.odo_t, seq.odo_speed, steer),
         laser=np.asarray(seq.laser_pose if cfg.laser_pose is None else cfg.laser_pose, float),
         noise=noise,
         floor=(cfg.fit_floor_range_m, cfg.fit_floor_bearing_rad),
@@ -789,8 +790,9 @@ def _sub_problem(H5, cand, P_lm, cov_t):
     return H, P_sub
 
 
-def _check_runnable(seq: Sequence, n_features: int | None, cfg: SlamConfig) -> None:
-    """What a run needs beyond a valid Sequence: odometry, a vehicle, no long odometry gaps."""
+def _check_runnable(seq: Sequence, n_features: int | None, cfg: SlamConfig, steer) -> None:
+    """What a run needs beyond a valid Sequence: odometry, a vehicle, no long odometry gaps.
+    steer: the steering readings through `cfg.steering` (None without odometry)."""
     if seq.odo_t is None:
         raise SlamError(
             "sequence: missing odometry (odo_t, odo_speed, odo_steer); EKF-SLAM needs it"
@@ -799,7 +801,6 @@ def _check_runnable(seq: Sequence, n_features: int | None, cfg: SlamConfig) -> N
         raise SlamError("sequence.vehicle: missing vehicle model (needed to use the odometry)")
     scan_t, odo_t = seq.scan_t, seq.odo_t
     veh = seq.vehicle
-    steer = cfg.steering.apply(seq.odo_steer)
     if not cfg.steering.is_identity and np.any(np.abs(steer) > MAX_STEER_RAD):
         i = int(np.argmax(np.abs(steer)))
         raise SlamError(

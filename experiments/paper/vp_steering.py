@@ -121,13 +121,15 @@ def fit_steering(seq, fit_scans: int, evaluations: int = EVALUATIONS) -> Steerin
         options={"initial_simplex": simplex, "maxfev": evaluations, "xatol": 1e-5, "fatol": 1e-4},
     )
     best, ident = cal(res.x), SteeringCalibration()
+    fit_after, n_fit = dead_reckoning_mse(seq, best, fit)
+    held_after, n_held = dead_reckoning_mse(seq, best, held) if held else (math.nan, 0)
     return SteeringFit(
         steering=best,
-        fit_stretches=dead_reckoning_mse(seq, best, fit)[1],
-        held_out_stretches=dead_reckoning_mse(seq, best, held)[1] if held else 0,
+        fit_stretches=n_fit,
+        held_out_stretches=n_held,
         fit_mse_before=dead_reckoning_mse(seq, ident, fit)[0],
-        fit_mse_after=float(res.fun),
+        fit_mse_after=fit_after,
         held_out_mse_before=dead_reckoning_mse(seq, ident, held)[0] if held else math.nan,
-        held_out_mse_after=dead_reckoning_mse(seq, best, held)[0] if held else math.nan,
+        held_out_mse_after=held_after,
         evaluations=int(res.nfev),
     )
