@@ -7,6 +7,7 @@ misses its bounds. A script, not part of the package; it runs on calibration see
     .venv/bin/python docs/consistency_probes.py occluded --runs 16 --root 1000
     .venv/bin/python docs/consistency_probes.py track-correlation
     .venv/bin/python docs/consistency_probes.py scale --runs 16 --root 1000
+    .venv/bin/python docs/consistency_probes.py across-runs
 
 shuffled: for every extractor, the EKF run four ways on the same drives: its own extracted
     circles ("extracted"); the trunks it found, each centre rebuilt as the truth plus its own
@@ -29,6 +30,9 @@ track-correlation: the errors of one trunk along a run, normalised by the filter
     of (sum of z)^2 over sum of z^2, 1 when a trunk's errors are independent from scan to scan
     (the factor by which the filter overrates what a track tells it); for whole tracks and for
     10- and 30-scan windows, on seeds 1000-1019 (160 tracks).
+across-runs: how much of an extractor's error repeats between runs: the correlation of the
+    normalised errors of one trunk at the same scan of two runs (every pair of seeds 1000-1003),
+    when every run drives one path and when the path varies (`MONTE_CARLO_PATH`).
 """
 
 from __future__ import annotations
@@ -45,7 +49,7 @@ import experiments.paper.slam as ps
 from experiments.eval.detections import dominant_label, false_detections, run_labels
 from experiments.eval.poses import consistency, nees, pose_errors
 from experiments.exec.trials import spawn_seeds
-from experiments.sim.trajectory import CycabParams, simulate_cycab_run
+from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import run as slam_run
 from slam import se2
@@ -167,7 +171,7 @@ def _nll(q, e, X) -> float:
 
 
 def by_beams(roots=(1000, 1001, 1002, 1003)) -> None:
-    cyc = CycabParams()
+    cyc = CycabParams(**MONTE_CARLO_PATH)
     cfg = ps.Exp2Config()
     for m in METHODS:
         rows = []
@@ -330,7 +334,7 @@ def _tau(z: np.ndarray, groups: np.ndarray) -> float:
 def track_correlation(roots=tuple(range(1000, 1020))) -> None:
     from slam.measurement import measurements_from_features
 
-    cyc = CycabParams()
+    cyc = CycabParams(**MONTE_CARLO_PATH)
     slam_cfg = ps.Exp2Config().slam
     floor = (slam_cfg.fit_floor_range_m, slam_cfg.fit_floor_bearing_rad)
     print(f"seeds {list(roots)}; tau: 1 when a trunk's errors are independent from scan to scan")
@@ -372,6 +376,46 @@ def track_correlation(roots=tuple(range(1000, 1020))) -> None:
             )
 
 
+def across_runs(roots=(1000, 1001, 1002, 1003)) -> None:
+    cfg = ps.Exp2Config()
+    print(f"seeds {list(roots)}: correlation of one trunk's normalised errors at the same scan")
+    print("| method | paths | pairs | range | bearing |")
+    print("|---|---|---|---|---|")
+    for m in METHODS:
+        model = cfg.slam.noise_for(m, has_cov=False)[1]
+        for label, cyc in (
+            ("one path", CycabParams()),
+            ("varied", CycabParams(**MONTE_CARLO_PATH)),
+        ):
+            err = {}
+            for s in roots:
+                seq = simulate_cycab_run(np.random.default_rng(s), "tree_park", cyc)
+                truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+                laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
+                params = ps.extractor_params(m, cyc)
+                fs = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
+                t = trunk_errors(seq, fs, laser_w, model, DEFAULT_RANGE_BIAS.get(m, (0.0, 0.0)))
+                # the trunk: the landmark nearest the true centre
+                lw = laser_w[t[:, 0].astype(int)]
+                ang = lw[:, 2] + t[:, 3]
+                c = lw[:, :2] + t[:, 2:3] * np.column_stack([np.cos(ang), np.sin(ang)])
+                lm = seq.truth_landmarks[:, :2]
+                j = np.argmin(np.hypot(*(c[:, None] - lm[None]).transpose(2, 0, 1)), axis=1)
+                err[s] = {
+                    (int(k), int(jj)): (zr, zb)
+                    for k, jj, zr, zb in zip(t[:, 0], j, t[:, 4], t[:, 5])
+                }
+            pairs = [
+                (err[a][key], err[b][key])
+                for i, a in enumerate(roots)
+                for b in roots[i + 1 :]
+                for key in err[a].keys() & err[b].keys()
+            ]
+            x = np.array(pairs)  # (n, 2 runs, 2 components)
+            rho = [float(np.corrcoef(x[:, 0, c], x[:, 1, c])[0, 1]) for c in (0, 1)]
+            print(f"| {m} | {label} | {len(pairs)} | {rho[0]:.2f} | {rho[1]:.2f} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="probe", required=True)
@@ -383,6 +427,7 @@ def main() -> None:
     p.add_argument("--runs", type=int, default=16)
     p.add_argument("--root", type=int, default=1000)
     sub.add_parser("track-correlation")
+    sub.add_parser("across-runs")
     p = sub.add_parser("scale")
     p.add_argument("--runs", type=int, default=16)
     p.add_argument("--root", type=int, default=1000)
@@ -395,6 +440,8 @@ def main() -> None:
         occluded(a.runs, a.root)
     elif a.probe == "track-correlation":
         track_correlation()
+    elif a.probe == "across-runs":
+        across_runs()
     else:
         by_beams()
 

@@ -54,9 +54,9 @@ class NoiseModel(NamedTuple):
 # "other" (any other source of circles): the Zaragoza SLAM-school model of the Victoria Park
 # detections, 0.05 m + 1% of the range and 0.5 deg (BAILEY_DETECTOR.md section 4).
 DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
-    "paper": NoiseModel(0.011, 0.001, 0.00022, 0.0067),
-    "geometric": NoiseModel(0.007, 0.0014, 0.00031, 0.0061),
-    "bailey": NoiseModel(0.0092, 0.0015, 0.0019, 0.0028),
+    "paper": NoiseModel(0.013, 0.00085, 0.0, 0.0081),
+    "geometric": NoiseModel(0.0082, 0.0014, 0.0, 0.0078),
+    "bailey": NoiseModel(0.0098, 0.0014, 0.0019, 0.0022),
     "other": NoiseModel(0.05, 0.01, math.radians(0.5), 0.0),
 }
 
@@ -78,9 +78,9 @@ DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
 # sequence's detections); the Victoria Park preset sets them to 0 (the simulated sensor's
 # biases say nothing of the real one).
 DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
-    "paper": (-0.0079, 0.00015),
-    "geometric": (-0.0011, -0.00016),
-    "bailey": (-0.0095, 0.00051),
+    "paper": (-0.0076, 0.0001),
+    "geometric": (-0.0008, -0.00021),
+    "bailey": (-0.0097, 0.00062),
 }
 
 # Floors (range m, bearing rad) added in quadrature to a fit's own covariance ("fit" noise):
@@ -90,7 +90,7 @@ DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
 # returns at the trunk's edges are neither, and the most precise fits (many beams, close
 # trees: the ones that steer the filter) were the most over-confident (errors 1.3-1.5 times
 # their stated variance; 0.92-1.0 with the floors).
-DEFAULT_FIT_FLOOR: tuple[float, float] = (0.0067, 0.000079)
+DEFAULT_FIT_FLOOR: tuple[float, float] = (0.0063, 0.000093)
 
 
 def measurements_from_features(

@@ -37,7 +37,7 @@ from experiments.eval.detections import dominant_label, run_labels
 from experiments.eval.mapping import duplicates_and_missed, false_pairings
 from experiments.eval.poses import pose_errors
 from experiments.paper.slam import extractor_params
-from experiments.sim.trajectory import CycabParams, simulate_cycab_run
+from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import SlamConfig, interpolate_poses, se2
 from slam import run as slam_run
@@ -141,7 +141,9 @@ def tree_park_trial(job: tuple, seed: int) -> dict:
     """One simulated tree-park run (`job` = (odometry noise scale, scans or None, methods)) with
     every method on it: method label -> its figures. A pure function of (job, seed)."""
     scale, n_scans, methods = job
-    base_cyc = CycabParams() if n_scans is None else CycabParams(n_scans=n_scans)
+    base_cyc = CycabParams(**MONTE_CARLO_PATH)
+    if n_scans is not None:
+        base_cyc = replace(base_cyc, n_scans=n_scans)
     cyc = replace(
         base_cyc,
         speed_sigma_mps=base_cyc.speed_sigma_mps * scale,

@@ -20,7 +20,7 @@ from experiments.eval.detections import dominant_label, run_labels
 from experiments.exec import SerialExecutor
 from experiments.io.writers import write_tidy_table
 from experiments.paper.slam import METHODS, extractor_params
-from experiments.sim.trajectory import CycabParams, simulate_cycab_run
+from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import DEFAULT_CONSTANT_NOISE, SlamConfig, interpolate_poses, se2, wrap_angle
 from slam.measurement import DEFAULT_FIT_FLOOR, measurements_from_features
@@ -93,7 +93,7 @@ def calibrate_measurement_noise(
     Each seed's run is a trial (`calibration_trial`) on `executor`."""
     import numpy as np
 
-    cycab = cycab or CycabParams()
+    cycab = cycab or CycabParams(**MONTE_CARLO_PATH)
     got = (executor or SerialExecutor()).map(
         calibration_trial,
         [(cycab, scene)] * len(seeds),
@@ -144,7 +144,7 @@ def calibrate_fit_floor(
     """Maximum-likelihood floors (f_r m, f_b rad) of R = R_fit + diag(f_r^2, f_b^2) for the
     centres of `method`'s circles on trunks (as `calibrate_measurement_noise` finds them), with
     the mean NIS per degree of freedom of the errors under R_fit alone and with the floors."""
-    cycab = cycab or CycabParams()
+    cycab = cycab or CycabParams(**MONTE_CARLO_PATH)
     noise = ("fit", None)
     rows = []
     for seed in seeds:

@@ -57,7 +57,7 @@ from experiments.io.writers import dumps_json, json_types, write_atomic, write_t
 from experiments.paper import products
 from experiments.paper.products import FigureSpec
 from experiments.sim import sensor_preset
-from experiments.sim.trajectory import CycabParams, simulate_cycab_run
+from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import SlamConfig, interpolate_poses, se2
 from slam import run as slam_run
@@ -96,7 +96,9 @@ class Exp2Config:
     """Everything experiment 2 depends on.
 
     n_runs: Monte Carlo runs (50, the usual count for NEES; METHOD_NOTES section 5).
-    cycab: the simulated car, sensors and drive. association: "ihgr" (the paper's), "jcbb", "nn".
+    cycab: the simulated car, sensors and drive; by default each run's true path varies
+        (`experiments.sim.trajectory.MONTE_CARLO_PATH`), so that the runs are independent.
+        association: "ihgr" (the paper's), "jcbb", "nn".
     slam: the filter's configuration (measurement noise per method, map policy, ...).
     false_match_m: a circle on a trunk's beams farther than this from its centre is false.
     sensitivity: also run the consistency variants listed in `SENSITIVITY`, on the first
@@ -109,7 +111,7 @@ class Exp2Config:
     n_runs: int = 50
     methods: tuple[str, ...] = METHODS
     scene: str = "tree_park"
-    cycab: CycabParams = field(default_factory=CycabParams)
+    cycab: CycabParams = field(default_factory=lambda: CycabParams(**MONTE_CARLO_PATH))
     association: str = "ihgr"
     slam: SlamConfig = field(default_factory=SlamConfig)
     false_match_m: float = 0.5
@@ -120,7 +122,7 @@ class Exp2Config:
     @classmethod
     def quick(cls) -> Exp2Config:
         """The small version (tests, golden numbers): 4 runs of 170 scans, no variants."""
-        return cls(n_runs=4, cycab=CycabParams(n_scans=170), sensitivity=False)
+        return cls(n_runs=4, cycab=CycabParams(n_scans=170, **MONTE_CARLO_PATH), sensitivity=False)
 
 
 # Consistency variants: (name, method, SlamConfig overrides, kind). They explain the NEES figures:

@@ -39,7 +39,25 @@ from experiments.sim.simulate import laser_world_pose, sensor_preset, simulate_s
 from slam import Sequence
 from slam.vehicle import arc_step
 
-__all__ = ["CycabParams", "Drive", "drive", "route_polyline", "simulate_cycab_run"]
+__all__ = [
+    "MONTE_CARLO_PATH",
+    "CycabParams",
+    "Drive",
+    "drive",
+    "offset_route",
+    "route_polyline",
+    "simulate_cycab_run",
+]
+
+# How the true path varies between the runs of a Monte Carlo study (`CycabParams` fields). The
+# extractors' errors are largely fixed by the geometry (which beams hit a trunk: Bailey's bearing
+# is the mid-point of the first and last beam, identical in every run that passes the same
+# place), so runs along one path share them and are not independent samples. The variation makes
+# each trunk's place on the beam grid differ between runs: a sideways shift whose sd is one beam
+# spacing (0.5 deg) at the 95th percentile of the trunk ranges in the calibration runs (22.4 m,
+# Bailey's circles on seeds 1000-1003: 0.195 m, rounded to 0.2 m), and a start uniform over one
+# scan spacing along the route (1.2 m/s at 5 Hz: 0.24 m), so no scan position is favoured.
+MONTE_CARLO_PATH = {"route_offset_sigma_m": 0.2, "start_along_m": 0.24}
 
 
 @dataclass(frozen=True)
@@ -56,6 +74,12 @@ class CycabParams:
     dgps_rate_hz, dgps_offset_s, dgps_sigma_m: the DGPS reference (2 cm, the paper's figure).
     sensor: preset name; range_sigma_m, mixed_prob: its noise and mixed-return probability;
         quantisation_m: its range quantisation (None: the preset's, 1 cm for the LMS200).
+    route_offset_sigma_m, start_along_m: how the true path varies between runs (0, 0: every run
+        drives the same path). Each run's driver follows the route shifted sideways by an offset
+        drawn from N(0, route_offset_sigma_m^2), from a start moved along it by a distance drawn
+        uniformly from [0, start_along_m). A Monte Carlo study needs this: an extractor's error
+        is largely fixed by the geometry (which beams hit the trunk), so runs that drive one
+        path repeat the same errors and are not independent (see `experiments.paper.slam`).
     """
 
     wheelbase_m: float = 1.2
@@ -78,6 +102,8 @@ class CycabParams:
     range_sigma_m: float = 0.01
     mixed_prob: float = 0.1
     quantisation_m: float | None = None
+    route_offset_sigma_m: float = 0.0
+    start_along_m: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -99,6 +125,8 @@ class CycabParams:
             "dgps_offset_s",
             "range_sigma_m",
             "mixed_prob",
+            "route_offset_sigma_m",
+            "start_along_m",
         ):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"CycabParams.{name}: must be >= 0, got {getattr(self, name)!r}")
@@ -154,22 +182,43 @@ def route_polyline(waypoints: np.ndarray, spacing_m: float = 0.1) -> np.ndarray:
     return np.vstack(out)
 
 
-def drive(scene: Scene, p: CycabParams, n_samples: int) -> Drive:
-    """Pure pursuit around the scene's route from its first waypoint, n_samples odometry samples."""
+def offset_route(route: np.ndarray, offset_m: float) -> np.ndarray:
+    """The closed polyline (K, 2) shifted by offset_m along its left normals (each point's normal
+    from the chord between its neighbours)."""
+    if offset_m == 0.0:
+        return route
+    chord = np.roll(route, -1, axis=0) - np.roll(route, 1, axis=0)
+    normal = np.column_stack([-chord[:, 1], chord[:, 0]]) / np.hypot(*chord.T)[:, None]
+    return route + offset_m * normal
+
+
+def drive(
+    scene: Scene, p: CycabParams, n_samples: int, offset_m: float = 0.0, start_along_m: float = 0.0
+) -> Drive:
+    """Pure pursuit around the scene's route, n_samples odometry samples. offset_m: the route is
+    shifted that far to its left (negative: right); start_along_m: the drive starts that far
+    along the (shifted) route, heading along it. Both 0: from the first waypoint's pose."""
     if scene.scan_positions.shape[0] < 2:
         raise ConfigError(f"drive.scene: scene {scene.name!r} has no route (scan_positions)")
-    route = route_polyline(scene.scan_positions)
+    route = offset_route(route_polyline(scene.scan_positions), offset_m)
     K = route.shape[0]
     step = np.hypot(*np.diff(np.vstack([route, route[:1]]), axis=0).T)
     ahead = max(round(p.lookahead_m / float(np.mean(step))), 1)
     dt = 1.0 / p.odo_rate_hz
     L = p.wheelbase_m
     pose = np.array(scene.scan_positions[0], dtype=np.float64)
+    near = 0
+    if offset_m != 0.0 or start_along_m != 0.0:
+        s = np.concatenate([[0.0], np.cumsum(step)])
+        j = min(int(np.searchsorted(s, start_along_m % s[-1], side="right")) - 1, K - 1)
+        a, b = route[j], route[(j + 1) % K]
+        u = (start_along_m % s[-1] - s[j]) / step[j]
+        pose = np.array([*(a + u * (b - a)), math.atan2(b[1] - a[1], b[0] - a[0])])
+        near = j
     poses = np.empty((n_samples, 3))
     v_enc = np.empty(n_samples)
     steer = np.empty(n_samples)
     alpha = 0.0
-    near = 0
     for i in range(n_samples):
         poses[i] = pose
         t = i * dt
@@ -215,7 +264,12 @@ def simulate_cycab_run(
     sc = scene if isinstance(scene, Scene) else load_scene(scene)
     rng_odo, rng_scan, rng_gps = rng.spawn(3)
     n_samples = (p.n_scans - 1) * p.scan_every + 1
-    d = drive(sc, p, n_samples)
+    offset = along = 0.0
+    if p.route_offset_sigma_m > 0 or p.start_along_m > 0:
+        rng_path = rng.spawn(1)[0]  # a fourth stream: the first three are as without it
+        offset = p.route_offset_sigma_m * float(rng_path.standard_normal())
+        along = p.start_along_m * float(rng_path.random())
+    d = drive(sc, p, n_samples, offset, along)
     # odometry readings
     speed = d.speed_enc_mps + p.speed_sigma_mps * rng_odo.standard_normal(n_samples)
     steer = d.steer_rad + p.steer_sigma_rad * rng_odo.standard_normal(n_samples)

@@ -23,7 +23,7 @@ from slam import (
 )
 from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT
 from slam.mapping import Tentatives
-from slam.measurement import DEFAULT_FIT_FLOOR
+from slam.measurement import DEFAULT_CONSTANT_NOISE, DEFAULT_FIT_FLOOR
 from slam.vehicle import AckermannModel, Odometry, integrate
 
 CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
@@ -466,7 +466,8 @@ def test_detections_noise_model_and_errors():
     np.testing.assert_allclose(run(with_cov, features="detections", config=no_floor).meas_R, cov)
     lg = run(with_cov, features="detections", config=SlamConfig(measurement_noise="constant"))
     z = lg.meas_z
-    expected = 0.0092 + 0.0015 * z[:, 0]  # the bailey constant model
+    s_r, s_rm = DEFAULT_CONSTANT_NOISE["bailey"][:2]  # the bailey constant model
+    expected = s_r + s_rm * z[:, 0]
     np.testing.assert_allclose(np.sqrt(lg.meas_R[:, 0, 0]), expected)
     with pytest.raises(SlamError, match="'fit' needs det_cov"):
         run(det, features="detections", config=SlamConfig(measurement_noise="fit"))
