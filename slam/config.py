@@ -33,9 +33,9 @@ GPS_START_TRACKS = ("dead-reckoning", "slam")  # SlamConfig.gps_start_track
 # measurement_noise "auto": the first-order covariance of an orthogonal-distance fit at the
 # reported circle (`features.fitting.circle_covariance`). Exact for `geometric`; for the paper's
 # Gauss-Newton on eq. (6) the calibration circles' normalised errors under it (floors added,
-# range bias removed) have mean squares 0.90 in range and 1.00 in bearing, against 1.44 to 0.24
-# across beam counts under the constant model (`noise-calibration`). Bailey's diameter-based
-# covariance is not a fit's: constant noise.
+# range bias removed) have mean squares 0.94 in range and 1.02 in bearing, against 1.79 to 0.33
+# in range across beam counts under the constant model (`noise-calibration`, `by-beams` in
+# docs/consistency_probes.py). Bailey's diameter-based covariance is not a fit's: constant noise.
 OWN_COVARIANCE = ("geometric", "paper")
 
 

@@ -45,12 +45,13 @@ class NoiseModel(NamedTuple):
 # Values: maximum-likelihood fits of this model to the range and bearing errors of the centres
 # of the circles found on trunks in the simulated tree park (LMS200, 1 cm range noise, 1 cm
 # quantisation; `trunkslam reproduce noise-calibration`, seeds 1000-1003, apart from the
-# experiment's), rounded up to two digits. Fitted (a, b, c, t): paper (0.0107, 0.00095,
-# 0.00021, 0.0066), geometric (0.0069, 0.0013, 0.00030, 0.0060), bailey (0.0091, 0.0015,
-# 0.0018, 0.0028). The fitted extractors' centres are off by under 1 cm across the beam (the
-# bearing error falls as 1/range); the Bailey detector's bearing is quantised by the beams
-# (about 0.1 deg whatever the range). The paper's fit also has a mean range error of -4 mm
-# (Kasa's bias toward the sensor), which a zero-mean model cannot represent.
+# experiment's, each run's path varied as in experiment 2), rounded up to two digits. Fitted
+# (a, b, c, t): paper (0.0120, 0.00085, 0, 0.0081), geometric (0.0081, 0.0013, 0, 0.0078),
+# bailey (0.0098, 0.0014, 0.0019, 0.0022). The fitted extractors' centres are off by under 1 cm
+# across the beam (the bearing error falls as 1/range: c fits to 0); the Bailey detector's
+# bearing is quantised by the beams (about 0.1 deg whatever the range). The paper's fit also has
+# a mean range error of -4.6 mm (Kasa's bias toward the sensor), which a zero-mean model cannot
+# represent (`DEFAULT_RANGE_BIAS`).
 # "other" (any other source of circles): the Zaragoza SLAM-school model of the Victoria Park
 # detections, 0.05 m + 1% of the range and 0.5 deg (BAILEY_DETECTOR.md section 4).
 DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
@@ -65,18 +66,15 @@ DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
 # of the circles found on trunks in the calibration runs (noise-calibration, seeds 1000-1003,
 # never the experiment's) by maximum likelihood under the filter's own sigmas (least squares
 # weighted by 1 / sigma^2; `experiments.paper.calibration.range_bias_line`), rounded to 0.1 mm
-# and 0.01 mm per m. paper (-0.0079, 0.00015): its Gauss-Newton fit pulls the centre toward the
-# sensor, -7.5 mm below 6 m, none beyond 12 m (mean -4.3 mm, -0.41 of the sigma of its own
-# covariance, which the filter uses for it; -10.7 mm + 0.67 mm per m under the constant model
-# it had before, `SlamConfig.measurement_noise = "constant"`); bailey
-# (-0.0095, 0.00051): its radius from the angular width is too small (mean -3.7 mm, -0.20
-# sigma); geometric (-0.0011, -0.00016): +1.0 mm on average, but -0.09 of the sigma the filter
-# gives each fit, the same in every beam count, so biased where the fit is precise (an
-# unweighted line, +0.26 mm per m, made its NEES worse). A bias that every tree shares is not
-# noise: a filter that treats scans as independent averages it into the pose with ever-growing
-# confidence (NEES above its bounds). Applied to every circle of that method (extracted, or a
-# sequence's detections); the Victoria Park preset sets them to 0 (the simulated sensor's
-# biases say nothing of the real one).
+# and 0.01 mm per m. paper (-0.0076, 0.00010): its Gauss-Newton fit pulls the centre toward the
+# sensor (mean -4.6 mm, -0.42 of the sigma of its own covariance, which the filter uses for it);
+# bailey (-0.0097, 0.00062): its radius from the angular width is too small (mean -2.7 mm, -0.16
+# sigma); geometric (-0.0008, -0.00021): +0.9 mm on average, but -0.10 of the sigma the filter
+# gives each fit, so biased where the fit is precise (an unweighted line made its NEES worse).
+# A bias that every tree shares is not noise: a filter that treats scans as independent averages
+# it into the pose with ever-growing confidence (NEES above its bounds). Applied to every circle
+# of that method (extracted, or a sequence's detections); the Victoria Park preset sets them to 0
+# (the simulated sensor's biases say nothing of the real one).
 DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
     "paper": (-0.0076, 0.0001),
     "geometric": (-0.0008, -0.00021),
@@ -85,11 +83,12 @@ DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
 
 # Floors (range m, bearing rad) added in quadrature to a fit's own covariance ("fit" noise):
 # maximum-likelihood fit of R_fit + diag(f_r^2, f_b^2) to the `geometric` centres' errors in the
-# calibration runs (seeds 1000-1003): 6.6 mm and 0.078 mrad (rounded up to 2 digits). The fit's
+# calibration runs (seeds 1000-1003): 6.29 mm and 0.092 mrad (rounded up to 2 digits). The fit's
 # covariance assumes independent Gaussian range noise; the 1 cm quantisation and the mixed
 # returns at the trunk's edges are neither, and the most precise fits (many beams, close
-# trees: the ones that steer the filter) were the most over-confident (errors 1.3-1.5 times
-# their stated variance; 0.92-1.0 with the floors).
+# trees: the ones that steer the filter) were the most over-confident (range sigma under 10 mm:
+# errors 1.37-1.54 times their stated variance). NIS per dof of the calibration circles: 1.17
+# under the fit's covariance, 0.93 with the floors.
 DEFAULT_FIT_FLOOR: tuple[float, float] = (0.0063, 0.000093)
 
 

@@ -1,7 +1,9 @@
 """Calibration of the constant measurement-noise model (`slam.DEFAULT_CONSTANT_NOISE`).
 
 `trunkslam reproduce noise-calibration` simulates four
-Cycab runs in the tree park on seeds 1000-1003, apart from experiment 2's, extracts circles with
+Cycab runs in the tree park on seeds 1000-1003, apart from experiment 2's, each on a path varied
+as in experiment 2 (`experiments.sim.trajectory.MONTE_CARLO_PATH`: runs along one path would be
+four copies of one geometry, and the extractors' errors are fixed by it), extracts circles with
 each method, and fits sigma_range = a + b r and sigma_bearing^2 = c^2 + (t / r)^2 to the centre
 errors of the circles found on trunks by maximum likelihood. Writes noise_calibration.md/.csv.
 The values in `slam.measurement.DEFAULT_CONSTANT_NOISE` are these fits rounded up to two digits.
@@ -239,8 +241,9 @@ def run(ctx) -> None:
         labels=labels,
         title="Constant measurement-noise model: maximum-likelihood fits (tree park)",
         notes=(
-            f"Seeds {list(SEEDS)}, 240 scans each, circles whose beams with a return mostly hit "
-            "one trunk. sigma_range = a + b r, sigma_bearing^2 = c^2 + (t / r)^2. 'in use' is "
+            f"Seeds {list(SEEDS)}, 240 scans each on paths varied as in experiment 2, circles "
+            "whose beams with a return mostly hit one trunk. sigma_range = a + b r, "
+            "sigma_bearing^2 = c^2 + (t / r)^2. 'in use' is "
             "slam.DEFAULT_CONSTANT_NOISE (the fits rounded up to two digits). A normalised "
             "variance of 1 means the fitted model matches the errors. 'range mean / filter "
             "sigma': the mean range error in units of the sigma the filter gives each circle "

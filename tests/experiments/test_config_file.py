@@ -94,7 +94,11 @@ def test_unreadable_files_are_data_errors(tmp_path):
 
 def test_presets():
     assert {p.stem for p in PRESETS_DIR.glob("*.toml")} >= {"cycab", "victoria_park_ute"}
-    assert load_slam_config("cycab") == SlamConfig()
+    from experiments.paper.slam import CYCAB_SLAM, Exp2Config
+
+    assert load_slam_config("cycab") == CYCAB_SLAM == Exp2Config().slam
+    # the defaults but the odometry model's pose floor, which the simulated car does not have
+    assert dataclasses.replace(CYCAB_SLAM, odometry_noise=OdometryNoise()) == SlamConfig()
     vp = load_slam_config("victoria_park_ute")
     assert vp.first_estimates_jacobians and vp.laser_pose[:2] == (3.78, 0.5)
     assert 0.1 < vp.odometry_noise.speed_sigma_mps < 2.0
