@@ -151,3 +151,18 @@ def test_path_variation_draws_its_own_stream_and_leaves_the_noise_as_it_was():
 def test_negative_path_variation_is_refused_by_name(name):
     with pytest.raises(ConfigError, match=name):
         CycabParams(**{name: -0.1})
+
+
+def test_experiment_2s_filter_is_told_the_simulated_odometry_noise_and_no_slip():
+    from experiments.paper.slam import CYCAB_SLAM, Exp2Config
+
+    sim, model = Exp2Config().cycab, Exp2Config().slam.odometry_noise
+    assert Exp2Config().slam == CYCAB_SLAM
+    assert (model.speed_sigma_mps, model.steer_sigma_rad) == (
+        sim.speed_sigma_mps,
+        sim.steer_sigma_rad,
+    )
+    assert model.floor_xy_m_per_sqrt_s == model.floor_theta_rad_per_sqrt_s == 0.0
+    assert model.speed_sigma_per_speed == model.steer_sigma_per_lateral_mps2 == 0.0
+    varied = (MONTE_CARLO_PATH["route_offset_sigma_m"], MONTE_CARLO_PATH["start_along_m"])
+    assert (sim.route_offset_sigma_m, sim.start_along_m) == varied
