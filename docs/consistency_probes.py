@@ -63,8 +63,9 @@ def _wrap(a: float) -> float:
 
 
 def trunk_errors(seq, feats, laser_w, model, bias) -> np.ndarray:
-    """(n, 9) rows (scan, circle, true range, true bearing, normalised range error, normalised
-    bearing error, radius, range sigma, bearing sigma) of the circles on trunks."""
+    """(n, 10) rows (scan, circle, true range, true bearing, normalised range error, normalised
+    bearing error, radius, range sigma, bearing sigma, trunk's landmark index) of the circles on
+    trunks."""
     s_r, s_rm, s_b, s_t = model
     a0, b0 = bias
     lm = seq.truth_landmarks
@@ -84,15 +85,27 @@ def trunk_errors(seq, feats, laser_w, model, bias) -> np.ndarray:
             r -= a0 + b0 * r
             sr, sb = s_r + s_rm * tr, math.sqrt(s_b**2 + (s_t / tr) ** 2)
             eb = _wrap(math.atan2(p[1], p[0]) - tb)
-            rows.append((k, i, tr, tb, (r - tr) / sr, eb / sb, p[2], sr, sb))
-    return np.array(rows).reshape(-1, 9)
+            rows.append((k, i, tr, tb, (r - tr) / sr, eb / sb, p[2], sr, sb, j))
+    return np.array(rows).reshape(-1, 10)
+
+
+def seeded_trunk_errors(seed: int, cyc: CycabParams, method: str, model) -> tuple[list, np.ndarray]:
+    """One tree-park run on `seed`: its features by `method` and their `trunk_errors` rows
+    (`model`'s sigmas, the method's default range bias removed)."""
+    seq = simulate_cycab_run(np.random.default_rng(seed), "tree_park", cyc)
+    truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
+    params = ps.extractor_params(method, cyc)
+    fs = [extract_features(seq.scan(k), method, **params) for k in range(seq.n_scans)]
+    bias = DEFAULT_RANGE_BIAS.get(method, (0.0, 0.0))
+    return fs, trunk_errors(seq, fs, laser_w, model, bias)
 
 
 def rebuilt(feats, rows, zr, zb) -> list:
     """The features with only the trunk circles, each centre at truth + (zr, zb) sigmas."""
     by_scan: dict[int, list] = {}
     for row, a, b in zip(rows, zr, zb):
-        k, _, tr, tb, _, _, rad, sr, sb = row
+        k, _, tr, tb, _, _, rad, sr, sb, _ = row
         r2, b2 = tr + a * sr, tb + b * sb
         by_scan.setdefault(int(k), []).append([r2 * math.cos(b2), r2 * math.sin(b2), rad])
     out = []
@@ -177,17 +190,12 @@ def by_beams(roots=(1000, 1001, 1002, 1003)) -> None:
         rows = []
         model = cfg.slam.noise_for(m, has_cov=False)[1]
         for s in roots:
-            seq = simulate_cycab_run(np.random.default_rng(s), "tree_park", cyc)
-            truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-            laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
-            params = ps.extractor_params(m, cyc)
-            fs = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
-            t = trunk_errors(seq, fs, laser_w, model, DEFAULT_RANGE_BIAS.get(m, (0.0, 0.0)))
+            fs, t = seeded_trunk_errors(s, cyc, m, model)
             beams = np.array([fs[int(k)].circle_beams[int(i)] for k, i in t[:, :2]])
             rows.append(np.column_stack([t, beams[:, 1] - beams[:, 0] + 1]))
         t = np.vstack(rows)
         er, eb = t[:, 4] * t[:, 7], t[:, 5] * t[:, 8]  # errors in m and rad
-        n, r = t[:, 9], t[:, 2]
+        n, r = t[:, 10], t[:, 2]
         X = np.column_stack([np.ones_like(n), np.log(n), np.log(r)])
 
         qr = minimize(_nll, [np.log(np.var(er)), 0, 0], args=(er, X), method="BFGS").x
@@ -389,22 +397,8 @@ def across_runs(roots=(1000, 1001, 1002, 1003)) -> None:
         ):
             err = {}
             for s in roots:
-                seq = simulate_cycab_run(np.random.default_rng(s), "tree_park", cyc)
-                truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-                laser_w = np.array([se2.compose(p, seq.laser_pose) for p in truth])
-                params = ps.extractor_params(m, cyc)
-                fs = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
-                t = trunk_errors(seq, fs, laser_w, model, DEFAULT_RANGE_BIAS.get(m, (0.0, 0.0)))
-                # the trunk: the landmark nearest the true centre
-                lw = laser_w[t[:, 0].astype(int)]
-                ang = lw[:, 2] + t[:, 3]
-                c = lw[:, :2] + t[:, 2:3] * np.column_stack([np.cos(ang), np.sin(ang)])
-                lm = seq.truth_landmarks[:, :2]
-                j = np.argmin(np.hypot(*(c[:, None] - lm[None]).transpose(2, 0, 1)), axis=1)
-                err[s] = {
-                    (int(k), int(jj)): (zr, zb)
-                    for k, jj, zr, zb in zip(t[:, 0], j, t[:, 4], t[:, 5])
-                }
+                t = seeded_trunk_errors(s, cyc, m, model)[1]
+                err[s] = {(int(k), int(j)): (zr, zb) for k, zr, zb, j in t[:, [0, 4, 5, 9]]}
             pairs = [
                 (err[a][key], err[b][key])
                 for i, a in enumerate(roots)

@@ -210,9 +210,10 @@ def drive(
     near = 0
     if offset_m != 0.0 or start_along_m != 0.0:
         s = np.concatenate([[0.0], np.cumsum(step)])
-        j = min(int(np.searchsorted(s, start_along_m % s[-1], side="right")) - 1, K - 1)
+        along = start_along_m % s[-1]  # the route is a loop
+        j = min(int(np.searchsorted(s, along, side="right")) - 1, K - 1)
         a, b = route[j], route[(j + 1) % K]
-        u = (start_along_m % s[-1] - s[j]) / step[j]
+        u = (along - s[j]) / step[j]
         pose = np.array([*(a + u * (b - a)), math.atan2(b[1] - a[1], b[0] - a[0])])
         near = j
     poses = np.empty((n_samples, 3))
