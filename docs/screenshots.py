@@ -6,8 +6,9 @@ Starts the native viewer of the installed rerun-sdk in its headless mode
 (`rerun.experimental.ViewerClient.spawn(headless=True)`: an offscreen window, rendered by
 whatever wgpu adapter the machine has; on a machine without a GPU, Mesa's llvmpipe through
 Vulkan (Debian: mesa-vulkan-drivers)), opens the file with the blueprint it carries, puts the
-time cursor on a scan, pauses, and saves the screenshot. A script, not part of the package:
-it is only for the documentation.
+time cursor on a scan, pauses, and saves the screenshot, scaled to --width pixels and saved as
+an optimised RGB PNG (full colour; no palette). A script, not part of the package: it is only
+for the documentation.
 """
 
 from __future__ import annotations
@@ -47,12 +48,14 @@ def main() -> None:
         viewer.save_screenshot(a.png)
     finally:
         viewer.quit()
-    if a.width:  # small enough for a README: scaled down, 256 colours (the UI has few)
+    if a.width:  # small enough for a README: scaled down, in full colour
         from PIL import Image
 
         im = Image.open(a.png).convert("RGB")
         im = im.resize((a.width, round(im.height * a.width / im.width)), Image.LANCZOS)
-        im.quantize(256).save(a.png, optimize=True)
+        # RGB, not a 256-colour palette: quantising turns the thin green and brown strokes
+        # (landmarks, circles, segments) grey, as they share few pixels with the dark UI
+        im.save(a.png, optimize=True)
     print(f"{a.rrd} -> {a.png} (rerun {rr.__version__})")
 
 

@@ -308,14 +308,18 @@ def atomic_folder(target: Path | str) -> Iterator[Path]:
     if not parent.is_dir():
         raise DataError(f"cannot write {target}: folder {parent} does not exist")
     _remove_stale(target)
-    staging = Path(tempfile.mkdtemp(dir=parent, prefix=f".{target.name}.partial-{os.getpid()}-"))
-    try:
+    prefix = f".{target.name}.partial-{os.getpid()}-"
+    staging = None
+    try:  # the folder is made inside: an interruption while making it still cleans up
+        staging = Path(tempfile.mkdtemp(dir=parent, prefix=prefix))
         yield staging
         os.chmod(staging, 0o755)  # mkdtemp makes folders owner-only
         _fsync_dir(staging)
         _swap_into_place(staging, target)
     except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
+        # interrupted inside mkdtemp: the folder may exist without its name having come back
+        for p in [staging] if staging is not None else parent.glob(prefix + "*"):
+            shutil.rmtree(p, ignore_errors=True)
         raise
     _fsync_dir(parent)
 
@@ -365,7 +369,7 @@ def markdown_table(header: Sequence[str], rows: Sequence[Sequence]) -> str:
 #
 # A result table is a list of records (dicts), one per observation. Its CSV holds them as they
 # are (one row each, every field a column); its Markdown table is a pivot of them. See the
-# README's "Result tables" for the two layouts the experiments use.
+# docs/result-tables.md for the two layouts the experiments use.
 
 PIVOT_MARK = "<!-- pivot of "
 
@@ -520,20 +524,42 @@ def write_tidy_table(
     labels: dict | None = None,
     title: str = "",
     notes: str = "",
+    parts: Sequence[tuple[str, Sequence[str]]] = (),
 ) -> list[Path]:
     """Write tidy records as `stem`.csv (one row per record, every field a column, numbers at
     full precision, missing values empty) and `stem`.md (title, the pivot of the same records
     by `tidy_markdown`, notes); returns both paths. Every field must appear in the pivot
-    (`index`, `columns` or `values`), so that the Markdown table shows all of the CSV."""
+    (`index`, `columns` or `values`), so that the Markdown table shows all of the CSV.
+
+    parts: [(heading, value names)] splits the Markdown into narrow tables, one per part (a
+    `##` heading, then the pivot of the same records by `index` and `columns` with those
+    values, marked as a pivot of the CSV like a whole table): a table too wide to read, shown
+    by concern. Together the parts hold every one of `values`, each once. The CSV is the same
+    either way."""
     fields = list(dict.fromkeys(k for r in records for k in r))
-    shown = {*index, *columns, *([values] if isinstance(values, str) else values)}
+    names = [values] if isinstance(values, str) else list(values)
+    shown = {*index, *columns, *names}
     if set(fields) - shown:
         raise ValueError(f"write_tidy_table: fields {sorted(set(fields) - shown)} not in the pivot")
+    split = [v for _, vs in parts for v in vs]
+    if parts and sorted(split) != sorted(names):
+        raise ValueError(
+            "write_tidy_table: parts must hold every value once; missing "
+            f"{sorted(set(names) - set(split))}, unknown or repeated "
+            f"{sorted({v for v in split if v not in names or split.count(v) > 1})}"
+        )
     records = [{f: r.get(f) for f in fields} for r in records]
     stem = Path(stem)
-    md = (f"# {title}\n\n" if title else "") + tidy_markdown(
-        records, index, columns, values, labels, source=stem.name + ".csv"
-    )
+    source = stem.name + ".csv"
+    md = f"# {title}\n\n" if title else ""
+    if parts:
+        md += "\n".join(
+            f"## {heading}\n\n"
+            + tidy_markdown(records, index, columns, list(vs), labels, source=source)
+            for heading, vs in parts
+        )
+    else:
+        md += tidy_markdown(records, index, columns, values, labels, source=source)
     if notes:
         md += "\n" + notes.strip() + "\n"
     return [

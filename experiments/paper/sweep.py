@@ -360,6 +360,54 @@ def sweep_rows(spec: SweepSpec, records: list) -> list[list]:
     return rows
 
 
+# the figures' words for the studies and their trials' metrics: (panel title, y label and unit)
+STUDY_TITLES = {
+    "association": "Data association on simulated maps",
+    "slam": "EKF-SLAM on the simulated tree park",
+    "circles": "One pillar ahead of a PLS200",
+}
+METRICS = {
+    "correct_rate": ("correct associations", "share of the measurements"),
+    "false_pair_rate": ("false pairings", "share of the measurements"),
+    "missed_pair_rate": ("missed pairings", "share of the measurements"),
+    "ms_per_scan": ("association time", "time (ms per scan)"),
+    "dx_m": ("mean |x error| of the vehicle", "|x error| (m)"),
+    "dy_m": ("mean |y error| of the vehicle", "|y error| (m)"),
+    "dtheta_rad": ("mean |heading error| of the vehicle", "|heading error| (rad)"),
+    "nees_mean": ("vehicle-pose NEES, mean over the scans", "NEES (3 dof, no unit)"),
+    "nis_per_dof": ("NIS per degree of freedom", "NIS / dof (no unit)"),
+    "landmarks": ("landmarks in the final map", "landmarks (count)"),
+    "false_rate": ("false circles (Table 4)", "share of the detected features"),
+    "ce": ("centre error CE (eq. 10)", "centre error / range (no unit)"),
+    "re": ("radius error RE (eq. 11)", "radius error / radius (no unit)"),
+    "extracted": ("pillar extracted as a circle", "share of the trials"),
+}
+
+
+def _references(spec: SweepSpec) -> dict[str, list[tuple]]:
+    """What a consistent filter gives, drawn on the slam study's panels: the mean NEES's 95%
+    band and expected value 3, the NIS per dof's expected value 1.
+
+    The band is the 95% chi-square bounds of one scan's NEES averaged over the point's trials,
+    chi2_(3n)(0.025, 0.975) / n (`nees_bounds`, as nees.png): a wide band for the NEES averaged
+    over the scans of each trial too, whose spread is smaller. The NIS per dof's own bounds
+    depend on the degrees of freedom summed over a run, which sweep.csv does not keep."""
+    from experiments.eval.poses import nees_bounds
+
+    if spec.study != "slam":
+        return {}
+    band = nees_bounds(spec.trials)
+    return {
+        "nees_mean": [
+            ("band", band, f"95% NEES bounds over {spec.trials} runs (chi2, 3 dof)"),
+            ("line", 3.0, "expected value of a consistent filter (NEES 3, NIS per dof 1)"),
+        ],
+        "nis_per_dof": [
+            ("line", 1.0, "expected value of a consistent filter (NEES 3, NIS per dof 1)")
+        ],
+    }
+
+
 def run_sweep(
     spec: SweepSpec, out_dir: Path, executor: Executor, progress=None
 ) -> tuple[list[Path], list]:
@@ -392,8 +440,18 @@ def run_sweep(
         written = [write_atomic(stage / "sweep.csv", buf.getvalue())]
         for k, field in enumerate(spec.swept):
             name = f"sweep_{field}.png"
-            title = f"{spec.study}: {spec.trials} trials per point, swept {field}"
-            written.append(plots.plot_sweep_field(rows, spec.swept, k, title, stage / name))
+            title = f"{STUDY_TITLES[spec.study]}: {spec.trials} trials per point, {field} swept"
+            written.append(
+                plots.plot_sweep_field(
+                    rows,
+                    spec.swept,
+                    k,
+                    title,
+                    stage / name,
+                    metrics=METRICS,
+                    references=_references(spec),
+                )
+            )
         summary = {
             "study": spec.study,
             "trials": spec.trials,

@@ -25,18 +25,35 @@ from matplotlib.patches import Rectangle  # noqa: E402
 from experiments.io.writers import write_atomic  # noqa: E402
 from experiments.render.shapes import ellipse_polyline  # noqa: E402
 
-__all__ = ["plot_raw_scan", "plot_features", "save", "METHOD_COLORS"]
+__all__ = [
+    "METHOD_COLORS",
+    "SEGMENT_COLORS",
+    "break_at_gaps",
+    "gaps_of",
+    "plot_features",
+    "plot_raw_scan",
+    "save",
+]
 
-# one colour per circle-fitting method, in every figure
 Output = Path | BinaryIO  # where a figure goes: a file, or a binary file object
 
-METHOD_COLORS = {
+# One colour per kind of thing, in every feature figure (Figs. 3, 4, the Victoria Park scan),
+# with the same hues in the rerun views (`experiments.render.viz`): the segments (runs of beams)
+# by class, and the fitted circles by method; no colour is used for two kinds.
+SEGMENT_COLORS = {  # segment class (`Features.segment_kind`) -> (legend name, colour)
+    0: ("clutter", "tab:orange"),
+    1: ("line", "tab:blue"),
+    2: ("circle", "tab:brown"),
+}
+METHOD_COLORS = {  # circle-fitting method -> colour of its circles (and curves)
     "paper": "tab:green",
     "geometric": "m",
     "bailey": "goldenrod",
     "taubin": "c",
-    "kasa": "tab:cyan",
+    "kasa": "tab:purple",
 }
+EDGE_COLOR = "red"
+SCAN_POINT_COLOR = "0.55"
 
 
 def _subplots(nrows: int = 1, ncols: int = 1, *, figsize, layout=None, **kwargs):
@@ -56,6 +73,29 @@ def save(fig, path: Output) -> Output:
         draw(path)
         return path
     return write_atomic(path, draw)
+
+
+def break_at_gaps(x, *ys, max_step: float):
+    """(x, *ys) with a NaN row inserted wherever consecutive x are more than `max_step` apart,
+    so that a line drawn through them stops at the gap (an unobserved landmark, a GPS dropout)
+    instead of joining the samples on either side as if there were data between them.
+
+    x (n,) increasing; each y (n,) or (n, k). Returns float arrays of n + (number of gaps) rows.
+    """
+    x = np.asarray(x, float)
+    cut = np.flatnonzero(np.diff(x) > max_step) + 1
+    out = [np.insert(x, cut, np.nan)]
+    for y in ys:
+        out.append(np.insert(np.asarray(y, float), cut, np.nan, axis=0))
+    return tuple(out)
+
+
+def gaps_of(t, max_step: float) -> list[tuple[float, float]]:
+    """The gaps of the increasing times t: [(t_before, t_after)] of every pair of consecutive
+    samples more than `max_step` apart."""
+    t = np.asarray(t, float)
+    i = np.flatnonzero(np.diff(t) > max_step)
+    return [(float(t[k]), float(t[k + 1])) for k in i]
 
 
 def plot_raw_scan(points_xy: np.ndarray, title: str, path: Output) -> Output:
@@ -90,12 +130,12 @@ def segments_of(f):
 
 def _draw(ax, points_xy, segments, circles, edges, truth, lw=1.0):
     p = points_xy
-    ax.plot(p[:, 0], p[:, 1], ".", ms=2, color="0.55", zorder=1)
-    colors = {0: "tab:orange", 1: "tab:blue", 2: "tab:green"}
+    ax.plot(p[:, 0], p[:, 1], ".", ms=2.5, color=SCAN_POINT_COLOR, zorder=1)
     for (a, b), k in segments:
         q = p[np.arange(a, b + 1) % len(p)]  # runs may cross a 360 deg scan's seam
-        ax.plot(q[:, 0], q[:, 1], "-", color=colors[int(k)], lw=lw, zorder=2)
+        ax.plot(q[:, 0], q[:, 1], "-", color=SEGMENT_COLORS[int(k)][1], lw=lw, zorder=2)
     for name, circ, color in circles:
+        label = f"circle fit: {name}"
         for i, (cx, cy, r) in enumerate(circ):
             ax.add_patch(
                 CirclePatch(
@@ -103,12 +143,12 @@ def _draw(ax, points_xy, segments, circles, edges, truth, lw=1.0):
                     r,
                     fill=False,
                     color=color,
-                    lw=1.3,
+                    lw=1.6,
                     zorder=3,
-                    label=name if i == 0 else None,
+                    label=label if i == 0 else None,
                 )
             )
-            ax.patches[-1]._key = name
+            ax.patches[-1]._key = label
     if truth is not None and len(truth):
         for i, (cx, cy, r) in enumerate(truth):
             ax.add_patch(
@@ -118,54 +158,38 @@ def _draw(ax, points_xy, segments, circles, edges, truth, lw=1.0):
                     fill=False,
                     ls="--",
                     color="k",
-                    lw=0.8,
+                    lw=0.9,
                     zorder=2,
-                    label="truth" if i == 0 else None,
+                    label="true pillar" if i == 0 else None,
                 )
             )
-            ax.patches[-1]._key = "truth"
+            ax.patches[-1]._key = "true pillar"
     if len(edges):
-        ax.plot(edges[:, 0], edges[:, 1], "x", color="red", ms=7, mew=1.5, zorder=4, label="edges")
+        ax.plot(
+            edges[:, 0], edges[:, 1], "x", color=EDGE_COLOR, ms=7, mew=1.5, zorder=4, label="edges"
+        )
     ax.plot([0], [0], "k^", ms=7, label="laser")
     ax.set_aspect("equal")
     ax.grid(alpha=0.3)
 
 
-def _key(ax, box=None, fontsize=8, loc="best") -> None:
-    """Legend: what the point colours mean, then the circles, edges and truth; with box
-    (xmin, xmax, ymin, ymax) only the entries with something inside it."""
+def _key(ax) -> list:
+    """Legend entries: what the point and segment colours mean, then the circles (by method),
+    the true pillars, edges and the laser, as drawn on `ax`."""
     from matplotlib.lines import Line2D
 
     handles = [
-        Line2D([], [], ls="", marker=".", color="0.55", label="scan points (no segment)"),
-        Line2D([], [], color="tab:green", label="segment: circle"),
-        Line2D([], [], color="tab:blue", label="segment: line"),
-        Line2D([], [], color="tab:orange", label="segment: clutter"),
+        Line2D([], [], ls="", marker=".", color=SCAN_POINT_COLOR, label="scan points (no segment)")
+    ]
+    handles += [
+        Line2D([], [], color=color, lw=2, label=f"segment classified {name}")
+        for name, color in (SEGMENT_COLORS[k] for k in (2, 1, 0))
     ]
     for h in ax.patches + ax.lines:
         label = h.get_label() or ""
-        if not label or label.startswith("_"):
-            continue
-        if box is not None and not _inside(ax, label, box):
-            continue
-        handles.append(h)
-    ax.legend(handles=handles, loc=loc, fontsize=fontsize)
-
-
-def _inside(ax, label: str, box) -> bool:
-    """Has the axes anything of `label` (circles by centre, lines by points) inside box?"""
-    x0, x1, y0, y1 = box
-    for h in ax.patches:
-        if getattr(h, "_key", None) == label:
-            cx, cy = h.center
-            if x0 <= cx <= x1 and y0 <= cy <= y1:
-                return True
-    for h in ax.lines:
-        if h.get_label() == label:
-            x, y = np.asarray(h.get_xdata(), float), np.asarray(h.get_ydata(), float)
-            if np.any((x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)):
-                return True
-    return False
+        if label and not label.startswith("_"):
+            handles.append(h)
+    return handles
 
 
 def plot_features(
@@ -181,27 +205,29 @@ def plot_features(
     """Figs. 3 and 4: circles and edges on the scan (left), and a zoom on a box (right).
 
     points_xy: (B, 2) scan points (NaN rows for no return). segments: [((first, last), kind)].
-    circles: [(label, (C, 3) [x, y, r], colour)]. zoom: (xmin, xmax, ymin, ymax).
+    circles: [(label, (C, 3) [x, y, r], colour)]. zoom: (xmin, xmax, ymin, ymax). Colours:
+    `SEGMENT_COLORS` for the segments, the given ones (`METHOD_COLORS`) for the circles.
     """
     ncols = 2 if zoom else 1
-    fig, axes = _subplots(1, ncols, figsize=(6.5 * ncols, 6.2))
+    fig, axes = _subplots(1, ncols, figsize=(6.2 * ncols, 6.8), layout="constrained")
     axes = np.atleast_1d(axes)
     for ax in axes:
-        _draw(ax, points_xy, segments, circles, edges_xy, truth_xyr, lw=1.0)
-    axes[0].set_title(title, fontsize=10)
-    for ax in axes:
+        _draw(ax, points_xy, segments, circles, edges_xy, truth_xyr, lw=1.2)
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
     if zoom:
+        fig.suptitle(title, fontsize=11)
+        axes[0].set_title("whole scan", fontsize=10)
         x0, x1, y0, y1 = zoom
-        axes[0].add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", color="m"))
+        axes[0].add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, ls="--", color="k"))
         axes[1].set_xlim(x0, x1)
         axes[1].set_ylim(y0, y1)
         axes[1].set_title("zoom on the dashed box", fontsize=10)
-        _key(axes[1], box=zoom)
-        _key(axes[0], fontsize=7)
     else:
-        _key(axes[0])
+        axes[0].set_title(title, fontsize=10)
+    # one legend for both panels, under them: a legend inside a panel hides scan points
+    handles = _key(axes[0])
+    fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 4), fontsize=9)
     return save(fig, path)
 
 
@@ -291,7 +317,10 @@ def plot_sweep(results: dict, path: Output, held: dict | None = None) -> Output:
     variables = list(results)
     fig, axes = _subplots(2, len(variables), figsize=(5 * len(variables), 7.8), squeeze=False)
     styles = {"paper": "o-", "geometric": "s-", "bailey": "^-", "taubin": "d-", "crlb": "--"}
-    ylabels = ("RMS CE (eq. 10): centre error / range", "RMS RE (eq. 11): radius error / radius")
+    panels = (  # (title, y label with the unit) of each row
+        ("RMS centre error CE (eq. 10)", "CE = centre error / range (log)"),
+        ("RMS radius error RE (eq. 11)", "RE = radius error / radius (log)"),
+    )
     for j, var in enumerate(variables):
         xs = sorted(results[var])
         methods = list(results[var][xs[0]])
@@ -304,7 +333,7 @@ def plot_sweep(results: dict, path: Output, held: dict | None = None) -> Output:
             f"{', '.join(ms)}: no circle at {', '.join(f'{x:g}' for x in gone)}"
             for gone, ms in missing.items()
         )
-        for i, label in enumerate(ylabels):
+        for i, (head, ylabel) in enumerate(panels):
             ax = axes[i, j]
             for m in methods:
                 ys = [results[var][x][m][i] for x in xs]
@@ -328,17 +357,18 @@ def plot_sweep(results: dict, path: Output, held: dict | None = None) -> Output:
                 )
             ax.set_yscale("log")
             ax.set_xlabel(SWEEP_AXES.get(var, var))
-            ax.set_ylabel(f"{label} (relative)", fontsize=8)
+            ax.set_title(f"{head} against {SWEEP_AXES.get(var, var).split(' (')[0]}", fontsize=10)
+            ax.set_ylabel(ylabel, fontsize=9)
             ax.grid(alpha=0.3, which="both")
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8)
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=9)
     held_txt = ", ".join(
         f"{SWEEP_AXES.get(k, k).split(' (')[0]} {v:g} m" for k, v in (held or {}).items()
     )
     fig.suptitle(
         "Circle accuracy, one pillar straight ahead of a PLS200 (0.5 deg beams); one variable "
         f"swept, the others held at: {held_txt}",
-        fontsize=9,
+        fontsize=10,
     )
     fig.tight_layout(rect=(0, 0.05, 1, 0.97))
     return save(fig, path)
@@ -419,35 +449,44 @@ def plot_innovations(series: Sequence[dict], title: str, path: Output) -> Output
     """Fig. 10: range and bearing innovations with their 3-sigma bounds.
 
     series: dicts with label, scan (k,), innov (k, 2) [m, rad], sigma (k, 2) and style (a
-    matplotlib line style such as "-." or "-").
+    matplotlib line style such as "-." or "-"). The scans at which the landmark was not
+    observed are gaps: the lines stop there (`break_at_gaps`), and every observation has a dot
+    so that one between two gaps shows.
     """
-    fig, axes = _subplots(2, 1, figsize=(8, 6), sharex=True)
-    _plot_with_bounds(axes, series, "innov", "innovation")
+    fig, axes = _subplots(2, 1, figsize=(8, 6.5), sharex=True, layout="constrained")
+    _plot_with_bounds(axes, series, "innov", "innovation", markers=True)
     axes[0].set_ylabel("range innovation (m)")
     axes[1].set_ylabel("bearing innovation (rad)")
-    axes[1].set_xlabel("scan")
-    axes[0].set_title(title)
+    axes[1].set_xlabel("scan (lines stop at scans where the tree was not observed)")
+    fig.suptitle(title, fontsize=11)
     for ax in axes:
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7, ncol=2)
+    _outside_legend(fig, axes[0])
     return save(fig, path)
 
 
 def plot_pose_errors(series: Sequence[dict], title: str, path: Output) -> Output:
     """Fig. 11: x, y and heading errors of the vehicle with their 3-sigma bounds.
 
-    series: dicts with label, scan (N,), err (N, 3) [m, m, rad], sigma (N, 3), style.
+    series: dicts with label, scan (N,), err (N, 3) [m, m, rad], sigma (N, 3), style; a scan
+    missing from `scan` is a gap (the lines stop there).
     """
-    fig, axes = _subplots(3, 1, figsize=(8, 7.5), sharex=True)
+    fig, axes = _subplots(3, 1, figsize=(8, 8), sharex=True, layout="constrained")
     names = ["x error (m)", "y error (m)", "heading error (rad)"]
     _plot_with_bounds(axes, series, "err", "error")
     for ax, n in zip(axes, names):
         ax.set_ylabel(n)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("scan")
-    axes[0].set_title(title)
-    axes[0].legend(fontsize=7, ncol=2)
+    fig.suptitle(title, fontsize=11)
+    _outside_legend(fig, axes[0])
     return save(fig, path)
+
+
+def _outside_legend(fig, ax, ncol: int = 4) -> None:
+    """The legend of `ax`'s lines under the panels, off the data."""
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=ncol, fontsize=9)
 
 
 def plot_consistency(
@@ -457,20 +496,26 @@ def plot_consistency(
     ylabel: str,
     path: Output,
     expected: float | None = None,
+    first_scan: int = 0,
 ) -> Output:
-    """Average NEES (or NIS) per scan over Monte Carlo runs, with its 95% chi-square bounds."""
-    fig, ax = _subplots(figsize=(8, 4))
-    for label, v in series.items():
-        ax.plot(np.arange(len(v)), v, "-", lw=1.0, label=label)
-    ax.axhline(bounds[0], color="k", ls="--", lw=0.8, label="95% bounds")
-    ax.axhline(bounds[1], color="k", ls="--", lw=0.8)
+    """Average NEES (or NIS) per scan over Monte Carlo runs, with its 95% chi-square bounds
+    (shaded) and its expected value. series: label -> (N,) values of scans first_scan,
+    first_scan + 1, ...; NaN (no value at that scan) is a gap, the line stops there."""
+    fig, ax = _subplots(figsize=(8, 4.2), layout="constrained")
+    band = f"95% bounds ({bounds[0]:.3g}-{bounds[1]:.3g})"
+    ax.axhspan(bounds[0], bounds[1], color="0.88", lw=0, zorder=0, label=band)
+    for b in bounds:
+        ax.axhline(b, color="0.4", ls="--", lw=0.8, zorder=1)
     if expected is not None:
-        ax.axhline(expected, color="0.5", ls=":", lw=0.8)
+        ax.axhline(expected, color="k", ls=":", lw=1.0, label=f"expected value ({expected:g})")
+    for label, v in series.items():
+        v = np.asarray(v, float)
+        ax.plot(first_scan + np.arange(len(v)), v, "-", lw=1.0, label=label)
     ax.set_xlabel("scan")
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    fig.legend(loc="outside right upper", fontsize=8)
     return save(fig, path)
 
 
@@ -516,23 +561,25 @@ def plot_association(
     return save(fig, path)
 
 
-def _plot_with_bounds(axes, series, key: str, what: str) -> None:
-    """Each series' column i of s[key] on axes[i], with its +-3 sigma bounds dotted."""
+def _plot_with_bounds(axes, series, key: str, what: str, markers: bool = False) -> None:
+    """Each series' column i of s[key] on axes[i], with its +-3 sigma bounds dotted; the lines
+    stop where scans are missing (a gap of more than one scan, `break_at_gaps`)."""
     colors = ["tab:blue", "tab:orange", "tab:green", "tab:red"]
     for s, c in zip(series, colors):
+        scan, val, sig = break_at_gaps(s["scan"], s[key], s["sigma"], max_step=1)
         for i, ax in enumerate(axes):
             ax.plot(
-                s["scan"],
-                s[key][:, i],
+                scan,
+                val[:, i],
                 s.get("style", "-"),
                 color=c,
                 lw=1.0,
+                marker="." if markers else None,
+                ms=3.5,
                 label=f"{s['label']} {what}",
             )
-            ax.plot(
-                s["scan"], 3 * s["sigma"][:, i], ":", color=c, lw=1.0, label=f"{s['label']} 3 sigma"
-            )
-            ax.plot(s["scan"], -3 * s["sigma"][:, i], ":", color=c, lw=1.0)
+            ax.plot(scan, 3 * sig[:, i], ":", color=c, lw=1.0, label=f"{s['label']} 3 sigma")
+            ax.plot(scan, -3 * sig[:, i], ":", color=c, lw=1.0)
 
 
 # ---- Victoria Park ------------------------------------------------------------------------------
@@ -578,28 +625,38 @@ def plot_vp_timeseries(
     map_size: dict[str, np.ndarray],
     title: str,
     path: Output,
+    gap_s: float = 2.0,
 ) -> Output:
-    """Three panels against time: distance to each GPS fix (jumps marked x, GPS gaps over 2 s
+    """Three panels against time: distance to each GPS fix (jumps marked x, the GPS `gaps`
     shaded), the fraction of recent scans whose NIS is inside its 95% bounds (100-scan window),
-    and the map size."""
-    fig, axes = _subplots(3, 1, figsize=(11, 9), sharex=True)
+    and the map size; the per-scan lines stop where consecutive scans are more than `gap_s`
+    seconds apart (no scan there)."""
+    fig, axes = _subplots(3, 1, figsize=(11, 9), sharex=True, layout="constrained")
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
     for a, b in gaps:
         for ax in axes:
-            ax.axvspan(a, b, color="0.9", lw=0)
+            ax.axvspan(a, b, color="0.85", lw=0)
     for (label, e), c in zip(errors.items(), colors):
-        axes[0].plot(gps_t[~jumps], e[~jumps], ".", ms=2, color=c, label=label)
+        axes[0].plot(gps_t[~jumps], e[~jumps], ".", ms=2.5, color=c, label=label)
         axes[0].plot(gps_t[jumps], e[jumps], "x", ms=5, color=c)
     axes[0].set_ylabel("distance to GPS fix (m)")
     axes[0].set_yscale("log")
-    axes[0].legend(fontsize=8, markerscale=4, title="x: fixes flagged as jumps; grey: no GPS")
-    axes[1].plot(scan_t, nis_in, "-", color="tab:blue", lw=1)
+    axes[0].legend(
+        fontsize=8,
+        markerscale=4,
+        loc="upper left",
+        title=f"x: fixes flagged as jumps; grey: no GPS fix for over {gap_s:g} s",
+        title_fontsize=8,
+    )
+    t, w = break_at_gaps(scan_t, nis_in, max_step=gap_s)
+    axes[1].plot(t, w, "-", color="tab:blue", lw=1)
     axes[1].axhline(0.95, color="k", ls="--", lw=0.8, label="0.95: a consistent filter")
     axes[1].legend(fontsize=8, loc="lower right")
     axes[1].set_ylabel("NIS inside 95% bounds\n(100-scan window)")
     axes[1].set_ylim(0, 1.05)
     for (label, n), c in zip(map_size.items(), colors):
-        axes[2].plot(scan_t[: n.size], n, "-", color=c, lw=1, label=label)
+        t, m = break_at_gaps(scan_t[: n.size], n, max_step=gap_s)
+        axes[2].plot(t, m, "-", color=c, lw=1, label=label)
     axes[2].set_ylabel("landmarks in the map")
     axes[2].set_xlabel("time (s)")
     axes[0].set_title(title)
@@ -609,15 +666,27 @@ def plot_vp_timeseries(
 
 
 def plot_gps_errors(
-    series: dict[str, tuple[np.ndarray, np.ndarray]], jumps: np.ndarray, title: str, path: Output
+    series: dict[str, tuple[np.ndarray, np.ndarray]],
+    jumps: np.ndarray,
+    title: str,
+    path: Output,
+    gap_s: float = 2.0,
 ) -> Output:
     """Distance of each estimated antenna path to the GPS fixes against time: series label ->
-    (fix times (s), distances (m)), all on the same fixes; fixes flagged as jumps marked x."""
-    fig, ax = _subplots(figsize=(10, 4))
+    (fix times (s), distances (m)), all on the same fixes; fixes flagged as jumps marked x.
+    Where consecutive fixes are more than `gap_s` apart (a GPS dropout) the time is shaded
+    and the lines stop."""
+    fig, ax = _subplots(figsize=(10, 4.5), layout="constrained")
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
+    if series:
+        t0 = next(iter(series.values()))[0]
+        for i, (a, b) in enumerate(gaps_of(t0, gap_s)):
+            label = f"no GPS fix for over {gap_s:g} s" if i == 0 else None
+            ax.axvspan(a, b, color="0.85", lw=0, zorder=0, label=label)
     for (label, (t, e)), c in zip(series.items(), colors):
         rmse = float(np.sqrt(np.mean(e**2))) if e.size else float("nan")
-        ax.plot(t, e, "-", lw=0.7, color=c, label=f"{label} (RMSE {rmse:.2f} m)")
+        tb, eb = break_at_gaps(t, e, max_step=gap_s)
+        ax.plot(tb, eb, "-", lw=0.8, color=c, label=f"{label} (RMSE {rmse:.2f} m)")
         if np.any(jumps):
             ax.plot(t[jumps], e[jumps], "x", ms=4, color=c)
     ax.set_yscale("log")  # metre-level errors beside GPS jumps of 100 m and more
@@ -625,43 +694,105 @@ def plot_gps_errors(
     ax.set_ylabel("distance to GPS fix (m, log scale)")
     ax.set_title(title)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8, loc="upper left")
+    fig.legend(loc="outside lower center", ncol=3, fontsize=8)
     return save(fig, path)
 
 
-def plot_sweep_field(rows: list, swept: list, k: int, title: str, path: Output) -> Output:
+def plot_sweep_field(
+    rows: list,
+    swept: list,
+    k: int,
+    title: str,
+    path: Output,
+    metrics: dict[str, tuple[str, str]] | None = None,
+    references: dict[str, list[tuple]] | None = None,
+) -> Output:
     """One panel per metric of a sweep (`experiments.paper.sweep.sweep_rows`: [point, *swept
     values, method, metric, mean, std, n]): the mean against swept field k with +-1 standard
-    error, one line per method and combination of the other swept fields."""
+    error (std / sqrt(n), as the figure says), one line per method and combination of the other
+    swept fields.
+
+    metrics: metric -> (panel title, y label with its unit); a metric missing from it is titled
+    by its name with spaces. references: metric -> [("band", (low, high), label) for a shaded
+    band such as the NEES 95% bounds, or ("line", y, label) for a dashed line such as an
+    expected value].
+    """
+    metrics = metrics or {}
+    references = references or {}
     off = len(swept)
-    metrics = list(dict.fromkeys(r[off + 2] for r in rows))
+    names = list(dict.fromkeys(r[off + 2] for r in rows))
     xs = list(dict.fromkeys(r[1 + k] for r in rows))
     numeric = all(isinstance(x, int | float) and not isinstance(x, bool) for x in xs)
     pos = {x: (x if numeric else i) for i, x in enumerate(xs)}
-    ncols = min(len(metrics), 4) or 1
-    nrows = max(1, math.ceil(len(metrics) / ncols))
+    steps = np.diff(sorted(pos.values()))
+    dodge = 0.03 * float(steps.min()) if steps.size else 0.0  # x shift between lines
+    ncols = min(len(names), 3) or 1
+    nrows = max(1, math.ceil(len(names) / ncols))
     fig, axes = _subplots(
-        nrows, ncols, figsize=(4.2 * ncols, 3.4 * nrows), squeeze=False, layout="constrained"
+        nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows + 1.2), squeeze=False, layout="constrained"
     )
-    for ax, metric in zip(axes.flat, metrics):
+    # a colour per method, a line style and marker per combination of the other swept fields
+    methods = list(dict.fromkeys(r[off + 1] for r in rows))
+    color_of = {m: METHOD_COLORS.get(m, f"C{i % 10}") for i, m in enumerate(methods)}
+    combos = list(dict.fromkeys(tuple(r[1 + i] for i in range(off) if i != k) for r in rows))
+    styles = [("-", "o"), ("--", "s"), (":", "^"), ("-.", "D")]
+    style_of = {c: styles[i % len(styles)] for i, c in enumerate(combos)}
+    for ax, metric in zip(axes.flat, names):
+        for kind, value, label in references.get(metric, ()):
+            if kind == "band":
+                ax.axhspan(*value, color="0.85", lw=0, zorder=0, label=label)
+            else:
+                ax.axhline(value, color="k", ls="--", lw=1.0, zorder=1, label=label)
         lines: dict = {}
         for r in rows:
             if r[off + 2] != metric:
                 continue
+            combo = tuple(r[1 + i] for i in range(off) if i != k)
             others = ", ".join(f"{swept[i]}={r[1 + i]}" for i in range(off) if i != k)
             label = r[off + 1] + (f" ({others})" if others else "")
-            lines.setdefault(label, []).append((pos[r[1 + k]], r[off + 3], r[off + 4], r[off + 5]))
-        for label, pts in lines.items():
+            pts = lines.setdefault((label, r[off + 1], combo), [])
+            pts.append((pos[r[1 + k]], r[off + 3], r[off + 4], r[off + 5]))
+        for j, ((label, method, combo), pts) in enumerate(lines.items()):
             x, mean, std, n = (np.array(v, float) for v in zip(*sorted(pts)))
             se = np.where(n > 1, std / np.sqrt(np.maximum(n, 1)), np.nan)
-            ax.errorbar(x, mean, yerr=se, marker="o", ms=3, capsize=2, label=label)
-        ax.set_title(metric, fontsize=9)
+            ls, marker = style_of[combo]
+            shift = (j - (len(lines) - 1) / 2) * dodge  # bars of equal means side by side
+            ax.errorbar(
+                x + shift,
+                mean,
+                yerr=se,
+                ls=ls,
+                marker=marker,
+                ms=4,
+                capsize=3,
+                lw=1.2,
+                color=color_of[method],
+                label=label,
+            )
+        head, ylabel = metrics.get(metric, (metric.replace("_", " "), ""))
+        ax.set_title(head, fontsize=10)
+        ax.set_ylabel(ylabel)
         ax.set_xlabel(swept[k])
         if not numeric:
             ax.set_xticks(range(len(xs)), [str(x) for x in xs])
         ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(metrics) :]:
+    for ax in list(axes.flat)[len(names) :]:
         ax.set_visible(False)
-    axes.flat[0].legend(fontsize=7)
-    fig.suptitle(title, fontsize=10)
+    seen: dict[str, object] = {}
+    for ax in axes.flat:
+        for h, label in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(label, h)
+    counts = sorted({int(r[off + 5]) for r in rows})
+    n_text = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+    fig.legend(
+        list(seen.values()),
+        list(seen),
+        loc="outside lower center",
+        ncol=min(len(seen), 3),
+        fontsize=8,
+        title=f"bars: \u00b11 standard error of the mean over the n = {n_text} trials of each "
+        "point (lines drawn side by side, shifted a little along x)",
+        title_fontsize=8,
+    )
+    fig.suptitle(title, fontsize=11)
     return save(fig, path)

@@ -15,8 +15,9 @@ Every recording carries its layout (a blueprint, `rerun.blueprint`), chosen by i
 Entities. A frame entity carries a 2D pose as a rerun transform; its children are in its frame.
   world/laser                the laser's world pose (frame entity)
   world/laser/scan           scan points (grey), laser frame
-  world/laser/features/...   segments (strips coloured by kind: line blue, circle green,
-                             clutter orange), circles (outline, radius label), lines, edges
+  world/laser/features/...   segments (strips coloured by kind: line blue, circle brown,
+                             clutter orange), circles (outline coloured by method, radius
+                             label), lines, edges (red); the hues of the PNG figures
   world/truth/...            simulated truth: trees (white dots, true outlines) or pillars,
                              true pose (`vehicle`) and path (`path`)
 SLAM runs (slam.run's visualiser interface):
@@ -53,13 +54,17 @@ from slam import se2
 __all__ = ["KINDS", "MemoryRecorder", "NullRecorder", "Recorder", "blueprint", "open_recording"]
 
 KINDS = ("slam", "features", "circles")
-KIND_COLORS = np.array([[255, 150, 40], [60, 120, 255], [40, 200, 90]], dtype=np.uint8)
-METHOD_COLORS = {
+# The hues of the PNG figures (`experiments.render.plots.SEGMENT_COLORS`, `METHOD_COLORS`),
+# lighter where the dark background needs it; no colour is used for two kinds of feature.
+KIND_COLORS = np.array(  # segment class (`Features.segment_kind`): clutter, line, circle
+    [[255, 150, 40], [60, 120, 255], [170, 105, 60]], dtype=np.uint8
+)
+METHOD_COLORS = {  # circles by fitting method
     "paper": [40, 200, 90],
     "geometric": [220, 60, 220],
     "bailey": [255, 200, 0],
-    "kasa": [0, 200, 220],
-    "taubin": [150, 150, 255],
+    "kasa": [160, 110, 230],
+    "taubin": [0, 200, 220],
     "truth": [255, 255, 255],
 }
 SCAN_POINT_PX = 2.0  # scan points: on-screen radius in UI points, readable at any zoom
@@ -118,8 +123,9 @@ def blueprint(
         scan = rrb.Spatial2DView(
             origin=_y_up("laser"),
             contents="/laser/**",
-            name="scan and features, laser frame (x forward, m); circles: paper green, "
-            "geometric magenta, Bailey yellow",
+            name="scan and features, laser frame (x forward, m); segments: circle brown, "
+            "line blue, clutter orange; circles: paper green, geometric magenta, Bailey yellow; "
+            "edges red",
         )
         body = rrb.Vertical(scan, *panels, row_shares=[4] + [1] * len(panels))
         return rrb.Blueprint(body, rrb.TimePanel(timeline="time"), *collapsed)
@@ -492,7 +498,24 @@ class Recorder(NullRecorder):
                 ],
                 columns=rr.Scalars.columns(scalars=np.asarray(s.values, float)),
             )
+            if not s.points:
+                self._break_at_gaps(s.name, k, scan_t)
             self._style(s.name, s.curves, s.points)
+
+    def _break_at_gaps(self, name: str, k: np.ndarray, scan_t: np.ndarray) -> None:
+        """rerun joins consecutive values of a line series, across scans with none (NIS at scans
+        without an update): a clear at the first scan of each such gap stops the lines there."""
+        gap = k[np.flatnonzero(np.diff(k) > 1)] + 1
+        if gap.size == 0:
+            return
+        self.rec.send_columns(
+            f"series/{name}",
+            indexes=[
+                rr.TimeColumn("scan", sequence=gap),
+                rr.TimeColumn("time", duration=scan_t[gap]),
+            ],
+            columns=rr.Clear.columns(is_recursive=np.zeros(gap.size, bool)),
+        )
 
     def close(self) -> None:
         """Finish the file (its footer, which readers use to list its stores) and put it at
