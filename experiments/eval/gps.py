@@ -25,7 +25,22 @@ import numpy as np
 from slam import interpolate_poses, se2
 from slam.start import procrustes_2d
 
-__all__ = ["GpsScore", "flag_jumps", "score_against_gps", "score_sequence", "top_speed"]
+__all__ = [
+    "GpsScore",
+    "fixes_in_run",
+    "flag_jumps",
+    "score_against_gps",
+    "score_sequence",
+    "top_speed",
+]
+
+
+def fixes_in_run(gps_t: np.ndarray, scan_t: np.ndarray) -> np.ndarray:
+    """(G,) bool: the fixes a run over scan_t is scored against, those inside its time span
+    [scan_t[0], scan_t[-1]] (`trunkslam export-reference` writes the same fixes)."""
+    gps_t = np.asarray(gps_t, dtype=np.float64)
+    scan_t = np.asarray(scan_t, dtype=np.float64)
+    return (gps_t >= scan_t[0]) & (gps_t <= scan_t[-1])
 
 
 def flag_jumps(t_s: np.ndarray, xy: np.ndarray, max_speed_mps: float, slack_m: float = 1.0):
@@ -95,7 +110,7 @@ def score_against_gps(
     """
     scan_t = np.asarray(scan_t, dtype=np.float64)
     gps_t = np.asarray(gps_t, dtype=np.float64)
-    inside = (gps_t >= scan_t[0]) & (gps_t <= scan_t[-1])
+    inside = fixes_in_run(gps_t, scan_t)
     t, g = gps_t[inside], np.asarray(gps_xy, dtype=np.float64)[inside]
     jump = flag_jumps(t, g, max_speed_mps)
     P = interpolate_poses(t, scan_t, pose)
