@@ -1,18 +1,84 @@
-"""Shared fixtures.
+"""Shared fixtures and settings.
 
-Real data: `vp_dir` is the Victoria Park folder under TRUNKSLAM_DATA (see experiments/data.py).
-When the data are absent the tests that need them are skipped, unless TRUNKSLAM_REQUIRE_DATA=1
-(CI), in which case they fail with a message saying what is missing.
+Real data: `vp_dir` is the Victoria Park folder under TRUNKSLAM_DATA (read by
+experiments/io/paths.py). When the data are absent the tests that need them are skipped, unless
+TRUNKSLAM_REQUIRE_DATA=1 (CI), in which case they fail with a message saying what is missing.
+
+Hypothesis profiles: `ci` draws the same examples on every run (`derandomize=True`, no example
+database), so that CI's verdict does not depend on the seed; `make test` and `make check` pass
+`--hypothesis-profile=ci`. `dev`, loaded when no profile is named (a plain `pytest`), draws new
+examples on every run and replays the failures it saved in .hypothesis/; the property tests must
+pass under it too (`pytest -m hypothesis --hypothesis-seed=N`).
+
+Parallel runs (pytest-xdist, `-n auto`): every test writes under its own tmp_path, and each
+worker process gets its own numba cache folder (NUMBA_CACHE_DIR, inherited by the processes it
+starts), because numba's cache is not safe for two processes compiling one function at once
+(a cold cache, or a source file just edited): a process writes the function's index before its
+data file, so another can read an index entry whose file is not written yet or is an older one
+of the same name, and two processes compiling different signatures take the same file number,
+so one signature's entry can end up naming the other's code.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 REQUIRE_DATA_ENV = "TRUNKSLAM_REQUIRE_DATA"
+
+settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
+settings.register_profile("dev", derandomize=False, print_blob=True)
+settings.load_profile("dev")  # `--hypothesis-profile=ci` loads `ci` after this file is read
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if not worker:
+        return  # one process: numba's default cache beside the sources, BLAS as it starts
+    _share_the_cores(int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
+    _own_numba_cache(config, worker)
+
+
+# the BLAS (and OpenMP) threads a worker may use, and the limit each one holds
+_BLAS_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+_blas_limit = None
+
+
+def _share_the_cores(workers: int) -> None:
+    """Give each of `workers` processes its share of the cores for BLAS (at least 1 thread),
+    in this process and in the ones it starts. OpenBLAS starts one thread per core in every
+    process, and its threads spin while they wait: with more busy threads than cores the
+    Victoria Park runs slow down fourfold (the consistency-scale test: 39 s with 2 BLAS threads,
+    10 s with 1, on 2 cores with other work running)."""
+    global _blas_limit
+    threads = max(1, (os.cpu_count() or 1) // max(workers, 1))
+    for var in _BLAS_THREADS:
+        os.environ.setdefault(var, str(threads))
+    import numpy  # noqa: F401  (loads the BLAS that threadpoolctl then limits)
+    from threadpoolctl import threadpool_limits
+
+    _blas_limit = threadpool_limits(limits=int(os.environ["OPENBLAS_NUM_THREADS"]))
+
+
+def _own_numba_cache(config: pytest.Config, worker: str) -> None:
+    """This worker's numba cache folder (see the module docstring)."""
+    parent = os.environ.get("NUMBA_CACHE_DIR")
+    if parent:
+        folder = Path(parent) / f"xdist-{worker}"
+    elif getattr(config, "cache", None) is not None:
+        folder = config.cache.mkdir(f"numba-{worker}")
+    else:
+        folder = config.rootpath / ".pytest_cache" / "d" / f"numba-{worker}"
+    folder.mkdir(parents=True, exist_ok=True)
+    os.environ["NUMBA_CACHE_DIR"] = str(folder)
+    if "numba" in sys.modules:  # read at import: make numba see the new folder
+        from numba.core import config as numba_config
+
+        numba_config.reload_config()
 
 
 def _missing_data(message: str) -> None:
@@ -38,3 +104,20 @@ def vp_dir() -> Path:
     if missing:
         _missing_data(f"Victoria Park data incomplete in {d}: missing {missing}")
     return d
+
+
+@pytest.fixture(scope="session")
+def noise_calibration_set(tmp_path_factory) -> Path:
+    """A complete result set of `trunkslam reproduce noise-calibration --quick --seed 0` (the
+    quickest experiment), made once a session: the earlier results that the interruption,
+    full-disk and failed-experiment tests copy and then try to replace. Read-only: copy it."""
+    from typer.testing import CliRunner
+
+    from experiments.cli import app
+
+    out = tmp_path_factory.mktemp("noise_calibration") / "results"
+    args = ["reproduce", "noise-calibration", "--quick", "--seed", "0", "--out", str(out)]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert (out / "noise_calibration.csv").is_file() and (out / "manifest.json").is_file()
+    return out

@@ -68,14 +68,12 @@ def assert_old_or_new(folder: Path, old: dict[str, str], new_seed: int) -> str:
 
 
 @pytest.fixture(scope="module")
-def old_set(tmp_path_factory):
-    """A complete `reproduce noise-calibration --quick --seed 0` result set (made once; each
-    test copies it)."""
-    out = tmp_path_factory.mktemp("old") / "results"
-    res = runner.invoke(app, ["reproduce", *FAST, "--quick", "--seed", "0", "--out", str(out)])
-    assert res.exit_code == 0, res.output
-    assert_complete_reproduce_set(out, 0)
-    return out
+def old_set(noise_calibration_set):
+    """A complete `reproduce noise-calibration --quick --seed 0` result set (made once a session,
+    tests/conftest.py; each test copies it)."""
+    assert FAST == ["noise-calibration"]  # the experiment of the shared set
+    assert_complete_reproduce_set(noise_calibration_set, 0)
+    return noise_calibration_set
 
 
 def copy_of(folder: Path, dest: Path) -> Path:
@@ -217,6 +215,7 @@ def drive(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_slam_under_a_full_disk_keeps_the_old_outputs(drive, tmp_path, monkeypatch):
     out = tmp_path / "slam_out"
     rrd = out / "run.rrd"

@@ -17,6 +17,7 @@ from experiments.io.sequence_file import load_sequence
 runner = CliRunner()
 
 
+@pytest.mark.slow
 def test_simulate_then_extract_finds_the_pillars(tmp_path):
     scan = tmp_path / "scan.npz"
     res = runner.invoke(

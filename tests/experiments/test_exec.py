@@ -50,6 +50,7 @@ def blas_threads(cfg, seed) -> list[int]:
     return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
 
 
+@pytest.mark.slow
 def test_trials_in_this_process_use_one_blas_thread_as_the_workers_do(executors):
     """A multi-threaded BLAS rounds its sums differently (the full Victoria Park run's tables
     differed in their last digits between --workers 1 and 2): trials run with one BLAS thread
@@ -77,6 +78,7 @@ def test_spawn_seeds_are_the_generators_spawn():
     assert np.random.default_rng(again).random() == np.random.default_rng(s).random()
 
 
+@pytest.mark.slow
 def test_pillar_study_identical_on_every_executor(executors):
     """Tables 1-2's Monte Carlo (8 draws at each of 6 positions): the same per-scan estimates
     and the same table figures, compared exactly."""
@@ -91,6 +93,7 @@ def test_pillar_study_identical_on_every_executor(executors):
         assert table == ref[1], name
 
 
+@pytest.mark.slow
 def test_association_rates_identical_on_every_executor(executors):
     sweeps = {"clutter": ("clutter_per_scan", "clutter", [0.0, 20.0])}
     got = {}
@@ -101,6 +104,7 @@ def test_association_rates_identical_on_every_executor(executors):
     assert got["processes"] == got["serial"] and got["dask"] == got["serial"]
 
 
+@pytest.mark.slow
 def test_slam_study_identical_on_every_executor(executors):
     """Tables 3-4 and NEES of 2 short runs (with the smoother), every figure exactly equal."""
     cfg = Exp2Config(n_runs=2, cycab=CycabParams(n_scans=40), sensitivity=False)
@@ -117,6 +121,7 @@ def test_slam_study_identical_on_every_executor(executors):
             assert np.array_equal(det[m], ref[3][m]), name
 
 
+@pytest.mark.slow
 def test_reproduce_outputs_identical_with_1_and_2_workers_and_dask(tmp_path, executors):
     """`reproduce circle-sweep table1 --quick`: the tables (CSV bytes), the figures (PNG bytes,
     drawn as trials on the executor) and circles.rrd (made by a trial; compared row by row,
@@ -143,6 +148,7 @@ def test_reproduce_outputs_identical_with_1_and_2_workers_and_dask(tmp_path, exe
         assert out[name][1] == rec, name
 
 
+@pytest.mark.slow
 def test_submitted_trials_give_the_records_of_map(executors):
     """`submit` hands the trials over and returns their batch; this process can go on (here:
     other trials) before `result()`, which gives what `map` gives, and the same again when
@@ -168,6 +174,7 @@ def test_submitted_trials_give_the_records_of_map(executors):
             dropped.result()
 
 
+@pytest.mark.slow
 def test_figures_drawn_on_every_executor_are_the_files_drawn_here(tmp_path, executors):
     """A figure drawn as a trial (`figure_trial`: in this process, in a worker process, on a
     Dask worker) is byte for byte the PNG file its plot function writes here."""
@@ -191,6 +198,7 @@ def test_figures_drawn_on_every_executor_are_the_files_drawn_here(tmp_path, exec
                 assert data.startswith(b"\x89PNG") and data == (tmp_path / f).read_bytes(), name
 
 
+@pytest.mark.slow
 def test_recordings_made_on_every_executor_hold_what_one_made_here_holds(tmp_path, executors):
     """circles.rrd and the pillar court's figures made by a trial (`products_trial`, which
     records with a `MemoryRecorder`) on every executor: the figures are byte for byte, and the
@@ -217,6 +225,7 @@ def test_recordings_made_on_every_executor_hold_what_one_made_here_holds(tmp_pat
         assert files == here, name
 
 
+@pytest.mark.slow
 def test_a_deferred_part_that_fails_fails_its_experiment(tmp_path, monkeypatch):
     """The circle sweep's figure is drawn after the experiments (`RunContext.later`); when that
     raises a project error, circle-sweep is listed as failed with it, its files (the table,
@@ -240,6 +249,7 @@ def test_a_deferred_part_that_fails_fails_its_experiment(tmp_path, monkeypatch):
 POINT = {"range_m": 10.0, "radius_m": 0.3, "noise_m": 0.01, "n_trials": 2}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["serial", "processes", "dask"])
 def test_a_trial_that_raises_is_reported_with_its_seed(executors, name):
     """Trial 1 of 3 has a negative radius (the scene refuses it): the error names trial 1 and
@@ -261,6 +271,7 @@ def test_a_trial_that_raises_is_reported_with_its_seed(executors, name):
     assert repr(exc.records[0]) == repr(clean[0]) and repr(exc.records[2]) == repr(clean[2])
 
 
+@pytest.mark.slow
 def test_a_failed_trial_fails_its_experiment_with_its_seed(tmp_path, monkeypatch):
     """In `reproduce`, the experiment is listed as failed with the trial's seed; the other
     experiments' results are written."""
@@ -295,6 +306,7 @@ gate_prob = [0.9, 0.999]
 """
 
 
+@pytest.mark.slow
 def test_sweep_writes_a_tidy_csv_and_a_plot_per_field(tmp_path, executors):
     path = tmp_path / "s.toml"
     path.write_text(SWEEP)

@@ -89,11 +89,13 @@ def figures() -> dict:
     }
 
 
+@pytest.mark.slow
 def test_runs_along_one_path_share_the_geometry_fixed_error(figures):
     inside, above = figures["one path"]
     assert inside <= 0.6, figures
 
 
+@pytest.mark.slow
 def test_varied_paths_make_the_runs_independent(figures):
     inside, above = figures["varied paths"]
     assert inside >= 0.9 and above <= 0.02, figures

@@ -50,6 +50,7 @@ def quick_run(tmp_path_factory):
     return quick_reproduce(tmp_path_factory, "association", seed=3)
 
 
+@pytest.mark.slow
 def test_quick_run_writes_tables_plot_and_optimality(quick_run):
     names = ["association.md", "association.csv", "association.png"]
     assert_outputs(
@@ -66,11 +67,13 @@ def test_quick_run_writes_tables_plot_and_optimality(quick_run):
         assert (r["jcbb_budget_hits"] != "") == (r["method"] == "JCBB")
 
 
+@pytest.mark.slow
 def test_quick_run_tables_are_tidy(quick_run):
     # association_optimality.csv (every instance) is summarised, not pivoted, in its Markdown
     assert assert_tidy_tables(quick_run) == {"association.csv", "association_loop.csv"}
 
 
+@pytest.mark.slow
 def test_quick_run_has_the_in_the_loop_section(quick_run):
     assert "## In the SLAM loop" in (quick_run / "association.md").read_text()
     rows = list(csv.DictReader((quick_run / "association_loop.csv").open()))
@@ -96,6 +99,7 @@ def test_quick_run_has_the_in_the_loop_section(quick_run):
             assert 0 <= int(r["window_steps_rounded"]) <= steps
 
 
+@pytest.mark.slow
 def test_quick_run_single_scan_ihgr_is_always_optimal(quick_run):
     rows = list(csv.DictReader((quick_run / "association_optimality.csv").open()))
     single = [r for r in rows if r["family"].startswith("single")]

@@ -48,6 +48,7 @@ def test_range_jacobian_matches_numerical_derivative():
     np.testing.assert_allclose(beam_range_jacobian(c, r, ang), num, rtol=1e-6, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_crlb_against_monte_carlo_of_an_efficient_estimator():
     """A simple geometry (no grazing beams, small noise): maximum likelihood in range space is
     efficient, so its covariance over many draws matches the bound."""

@@ -35,7 +35,7 @@ def test_overall_trunk_rate_over_the_issue_grid(study):
 
 
 def test_paper_eq5_calls_trunks_lines(study):
-    """METHOD_NOTES 2: the printed test is too weak; our default is the one that classifies."""
+    """docs/method.md section 2: the printed test is too weak; our default classifies."""
     cells = [k for k in study.beams if study.beams[k] >= 10]
     paper = np.mean([study.circle_rate["paper"][k] for k in cells])
     lrt = np.mean([study.circle_rate["lrt"][k] for k in cells])

@@ -94,6 +94,7 @@ def test_false_detection_rule():
     assert false_detections(Features.empty(), labels, pose, lm) == (0, 0)
 
 
+@pytest.mark.slow
 def test_quick_run_matches_golden_numbers():
     """Tolerances: Table 4 depends only on the seeded simulation and the extractors (1e-6);
     Table 3 and the NEES also on the filter and the association (LP solver, BLAS): 5% and 10%

@@ -16,12 +16,14 @@ def quick_run(tmp_path_factory, vp_dir):
     return quick_reproduce(tmp_path_factory, "smoother", seed=0)
 
 
+@pytest.mark.slow
 def test_outputs_and_figures(quick_run):
     names = ["smoother.md", "vp_smoother_map.png", "vp_smoother_errors.png", "manifest.json"]
     assert_outputs(quick_run, names, 501)
     assert_outputs(quick_run, ["smoother.csv"], 200)
 
 
+@pytest.mark.slow
 def test_table_rows(quick_run):
     rows = list(csv.DictReader((quick_run / "smoother.csv").open()))
     graph, ekf, smoothed = rows
@@ -34,6 +36,7 @@ def test_table_rows(quick_run):
     assert float(ekf["rmse_m"]) < 5 and float(smoothed["rmse_m"]) < 5
 
 
+@pytest.mark.slow
 def test_table_is_tidy(quick_run):
     assert assert_tidy_tables(quick_run) == {"smoother.csv"}
 

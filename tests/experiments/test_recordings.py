@@ -130,19 +130,28 @@ print(json.dumps(ms.tolist()))
 """
 
 
+@pytest.mark.slow
 def test_time_per_scan_panel_has_no_first_scan_spike():
     """In a fresh process (numba kernels not yet loaded, lazy imports not yet done) the
     recording's ms-a-scan series of a small simulated run: the first scans are not outliers
     (below 10x the median, or no slower than the slowest later scan), so the panel's axis
-    shows the run. Without `slam.run`'s warm-up scan 0 takes seconds against a median of ms."""
+    shows the run. Without `slam.run`'s warm-up scan 0 takes seconds against a median of ms.
+
+    Each scan's time is its fastest in 3 fresh processes: a scan takes about 0.5 ms, and when
+    other work shares the cores (a parallel test run) the process loses a time slice, some
+    5 ms, at a random scan (seen: scan 0 at 5.3 ms, the slowest later scan at 5.2 ms). A first
+    scan slow by construction, what the warm-up prevents, is slow in every fresh process."""
     import json
     import subprocess
     import sys
 
-    out = subprocess.run(
-        [sys.executable, "-c", _MS_PER_SCAN], capture_output=True, text=True, check=True
-    )
-    ms = np.array(json.loads(out.stdout.strip().splitlines()[-1]))
+    runs = []
+    for _ in range(3):
+        out = subprocess.run(
+            [sys.executable, "-c", _MS_PER_SCAN], capture_output=True, text=True, check=True
+        )
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    ms = np.min(np.array(runs), axis=0)
     assert ms.shape == (40,) and np.all(ms > 0)
     limit = max(10 * np.median(ms), ms[4:].max())
     assert np.all(ms[:4] <= limit), (ms[:4], np.median(ms), ms[4:].max())

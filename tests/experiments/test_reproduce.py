@@ -14,11 +14,13 @@ def quick_run(tmp_path_factory):
     return quick_reproduce(tmp_path_factory, "features", seed=7)
 
 
+@pytest.mark.slow
 def test_outputs_exist(quick_run):
     names = ["classification.md", "classification.csv", "classification.png", "features.rrd"]
     assert_outputs(quick_run, names + ["manifest.json"], 501)
 
 
+@pytest.mark.slow
 def test_victoria_park_figure_with_data(quick_run, vp_dir):
     assert (quick_run / "fig_vp_scan.png").stat().st_size > 500
 
@@ -39,6 +41,7 @@ def test_victoria_park_figure_skipped_and_said_without_data(tmp_path, monkeypatc
     assert rec["blueprints"] == 1 and not any(e.startswith("laser/scan") for e in rec["entities"])
 
 
+@pytest.mark.slow
 def test_manifest_records_how_to_recreate(quick_run):
     m = json.loads((quick_run / "manifest.json").read_text())
     assert m["seed"] == 7 and m["quick"] is True and m["experiments"] == ["features"]
@@ -48,6 +51,7 @@ def test_manifest_records_how_to_recreate(quick_run):
     assert "classification.csv" in m["outputs"]
 
 
+@pytest.mark.slow
 def test_classification_table_is_consistent(quick_run):
     rows = list(csv.DictReader((quick_run / "classification.csv").open()))
     assert list(rows[0]) == ["radius_m", "range_m", "beams_on_trunk", "line_test", "circle_rate"]
@@ -56,10 +60,12 @@ def test_classification_table_is_consistent(quick_run):
     assert big and all(float(r["circle_rate"]) >= 0.75 for r in big)
 
 
+@pytest.mark.slow
 def test_classification_table_is_tidy(quick_run):
     assert assert_tidy_tables(quick_run) == {"classification.csv"}
 
 
+@pytest.mark.slow
 def test_features_recording_carries_its_layout(quick_run, vp_dir):
     from support import read_recording
 

@@ -115,6 +115,7 @@ def quick_tables(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_quick_circle_and_calibration_tables_are_tidy(quick_tables):
     assert assert_tidy_tables(quick_tables) == {
         "table1_ce.csv",
@@ -129,6 +130,7 @@ def test_quick_circle_and_calibration_tables_are_tidy(quick_tables):
     }
 
 
+@pytest.mark.slow
 def test_table1_has_the_papers_numbers_as_rows(quick_tables):
     from experiments.paper.circles import PAPER_TABLE1
 
@@ -144,6 +146,7 @@ def test_table1_has_the_papers_numbers_as_rows(quick_tables):
     assert {r["pillar"] for r in every if r["source"] == "paper_published"} == set("defg")
 
 
+@pytest.mark.slow
 def test_noise_calibration_in_use_values_are_slams(quick_tables):
     from slam import DEFAULT_CONSTANT_NOISE
 
@@ -152,6 +155,7 @@ def test_noise_calibration_in_use_values_are_slams(quick_tables):
     assert in_use[:4] == list(DEFAULT_CONSTANT_NOISE["paper"])
 
 
+@pytest.mark.slow
 def test_range_biases_in_use_are_the_calibrations_lines(quick_tables):
     """slam.measurement.DEFAULT_RANGE_BIAS holds the calibration's maximum-likelihood lines,
     rounded to 0.1 mm and 0.01 mm per m, for every extractor."""
@@ -189,6 +193,7 @@ def quick_victoria_park(tmp_path_factory, vp_dir):
     return out
 
 
+@pytest.mark.slow
 def test_quick_victoria_park_table_is_tidy(quick_victoria_park):
     from experiments.paper.victoria_park import PUBLISHED
 

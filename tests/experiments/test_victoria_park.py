@@ -237,6 +237,7 @@ def test_full_run_loader(vp_dir):
     assert cov is None
 
 
+@pytest.mark.slow
 def test_first_1000_scans_match_the_golden_figures(vp_dir):
     """Landmarks within 5 of the golden count, GPS RMSE and NIS within 10%: the run depends on
     the LP solver and BLAS rounding through the association, not on randomness."""
@@ -282,6 +283,7 @@ def test_scale_measurement_noise_scales_every_sigma_and_rejects_bad_factors():
             scale_measurement_noise(cfg, bad)
 
 
+@pytest.mark.slow
 @pytest.mark.data
 def test_consistency_scale_brings_nis_per_dof_to_one(vp_dir):
     """On the first 300 scans: NIS per dof falls as the measurement sigmas grow, the bisection
@@ -391,6 +393,7 @@ def test_start_stretch_is_the_shortest_from_which_the_heading_holds():
     assert derive([(300.0, 35.0, 9)]) == 300.0
 
 
+@pytest.mark.slow
 @pytest.mark.data
 def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
     """The preset's gps_start_fit_m is what `vp_start` derives on scans 1-2000 with the

@@ -42,6 +42,7 @@ def test_derive_starts_at_the_first_bin_seen_half_the_time_and_refuses_none():
         derive(rates([0.4, 0.3, 0.45]))
 
 
+@pytest.mark.slow
 @pytest.mark.data
 def test_pruning_experiment_on_the_first_scans(vp_dir, tmp_path):
     from typer.testing import CliRunner

@@ -58,6 +58,7 @@ def ute_drive(seconds: float = 480.0, gps_sigma: float = 0.05, seed: int = 0) ->
     )
 
 
+@pytest.mark.slow
 def test_fit_recovers_a_known_miscalibration_and_holds_out_the_rest():
     """Readings whose true angle is 0.005 + 1.02 r + 0.2 r^3: the fit on the first 240 scans
     (4 stretches of 60 s) finds the three parameters, and the dead-reckoning error falls to the
@@ -86,6 +87,7 @@ def test_the_jump_is_left_out_and_missing_gps_is_named():
         fit_steering(seq, fit_scans=30)
 
 
+@pytest.mark.slow
 @pytest.mark.data
 def test_on_victoria_park_the_fit_halves_the_held_out_dead_reckoning_error(vp_dir):
     """Fitted on the GPS stretches of scans 1-2000, the calibration brings dead reckoning

@@ -180,6 +180,7 @@ def _known_association_run(seed: int, n_scans: int = 100):
     return np.array(nees)
 
 
+@pytest.mark.slow
 def test_nees_with_known_association_lies_inside_its_bounds():
     """50 seeded Monte Carlo runs of 100 scans: the average pose NEES lies inside its 95%
     chi-square bounds at >= 90% of the scans (95% expected for a consistent filter), and its

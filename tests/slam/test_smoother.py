@@ -378,6 +378,7 @@ def test_bad_problems_name_the_field():
         SmootherOptions(isam2_every=0)
 
 
+@pytest.mark.slow
 @pytest.mark.data
 def test_gtsam_victoria_park_graph_reaches_the_optimum(vp_dir):
     path = vp_dir / "gtsam" / "victoria_park.txt"
