@@ -4,14 +4,14 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: reproduce test format install bench clean
+.PHONY: reproduce test check format install bench docs report clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
 
 $(STAMP): $(BIN)/python pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test,docs]'
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -23,17 +23,36 @@ format: $(STAMP)
 reproduce: $(STAMP)
 	$(BIN)/trunkslam reproduce --out results
 
+# The whole suite on every core (pytest-xdist; --dist loadscope keeps each module's tests, and
+# so its module fixtures, on one worker), property tests derandomized (tests/conftest.py).
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci
 
+# The fast tier, for every change: lint, format, and the tests not marked slow (each under
+# about 1 s; pyproject.toml's `slow` marker).
+check: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci -m "not slow"
+
+# each benchmark prints its table and writes it to bench_results/ for the performance page
 bench: $(STAMP)
-	$(BIN)/trunkslam bench extract
-	$(BIN)/trunkslam bench association
-	$(BIN)/trunkslam bench slam
-	$(BIN)/trunkslam bench raycast
-	$(BIN)/trunkslam bench smoother
+	mkdir -p bench_results
+	$(BIN)/trunkslam bench extract --out bench_results/bench_extract.md
+	$(BIN)/trunkslam bench association --out bench_results/bench_association.md
+	$(BIN)/trunkslam bench slam --out bench_results/bench_slam.md
+	$(BIN)/trunkslam bench raycast --out bench_results/bench_raycast.md
+	$(BIN)/trunkslam bench smoother --out bench_results/bench_smoother.md
+
+# the documentation site, into build/site; --strict: a broken link or an unresolved number fails
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict --quiet
+
+# after `make reproduce` (and `make bench`): the docs' snapshot and the README's glance table
+report: $(STAMP)
+	$(BIN)/trunkslam report results $(wildcard bench_results)
 
 clean:
-	rm -rf $(VENV) results .pytest_cache
+	rm -rf $(VENV) results bench_results build .pytest_cache

@@ -1,6 +1,6 @@
 """LP relaxation with iterative heuristic greedy rounding (IHGR) for set-partitioning problems.
 
-The problem (METHOD_NOTES section 1; Storms & Spieksma 2003):
+The problem (docs/method.md section 1; Storms & Spieksma 2003):
 
     minimise   c^T x
     subject to A[r] x  = 1   for every row r with exact[r]       (e.g. a measurement)

@@ -1,4 +1,4 @@
-"""Single-scan IHGR: the assignment integer program of METHOD_NOTES section 1 and its costs.
+"""Single-scan IHGR: the assignment integer program of docs/method.md section 1 and its costs.
 
 Variables x_ij (measurement i paired with map feature j, only for individually gated pairs) and
 x_i0 (measurement i is a new feature or clutter). Constraints: every measurement exactly once,

@@ -4,7 +4,7 @@ Which decisions are committed
 -----------------------------
 `SlidingWindowAssociator.step(...)` is called with the newest scan and returns that scan's
 assignment, final at once: the EKF needs it for this scan's update. So the window commits the
-**newest** scan (METHOD_NOTES section 1 leaves oldest-or-newest open; committing the oldest would
+**newest** scan (docs/method.md section 1 leaves oldest-or-newest open; committing the oldest would
 delay every EKF update by K - 1 scans). A pairing with a map feature, once returned, is never
 revisited, and hypotheses that contradict it are not built.
 

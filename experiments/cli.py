@@ -143,6 +143,39 @@ class _StderrHandler(logging.StreamHandler):
         pass
 
 
+def _bench_out(value: Path | None) -> Path | None:
+    """`--out` of a benchmark, checked before the benchmark runs."""
+    if value is not None:
+        from experiments.errors import DataError
+        from experiments.io.writers import check_output_file
+
+        try:
+            check_output_file(value, "--out")
+        except DataError as exc:
+            raise typer.BadParameter(str(exc)) from None
+    return value
+
+
+BenchOut = Annotated[
+    Path | None,
+    typer.Option(
+        "--out",
+        callback=_bench_out,
+        help="also write the table to this Markdown file (the docs' performance page) "
+        "[default: none]",
+    ),
+]
+
+
+def _emit(text: str, out: Path | None) -> None:
+    """Print a benchmark's table, and write it to `out` when given (atomically)."""
+    typer.echo(text)
+    if out is not None:
+        from experiments.io.writers import write_atomic
+
+        write_atomic(out, text if text.endswith("\n") else text + "\n")
+
+
 def _version(value: bool) -> None:
     if value:
         from importlib.metadata import version
@@ -432,6 +465,35 @@ def sweep(
     typer.echo(f"{len(written)} files in {out}/ (see {out}/sweep.csv)")
 
 
+@app.command()
+@handle_errors
+def report(
+    results: Annotated[
+        list[Path],
+        typer.Argument(
+            help="`trunkslam reproduce` folders; the first one's manifest.json is the snapshot's"
+        ),
+    ],
+    docs: Annotated[Path, typer.Option(help="the snapshot folder the documentation reads")] = Path(
+        "docs/results"
+    ),
+    readme: Annotated[
+        Path | None,
+        typer.Option(help="README whose results-at-a-glance block is rewritten ('' for none)"),
+    ] = Path("README.md"),
+) -> None:
+    """Copy result tables and figures into the documentation's snapshot (docs/results/) and
+    rewrite the README's results-at-a-glance table from it."""
+    from experiments.render.report import Snapshot, clear_snapshot, copy_results, update_readme
+
+    clear_snapshot(docs)
+    written = copy_results(results, docs)
+    typer.echo(f"{len(written)} files -> {docs}/")
+    if readme is not None and str(readme):
+        changed = update_readme(readme, Snapshot(docs))
+        typer.echo(f"{readme}: results at a glance {'rewritten' if changed else 'unchanged'}")
+
+
 @app.command("slam")
 @handle_errors
 def slam_cmd(
@@ -611,11 +673,23 @@ def export_reference_cmd(
     input: Annotated[Path, typer.Argument(help="sequence file (.npz) with GPS or truth")],
     out: Annotated[Path, typer.Option(help="output folder")] = Path("reference"),
 ) -> None:
-    """Write a sequence's GPS track (and, for simulated runs, the truth) as TUM files for evo."""
+    """Write a sequence's GPS track (the fixes inside its scans' time span, the ones a run is
+    scored against) and, for simulated runs, the truth as TUM files for evo_ape."""
     from experiments.pipeline.reference import export_reference
 
-    written = export_reference(input, out)
-    typer.echo(f"{', '.join(p.name for p in written)} -> {out}/")
+    done = export_reference(input, out)
+    typer.echo(f"{', '.join(p.name for p in done.files)} -> {out}/")
+    if done.n_fixes:
+        typer.echo(
+            f"{done.n_fixes} fixes; against a run's trajectory_gps_antenna.tum: evo_ape tum "
+            f"{out / 'gps.tum'} RUN/trajectory_gps_antenna.tum --sync_method interpolation "
+            f"--t_max_diff {done.t_max_diff_s:g}"
+        )
+    if done.n_fixes >= done.n_scans:  # evo then resamples the GPS at the scans, not the run
+        typer.echo(
+            f"(more fixes than the {done.n_scans} scans: evo compares each scan with the GPS "
+            "interpolated at its time, not each fix with the run; truth.tum is the exact check)"
+        )
 
 
 @bench_app.command("extract")
@@ -626,6 +700,7 @@ def bench_extract(
         Path | None,
         typer.Option(help="victoria_park folder [default: $TRUNKSLAM_DATA/victoria_park]"),
     ] = None,
+    out: BenchOut = None,
 ) -> None:
     """Scans per second of each extractor on the 2000 real Victoria Park scans."""
     from experiments.bench.extract import bench_extract as bench
@@ -634,7 +709,7 @@ def bench_extract(
 
     with Progress() as progress:
         rows = bench(repeats=repeats, root=data, progress=progress)
-    typer.echo(format_extract(rows))
+    _emit(format_extract(rows), out)
 
 
 @bench_app.command("association")
@@ -642,6 +717,7 @@ def bench_extract(
 def bench_association(
     repeats: Annotated[int, typer.Option(min=1, help="scans timed per method")] = 200,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
+    out: BenchOut = None,
 ) -> None:
     """Median time per scan of each association method at Victoria Park scale."""
     from experiments.bench.association import bench, format_table
@@ -649,7 +725,7 @@ def bench_association(
 
     with Progress() as progress:
         rows = bench(repeats=repeats, seed=seed, progress=progress)
-    typer.echo(format_table(rows))
+    _emit(format_table(rows), out)
 
 
 @bench_app.command("slam")
@@ -660,6 +736,7 @@ def bench_slam(
     ] = 800,
     association: Annotated[Association, typer.Option(help="data association")] = Association.ihgr,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
+    out: BenchOut = None,
 ) -> None:
     """EKF-SLAM time per scan against the size of the map: an avenue of trees, and the full
     Victoria Park run when its data is there."""
@@ -673,7 +750,7 @@ def bench_slam(
             rows += bench_victoria_park(association.value, progress=progress)
         except MissingDataError as exc:
             typer.echo(f"Victoria Park rows skipped: {exc}", err=True)
-    typer.echo(format_table(rows))
+    _emit(format_table(rows), out)
 
 
 @bench_app.command("smoother")
@@ -690,6 +767,7 @@ def bench_smoother(
         typer.Option(help="victoria_park folder [default: $TRUNKSLAM_DATA/victoria_park]"),
     ] = None,
     seed: Annotated[int, typer.Option(min=0, help="random seed of the tree-park run")] = 0,
+    out: BenchOut = None,
 ) -> None:
     """Seconds of the GTSAM smoother (batch, iSAM2, iSAM2 + polish) on a tree-park run, the
     full Victoria Park run and GTSAM's own Victoria Park graph."""
@@ -703,7 +781,7 @@ def bench_smoother(
 
     with Progress() as progress:
         rows = bench(data, tuple(sizes), per_pose, seed, progress=progress)
-    typer.echo(format_table(rows))
+    _emit(format_table(rows), out)
 
 
 @bench_app.command("reproduce")
@@ -722,6 +800,7 @@ def bench_reproduce(
         str | None,
         typer.Option(help="also run on this Dask scheduler (tcp://host:8786) [default: no]"),
     ] = None,
+    out: BenchOut = None,
 ) -> None:
     """Wall time of `trunkslam reproduce` with 1 worker and with every core (and on a Dask
     scheduler), and whether the tables are the same."""
@@ -733,7 +812,7 @@ def bench_reproduce(
     with Progress() as progress:
         rows = bench(chosen, quick, (1, workers), dask, progress)
     what = " ".join(chosen) or "(default experiments)"
-    typer.echo(format_table(rows, what + (" --quick" if quick else "")))
+    _emit(format_table(rows, what + (" --quick" if quick else "")), out)
 
 
 @bench_app.command("raycast")
@@ -741,6 +820,7 @@ def bench_reproduce(
 def bench_raycast(
     repeats: Annotated[int, typer.Option(min=1, help="calls timed per pass")] = 300,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
+    out: BenchOut = None,
 ) -> None:
     """Microseconds per 720-beam simulated scan on the bundled scenes and a random one."""
     from experiments.bench.raycast import bench_raycast as bench
@@ -749,7 +829,7 @@ def bench_raycast(
 
     with Progress() as progress:
         rows = bench(repeats=repeats, seed=seed, progress=progress)
-    typer.echo(format_table(rows))
+    _emit(format_table(rows), out)
 
 
 if __name__ == "__main__":  # pragma: no cover

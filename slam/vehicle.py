@@ -4,7 +4,7 @@ Vehicle frame: origin at the centre of the rear axle, x forward, y left (dataset
 World frame: the run's fixed frame; a pose is [x_m, y_m, theta_rad] of the vehicle frame.
 
 Model (`"ackermann"` of the sequence format, the Guivant-Nebot model of the Victoria Park ute,
-and the rear-axle bicycle model proposed for the Cycab in METHOD_NOTES section 3):
+and the rear-axle bicycle model proposed for the Cycab in docs/method.md section 3):
 - the speed encoder sits H = `encoder_offset_m` to the left of the centre line on the rear axle;
   the rear-axle-centre speed is v_c = v_e / (1 - (H / L) tan(alpha)),
 - the rear-axle centre moves as x' = v_c cos(theta), y' = v_c sin(theta),

@@ -1,6 +1,6 @@
 """Pose errors against a reference, and filter consistency (NEES, NIS) with chi-square bounds.
 
-Definitions (METHOD_NOTES section 5):
+Definitions (docs/method.md section 5):
   pose error   estimate minus reference, [dx_m, dy_m, dtheta_rad] with the heading wrapped.
   NEES         e^T P^-1 e of each pose (3 dof); averaged over R Monte Carlo runs, its 95% bounds
                are chi2_(3R)(0.025, 0.975) / R.

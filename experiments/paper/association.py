@@ -647,7 +647,7 @@ def _optimality_notes(oc: dict, summary) -> str:
         "vertex. IHGR runs here without presolve, so every instance goes through linprog "
         "(HiGHS dual simplex). Variants: 'IHGR' (the default) fixes the largest fractional "
         "variable in each pass; 'also fixing every x = 1' fixes, in the same pass, every "
-        "variable the LP already put at 1 (the faster variant of METHOD_NOTES).\n\n"
+        "variable the LP already put at 1 (the faster variant of docs/method.md section 1).\n\n"
         "Families: single-scan problems from simulated scans with strong contention (1-6 "
         "landmarks per 100 m^2, up to 30 clutter returns, pose std up to 1.5 m); the problems "
         "`SlidingWindowAssociator` builds on simulated sequences (K = 3 with a map, 30% unmapped "

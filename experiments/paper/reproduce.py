@@ -23,11 +23,12 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable
+from datetime import UTC, datetime
 from pathlib import Path
 
 from experiments.errors import ExperimentFailed, input_errors
 from experiments.exec import Batch, Executor, SerialExecutor
-from experiments.io.provenance import git_commit, versions
+from experiments.io.provenance import git_commit, machine, versions
 from experiments.io.writers import atomic_folder, check_output_folder, dumps_json, write_atomic
 from experiments.paper.runner import DEFAULT_EXPERIMENTS, RunContext, get_experiment
 
@@ -161,6 +162,8 @@ def run_experiments(
             "quick": quick,
             "seed": seed,
             "git_commit": git_commit(),
+            "finished": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
+            "machine": machine(),
             "versions": versions(),
             "config": ctx.config,
             "seconds": timings,

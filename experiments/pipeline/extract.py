@@ -32,7 +32,7 @@ def run_extract(
     progress: Callable[[str, int, int], None] | None = None,
 ) -> dict:
     """Extract features from every scan of `input_path` and write the features JSON to `out`
-    (format: README, "Formats"); optionally a rerun recording. Returns a summary: scans,
+    (format: docs/formats.md); optionally a rerun recording. Returns a summary: scans,
     circles, the output path. Both outputs are written atomically (temporary file, rename);
     an output path that is the input, or not a regular file, is refused before any work."""
     out = Path(out)

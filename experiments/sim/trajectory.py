@@ -2,7 +2,7 @@
 
 The paper's second experiment drives the Cycab (INRIA/Robosoft, a small electric car-like
 vehicle) with a SICK LMS200 and a DGPS "with up to 2 cm accuracy" as ground truth. Its
-geometry is not published; `CycabParams` holds our choices (METHOD_NOTES section 3: a
+geometry is not published; `CycabParams` holds our choices (docs/method.md section 3: a
 rear-axle bicycle model, wheelbase about 1.2 m, unverified; speed from the mean of the rear-wheel
 encoders, so the encoder offset H is 0).
 
@@ -64,7 +64,7 @@ MONTE_CARLO_PATH = {"route_offset_sigma_m": 0.2, "start_along_m": 0.24}
 class CycabParams:
     """The car, its sensors and the drive (metres, radians, seconds).
 
-    wheelbase_m: L (METHOD_NOTES: about 1.2 m, unverified). encoder_offset_m: H, 0 for a
+    wheelbase_m: L (docs/method.md section 3: about 1.2 m, unverified). encoder_offset_m: H, 0 for a
     mean of both rear wheels. laser_pose: the LMS200 at the front bumper, in the vehicle frame.
     speed_mps: cruising speed; accel_time_s: linear ramp from rest at the start.
     lookahead_m, max_steer_rad, max_steer_rate_rad_s: the pure-pursuit driver.

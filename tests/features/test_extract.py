@@ -178,7 +178,7 @@ def test_paper_fit_falls_back_when_first_three_points_are_collinear():
 
 
 def test_kasa_bias_toward_small_circles_on_short_arcs():
-    """METHOD_NOTES 4: the paper's (Kasa) fit underestimates the radius; geometric does not."""
+    """docs/method.md section 4: the paper's (Kasa) fit shrinks the radius; geometric does not."""
     rng = np.random.default_rng(5)
     paper_r, geo_r = [], []
     for _ in range(300):
