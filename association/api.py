@@ -8,7 +8,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from association.errors import AssociationError
-from association.inputs import prepare
+from association.inputs import Prepared, prepare
 from association.jcbb import DEFAULT_MAX_NODES, jcbb_assign
 from association.nn import nn_assign
 from association.rounding import ROUNDING_OPTIONS, check_rounding_options
@@ -66,7 +66,9 @@ def associate_detailed(
     **params,
 ) -> Association:
     """`associate` with the method's statistics; see `associate` for the arguments."""
-    prep, out, cost, extra = _solve(z, R, z_hat, H, P, method, gate_prob, validate, params)
+    _check_method(method, params)
+    prep = prepare(z, R, z_hat, H, P, gate_prob=gate_prob, validate=validate)
+    out, cost, extra = _solve(prep, method, gate_prob, params)
     d2 = np.full(prep.m, np.nan)
     if prep.pair_i.size:
         lookup = {(int(i), int(j)): k for k, (i, j) in enumerate(zip(prep.pair_i, prep.pair_j))}
@@ -77,8 +79,8 @@ def associate_detailed(
     return Association(out, method, d2, float(cost), int(prep.pair_i.size), **extra)
 
 
-def _solve(z, R, z_hat, H, P, method, gate_prob, validate, params):
-    """(prepared inputs, assignment, cost (NaN for nn), statistics) of `associate_detailed`."""
+def _check_method(method: str, params: dict) -> None:
+    """`method` is one of `METHODS` and `params` are its parameters."""
     if method not in METHODS:
         raise AssociationError(f"method: expected one of {METHODS}, got {method!r}")
     unknown = set(params) - set(_PARAMS[method])
@@ -87,7 +89,11 @@ def _solve(z, R, z_hat, H, P, method, gate_prob, validate, params):
         raise AssociationError(
             f"{sorted(unknown)}: not parameters of method {method!r} (allowed: {allowed})"
         )
-    prep = prepare(z, R, z_hat, H, P, gate_prob, validate=validate)
+
+
+def _solve(prep: Prepared, method: str, gate_prob: float, params: dict):
+    """(assignment, cost (NaN for nn), statistics) of `associate_detailed` on prepared inputs;
+    `method` and `params` checked (`_check_method`)."""
     extra: dict = {}
     if method == "ihgr":
         model = CostModel(**{k: params[k] for k in _COST_KEYS if k in params})
@@ -102,7 +108,7 @@ def _solve(z, R, z_hat, H, P, method, gate_prob, validate, params):
     else:
         out = nn_assign(prep)
         cost = math.nan
-    return prep, out, cost, extra
+    return out, cost, extra
 
 
 def associate(
@@ -140,5 +146,7 @@ def associate(
     malformed input (shapes, NaN or inf, negative ranges, R not positive definite, P not
     symmetric positive semi-definite on the blocks used).
     """
+    _check_method(method, params)
+    prep = prepare(z, R, z_hat, H, P, gate_prob=gate_prob, validate=validate)
     # without `associate_detailed`'s per-pair distances and cost, which it does not return
-    return _solve(z, R, z_hat, H, P, method, gate_prob, validate, params)[1]
+    return _solve(prep, method, gate_prob, params)[0]

@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 
 from association.errors import AssociationError
+from association.gating import pair_d2
 
 __all__ = [
     "wrap_angle",
@@ -365,7 +366,8 @@ def prepare(z, R, z_hat, H, P, gate_prob: float, *, validate: bool = True) -> Pr
     the checked path's, to the bit (the same kernels and arithmetic).
     """
     if validate:
-        z, R, z_hat, H, P, S_feat, gate_prob = _checked(z, R, z_hat, H, P, gate_prob)
+        gate_prob = check_gate_prob(gate_prob)
+        z, R, z_hat, H, P, S_feat = _checked(z, R, z_hat, H, P)
     else:
         z, z_hat = np.asarray(z, np.float64), np.asarray(z_hat, np.float64)
         m = z.shape[0]
@@ -393,11 +395,36 @@ def prepare(z, R, z_hat, H, P, gate_prob: float, *, validate: bool = True) -> Pr
             _check_joint_psd(H, P, np.unique(jj))
         order = np.lexsort((rank_feat[jj], rank_meas[ii]))
         logdet = 2.0 * (np.log(l11[order]) + np.log(l22[order]))  # as `chol2_solve`
-        pairs = (ii[order], jj[order], nu[order], S[order], d2[order], logdet)
+        pairs = {
+            "pair_i": ii[order],
+            "pair_j": jj[order],
+            "nu": nu[order],
+            "S": S[order],
+            "d2": d2[order],
+            "logdet_S": logdet,
+        }
     else:
         e = np.zeros(0, np.int64)
-        pairs = (e, e, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0), np.zeros(0))
-    return Prepared(z, R, z_hat, S_feat, H, P, gate, rank_meas, rank_feat, *pairs)
+        pairs = {
+            "pair_i": e,
+            "pair_j": e,
+            "nu": np.zeros((0, 2)),
+            "S": np.zeros((0, 2, 2)),
+            "d2": np.zeros(0),
+            "logdet_S": np.zeros(0),
+        }
+    return Prepared(
+        z=z,
+        R=R,
+        z_hat=z_hat,
+        S_feat=S_feat,
+        H=H,
+        P=P,
+        gate=gate,
+        rank_meas=rank_meas,
+        rank_feat=rank_feat,
+        **pairs,
+    )
 
 
 @njit(cache=True)
@@ -406,8 +433,9 @@ def _gated_pairs(z, R, z_hat, S_feat, gate):
     m x n pairs (the vectorised form built (m, n, 2, 2) arrays of every pair, and its dozen
     array operations cost more than the arithmetic).
 
-    For each pair: nu_ij = z_i - z_hat_j (bearing wrapped as `wrap_angle`), S_ij = S_feat_j +
-    R_i, and d2_ij with the arithmetic of `chol2_solve`, so the same numbers to the bit.
+    For each pair `association.gating.pair_d2` (the one home of the gate's arithmetic): nu_ij =
+    z_i - z_hat_j (bearing wrapped as `wrap_angle`), S_ij = S_feat_j + R_i, and d2_ij with the
+    arithmetic of `chol2_solve`, so the same numbers to the bit.
     Returns the pairs with d2 <= gate in row-major order: ii, jj (k,), nu (k, 2),
     S (k, 2, 2), d2 (k,), and the Cholesky diagonals l11, l22 (k,) (ln|S| = 2 ln(l11 l22));
     bad (2,): the first pair whose S is not positive definite, or (-1, -1)."""
@@ -421,30 +449,15 @@ def _gated_pairs(z, R, z_hat, S_feat, gate):
     l11s = np.empty(cap)
     l22s = np.empty(cap)
     bad = np.full(2, -1, np.int64)
-    two_pi = 2.0 * np.pi
     k = 0
     for i in range(m):
         for j in range(n):
-            nu0 = z[i, 0] - z_hat[j, 0]
-            nu1 = np.pi - np.mod(np.pi - (z[i, 1] - z_hat[j, 1]), two_pi)  # `wrap_angle`
-            s00 = S_feat[j, 0, 0] + R[i, 0, 0]
-            s01 = S_feat[j, 0, 1] + R[i, 0, 1]
-            s10 = S_feat[j, 1, 0] + R[i, 1, 0]
-            s11 = S_feat[j, 1, 1] + R[i, 1, 1]
-            # `chol2_solve`, operation for operation
-            s21 = 0.5 * (s10 + s01)
-            l11 = math.sqrt(s00) if s00 >= 0.0 else math.nan
-            l21 = s21 / l11
-            q = s11 - l21 * l21
-            l22 = math.sqrt(q) if q >= 0.0 else math.nan
-            if not (s00 > 0.0 and q > 0.0):
+            dd, nu0, nu1, s00, s01, s10, s11, l11, l22, ok = pair_d2(z, R, z_hat, S_feat, i, j)
+            if not ok:
                 if bad[0] < 0:
                     bad[0] = i
                     bad[1] = j
                 continue
-            y1 = nu0 / l11
-            y2 = (nu1 - l21 * y1) / l22
-            dd = y1 * y1 + y2 * y2
             if dd <= gate:  # eq. individual compatibility gate
                 ii[k] = i
                 jj[k] = j
@@ -461,10 +474,9 @@ def _gated_pairs(z, R, z_hat, S_feat, gate):
     return ii[:k], jj[:k], nu[:k], S[:k], d2[:k], l11s[:k], l22s[:k], bad
 
 
-def _checked(z, R, z_hat, H, P, gate_prob):
-    """The checks of `prepare`: (z, R, z_hat, H, P) as checked float arrays, S_feat and
-    gate_prob (a float)."""
-    gate_prob = check_gate_prob(gate_prob)
+def _checked(z, R, z_hat, H, P):
+    """The checks of `prepare` on its arrays (after gate_prob's): (z, R, z_hat, H, P) as checked
+    float arrays, and S_feat."""
     z = check_measurements("z", z, "(m, 2)")
     m = z.shape[0]
     R = check_R(R, m)
@@ -517,7 +529,7 @@ def _checked(z, R, z_hat, H, P, gate_prob):
             raise AssociationError(
                 f"P: H[{k}] P H[{k}]^T is not positive semi-definite ({S_feat[k].tolist()})"
             )
-    return z, R, z_hat, H, P, S_feat, gate_prob
+    return z, R, z_hat, H, P, S_feat
 
 
 def _check_joint_psd(H: np.ndarray, P: np.ndarray, feats: np.ndarray) -> None:

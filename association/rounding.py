@@ -37,6 +37,7 @@ RuntimeError is raised; association problems always give each measurement a sing
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -102,6 +103,25 @@ class RoundingResult:
     method: str
 
 
+class _Csc(NamedTuple):
+    """A set-partitioning problem in CSC index form: column h covers rows
+    indices[indptr[h]:indptr[h + 1]]."""
+
+    c: np.ndarray  # (N,) float64 column costs
+    n_rows: int
+    indptr: np.ndarray  # (N + 1,) int64
+    indices: np.ndarray  # (nnz,) int64 row of each entry
+    exact: np.ndarray  # (n_rows,) bool: covered exactly once, else at most once
+
+
+class _Components(NamedTuple):
+    """The connected components of the row-column graph (`_components`)."""
+
+    n_comp: int
+    row_lab: np.ndarray  # (n_rows,) int, the component of each row
+    col_lab: np.ndarray  # (N,) int, the component of each column
+
+
 def check_problem(costs, A, exact) -> tuple[np.ndarray, sp.csc_array, np.ndarray]:
     """Validate and normalise (costs (N,), A (rows, N) 0/1, exact (rows,) bool)."""
     c, n_rows, indptr, indices, e = _check(costs, A, exact)
@@ -156,7 +176,7 @@ def _check(costs, A, exact):
     return c, n_rows, indptr, indices, e
 
 
-def _components(n_rows: int, indptr: np.ndarray, indices: np.ndarray):
+def _components(n_rows: int, indptr: np.ndarray, indices: np.ndarray) -> _Components:
     """Connected components of the row-column graph: (count, row labels, column labels).
 
     Labels number the components in the order of their smallest union-find root (rows joined by
@@ -166,8 +186,8 @@ def _components(n_rows: int, indptr: np.ndarray, indices: np.ndarray):
         col = np.repeat(np.arange(n_cols), np.diff(indptr)) + n_rows
         g = sp.coo_array((np.ones(indices.size), (indices, col)), shape=(n_rows + n_cols,) * 2)
         k, labels = connected_components(g, directed=False)
-        return k, labels[:n_rows], labels[n_rows:]
-    return _union_find(n_rows, indptr, indices)
+        return _Components(k, labels[:n_rows], labels[n_rows:])
+    return _Components._make(_union_find(n_rows, indptr, indices))
 
 
 @njit(cache=True)
@@ -210,13 +230,17 @@ def _union_find(n_rows, indptr, indices):
 
 
 @njit(cache=True)
-def _presolve(c, n_rows, indptr, indices, exact, n_comp, row_lab, col_lab, chosen, active):
-    """The presolve of `ihgr_round_csc`, in place on `chosen` and `active`; returns the cost of
-    the columns it chose (summed in component order).
+def _presolve(problem, components, chosen, active):
+    """The presolve of `ihgr_round_csc`, in place on `chosen` and `active` ((N,) bool); returns
+    the cost of the columns it chose (summed in component order). problem: a `_Csc`,
+    components: its `_Components`, both as plain tuples (numba's dispatcher types a plain tuple
+    in C but a NamedTuple in Python, about 1.5 us a call).
 
     A component whose columns all cover its only exact row (or, with no exact row, all share
     one row) is a choice of at most one column: the cheapest (ties: the lowest index) is taken
     when a row must be covered or its cost is negative, and the component is closed."""
+    c, n_rows, indptr, indices, exact = problem
+    n_comp, row_lab, col_lab = components
     n_cols = c.size
     n_exact = np.zeros(n_comp, np.int64)
     n_rows_k = np.zeros(n_comp, np.int64)
@@ -276,9 +300,10 @@ def _presolve(c, n_rows, indptr, indices, exact, n_comp, row_lab, col_lab, chose
     return bound
 
 
-def _solve_lp(c, n_rows, indptr, indices, cols, rows, exact):
-    """LP relaxation over columns `cols` and rows `rows`; <= rows get slack columns so that
-    HiGHS sees only equalities. Returns (x over cols, optimum)."""
+def _solve_lp(problem: _Csc, cols: np.ndarray, rows: np.ndarray):
+    """LP relaxation of `problem` over columns `cols` and rows `rows`; <= rows get slack columns
+    so that HiGHS sees only equalities. Returns (x over cols, optimum)."""
+    c, n_rows, indptr, indices, exact = problem
     row_pos = np.full(n_rows, -1, np.int64)
     row_pos[rows] = np.arange(rows.size)
     counts = np.diff(indptr)[cols]
@@ -340,17 +365,16 @@ def ihgr_round_csc(
         r = int(np.flatnonzero(exact & ~row_has_col)[0])
         raise RuntimeError(f"IHGR: infeasible, exact row {r} has no column")
     if n_cols == 0:
-        return RoundingResult(np.zeros(0, np.int64), 0.0, 0.0, 0, False, "ihgr")
-    n_comp, row_lab, col_lab = _components(n_rows, indptr, indices)
+        return _no_columns("ihgr")
+    problem = _Csc(c, n_rows, indptr, indices, exact)
+    components = _components(n_rows, indptr, indices)
     counts = np.diff(indptr)
     chosen = np.zeros(n_cols, bool)
     active = np.ones(n_cols, bool)  # columns still in play
     bound = 0.0
 
     if presolve:  # single-choice components settled without an LP (`_presolve`)
-        bound += _presolve(
-            c, n_rows, indptr, indices, exact, n_comp, row_lab, col_lab, chosen, active
-        )
+        bound += _presolve(tuple(problem), tuple(components), chosen, active)
     covered = np.zeros(n_rows, bool)
     covered[indices[np.repeat(chosen, counts)]] = True
     solves = 0
@@ -365,29 +389,17 @@ def ihgr_round_csc(
                 f"{int(np.flatnonzero(missing)[0])} has no column left"
             )
         rows = np.flatnonzero(in_play & ~covered)
-        x, fun = _solve_lp(c, n_rows, indptr, indices, cols, rows, exact)
+        x, fun = _solve_lp(problem, cols, rows)
         solves += 1
         if solves == 1:
             bound += fun
         frac = (x > eps) & (x < 1.0 - eps)
         if solves == 1 and frac.any():
             fractional = True
-        to_fix: list[int] = []
-        labs = col_lab[cols]
-        for k in np.unique(labs):
-            in_k = labs == k
-            fk = frac & in_k
-            if fk.any():
-                if fix_ones:
-                    to_fix += cols[in_k & (x >= 1.0 - eps)].tolist()
-                cand = np.flatnonzero(fk)
-                # largest fractional value; ties: lower cost, then lower index
-                best = cand[np.lexsort((cols[cand], c[cols[cand]], -x[cand]))[0]]
-                to_fix.append(int(cols[best]))
-            else:
-                # integral component: take it and close it
-                to_fix += cols[in_k & (x >= 1.0 - eps)].tolist()
-                active[cols[in_k]] = False
+        labs = components.col_lab[cols]
+        to_fix, closed = _columns_to_fix(x, frac, cols, c, labs, eps=eps, fix_ones=fix_ones)
+        for cols_k in closed:
+            active[cols_k] = False
         for h in to_fix:
             chosen[h] = True
             covered[indices[indptr[h] : indptr[h + 1]]] = True
@@ -395,14 +407,46 @@ def ihgr_round_csc(
         conflict = np.add.reduceat(covered[indices].astype(np.int64), indptr[:-1]) > 0
         active &= ~conflict
     sel = np.flatnonzero(chosen)
-    return RoundingResult(sel, float(c[sel].sum()), float(bound), solves, fractional, "ihgr")
+    return RoundingResult(
+        selected=sel,
+        cost=float(c[sel].sum()),
+        lp_bound=float(bound),
+        lp_solves=solves,
+        fractional=fractional,
+        method="ihgr",
+    )
+
+
+def _columns_to_fix(x, frac, cols, c, labs, *, eps: float, fix_ones: bool):
+    """IHGR steps 2-3 on one LP solution x over the columns `cols` (frac: x is fractional;
+    labs: each column's component; c: all column costs): in each fractional component the
+    largest fractional column (ties: lower cost, then lower index), with `fix_ones` also its
+    x = 1 columns; in each integral component its x = 1 columns, and the component is closed.
+    Returns (columns to fix, [the columns of each closed component])."""
+    to_fix: list[int] = []
+    closed = []
+    for k in np.unique(labs):
+        in_k = labs == k
+        fk = frac & in_k
+        if fk.any():
+            if fix_ones:
+                to_fix += cols[in_k & (x >= 1.0 - eps)].tolist()
+            cand = np.flatnonzero(fk)
+            # largest fractional value; ties: lower cost, then lower index
+            best = cand[np.lexsort((cols[cand], c[cols[cand]], -x[cand]))[0]]
+            to_fix.append(int(cols[best]))
+        else:
+            # integral component: take it and close it
+            to_fix += cols[in_k & (x >= 1.0 - eps)].tolist()
+            closed.append(cols[in_k])
+    return to_fix, closed
 
 
 def _milp(costs, A, exact) -> RoundingResult:
     c, A, exact = check_problem(costs, A, exact)
     n_rows, n_cols = A.shape
     if n_cols == 0:
-        return RoundingResult(np.zeros(0, np.int64), 0.0, 0.0, 0, False, "milp")
+        return _no_columns("milp")
     lb = np.where(exact, 1.0, 0.0)
     res = milp(
         c,
@@ -414,7 +458,21 @@ def _milp(costs, A, exact) -> RoundingResult:
         raise RuntimeError(f"milp: no optimal solution ({res.message})")
     sel = np.flatnonzero(res.x > 0.5)
     cost = float(c[sel].sum())
-    return RoundingResult(sel, cost, cost, 0, False, "milp")
+    return RoundingResult(
+        selected=sel, cost=cost, lp_bound=cost, lp_solves=0, fractional=False, method="milp"
+    )
+
+
+def _no_columns(method: str) -> RoundingResult:
+    """The answer of a problem without columns (and so without exact rows)."""
+    return RoundingResult(
+        selected=np.zeros(0, np.int64),
+        cost=0.0,
+        lp_bound=0.0,
+        lp_solves=0,
+        fractional=False,
+        method=method,
+    )
 
 
 def solve_set_partition(costs, A, exact, method: str = "ihgr", **params) -> RoundingResult:

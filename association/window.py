@@ -68,12 +68,14 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 
 from association.errors import AssociationError
 from association.inputs import (
+    Prepared,
     as_float_array,
     block_psd_ok,
     check_finite,
@@ -127,6 +129,55 @@ class _PastScan:
     pair_cost: np.ndarray  # (k,) and the single-scan pair cost
 
 
+class _ThisScan(NamedTuple):
+    """The scan being associated, checked (`SlidingWindowAssociator.step`)."""
+
+    prep: Prepared  # its measurements, the map features' predictions and the gated pairings
+    pose: np.ndarray | None  # (3,) [x_m, y_m, heading_rad] of the sensor in the world, or None
+    pose_cov: np.ndarray  # (3, 3) that pose's covariance relative to the window's other scans
+    fids: np.ndarray  # (n,) int64 ids naming the map features across scans
+
+
+class _WindowProblem(NamedTuple):
+    """One step's set-partitioning problem (see the module doc) and what its columns mean.
+
+    Columns: 0..n_single-1 the single-scan problem's (col_meas, col_feat: (n_single,) its
+    measurement and map feature, -1 for a singleton), then the (a') pairings of earlier open
+    measurements, then one column per track from first_track on, then the (c) singletons.
+    """
+
+    costs: np.ndarray  # (N,) column costs (negative log-likelihoods)
+    A: sp.csc_array  # (rows, N) 0/1
+    exact: np.ndarray  # (rows,) bool: covered exactly once, else at most once
+    col_meas: np.ndarray  # (n_single,) int64
+    col_feat: np.ndarray  # (n_single,) int64
+    first_track: int
+    tracks: list  # [(cost, [(w, i), ...]), ...] the new-landmark track hypotheses, `_tracks`
+    W: int  # scans in the window, the current one included (window index W - 1)
+
+
+class _Columns:
+    """The columns of a 0/1 set-partitioning matrix, added one at a time."""
+
+    def __init__(self, A0: sp.csc_array, costs0: np.ndarray) -> None:
+        coo = A0.tocoo()
+        self.rows, self.cols, self.costs = [coo.row], [coo.col], [costs0]
+        self.n = A0.shape[1]
+
+    def add(self, rows: list, cost: float) -> None:
+        """A column covering `rows` at `cost`."""
+        self.rows.append(np.asarray(rows, np.int64))
+        self.cols.append(np.full(len(rows), self.n, np.int64))
+        self.costs.append(np.array([cost]))
+        self.n += 1
+
+    def problem(self, n_rows: int) -> tuple[np.ndarray, sp.csc_array]:
+        """(costs (N,), A (n_rows, N) CSC)."""
+        rr, cc = np.concatenate(self.rows), np.concatenate(self.cols)
+        A = sp.csc_array((np.ones(rr.size), (rr, cc)), shape=(n_rows, self.n))
+        return np.concatenate(self.costs), A
+
+
 def _point_from_measurement(pose, Q, z, R):
     """World point (m, 2) and covariance (m, 2, 2) of range-bearing measurements from `pose`."""
     phi = pose[2] + z[:, 1]
@@ -165,6 +216,51 @@ def _solve2(S: np.ndarray, B: np.ndarray) -> np.ndarray:
     x1 = u1 / l22  # backward: L^T x = u
     x0 = (u0 - l21 * x1) / l11
     return np.stack([x0, x1])
+
+
+def _add_missed_pairings(cols: _Columns, live, row_of_open: dict, first_row: int) -> int:
+    """Columns (a'): each open measurement i of an earlier scan w (`live`: [(w, _PastScan)])
+    with each map feature f that its scan left unused and gated with it, at that scan's pair
+    cost, covering i's row and the row of (w, f), numbered from first_row in order of first use.
+    Returns the number of (w, f) rows."""
+    feat_row: dict[tuple[int, int], int] = {}
+    for w, ps in live:
+        keep = ps.open[ps.pair_i]
+        for i, f, c in zip(ps.pair_i[keep], ps.pair_fid[keep], ps.pair_cost[keep]):
+            r = feat_row.setdefault((w, int(f)), first_row + len(feat_row))
+            cols.add([row_of_open[(w, int(i))], r], c)
+    return len(feat_row)
+
+
+def _decide(problem: _WindowProblem, res: RoundingResult, m: int):
+    """The step's `WindowDecision` from the chosen columns, and the members of each chosen
+    track with a current member, by that member's index: {i: [(w, i_w), ...]}."""
+    W = problem.W
+    out = np.full(m, -1, np.int64)
+    sightings = np.ones(m, np.int64)
+    chosen_tracks = []
+    members_of: dict[int, list[tuple[int, int]]] = {}
+    n_single, first_track = problem.col_meas.size, problem.first_track
+    for h in res.selected:
+        if h < n_single:
+            out[problem.col_meas[h]] = problem.col_feat[h]
+        elif first_track <= h < first_track + len(problem.tracks):
+            members = problem.tracks[h - first_track][1]
+            if members[-1][0] == W - 1:
+                i_cur = members[-1][1]
+                sightings[i_cur] = len(members)
+                members_of[i_cur] = members
+                chosen_tracks.append(tuple((W - 1 - w, i) for w, i in members))
+    sightings[out >= 0] = 0
+    decision = WindowDecision(
+        assignment=out,
+        sightings=sightings,
+        tracks=tuple(chosen_tracks),
+        rounding=res,
+        n_tracks=len(problem.tracks),
+        problem=(problem.costs, problem.A, problem.exact),
+    )
+    return decision, members_of
 
 
 class SlidingWindowAssociator:
@@ -226,95 +322,79 @@ class SlidingWindowAssociator:
         feature_ids: (n,) distinct integers naming the map features across scans (default
             0..n-1, right when the map only grows by appending, as an EKF-SLAM state does).
         """
-        prep = prepare(z, R, z_hat, H, P, self.gate_prob)
+        prep = prepare(z, R, z_hat, H, P, gate_prob=self.gate_prob)
         pose, Q = self._check_pose(sensor_pose, sensor_pose_cov)
-        fids = self._check_ids(feature_ids, prep.n)
-        m = prep.m
-        costs0, A0, exact0, col_meas, col_feat = single_scan_problem(prep, self.model)
-        n_rows0 = A0.shape[0]
-
+        scan = _ThisScan(prep, pose, Q, self._check_ids(feature_ids, prep.n))
         past = self._past[-(self.K - 1) :] if self.K > 1 else []
-        open_nodes: list[tuple[int, int]] = []  # (window index w, measurement index)
-        if pose is not None:
-            for w, ps in enumerate(past):
-                if ps.pose is not None:
-                    open_nodes += [(w, int(i)) for i in np.flatnonzero(ps.open)]
-        W = len(past) + 1
+        problem = self._problem(scan, past)
+        res = ihgr_round(problem.costs, problem.A, problem.exact, **self.rounding)
+        self.last, self._last_track_members = _decide(problem, res, prep.m)
+        out = self.last.assignment
+        if self.K > 1:
+            self._past = (past + [self._remember(scan, out)])[-(self.K - 1) :]
+        self._last_drop = problem.W - len(self._past)
+        return out
+
+    def _problem(self, scan: _ThisScan, past: list[_PastScan]) -> _WindowProblem:
+        """Assemble the step's problem: (a) and the current singletons from the single-scan
+        problem, (a') earlier open measurements with the map features free in their scan,
+        (b) tracks, (c) singletons of the earlier open measurements. past: the window's earlier
+        scans, oldest first (window indices 0..W-2; the current scan is W - 1)."""
+        costs0, A0, exact0, col_meas, col_feat = single_scan_problem(scan.prep, self.model)
+        n_rows0 = A0.shape[0]
+        # the earlier scans that take part in (a'), (b), (c): with a sensor pose, as this one
+        live = [
+            (w, ps) for w, ps in enumerate(past) if ps.pose is not None and scan.pose is not None
+        ]
+        # (window index w, measurement index) of the open measurements, each a row
+        open_nodes = [(w, int(i)) for w, ps in live for i in np.flatnonzero(ps.open)]
         row_of_open = {node: n_rows0 + k for k, node in enumerate(open_nodes)}
         tracks: list[tuple[float, list[tuple[int, int]]]] = []
         if open_nodes and self.model.birth_density > 0:
-            tracks = self._tracks(past, open_nodes, prep, pose, Q)
-
-        # Assemble: (a) + current singletons from the single-scan problem, (a') earlier open
-        # measurements with the map features free in their scan, (b) tracks, (c) singletons.
-        coo = A0.tocoo()
-        rows, cols, cost_parts = [coo.row], [coo.col], [costs0]
-        n_cols = A0.shape[1]
+            tracks = self._tracks(past, open_nodes, scan)
+        W = len(past) + 1
+        cols = _Columns(A0, costs0)
         n_rows = n_rows0 + len(open_nodes)
-        feat_row: dict[tuple[int, int], int] = {}
-        for w, ps in enumerate(past):
-            if pose is None or ps.pose is None:
-                continue
-            keep = ps.open[ps.pair_i]
-            for i, f, c in zip(ps.pair_i[keep], ps.pair_fid[keep], ps.pair_cost[keep]):
-                r = feat_row.setdefault((w, int(f)), n_rows + len(feat_row))
-                rows.append(np.array([row_of_open[(w, int(i))], r], np.int64))
-                cols.append(np.array([n_cols, n_cols], np.int64))
-                cost_parts.append(np.array([c]))
-                n_cols += 1
-        n_rows += len(feat_row)
-        k_tracks0 = n_cols
-        for cost, members in tracks:
-            r = [i if w == W - 1 else row_of_open[(w, i)] for w, i in members]
-            rows.append(np.asarray(r, np.int64))
-            cols.append(np.full(len(r), n_cols, np.int64))
-            cost_parts.append(np.array([cost]))
-            n_cols += 1
-        for w, i in open_nodes:
-            rows.append(np.array([row_of_open[(w, i)]], np.int64))
-            cols.append(np.array([n_cols], np.int64))
-            cost_parts.append(np.array([self.model.unexplained_cost(W - 1 - w)]))
-            n_cols += 1
-        rr, cc = np.concatenate(rows), np.concatenate(cols)
-        A = sp.csc_array((np.ones(rr.size), (rr, cc)), shape=(n_rows, n_cols))
+        n_rows += _add_missed_pairings(cols, live, row_of_open, n_rows)  # (a')
+        first_track = cols.n
+        for cost, members in tracks:  # (b)
+            cols.add([i if w == W - 1 else row_of_open[(w, i)] for w, i in members], cost)
+        for w, i in open_nodes:  # (c)
+            cols.add([row_of_open[(w, i)]], self.model.unexplained_cost(W - 1 - w))
         exact = np.zeros(n_rows, bool)
         exact[:n_rows0] = exact0
         exact[n_rows0 : n_rows0 + len(open_nodes)] = True
-        costs = np.concatenate(cost_parts)
-        res = ihgr_round(costs, A, exact, **self.rounding)
-
-        out = np.full(m, -1, np.int64)
-        sightings = np.ones(m, np.int64)
-        chosen_tracks = []
-        self._last_track_members = {}
-        for h in res.selected:
-            if h < A0.shape[1]:
-                out[col_meas[h]] = col_feat[h]
-            elif k_tracks0 <= h < k_tracks0 + len(tracks):
-                members = tracks[h - k_tracks0][1]
-                if members[-1][0] == W - 1:
-                    i_cur = members[-1][1]
-                    sightings[i_cur] = len(members)
-                    self._last_track_members[i_cur] = members
-                    chosen_tracks.append(tuple((W - 1 - w, i) for w, i in members))
-        sightings[out >= 0] = 0
-        self.last = WindowDecision(
-            out, sightings, tuple(chosen_tracks), res, len(tracks), (costs, A, exact)
+        costs, A = cols.problem(n_rows)
+        return _WindowProblem(
+            costs=costs,
+            A=A,
+            exact=exact,
+            col_meas=col_meas,
+            col_feat=col_feat,
+            first_track=first_track,
+            tracks=tracks,
+            W=W,
         )
-        if self.K > 1:
-            # Remember this scan: its -1s stay open; their gated pairings with map features
-            # that this scan left free can still explain them later.
-            is_open = (out < 0) if pose is not None else np.zeros(m, bool)
-            used = np.zeros(prep.n, bool)
-            used[out[out >= 0]] = True
-            keep = is_open[prep.pair_i] & ~used[prep.pair_j]
-            pc = self.model.pair_cost(prep.d2[keep], prep.logdet_S[keep])
-            this = _PastScan(
-                pose, Q, prep.z, prep.R, is_open, prep.pair_i[keep], fids[prep.pair_j[keep]], pc
-            )
-            self._past = (past + [this])[-(self.K - 1) :]
-        self._last_drop = W - len(self._past)
-        return out
+
+    def _remember(self, scan: _ThisScan, out: np.ndarray) -> _PastScan:
+        """The current scan as an earlier one for the next steps: its -1s stay open (without a
+        sensor pose none do); their gated pairings with map features that this scan left free
+        can still explain them later."""
+        prep = scan.prep
+        is_open = (out < 0) if scan.pose is not None else np.zeros(prep.m, bool)
+        used = np.zeros(prep.n, bool)
+        used[out[out >= 0]] = True
+        keep = is_open[prep.pair_i] & ~used[prep.pair_j]
+        return _PastScan(
+            pose=scan.pose,
+            pose_cov=scan.pose_cov,
+            z=prep.z,
+            R=prep.R,
+            open=is_open,
+            pair_i=prep.pair_i[keep],
+            pair_fid=scan.fids[prep.pair_j[keep]],
+            pair_cost=self.model.pair_cost(prep.d2[keep], prep.logdet_S[keep]),
+        )
 
     @staticmethod
     def _check_ids(ids, n: int) -> np.ndarray:
@@ -371,8 +451,9 @@ class SlidingWindowAssociator:
                 raise AssociationError("sensor_pose_cov: not positive semi-definite")
         return pose, Q
 
-    def _tracks(self, past, open_nodes, prep, pose_cur, Q_cur):
+    def _tracks(self, past, open_nodes, scan: _ThisScan):
         """Enumerate new-landmark track hypotheses: [(cost, [(w, i), ...]), ...]."""
+        prep, pose_cur, Q_cur = scan.prep, scan.pose, scan.pose_cov
         z_cur, R_cur = prep.z, prep.R
         mdl = self.model
         gate = gate_threshold(self.gate_prob)

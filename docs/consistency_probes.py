@@ -51,8 +51,7 @@ from experiments.eval.poses import consistency, nees, pose_errors
 from experiments.exec.trials import spawn_seeds
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
-from slam import run as slam_run
-from slam import se2
+from slam import run_slam, se2
 from slam.measurement import DEFAULT_RANGE_BIAS
 
 METHODS = ("paper", "geometric", "bailey")
@@ -152,10 +151,12 @@ def shuffled(runs: int, root: int) -> None:
         for m in METHODS:
             params = ps.extractor_params(m, cfg.cycab)
             fs = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
-            model = cfg.slam.noise_for(m, has_cov=False)[1]
+            model = cfg.slam.measurement.model_for(m, has_cov=False).constant
             rows = trunk_errors(seq, fs, laser_w, model, DEFAULT_RANGE_BIAS.get(m, (0.0, 0.0)))
             perm = prng.permutation(rows.shape[0])
-            const = replace(cfg.slam, measurement_noise="constant", range_bias={m: (0.0, 0.0)})
+            const = cfg.slam.with_(
+                **{"measurement.noise": "constant", f"measurement.range_bias.{m}": (0.0, 0.0)}
+            )
             n = rows.shape[0]
             variants = {
                 "extracted": (fs, cfg.slam),
@@ -167,7 +168,7 @@ def shuffled(runs: int, root: int) -> None:
                 ),
             }
             for v, (F, C) in variants.items():
-                lg = slam_run(seq, features=F, association="ihgr", config=C)
+                lg = run_slam(seq, features=F, association="ihgr", config=C)
                 _record(res[(m, v)], r, lg, truth)
     print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs})")
     print("| method | centres | NEES mean | in 95% bounds | above |")
@@ -188,7 +189,7 @@ def by_beams(roots=(1000, 1001, 1002, 1003)) -> None:
     cfg = ps.Exp2Config()
     for m in METHODS:
         rows = []
-        model = cfg.slam.noise_for(m, has_cov=False)[1]
+        model = cfg.slam.measurement.model_for(m, has_cov=False).constant
         for s in roots:
             fs, t = seeded_trunk_errors(s, cyc, m, model)
             beams = np.array([fs[int(k)].circle_beams[int(i)] for k, i in t[:, :2]])
@@ -234,7 +235,8 @@ def scale(runs: int, root: int, factors=(0.8, 1.0, 1.25, 1.5, 2.0)) -> None:
     cfg = ps.Exp2Config(n_runs=runs, sensitivity=False, smoother=False)
     seeds = spawn_seeds(np.random.SeedSequence(root), runs)
     N = cfg.cycab.n_scans
-    base = cfg.slam.constant_noise["paper"]
+    measurement = cfg.slam.measurement
+    base = measurement.constant_noise["paper"]
     res = {s: _run_arrays(runs, N) for s in factors}
     for r in range(runs):
         seq = simulate_cycab_run(np.random.default_rng(seeds[r]), cfg.scene, cfg.cycab)
@@ -242,14 +244,17 @@ def scale(runs: int, root: int, factors=(0.8, 1.0, 1.25, 1.5, 2.0)) -> None:
         params = ps.extractor_params("paper", cfg.cycab)
         fs = [extract_features(seq.scan(k), "paper", **params) for k in range(seq.n_scans)]
         for s in factors:
-            noise = {**cfg.slam.constant_noise, "paper": NoiseModel(*(v * s for v in base))}
+            noise = {**measurement.constant_noise, "paper": NoiseModel(*(v * s for v in base))}
             c = replace(
                 cfg.slam,
-                measurement_noise="constant",
-                constant_noise=noise,
-                range_bias={**cfg.slam.range_bias, "paper": CONSTANT_MODEL_PAPER_BIAS},
+                measurement=replace(
+                    measurement,
+                    noise="constant",
+                    constant_noise=noise,
+                    range_bias={**measurement.range_bias, "paper": CONSTANT_MODEL_PAPER_BIAS},
+                ),
             )
-            lg = slam_run(seq, features=fs, config=c)
+            lg = run_slam(seq, features=fs, config=c)
             _record(res[s], r, lg, truth)
     print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs}); paper, constant noise")
     print("| sigmas x | NEES mean | in 95% bounds | below | above | NIS per dof |")
@@ -292,7 +297,7 @@ def occluded(runs: int, root: int) -> None:
             params = ps.extractor_params(m, cfg.cycab)
             fs = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
             occ = [occluded_edges(f, np.asarray(seq.scan(k).ranges_m)) for k, f in enumerate(fs)]
-            model = cfg.slam.noise_for(m, has_cov=False)[1]
+            model = cfg.slam.measurement.model_for(m, has_cov=False).constant
             rows = trunk_errors(seq, fs, laser_w, model, DEFAULT_RANGE_BIAS.get(m, (0.0, 0.0)))
             hid = np.array([occ[int(k)][int(i)] for k, i in rows[:, :2]], bool)
             errs.setdefault(m, []).append(np.column_stack([rows[:, 4:6], hid]))
@@ -307,7 +312,7 @@ def occluded(runs: int, root: int) -> None:
                 for f, o in zip(fs, occ)
             ]
             for v, F in (("all circles", fs), ("partly hidden dropped", kept)):
-                lg = slam_run(seq, features=F, association="ihgr", config=cfg.slam)
+                lg = run_slam(seq, features=F, association="ihgr", config=cfg.slam)
                 _record(res.setdefault((m, v), _run_arrays(runs, N)), r, lg, truth)
     print(f"{runs} runs, seeds SeedSequence({root}).spawn({runs})")
     print(
@@ -340,17 +345,14 @@ def _tau(z: np.ndarray, groups: np.ndarray) -> float:
 
 
 def track_correlation(roots=tuple(range(1000, 1020))) -> None:
-    from slam.measurement import measurements_from_features
-
     cyc = CycabParams(**MONTE_CARLO_PATH)
     slam_cfg = ps.Exp2Config().slam
-    floor = (slam_cfg.fit_floor_range_m, slam_cfg.fit_floor_bearing_rad)
     print(f"seeds {list(roots)}; tau: 1 when a trunk's errors are independent from scan to scan")
     print("| method | component | circles | E[z^2] | tau, whole track | 10 scans | 30 scans |")
     print("|---|---|---|---|---|---|---|")
     for m in METHODS:
         rows = []
-        noise, bias = slam_cfg.noise_for(m), slam_cfg.range_bias_for(m)
+        measure = slam_cfg.measurement.model_for(m)  # the floors and range bias the runs use
         for s in roots:
             seq = simulate_cycab_run(np.random.default_rng(s), "tree_park", cyc)
             truth = ps.interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
@@ -360,7 +362,7 @@ def track_correlation(roots=tuple(range(1000, 1020))) -> None:
                 if not f.n_circles:
                     continue
                 lw = se2.compose(truth[k], seq.laser_pose)
-                z, R = measurements_from_features(f, noise, floor, bias)
+                z, R = measure.from_features(f)
                 for i, (a, b) in enumerate(f.circle_beams):
                     lab = run_labels(seq.scan_labels[k], a, b)
                     j, _, n_ret = dominant_label(lab, returns_only=True)
@@ -390,7 +392,7 @@ def across_runs(roots=(1000, 1001, 1002, 1003)) -> None:
     print("| method | paths | pairs | range | bearing |")
     print("|---|---|---|---|---|")
     for m in METHODS:
-        model = cfg.slam.noise_for(m, has_cov=False)[1]
+        model = cfg.slam.measurement.model_for(m, has_cov=False).constant
         for label, cyc in (
             ("one path", CycabParams()),
             ("varied", CycabParams(**MONTE_CARLO_PATH)),

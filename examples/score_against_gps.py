@@ -13,7 +13,6 @@ e.g. RUN_DIR from `trunkslam slam vp.npz --features detections --config victoria
 import json
 import sys
 import tempfile
-import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -21,20 +20,20 @@ import numpy as np
 from experiments.eval.gps import score_sequence
 from experiments.io.sequence_file import load_sequence
 from experiments.sim import CycabParams, simulate_cycab_run
-from slam import run
+from slam import run_slam
 
 if len(sys.argv) == 3:  # an existing run: its trajectory.csv (t, x, y, theta, covariance)
     seq, out = load_sequence(sys.argv[1]), Path(sys.argv[2])
     table = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1, ndmin=2)
     scan_t, pose = table[:, 0], table[:, 1:4]
-    laser_pose = tomllib.loads((out / "config.toml").read_text()).get("laser_pose")
+    antenna = json.loads((out / "summary.json").read_text())["gps"]["antenna_pose"]
 else:  # a simulated tree-park drive with 2 cm DGPS at 10 Hz
     seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=240))
-    log = run(seq, features="paper", association="ihgr")
-    scan_t, pose, laser_pose = log.scan_t, log.pose, None
+    log = run_slam(seq)  # the built-in configuration: paper's extractor, IHGR
+    scan_t, pose, antenna = log.scan_t, log.pose, log.antenna_pose
     out = Path(tempfile.mkdtemp(prefix="trunkslam_"))
 
-s = score_sequence(seq, scan_t, pose, laser_pose)
+s = score_sequence(seq, scan_t, pose, antenna)
 print(f"{s.matched} fixes in the run's time span ({s.unmatched} outside), {s.jumps} jumps")
 print(f"all fixes:   RMSE {s.all_rmse:.4f} m, median {s.all_median:.4f} m, p95 {s.all_p95:.4f} m")
 print(f"no jumps:    RMSE {s.clean_rmse:.4f} m, median {s.clean_median:.4f} m")

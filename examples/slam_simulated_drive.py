@@ -19,7 +19,7 @@ from experiments.eval.poses import pose_errors
 from experiments.io.results import trajectory_tum
 from experiments.io.sequence_file import save_sequence
 from experiments.sim import CycabParams, simulate_cycab_run
-from slam import interpolate_poses, run
+from slam import interpolate_poses, run_slam
 
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="trunkslam_"))
 out.mkdir(parents=True, exist_ok=True)
@@ -28,7 +28,7 @@ seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_sc
 save_sequence(seq, out / "run.npz")
 print(f"{seq.n_scans} scans over {seq.scan_t[-1]:.1f} s, {len(seq.truth_landmarks)} trees")
 
-log = run(seq, features="paper", association="ihgr")
+log = run_slam(seq, features="paper")  # the paper's extractor, IHGR association
 (out / "trajectory.tum").write_text(trajectory_tum(log.scan_t, log.pose))
 
 truth = interpolate_poses(log.scan_t, seq.truth_t, seq.truth_pose)

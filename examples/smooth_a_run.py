@@ -17,14 +17,14 @@ import numpy as np
 from experiments.eval.poses import pose_errors
 from experiments.io.results import trajectory_tum
 from experiments.sim import CycabParams, simulate_cycab_run
-from slam import interpolate_poses, run
+from slam import interpolate_poses, run_slam
 from slam.smoother import SmootherOptions, problem_from_log, smooth
 
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="trunkslam_"))
 out.mkdir(parents=True, exist_ok=True)
 
 seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=240))
-log = run(seq, features="paper", association="ihgr")
+log = run_slam(seq, features="paper")  # the paper's extractor, IHGR association
 result = smooth(problem_from_log(log), SmootherOptions(solver="batch"))
 
 truth = interpolate_poses(log.scan_t, seq.truth_t, seq.truth_pose)

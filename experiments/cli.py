@@ -7,7 +7,6 @@ code 1; anything else is a bug and shows its traceback.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import logging
 import sys
@@ -23,9 +22,13 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    # help texts are Markdown: "[default: ...]" and "[features]" are shown, not read as rich tags
+    rich_markup_mode="markdown",
 )
-convert_app = typer.Typer(help="Convert a dataset into a trunkslam sequence file (.npz).")
-bench_app = typer.Typer(help="Benchmarks that print measured figures.")
+convert_app = typer.Typer(
+    help="Convert a dataset into a trunkslam sequence file (.npz).", rich_markup_mode="markdown"
+)
+bench_app = typer.Typer(help="Benchmarks that print measured figures.", rich_markup_mode="markdown")
 app.add_typer(convert_app, name="convert")
 app.add_typer(bench_app, name="bench")
 
@@ -420,7 +423,7 @@ class Study(StrEnum):
 def sweep(
     config: Annotated[
         Path | None,
-        typer.Argument(help="sweep file (TOML), e.g. datasets/configs/sweep_slam_noise.toml"),
+        typer.Argument(help="sweep file (TOML), e.g. datasets/sweeps/sweep_slam_noise.toml"),
     ] = None,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("sweep_out"),
     workers: Annotated[
@@ -449,11 +452,9 @@ def sweep(
     """Run a study over a grid (or list) of configuration values: sweep.csv (tidy: point,
     swept values, method, metric, mean, std, n), a plot per swept field, sweep.json."""
     if fields is not None:
-        from experiments.paper.sweep import STUDIES, study_defaults
+        from experiments.paper.sweep import fields_toml
 
-        typer.echo(f"# {fields.value}: {STUDIES[fields.value].about}")
-        for k, v in study_defaults(fields.value).items():
-            typer.echo(f"{k} = {v!r}")
+        typer.echo(fields_toml(fields.value), nl=False)
         return
     if config is None:
         raise typer.BadParameter("a sweep file is needed", param_hint="CONFIG")
@@ -494,44 +495,64 @@ def report(
         typer.echo(f"{readme}: results at a glance {'rewritten' if changed else 'unchanged'}")
 
 
+@app.command()
+@handle_errors
+def presets() -> None:
+    """The presets `--config NAME` takes (datasets/configs/NAME.toml), one line each."""
+    from experiments.io.config_file import presets as known
+
+    for name, about in known().items():
+        typer.echo(f"{name:20s} {about}")
+
+
 @app.command("slam")
 @handle_errors
 def slam_cmd(
     input: Annotated[
         Path | None, typer.Argument(help="sequence file (.npz), see datasets/FORMAT.md")
     ] = None,
+    config: Annotated[
+        str | None,
+        typer.Option(
+            help="the run's settings: a TOML file (a run's config.toml reproduces it) or a "
+            "preset of `trunkslam presets` [default: the built-in settings, SlamConfig()]"
+        ),
+    ] = None,
     features: Annotated[
-        SlamFeatures,
-        typer.Option(help="circle extractor on the raw scans, or the sequence's detections"),
-    ] = SlamFeatures.paper,
+        SlamFeatures | None,
+        typer.Option(
+            help="replaces the settings' [features] method: an extractor on the raw scans, or "
+            "the sequence's detections [default: the settings', paper]"
+        ),
+    ] = None,
     features_file: Annotated[
         Path | None,
         typer.Option(
-            help="features JSON from `trunkslam extract` to use instead of --features "
-            "[default: none]"
+            help="features JSON from `trunkslam extract`, used instead of extracting "
+            "([features] file) [default: none]"
         ),
     ] = None,
     association: Annotated[
-        Association,
+        Association | None,
         typer.Option(
-            help="data association: single-scan IHGR, the K-scan IHGR window (K: --window), "
-            "JCBB or NN"
+            help="replaces the settings' [association] method: single-scan IHGR, the K-scan "
+            "IHGR window (K: --window), JCBB or NN [default: the settings', ihgr]"
         ),
-    ] = Association.ihgr,
+    ] = None,
     window: Annotated[
         int | None,
         typer.Option(
             min=1,
             max=8,
             help="K of the IHGR window (implies --association ihgr-window) "
-            "[default: window_scans of the settings, 3]",
+            "[default: the settings' window_scans, 3]",
         ),
     ] = None,
-    config: Annotated[
-        str | None,
+    initial_heading: Annotated[
+        float | None,
         typer.Option(
-            help="SLAM settings: a TOML file or a preset of datasets/configs "
-            "[default: cycab, the simulated Cycab's]"
+            help="start heading, rad, when starting from GPS ([start] initial_heading_rad) "
+            "[default: from the GPS fit]"
         ),
     ] = None,
     dump_config: Annotated[
@@ -549,45 +570,38 @@ def slam_cmd(
             "(x1: true size)",
         ),
     ] = 10.0,
-    initial_heading: Annotated[
-        float | None,
-        typer.Option(help="start heading, rad, when starting from GPS [default: from the GPS fit]"),
-    ] = None,
     smooth: Annotated[
         bool, typer.Option(help="then re-solve the run with the GTSAM smoother (batch)")
     ] = False,
 ) -> None:
-    """EKF-SLAM over a sequence: trajectory (TUM and CSV with covariance), map, config, summary,
+    """EKF-SLAM over a sequence as its settings say: trajectory (TUM and CSV with covariance),
+    map, config.toml (the whole configuration: `--config` with it reproduces the run), summary,
     and the run log the smoother reads (`trunkslam smooth`)."""
     from experiments.io.config_file import config_toml, load_slam_config
-    from experiments.pipeline.slam import run_slam
+    from experiments.pipeline.slam import run_slam_file
     from experiments.render.progress import Progress
     from slam import SlamConfig
 
     cfg = load_slam_config(config) if config is not None else SlamConfig()
-    if window is not None:
-        if association not in (Association.ihgr, Association.ihgr_window):
-            raise typer.BadParameter(
-                f"--window is the IHGR window's K; not for --association {association.value}",
-                param_hint="--window",
-            )
-        association = Association.ihgr_window
-        cfg = dataclasses.replace(cfg, window_scans=window)
+    cfg = _slam_overrides(
+        cfg,
+        features=features,
+        features_file=features_file,
+        association=association,
+        window=window,
+        initial_heading=initial_heading,
+    )
     if dump_config:
-        typer.echo(config_toml(cfg, f"trunkslam slam settings ({config or 'defaults'})"), nl=False)
+        typer.echo(config_toml(cfg, f"trunkslam slam settings ({config or 'built-in'})"), nl=False)
         return
     if input is None:
         raise typer.BadParameter("a sequence file is needed", param_hint="INPUT")
     with Progress() as progress:
-        s = run_slam(
+        s = run_slam_file(
             input,
-            features.value,
-            association.value,
+            cfg,
             out,
-            rerun,
-            initial_heading,
-            config=cfg,
-            features_file=features_file,
+            rerun_path=rerun,
             progress=lambda done, total: (
                 progress("slam", done, total) if done % 10 == 0 or done == total else None
             ),
@@ -604,6 +618,28 @@ def slam_cmd(
         with Progress() as progress:
             summary = smooth_run(out, progress=_smoother_progress(progress))
         _echo_smoothed(summary)
+
+
+def _slam_overrides(cfg, *, features, features_file, association, window, initial_heading):
+    """The one place the command line's options replace settings of the configuration."""
+    changes = {}
+    if features is not None:
+        changes["features.method"] = features.value
+    if features_file is not None:
+        changes["features.file"] = str(features_file)
+    if window is not None:
+        if association not in (None, Association.ihgr, Association.ihgr_window):
+            raise typer.BadParameter(
+                f"--window is the IHGR window's K; not for --association {association.value}",
+                param_hint="--window",
+            )
+        association = Association.ihgr_window
+        changes["association.window_scans"] = window
+    if association is not None:
+        changes["association.method"] = association.value
+    if initial_heading is not None:
+        changes["start.initial_heading_rad"] = initial_heading
+    return cfg.with_(**changes) if changes else cfg
 
 
 def _echo_smoothed(s: dict) -> None:

@@ -34,7 +34,9 @@ Generalisation to other scans (`angles_rad`, used by `extract_bailey` for simula
 from __future__ import annotations
 
 import math
-from dataclasses import astuple, dataclass, fields
+import operator
+from dataclasses import dataclass, fields
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -106,8 +108,65 @@ def _check_angles(angles_rad, n_beams: int) -> np.ndarray:
     return a
 
 
+# The records below cross into the numba kernel as plain tuples, `tuple(record)`, and are named
+# again on the kernel's first line: numba's dispatcher types a plain tuple in C but a NamedTuple
+# in Python, which costs about 1.5 us a call.
+
+
+class _BeamTable(NamedTuple):
+    """The beam geometry of one scan as the kernels read it (`_prepare`)."""
+
+    ang: np.ndarray  # (B,) float64 beam angles, rad, increasing (rotated: `_prepare`)
+    cos_t: np.ndarray  # (B,) cos(ang)
+    sin_t: np.ndarray  # (B,) sin(ang)
+    beam_rad: float  # rad, the width added to the diameter (step 8)
+
+
+class _Limits(NamedTuple):
+    """The scan's field of view and tie rule (steps 2, 4 and 7)."""
+
+    check_fov: bool  # apply the field-of-view margin against [fov_lo, fov_hi] (step 7)
+    fov_lo: float  # rad, the first beam's angle
+    fov_hi: float  # rad, the last beam's angle
+    tie: float  # rad: angle differences within it of the break/occlusion thresholds count as equal
+
+
+class _Constants(NamedTuple):
+    """The `BaileyParams` values as the kernels read them: the same names, in field order."""
+
+    max_range_m: float
+    min_start_range_m: float
+    break_jump_m: float
+    break_gap_rad: float
+    isolation_m: float
+    occlusion_gap_rad: float
+    max_chord_m: float
+    fov_margin_rad: float
+    edge_ratio: float
+
+
+# `_Constants` of a BaileyParams, as a plain tuple (dataclasses.astuple deep-copies: 25x slower)
+_constants = operator.attrgetter(*_Constants._fields)
+
+
+class _Detection(NamedTuple):
+    """What steps 1-10 found in one scan (`_detect`)."""
+
+    trees: np.ndarray  # (3, n) [range m; bearing rad; diameter m], as `detect_trees`
+    seg_first: np.ndarray  # (K,) int64 first raw beam of every step-2 segment, in beam order
+    seg_last: np.ndarray  # (K,) int64 its last beam (inclusive)
+    kept: np.ndarray  # (K,) bool: the segment became a detection
+    det_seg: np.ndarray  # (n,) int64: det_seg[j] is the segment of detection (column) j
+
+
+# The original's scan: strict floating-point comparisons on the i*pi/360 table, no tie rule.
+_DEFAULT_TABLE = _BeamTable(_DEFAULT_ANGLES, _DEFAULT_COS, _DEFAULT_SIN, BAILEY_BEAM_RAD)
+_DEFAULT_LIMITS = _Limits(True, 0.0, math.pi, 0.0)
+
+
 def _prepare(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
-    """Angles, trig tables and the field-of-view / tie settings for the kernel; see `_detect`."""
+    """The kernels' view of one scan: (ranges (B,), `_BeamTable`, `_Limits`, rot), a full
+    circle rotated by `rot` beams so that its seam is a segment break (`_seam`); see `_detect`."""
     n_beams = r.shape[0]
     if ang is None or (n_beams == 361 and np.array_equal(ang, _DEFAULT_ANGLES)):
         if n_beams != 361:
@@ -115,84 +174,77 @@ def _prepare(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams):
                 f"ranges_m: the original detector takes 361 beams at i*pi/360, got {n_beams}; "
                 "pass angles_rad for other scans"
             )
-        # The original: strict floating-point comparisons on the i*pi/360 table, no tie rule.
-        return (
-            r,
-            _DEFAULT_ANGLES,
-            _DEFAULT_COS,
-            _DEFAULT_SIN,
-            BAILEY_BEAM_RAD,
-            True,
-            0.0,
-            math.pi,
-            0.0,
-            0,
-        )
+        return r, _DEFAULT_TABLE, _DEFAULT_LIMITS, 0
     beam_rad = (ang[-1] - ang[0]) / (n_beams - 1) if n_beams > 1 else BAILEY_BEAM_RAD
     full_circle = n_beams > 1 and (ang[-1] - ang[0]) + beam_rad >= _TWO_PI - 1e-6
     cos_t, sin_t = np.cos(ang), np.sin(ang)
-    fov_lo, fov_hi = float(ang[0]), float(ang[-1])
+    limits = _Limits(not full_circle, float(ang[0]), float(ang[-1]), _ANGLE_TIE_RAD)
     rot = _seam(r, p) if full_circle else 0
     if rot:
         r = np.concatenate((r[rot:], r[:rot]))
         ang = np.concatenate((ang[rot:], ang[:rot] + _TWO_PI))
         cos_t = np.concatenate((cos_t[rot:], cos_t[:rot]))
         sin_t = np.concatenate((sin_t[rot:], sin_t[:rot]))
-    return (r, ang, cos_t, sin_t, beam_rad, not full_circle, fov_lo, fov_hi, _ANGLE_TIE_RAD, rot)
+    ang = np.array(ang, dtype=np.float64)  # contiguous and writable: one numba specialisation
+    return r, _BeamTable(ang, cos_t, sin_t, beam_rad), limits, rot
 
 
-def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams, kernel=None):
+def _detect(r: np.ndarray, ang: np.ndarray | None, p: BaileyParams, kernel=None) -> _Detection:
     """Run steps 1-10 on one scan.
 
     r: (B,) float64 ranges, m (NaN = no return), B >= 1. ang: (B,) beam angles, or None for the
     original's i*pi/360 (B = 361). kernel: `_kernel_numba` (default) or its twin `_kernel_numpy`.
-    Returns (out (3, n), seg_first (K,), seg_last (K,), kept (K,) bool, det_seg (n,)): `out` as
-    `detect_trees`; seg_first/seg_last/kept describe every step-2 segment by its inclusive raw
-    beam indices, in beam order, and whether it became a detection; det_seg[j] is the segment of
-    column j. In a rotated full-circle scan a segment across the caller's seam has last >= B
-    (its beams are first..last modulo B).
+    Returns a `_Detection`: trees (3, n) as `detect_trees`; seg_first/seg_last/kept describe
+    every step-2 segment by its inclusive raw beam indices, in beam order, and whether it became
+    a detection; det_seg[j] is the segment of column j. In a rotated full-circle scan a segment
+    across the caller's seam has last >= B (its beams are first..last modulo B).
     """
     n_beams = r.shape[0]
     r = np.array(r, dtype=np.float64)  # contiguous and writable: one numba specialisation
-    r, ang, cos_t, sin_t, beam_rad, check_fov, fov_lo, fov_hi, tie, rot = _prepare(r, ang, p)
-    ang = np.array(ang, dtype=np.float64)
+    r, table, limits, rot = _prepare(r, ang, p)
     kernel = kernel or _kernel_numba
-    # the kernels take the BaileyParams values in field order, after the field-of-view limits
-    limits = (check_fov, fov_lo, fov_hi, tie, *astuple(p))
-    out, seg_first, seg_last, keep, det_seg = kernel(r, ang, cos_t, sin_t, beam_rad, *limits)
-    if rot:  # back to the caller's beam numbering and angle range
-        K = seg_first.size
-        seg_first = seg_first + rot
-        seg_last = seg_last + rot
-        wrap = seg_first >= n_beams  # wholly past the caller's last beam: renumber from 0
-        seg_first[wrap] -= n_beams
-        seg_last[wrap] -= n_beams  # a segment across the caller's seam keeps last >= B
-        out[1] = np.where(out[1] >= fov_lo + _TWO_PI, out[1] - _TWO_PI, out[1])
-        seg_order = np.argsort(seg_first, kind="stable")
-        seg_rank = np.empty_like(seg_order)
-        seg_rank[seg_order] = np.arange(K)
-        seg_first, seg_last, keep = seg_first[seg_order], seg_last[seg_order], keep[seg_order]
-        col_order = np.argsort(out[1], kind="stable")  # increasing bearing
-        out = out[:, col_order]
-        det_seg = seg_rank[det_seg[col_order]]
-    return out, seg_first, seg_last, keep, det_seg
+    det = _Detection._make(kernel(r, tuple(table), tuple(limits), _constants(p)))
+    if rot:
+        det = _unrotate(det, rot, n_beams, limits.fov_lo)
+    return det
 
 
-def _kernel_numpy(r, ang, cos_t, sin_t, beam_rad, *limits):
+def _unrotate(det: _Detection, rot: int, n_beams: int, fov_lo: float) -> _Detection:
+    """`det` of a full circle rotated by `rot` beams (`_prepare`) back to the caller's beam
+    numbering and angle range (first beam at fov_lo rad), segments in beam order and detections
+    in increasing bearing."""
+    out, seg_first, seg_last, keep, det_seg = det
+    K = seg_first.size
+    seg_first = seg_first + rot
+    seg_last = seg_last + rot
+    wrap = seg_first >= n_beams  # wholly past the caller's last beam: renumber from 0
+    seg_first[wrap] -= n_beams
+    seg_last[wrap] -= n_beams  # a segment across the caller's seam keeps last >= B
+    out[1] = np.where(out[1] >= fov_lo + _TWO_PI, out[1] - _TWO_PI, out[1])
+    seg_order = np.argsort(seg_first, kind="stable")
+    seg_rank = np.empty_like(seg_order)
+    seg_rank[seg_order] = np.arange(K)
+    seg_first, seg_last, keep = seg_first[seg_order], seg_last[seg_order], keep[seg_order]
+    col_order = np.argsort(out[1], kind="stable")  # increasing bearing
+    out = out[:, col_order]
+    det_seg = seg_rank[det_seg[col_order]]
+    return _Detection(out, seg_first, seg_last, keep, det_seg)
+
+
+def _kernel_numpy(r, table, limits, consts):
     """Steps 1-10 vectorised with numpy: the test oracle of `_kernel_numba` (same arithmetic,
     same arguments).
 
-    r, ang, cos_t, sin_t: (B,) ranges, beam angles and their cos/sin. beam_rad: the width added
-    to the diameter. limits, in `_kernel_numba`'s order: check_fov (apply the field-of-view
-    margin against [fov_lo, fov_hi]), fov_lo, fov_hi, tie (angle differences within it of the
-    break/occlusion thresholds count as equal to them), then the `BaileyParams` values
-    max_range, min_start, jump, gap, iso, occ, chord, margin, edge_ratio.
+    r: (B,) ranges, m. table: a `_BeamTable` (beam angles, their cos/sin, the width added to
+    the diameter), limits: a `_Limits` (field of view, tie rule), consts: a `_Constants` (the
+    `BaileyParams` values), each as a plain tuple or the record itself.
+    Returns the fields of a `_Detection`.
     """
-    check_fov, fov_lo, fov_hi, tie = limits[:4]
-    max_range, min_start, jump, gap, iso, occ, chord, margin, edge_ratio = limits[4:]
+    tab, lim, par = _BeamTable(*table), _Limits(*limits), _Constants(*consts)
+    ang, cos_t, sin_t = tab.ang, tab.cos_t, tab.sin_t
     # Step 1: valid beams (NaN < x is False, so NaN is invalid).
     with np.errstate(invalid="ignore"):
-        idx = np.flatnonzero(r < max_range)
+        idx = np.flatnonzero(r < par.max_range_m)
     n = idx.size
     if n == 0:
         z = np.zeros(0, np.int64)
@@ -201,7 +253,9 @@ def _kernel_numpy(r, ang, cos_t, sin_t, beam_rad, *limits):
     A = ang[idx]
 
     # Step 2: segmentation by range jumps and angular gaps.
-    brk = (np.abs(R[1:] - R[:-1]) > jump) | (A[1:] - A[:-1] > gap + tie)
+    brk = (np.abs(R[1:] - R[:-1]) > par.break_jump_m) | (
+        A[1:] - A[:-1] > par.break_gap_rad + lim.tie
+    )
     bpos = np.flatnonzero(brk)
     s = np.empty(bpos.size + 1, np.int64)
     e = np.empty(bpos.size + 1, np.int64)
@@ -222,25 +276,25 @@ def _kernel_numpy(r, ang, cos_t, sin_t, beam_rad, *limits):
             break
         dx = xe[:-d] - xs[d:]
         dy = ye[:-d] - ys[d:]
-        close = dx * dx + dy * dy < iso * iso
+        close = dx * dx + dy * dy < par.isolation_m * par.isolation_m
         remove[:-d] |= close
         remove[d:] |= close
     if K > 1:  # step 4: angularly adjacent neighbours, the farther one is occluded
-        adj = As[1:] - Ae[:-1] < occ - tie
+        adj = As[1:] - Ae[:-1] < par.occlusion_gap_rad - lim.tie
         next_farther = Rs[1:] > Re[:-1]
         remove[1:] |= adj & next_farther
         remove[:-1] |= adj & ~next_farther
 
     # Steps 5-9: removal, chord, range and field of view, diameter, edge consistency.
-    diam = (Ae - As + beam_rad) * (Rs + Re) / 2  # step 8: arc length, one beam width added
+    diam = (Ae - As + tab.beam_rad) * (Rs + Re) / 2  # step 8: arc length, one beam width added
     dx = xe - xs
     dy = ye - ys
     keep = ~remove
-    keep &= dx * dx + dy * dy < chord * chord  # step 6
-    keep &= Rs > min_start  # step 7
-    if check_fov:
-        keep &= (As - fov_lo > margin) & (fov_hi - Ae > margin)
-    keep &= np.abs(Rs - Re) < edge_ratio * diam  # step 9
+    keep &= dx * dx + dy * dy < par.max_chord_m * par.max_chord_m  # step 6
+    keep &= Rs > par.min_start_range_m  # step 7
+    if lim.check_fov:
+        keep &= (As - lim.fov_lo > par.fov_margin_rad) & (lim.fov_hi - Ae > par.fov_margin_rad)
+    keep &= np.abs(Rs - Re) < par.edge_ratio * diam  # step 9
 
     # Step 10: centre range (middle of the compressed run + the radius) and bearing.
     k = np.flatnonzero(keep)
@@ -254,32 +308,16 @@ def _kernel_numpy(r, ang, cos_t, sin_t, beam_rad, *limits):
 
 
 @njit(cache=True, nogil=True)
-def _kernel_numba(
-    r,
-    ang,
-    cos_t,
-    sin_t,
-    beam_rad,
-    check_fov,
-    fov_lo,
-    fov_hi,
-    tie,
-    max_range,
-    min_start,
-    jump,
-    gap,
-    iso,
-    occ,
-    chord,
-    margin,
-    edge_ratio,
-):
-    """Steps 1-10 as loops (numba); `_kernel_numpy` is its oracle. Same arguments and results."""
+def _kernel_numba(r, table, limits, consts):
+    """Steps 1-10 as loops (numba); `_kernel_numpy` is its oracle. Same arguments and results
+    (the records as plain tuples, see above)."""
+    tab, lim, par = _BeamTable(*table), _Limits(*limits), _Constants(*consts)
+    ang, cos_t, sin_t = tab.ang, tab.cos_t, tab.sin_t
     n_beams = r.shape[0]
     idx = np.empty(n_beams, np.int64)
     n = 0
     for i in range(n_beams):  # step 1
-        if r[i] < max_range:
+        if r[i] < par.max_range_m:
             idx[n] = i
             n += 1
     if n == 0:
@@ -296,7 +334,7 @@ def _kernel_numba(
     K = 0
     for j in range(n - 1):  # step 2
         a, b = idx[j], idx[j + 1]
-        if abs(r[b] - r[a]) > jump or ang[b] - ang[a] > gap + tie:
+        if abs(r[b] - r[a]) > par.break_jump_m or ang[b] - ang[a] > par.break_gap_rad + lim.tie:
             e[K] = j
             K += 1
             s[K] = j + 1
@@ -318,11 +356,11 @@ def _kernel_numba(
         for k in range(K - d):
             dx = xe[k] - xs[k + d]
             dy = ye[k] - ys[k + d]
-            if dx * dx + dy * dy < iso * iso:
+            if dx * dx + dy * dy < par.isolation_m * par.isolation_m:
                 remove[k] = True
                 remove[k + d] = True
     for k in range(K - 1):  # step 4
-        if ang[i_s[k + 1]] - ang[i_e[k]] < occ - tie:
+        if ang[i_s[k + 1]] - ang[i_e[k]] < par.occlusion_gap_rad - lim.tie:
             if r[i_s[k + 1]] > r[i_e[k]]:
                 remove[k + 1] = True
             else:
@@ -333,14 +371,18 @@ def _kernel_numba(
     for k in range(K):  # steps 5-9
         a, b = i_s[k], i_e[k]
         rs, re, as_, ae = r[a], r[b], ang[a], ang[b]
-        diam[k] = (ae - as_ + beam_rad) * (rs + re) / 2
+        diam[k] = (ae - as_ + tab.beam_rad) * (rs + re) / 2
         dx = xe[k] - xs[k]
         dy = ye[k] - ys[k]
-        ok = not remove[k] and dx * dx + dy * dy < chord * chord and rs > min_start
-        if ok and check_fov:
-            ok = as_ - fov_lo > margin and fov_hi - ae > margin
+        ok = (
+            not remove[k]
+            and dx * dx + dy * dy < par.max_chord_m * par.max_chord_m
+            and rs > par.min_start_range_m
+        )
+        if ok and lim.check_fov:
+            ok = as_ - lim.fov_lo > par.fov_margin_rad and lim.fov_hi - ae > par.fov_margin_rad
         if ok:
-            ok = abs(rs - re) < edge_ratio * diam[k]
+            ok = abs(rs - re) < par.edge_ratio * diam[k]
         keep[k] = ok
         nk += ok
     out = np.empty((3, nk))
@@ -401,7 +443,7 @@ def detect_trees(ranges_m, angles_rad=None, params: BaileyParams | None = None) 
         raise FeaturesError(f"params: expected BaileyParams, got {type(params).__name__}")
     if r.shape[0] == 0:
         return np.zeros((3, 0))
-    return _detect(r, ang, p)[0]
+    return _detect(r, ang, p).trees
 
 
 BAILEY_OPTIONS = (
@@ -443,6 +485,27 @@ def extract_bailey(
     """
     if not isinstance(scan, Scan):
         raise FeaturesError(f"scan: expected a features.Scan, got {type(scan).__name__}")
+    noise = _noise_model(range_sigma_m, range_sigma_per_m, bearing_sigma_rad, radius_sigma_m)
+    p = params or _DEFAULT
+    if not isinstance(p, BaileyParams):
+        raise FeaturesError(f"params: expected BaileyParams, got {type(params).__name__}")
+    det = _detect(scan.ranges_m, _beam_angles(scan, p), p)
+    circ, cov = _circles(det.trees, scan.angle_min_rad, scan.angle_increment_rad, noise)
+    return _as_features(scan, det, circ, cov)
+
+
+class _NoiseModel(NamedTuple):
+    """The constant covariance model of `extract_bailey`'s circles (see there)."""
+
+    range_sigma_m: float  # m, range std along the beam at range 0
+    range_sigma_per_m: float  # its growth with range, m per m
+    sin_bearing_sigma: float  # sin(bearing_sigma_rad): the cross-range std per metre of range
+    radius_sigma_m: float  # m, the radius model error
+
+
+def _noise_model(range_sigma_m, range_sigma_per_m, bearing_sigma_rad, radius_sigma_m) -> tuple:
+    """The checked options of `extract_bailey` as a `_NoiseModel`, in the plain tuple that
+    `_circles` takes."""
     for name, v in (
         ("range_sigma_m", range_sigma_m),
         ("range_sigma_per_m", range_sigma_per_m),
@@ -456,10 +519,15 @@ def extract_bailey(
             or not 0 <= v <= 1e9
         ):
             raise FeaturesError(f"{name}: must be a number in [0, 1e9], got {v!r}")
-    p = params or _DEFAULT
-    if not isinstance(p, BaileyParams):
-        raise FeaturesError(f"params: expected BaileyParams, got {type(params).__name__}")
+    noise = _NoiseModel(
+        range_sigma_m, range_sigma_per_m, math.sin(bearing_sigma_rad), radius_sigma_m
+    )
+    return tuple(noise)
 
+
+def _beam_angles(scan: Scan, p: BaileyParams) -> np.ndarray | None:
+    """The detector's beam angles for `scan` (B,), rad from its first beam, or None for the
+    original's i*pi/360 table (361 beams 0.5 deg apart)."""
     inc = scan.angle_increment_rad
     n_beams = scan.n_beams
     if inc >= p.break_gap_rad:
@@ -468,31 +536,25 @@ def extract_bailey(
             f"({p.break_gap_rad:.4g} rad): every beam would be a segment of its own"
         )
     if n_beams == 361 and inc == BAILEY_BEAM_RAD:
-        ang = None  # the original's angle table
-    else:
-        ang = np.arange(n_beams) * inc
-        if n_beams > 1 and ang[-1] >= _TWO_PI:
-            raise FeaturesError(f"scan: {n_beams} beams of {inc} rad cover more than 360 degrees")
-    out, seg_first, seg_last, kept, det_seg = _detect(scan.ranges_m, ang, p)
+        return None  # the original's angle table
+    ang = np.arange(n_beams) * inc
+    if n_beams > 1 and ang[-1] >= _TWO_PI:
+        raise FeaturesError(f"scan: {n_beams} beams of {inc} rad cover more than 360 degrees")
+    return ang
 
-    circ, cov = _circles(
-        out,
-        scan.angle_min_rad,
-        inc,
-        range_sigma_m,
-        range_sigma_per_m,
-        math.sin(bearing_sigma_rad),
-        radius_sigma_m,
-    )
-    seg_beams = np.empty((seg_first.size, 2), np.int64)
-    seg_beams[:, 0] = seg_first
-    seg_beams[:, 1] = seg_last
-    kind = np.where(kept, KIND_CIRCLE, KIND_CLUTTER).astype(np.int64)
+
+def _as_features(scan: Scan, det: _Detection, circ: np.ndarray, cov: np.ndarray) -> Features:
+    """`extract_bailey`'s answer: the circles (n, 3), their covariances (n, 3, 3) and the
+    detection's segments."""
+    seg_beams = np.empty((det.seg_first.size, 2), np.int64)
+    seg_beams[:, 0] = det.seg_first
+    seg_beams[:, 1] = det.seg_last
+    kind = np.where(det.kept, KIND_CIRCLE, KIND_CLUTTER).astype(np.int64)
     return Features(
         stamp_s=scan.stamp_s,
         circle_params=circ,
         circle_cov=cov,
-        circle_beams=seg_beams[det_seg],
+        circle_beams=seg_beams[det.det_seg],
         circle_rms_m=np.full(circ.shape[0], np.nan),
         line_params=_NO_LINES[0],
         line_cov=_NO_LINES[1],
@@ -506,7 +568,7 @@ def extract_bailey(
         segment_kind=kind,
         segment_innov=np.full((kind.size, 2), np.nan),
         method="bailey",
-        n_beams=n_beams,
+        n_beams=scan.n_beams,
     )
 
 
@@ -528,11 +590,14 @@ _NO_EDGES = (_empty(0, 2), _empty(0, 2, 2), _empty(0, dtype=np.int64))
 
 
 @njit(cache=True, nogil=True)
-def _circles(out, angle_min, inc, sig0, sig_per_m, sin_sig_b, sig_radius):
+def _circles(out, angle_min, inc, noise):
     """Detections (3, n) [range; bearing from the first beam; diameter] -> laser-frame circles.
 
+    angle_min: rad, laser-frame bearing of the first beam; inc: rad, beam spacing; noise: a
+    `_NoiseModel` as a plain tuple (see the note above `_BeamTable`).
     Returns circle_params (n, 3) [x0, y0, r] and circle_cov (n, 3, 3); see `extract_bailey`.
     """
+    noise = _NoiseModel(*noise)
     n = out.shape[1]
     circ = np.empty((n, 3))
     cov = np.zeros((n, 3, 3))
@@ -544,11 +609,13 @@ def _circles(out, angle_min, inc, sig0, sig_per_m, sin_sig_b, sig_radius):
         circ[j, 0] = rng * c
         circ[j, 1] = rng * s
         circ[j, 2] = out[2, j] / 2
-        var_along = (sig0 + sig_per_m * rng) ** 2  # range noise along the beam
-        var_across = (rng * sin_sig_b) ** 2  # bearing noise across it
+        # range noise along the beam, bearing noise across it
+        var_along = (noise.range_sigma_m + noise.range_sigma_per_m * rng) ** 2
+        var_across = (rng * noise.sin_bearing_sigma) ** 2
         cov[j, 0, 0] = var_along * c * c + var_across * s * s
         cov[j, 1, 1] = var_along * s * s + var_across * c * c
         cov[j, 0, 1] = (var_along - var_across) * c * s
         cov[j, 1, 0] = cov[j, 0, 1]
-        cov[j, 2, 2] = sig_radius**2 + (rng * inc) ** 2 / 24  # model error + beam quantisation
+        # model error + beam quantisation
+        cov[j, 2, 2] = noise.radius_sigma_m**2 + (rng * inc) ** 2 / 24
     return circ, cov

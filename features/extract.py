@@ -35,6 +35,7 @@ import math
 import numbers
 from dataclasses import asdict, dataclass, fields
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -159,39 +160,105 @@ def _chi2_tables(n_max: int, prob: float) -> tuple[np.ndarray, np.ndarray]:
     return line, circ
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _fit_method(code, x, y, lambda0, max_iter, tol):
-    if code == 0:
-        x0, y0, r, ok, _ = fit_circle_paper(x, y, lambda0, max_iter, tol)
-    elif code == 1:
+# The records below cross into the numba kernel as plain tuples, `tuple(record)`, and are named
+# again on the kernel's first line: numba's dispatcher types a plain tuple in C but a NamedTuple
+# in Python, which costs about 1.5 us a call (5% of a scan). The small helpers that take them
+# are inlined into the kernel (inline="always"): called, they cost about 0.5 us a scan.
+
+
+class _Beams(NamedTuple):
+    """One scan as the kernel reads it. A 360 deg scan is rotated to start at a break (`_seam`)
+    so that no segment crosses its seam: kernel beam k is the scan's beam (k + shift) mod B."""
+
+    ranges: np.ndarray  # (B,) m, NaN = no return, in kernel beam order
+    angle_min: float  # rad, laser-frame bearing of kernel beam 0
+    gamma: float  # rad, angle between successive beams
+    cyclic: bool  # the scan covers 360 deg: its last beam neighbours its first
+    shift: int  # the scan's number of kernel beam 0
+
+
+class _Settings(NamedTuple):
+    """`ExtractorParams` resolved for one scan and method, as the kernel reads them."""
+
+    sigma_r: float  # m, range noise of the segmentation EKF (eq. 3) and of the edges
+    q: float  # m^2, process noise Q of eq. (2)
+    gate: float  # delta of eq. (4)
+    max_growth: float  # largest ratio of successive ranges on a plane (degenerate case)
+    merge: bool  # merge_arcs
+    isolate: bool  # isolated_circles
+    edge_jump: float  # m, edge_min_jump_m
+    min_points: int
+    min_circle_points: int
+    line_test: int  # `_LINE_TESTS` code
+    lrt_threshold: float
+    sigma2: float  # m^2, sigma_r^2 + roughness^2: the noise of the fit tests
+    chi2_line: np.ndarray  # (B + 1,) chi2_(n-2)(class_prob) by number of points n
+    chi2_circ: np.ndarray  # (B + 1,) chi2_(n-3)(class_prob)
+    r_min: float  # m
+    r_max: float  # m
+    method: int  # `_METHOD_CODE` of the circle fit
+    lambda0: float
+    max_iter: int
+    tol: float
+
+
+class _Found(NamedTuple):
+    """What the kernel found, beams in kernel order: the `Features` arrays of the same names."""
+
+    segment_beams: np.ndarray  # (S, 2) int64, inclusive [first, last] beams
+    segment_kind: np.ndarray  # (S,) int64, KIND_*
+    segment_innov: np.ndarray  # (S, 2) eq. (5)'s mean innovation (m) and its variance (m^2)
+    circle_params: np.ndarray  # (C, 3) [x0, y0, r], m, laser frame
+    circle_cov: np.ndarray  # (C, 3, 3)
+    circle_beams: np.ndarray  # (C, 2) int64
+    circle_rms_m: np.ndarray  # (C,)
+    line_params: np.ndarray  # (L, 2) [alpha rad, rho m]
+    line_cov: np.ndarray  # (L, 2, 2)
+    line_endpoints: np.ndarray  # (L, 2, 2) m, laser frame
+    line_beams: np.ndarray  # (L, 2) int64
+    line_rms_m: np.ndarray  # (L,)
+    edge_xy: np.ndarray  # (E, 2) m, laser frame
+    edge_cov: np.ndarray  # (E, 2, 2)
+    edge_beam: np.ndarray  # (E,) int64
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _fit_method(cfg, x, y):
+    """The circle fit of `cfg.method` (a `_Settings`) to the points: (x0, y0, r, ok)."""
+    if cfg.method == 0:
+        x0, y0, r, ok, _ = fit_circle_paper(x, y, cfg.lambda0, cfg.max_iter, cfg.tol)
+    elif cfg.method == 1:
         x0, y0, r, ok, _ = fit_circle_geometric(x, y)
-    elif code == 2:
+    elif cfg.method == 2:
         x0, y0, r, ok = fit_circle_kasa(x, y)
     else:
         x0, y0, r, ok = fit_circle_taubin(x, y)
     return x0, y0, r, ok
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _points(ranges, angle_min, gamma, a, b, xbuf, ybuf):
-    """Cartesian points of beams a..b (views into the scratch buffers) and their least range."""
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _points(beams, a, b, buf):
+    """Cartesian points of beams a..b of a `_Beams` (views into the scratch buffers
+    buf = (x, y)) and their least range."""
     m = b - a + 1
-    x = xbuf[:m]
-    y = ybuf[:m]
+    x = buf[0][:m]
+    y = buf[1][:m]
     rmin = np.inf
     for i in range(m):
-        rr = ranges[a + i]
-        th = angle_min + gamma * (a + i)
+        rr = beams.ranges[a + i]
+        th = beams.angle_min + beams.gamma * (a + i)
         x[i] = rr * math.cos(th)
         y[i] = rr * math.sin(th)
         rmin = min(rmin, rr)
     return x, y, rmin
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _circle_plausible(x, y, rmin, chi2_circ, sigma2, r_min, r_max):
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _circle_plausible(x, y, rmin, cfg):
     """A circle is plausible when the geometric fit's residuals pass the chi-square test, its
-    radius is within bounds, and it is convex toward the laser. Returns (ok, ssr, x0, y0, r)."""
+    radius is within bounds, and it is convex toward the laser (bounds and test: the `_Settings`
+    cfg). Returns (ok, ssr, x0, y0, r)."""
+    sigma2, r_min, r_max = cfg.sigma2, cfg.r_min, cfg.r_max
     m = x.shape[0]
     dx = x[m - 1] - x[0]
     dy = y[m - 1] - y[0]
@@ -202,15 +269,16 @@ def _circle_plausible(x, y, rmin, chi2_circ, sigma2, r_min, r_max):
         return False, np.inf, gx, gy, gr
     ssr = circle_ssr(x, y, gx, gy, gr)
     convex = math.sqrt(gx * gx + gy * gy) >= rmin + 0.5 * gr
-    return convex and ssr <= sigma2 * chi2_circ[x.shape[0]], ssr, gx, gy, gr
+    return convex and ssr <= sigma2 * cfg.chi2_circ[x.shape[0]], ssr, gx, gy, gr
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
-def _continuous(ranges, bounds, k, side, edge_jump, cyclic):
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _continuous(beams, bounds, k, side, edge_jump):
     """Does segment k continue, at its start (side 0) or end (side 1), into a neighbouring
     surface at a similar range (no depth jump)? A one-beam neighbouring segment that is itself cut
-    off on its far side is taken for a mixed pixel and looked past. `cyclic`: the scan covers
-    360 deg and its last beam neighbours its first."""
+    off on its far side is taken for a mixed pixel and looked past. On a cyclic `_Beams` (360
+    deg) the last beam neighbours the first."""
+    ranges, cyclic = beams.ranges, beams.cyclic
     n = ranges.shape[0]
     ns = bounds.shape[0]
     e = bounds[k, 0] if side == 0 else bounds[k, 1]
@@ -237,58 +305,29 @@ def _continuous(ranges, bounds, k, side, edge_jump, cyclic):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _extract_kernel(
-    ranges,
-    angle_min,
-    gamma,
-    sigma_r,
-    q,
-    gate,
-    max_growth,
-    merge,
-    isolate,
-    cyclic,
-    method,
-    line_test,
-    min_points,
-    min_circle_points,
-    chi2_line,
-    chi2_circ,
-    lrt_threshold,
-    sigma2,
-    r_min,
-    r_max,
-    edge_jump,
-    lambda0,
-    max_iter,
-    tol,
-):
-    bounds0, reason, innov, svar = segment_kernel(
-        ranges, math.cos(gamma), sigma_r, q, gate, max_growth
-    )
-    n_beams = ranges.shape[0]
-    xbuf = np.empty(n_beams)
-    ybuf = np.empty(n_beams)
-    # --- merge pass: neighbouring segments split by the gate without a depth jump (the planar
-    # model breaking on a curved surface) are joined when together they form a plausible circle
+def _merge_arcs(beams, cfg, bounds0, reason, buf):
+    """The merge pass: neighbouring segments split by the gate without a depth jump (the planar
+    model breaking on a curved surface) are joined when together they form a plausible circle.
+    bounds0 (S, 2), reason (S,): `segment_kernel`'s segments. Returns the merged bounds."""
+    ranges = beams.ranges
     bounds = np.empty_like(bounds0)
     ns = 0
     k = 0
     while k < bounds0.shape[0]:
         a = bounds0[k, 0]
         b = bounds0[k, 1]
-        while merge and k + 1 < bounds0.shape[0]:
+        while cfg.merge and k + 1 < bounds0.shape[0]:
             if reason[k] == END_NO_RETURN or reason[k] == END_SCAN:
                 break
-            if abs(ranges[b + 1] - ranges[b]) >= edge_jump:
+            if abs(ranges[b + 1] - ranges[b]) >= cfg.edge_jump:
                 break
             b2 = bounds0[k + 1, 1]
-            if b2 - a + 1 < min_circle_points:
+            if b2 - a + 1 < cfg.min_circle_points:
                 b = b2
                 k += 1
                 continue
-            x, y, rmin = _points(ranges, angle_min, gamma, a, b2, xbuf, ybuf)
-            ok, _, _, _, _ = _circle_plausible(x, y, rmin, chi2_circ, sigma2, r_min, r_max)
+            x, y, rmin = _points(beams, a, b2, buf)
+            ok, _, _, _, _ = _circle_plausible(x, y, rmin, cfg)
             if not ok:
                 break
             b = b2
@@ -297,7 +336,84 @@ def _extract_kernel(
         bounds[ns, 1] = b
         ns += 1
         k += 1
-    bounds = bounds[:ns]
+    return bounds[:ns]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _mean_innovation(innov, svar, a, b, out):
+    """eq. (5): mean innovation and its variance over the beams a..b the filter validated (M - 2
+    of them for an unmerged segment), into out (2,) when there is one; returns their number."""
+    sv = 0.0
+    ss = 0.0
+    nv = 0
+    for i in range(a, b + 1):
+        if innov[i] == innov[i]:
+            sv += innov[i]
+            ss += svar[i]
+            nv += 1
+    if nv > 0:
+        out[0] = sv / nv
+        out[1] = ss / (nv * nv)
+    return nv
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _is_edge(beams, e, step, edge_jump):
+    """Is beam e, the first (step -1) or last (step +1) beam of a segment, an occluding edge: is
+    its neighbour on that side, or the one after a mixed pixel, farther by more than edge_jump?"""
+    ranges = beams.ranges
+    n_beams = ranges.shape[0]
+    for j in range(1, 3):  # the neighbour, or the one after a mixed pixel
+        nb = e + step * j
+        if beams.cyclic:
+            nb %= n_beams
+        if nb < 0 or nb >= n_beams or not (ranges[nb] == ranges[nb]):
+            return False
+        if ranges[nb] - ranges[e] > edge_jump:
+            return True
+        if ranges[nb] < ranges[e]:
+            return False
+    return False
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _edge_point(beams, e, step, sigma_r, out):
+    """The occluding edge at beam e, mid-way towards the far side (step -1 or +1): its point
+    into out[0] (2,) and covariance into out[1] (2, 2), range noise sigma_r along the beam."""
+    xy, cov = out
+    th = beams.angle_min + beams.gamma * e + 0.5 * step * beams.gamma
+    rr = beams.ranges[e]
+    c = math.cos(th)
+    s = math.sin(th)
+    var_th = beams.gamma * beams.gamma / 12.0  # uniform over one beam step
+    vr = sigma_r * sigma_r
+    xy[0] = rr * c
+    xy[1] = rr * s
+    # J diag(var_r, var_th) J^T, J = [[c, -r s], [s, r c]]
+    cov[0, 0] = c * c * vr + rr * rr * s * s * var_th
+    cov[0, 1] = c * s * vr - rr * rr * s * c * var_th
+    cov[1, 0] = cov[0, 1]
+    cov[1, 1] = s * s * vr + rr * rr * c * c * var_th
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _extract_kernel(beams, settings):
+    """Steps 1-4 of the module doc on one scan. beams: a `_Beams`, settings: a `_Settings`, both
+    as plain tuples (see above). Returns the fields of a `_Found`, in its order."""
+    beams = _Beams(*beams)
+    cfg = _Settings(*settings)
+    bounds0, reason, innov, svar = segment_kernel(
+        beams.ranges,
+        math.cos(beams.gamma),
+        sigma_r=cfg.sigma_r,
+        q=cfg.q,
+        gate=cfg.gate,
+        max_growth=cfg.max_growth,
+    )
+    n_beams = beams.ranges.shape[0]
+    buf = (np.empty(n_beams), np.empty(n_beams))
+    bounds = _merge_arcs(beams, cfg, bounds0, reason, buf)
+    ns = bounds.shape[0]
     kind = np.zeros(ns, np.int64)
     seg_innov = np.full((ns, 2), np.nan)
     circ = np.empty((ns, 3))
@@ -315,41 +431,28 @@ def _extract_kernel(
     edge_cov = np.empty((2 * ns, 2, 2))
     edge_beam = np.empty(2 * ns, np.int64)
     ne = 0
+    sigma2 = cfg.sigma2
     for k in range(ns):
         a = bounds[k, 0]
         b = bounds[k, 1]
         m = b - a + 1
-        # eq. (5): mean innovation and its variance over the beams the filter validated
-        # (M - 2 of them for an unmerged segment)
-        sv = 0.0
-        ss = 0.0
-        nv = 0
-        for i in range(a, b + 1):
-            if innov[i] == innov[i]:
-                sv += innov[i]
-                ss += svar[i]
-                nv += 1
-        if nv > 0:
-            seg_innov[k, 0] = sv / nv
-            seg_innov[k, 1] = ss / (nv * nv)
-        if m < min_points:
+        nv = _mean_innovation(innov, svar, a, b, seg_innov[k])
+        if m < cfg.min_points:
             continue
-        x, y, rmin = _points(ranges, angle_min, gamma, a, b, xbuf, ybuf)
+        x, y, rmin = _points(beams, a, b, buf)
         circle_ok = False
         ssr_c = np.inf
-        isolated = not isolate or (
-            not _continuous(ranges, bounds, k, 0, edge_jump, cyclic)
-            and not _continuous(ranges, bounds, k, 1, edge_jump, cyclic)
+        isolated = not cfg.isolate or (
+            not _continuous(beams, bounds, k, 0, cfg.edge_jump)
+            and not _continuous(beams, bounds, k, 1, cfg.edge_jump)
         )
-        if m >= min_circle_points and isolated:
-            circle_ok, ssr_c, _, _, _ = _circle_plausible(
-                x, y, rmin, chi2_circ, sigma2, r_min, r_max
-            )
+        if m >= cfg.min_circle_points and isolated:
+            circle_ok, ssr_c, _, _, _ = _circle_plausible(x, y, rmin, cfg)
         alpha, rho, lcov, lend, ssr_l, lok = fit_line_tls(x, y, sigma2)
-        if line_test == 1:
-            if circle_ok and (ssr_l - ssr_c) / sigma2 > lrt_threshold:
+        if cfg.line_test == 1:
+            if circle_ok and (ssr_l - ssr_c) / sigma2 > cfg.lrt_threshold:
                 kind[k] = 2
-            elif lok and ssr_l <= sigma2 * chi2_line[m]:
+            elif lok and ssr_l <= sigma2 * cfg.chi2_line[m]:
                 kind[k] = 1
         else:
             if nv > 0 and abs(seg_innov[k, 0]) <= 3.0 * math.sqrt(seg_innov[k, 1]):
@@ -357,11 +460,11 @@ def _extract_kernel(
             elif circle_ok:
                 kind[k] = 2
         if kind[k] == 2:
-            cx, cy, cr, cok = _fit_method(method, x, y, lambda0, max_iter, tol)
+            cx, cy, cr, cok = _fit_method(cfg, x, y)
             cov_ok = False
             if cok:
                 ssr = circle_ssr(x, y, cx, cy, cr)
-                cov, cov_ok = circle_covariance(x, y, cx, cy, cr, sigma2)
+                cov, cov_ok = circle_covariance(x, y, cx, cy, cr, sigma2=sigma2)
             if not cov_ok:
                 kind[k] = 0
             else:
@@ -382,36 +485,10 @@ def _extract_kernel(
             line_beams[nl, 1] = b
             line_rms[nl] = math.sqrt(ssr_l / m)
             nl += 1
-        # --- occluding edges at either end of the segment
-        for side in range(2):
-            e = a if side == 0 else b
-            step = -1 if side == 0 else 1
-            is_edge = False
-            for j in range(1, 3):  # the neighbour, or the one after a mixed pixel
-                nb = e + step * j
-                if cyclic:
-                    nb %= n_beams
-                if nb < 0 or nb >= n_beams or not (ranges[nb] == ranges[nb]):
-                    break
-                if ranges[nb] - ranges[e] > edge_jump:
-                    is_edge = True
-                    break
-                if ranges[nb] < ranges[e]:
-                    break
-            if is_edge:
-                th = angle_min + gamma * e + 0.5 * step * gamma  # mid-way towards the far side
-                rr = ranges[e]
-                c = math.cos(th)
-                s = math.sin(th)
-                var_th = gamma * gamma / 12.0  # uniform over one beam step
-                vr = sigma_r * sigma_r
-                edge_xy[ne, 0] = rr * c
-                edge_xy[ne, 1] = rr * s
-                # J diag(var_r, var_th) J^T, J = [[c, -r s], [s, r c]]
-                edge_cov[ne, 0, 0] = c * c * vr + rr * rr * s * s * var_th
-                edge_cov[ne, 0, 1] = c * s * vr - rr * rr * s * c * var_th
-                edge_cov[ne, 1, 0] = edge_cov[ne, 0, 1]
-                edge_cov[ne, 1, 1] = s * s * vr + rr * rr * c * c * var_th
+        for step in (-1, 1):  # occluding edges at either end of the segment
+            e = a if step == -1 else b
+            if _is_edge(beams, e, step, cfg.edge_jump):
+                _edge_point(beams, e, step, cfg.sigma_r, (edge_xy[ne], edge_cov[ne]))
                 edge_beam[ne] = e
                 ne += 1
     return (
@@ -433,7 +510,7 @@ def _extract_kernel(
     )
 
 
-def _short_trunks(ranges, angle_min, gamma, bounds, kind, p: ExtractorParams):
+def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     """Circles for trunks too narrow to fit (1 to min_circle_points - 1 beams).
 
     A segment qualifies when it is not already a line or circle, its neighbours on both sides
@@ -445,8 +522,10 @@ def _short_trunks(ranges, angle_min, gamma, bounds, kind, p: ExtractorParams):
     radius behind the segment's mean range, on its mean bearing. Covariance of (x0, y0, r): the
     mean range's noise sigma_r^2 / m plus the radius variance along the beam, a uniform one-beam
     bearing error across it, and the radius variance.
+    bounds (S, 2), kind (S,): the kernel's segments, in the kernel beam order of `beams`.
     Returns (params (k, 3), cov (k, 3, 3), beams (k, 2), segment indices (k,)).
     """
+    ranges, angle_min, gamma = beams.ranges, beams.angle_min, beams.gamma
     n = ranges.shape[0]
     out_p, out_c, out_b, out_k = [], [], [], []
     r0, s0 = p.short_trunk_radius_m, p.short_trunk_radius_sigma_m
@@ -497,21 +576,143 @@ def _farther(neighbour: float, own: float, p: ExtractorParams) -> bool:
     return not (neighbour == neighbour) or neighbour - own > p.edge_min_jump_m
 
 
-@lru_cache(maxsize=32)
-def _cached_params(items: tuple) -> ExtractorParams:
-    """ExtractorParams from ((name, type name, value), ...)."""
-    return ExtractorParams.from_kwargs(**{k: v for k, _, v in items})
+def _with_short_trunks(found: _Found, beams: _Beams, p: ExtractorParams) -> _Found:
+    """`found` with the short trunks' circles (`_short_trunks`) appended (circle_rms_m NaN: no
+    fit) and their segments' kind set to circle."""
+    params, cov, runs, segments = _short_trunks(beams, found.segment_beams, found.segment_kind, p)
+    if not params.shape[0]:
+        return found
+    kind = found.segment_kind.copy()
+    kind[segments] = KIND_CIRCLE
+    return found._replace(
+        circle_params=np.concatenate([found.circle_params, params]),
+        circle_cov=np.concatenate([found.circle_cov, cov]),
+        circle_beams=np.concatenate([found.circle_beams, runs]),
+        circle_rms_m=np.concatenate([found.circle_rms_m, np.full(params.shape[0], np.nan)]),
+        segment_kind=kind,
+    )
 
 
-def _params(params: dict) -> ExtractorParams:
-    """ExtractorParams from keyword arguments, cached (building one costs ~10 us per scan)."""
+def _resolve(params: dict, method: str, scan: Scan) -> tuple[ExtractorParams, tuple]:
+    """The `ExtractorParams` of keyword arguments `params` and the kernel's settings for
+    `method` and `scan`'s beams (`_settings`), cached (building them costs ~12 us per scan)."""
+    gamma, n_beams = scan.angle_increment_rad, scan.n_beams
+    items = _items(params)
+    if items is None:
+        p = ExtractorParams.from_kwargs(**params)  # an unhashable value: validation says why
+        return p, _settings(p, method, gamma, n_beams)
+    return _cached_resolve(items, method, gamma, n_beams)
+
+
+def _items(params: dict) -> tuple | None:
+    """The cache key of keyword arguments, None when a value is unhashable."""
     # the value's type is part of the key: 1 == True and 0.5 == Fraction(1, 2) hash alike
     items = tuple(sorted((k, type(v).__name__, v) for k, v in params.items()))
     try:
         hash(items)
     except TypeError:
-        return ExtractorParams.from_kwargs(**params)  # an unhashable value: validation says why
-    return _cached_params(items)
+        return None
+    return items
+
+
+@lru_cache(maxsize=64)
+def _cached_resolve(items: tuple, method: str, gamma: float, n_beams: int):
+    """`_resolve` of the keyword arguments ((name, type name, value), ...)."""
+    p = ExtractorParams.from_kwargs(**{k: v for k, _, v in items})
+    return p, _settings(p, method, gamma, n_beams)
+
+
+def _settings(p: ExtractorParams, method: str, gamma: float, n_beams: int) -> tuple:
+    """`p` and `method` resolved for a scan of `n_beams` beams `gamma` rad apart: a `_Settings`
+    as the plain tuple the kernel takes. Raises when the beams are too coarse for the planar
+    model at p.max_incidence_deg."""
+    if gamma >= math.pi / 2 - math.radians(p.max_incidence_deg):
+        raise FeaturesError(
+            f"angle_increment_rad: {gamma} is too coarse for the planar model "
+            f"with max_incidence_deg={p.max_incidence_deg}"
+        )
+    max_growth = max_growth_ratio(gamma, math.radians(p.max_incidence_deg))
+    chi2_line, chi2_circ = _chi2_tables(n_beams, p.class_prob)
+    settings = _Settings(
+        sigma_r=p.sigma_r_m,
+        q=p.q_m2,
+        gate=p.gate,
+        max_growth=max_growth,
+        merge=p.merge_arcs,
+        isolate=p.isolated_circles,
+        edge_jump=p.edge_min_jump_m,
+        min_points=p.min_points,
+        min_circle_points=p.min_circle_points,
+        line_test=_LINE_TESTS[p.line_test],
+        lrt_threshold=p.lrt_threshold,
+        sigma2=p.sigma_r_m**2 + p.roughness_m**2,
+        chi2_line=chi2_line,
+        chi2_circ=chi2_circ,
+        r_min=p.r_min_m,
+        r_max=p.r_max_m,
+        method=_METHOD_CODE[method],
+        lambda0=p.lambda0,
+        max_iter=p.max_iter,
+        tol=p.tol,
+    )
+    return tuple(settings)
+
+
+def _kernel_beams(scan: Scan) -> _Beams:
+    """`scan` in kernel beam order: a 360 deg scan starts at its `_seam`."""
+    n, gamma = scan.n_beams, scan.angle_increment_rad
+    if not (n > 2 and abs(n * gamma - 2.0 * math.pi) < 0.5 * gamma):
+        return _Beams(scan.ranges_m, scan.angle_min_rad, gamma, False, 0)
+    shift = _seam(scan.ranges_m)
+    ranges = np.roll(scan.ranges_m, -shift)
+    return _Beams(ranges, scan.angle_min_rad + shift * gamma, gamma, True, shift)
+
+
+def _in_scan_order(found: _Found, beams: _Beams) -> _Found:
+    """`found` with the scan's own beam numbers (in place); a run across the seam keeps
+    last >= B."""
+    shift, n = beams.shift, beams.ranges.shape[0]
+    for runs in (found.segment_beams, found.circle_beams, found.line_beams):
+        runs += shift
+        runs -= n * (runs[:, :1] >= n)
+    return found._replace(edge_beam=(found.edge_beam + shift) % n)
+
+
+def _features(scan: Scan, method: str, found: _Found) -> Features:
+    """The answer of `extract_features`: `found`, in the scan's beam order, as `Features`."""
+    return Features(
+        stamp_s=scan.stamp_s,
+        circle_params=found.circle_params,
+        circle_cov=found.circle_cov,
+        circle_beams=found.circle_beams,
+        circle_rms_m=found.circle_rms_m,
+        line_params=found.line_params,
+        line_cov=found.line_cov,
+        line_endpoints=found.line_endpoints,
+        line_beams=found.line_beams,
+        line_rms_m=found.line_rms_m,
+        edge_xy=found.edge_xy,
+        edge_cov=found.edge_cov,
+        edge_beam=found.edge_beam,
+        segment_beams=found.segment_beams,
+        segment_kind=found.segment_kind,
+        segment_innov=found.segment_innov,
+        method=method,
+        n_beams=scan.n_beams,
+    )
+
+
+def _extract_bailey(scan: Scan, params: dict) -> Features:
+    """`extract_features(scan, "bailey", **params)`: `params` must be options of
+    `features.bailey.extract_bailey`."""
+    from features.bailey import BAILEY_OPTIONS, extract_bailey
+
+    unknown = sorted(set(params) - set(BAILEY_OPTIONS))
+    if unknown:
+        raise FeaturesError(
+            f"{unknown}: not parameters of method 'bailey' (allowed: {list(BAILEY_OPTIONS)})"
+        )
+    return extract_bailey(scan, **params)
 
 
 def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
@@ -525,109 +726,17 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
     if not isinstance(scan, Scan):
         raise FeaturesError(f"scan: expected a features.Scan, got {type(scan).__name__}")
     if method == "bailey":
-        from features.bailey import BAILEY_OPTIONS, extract_bailey
-
-        unknown = sorted(set(params) - set(BAILEY_OPTIONS))
-        if unknown:
-            raise FeaturesError(
-                f"{unknown}: not parameters of method 'bailey' (allowed: {list(BAILEY_OPTIONS)})"
-            )
-        return extract_bailey(scan, **params)
+        return _extract_bailey(scan, params)
     if method not in _METHOD_CODE:
         raise FeaturesError(f"method: must be one of {list(METHODS)}, got {method!r}")
-    p = _params(params)
-    gamma = scan.angle_increment_rad
-    if gamma >= math.pi / 2 - math.radians(p.max_incidence_deg):
-        raise FeaturesError(
-            f"angle_increment_rad: {gamma} is too coarse for the planar model "
-            f"with max_incidence_deg={p.max_incidence_deg}"
-        )
-    growth = max_growth_ratio(gamma, math.radians(p.max_incidence_deg))
-    n = scan.n_beams
-    chi2_line, chi2_circ = _chi2_tables(n, p.class_prob)
-    ranges, angle_min, shift = scan.ranges_m, scan.angle_min_rad, 0
-    cyclic = n > 2 and abs(n * gamma - 2.0 * math.pi) < 0.5 * gamma
-    if cyclic:  # 360 deg: start the scan at a break so that no segment crosses the seam
-        shift = _seam(ranges)
-        ranges = np.roll(ranges, -shift)
-        angle_min = angle_min + shift * gamma
-    out = _extract_kernel(
-        ranges,
-        angle_min,
-        gamma,
-        p.sigma_r_m,
-        p.q_m2,
-        p.gate,
-        growth,
-        p.merge_arcs,
-        p.isolated_circles,
-        cyclic,
-        _METHOD_CODE[method],
-        _LINE_TESTS[p.line_test],
-        p.min_points,
-        p.min_circle_points,
-        chi2_line,
-        chi2_circ,
-        p.lrt_threshold,
-        p.sigma_r_m**2 + p.roughness_m**2,
-        p.r_min_m,
-        p.r_max_m,
-        p.edge_min_jump_m,
-        p.lambda0,
-        p.max_iter,
-        p.tol,
-    )
-    (
-        bounds,
-        kind,
-        seg_innov,
-        circ,
-        circ_cov,
-        circ_beams,
-        circ_rms,
-        line,
-        line_cov,
-        line_end,
-        line_beams,
-        line_rms,
-        edge_xy,
-        edge_cov,
-        edge_beam,
-    ) = out
+    p, settings = _resolve(params, method, scan)
+    beams = _kernel_beams(scan)
+    found = _Found._make(_extract_kernel(tuple(beams), settings))
     if p.short_trunks:
-        short = _short_trunks(ranges, angle_min, gamma, bounds, kind, p)
-        if short[0].shape[0]:
-            circ = np.concatenate([circ, short[0]])
-            circ_cov = np.concatenate([circ_cov, short[1]])
-            circ_beams = np.concatenate([circ_beams, short[2]])
-            circ_rms = np.concatenate([circ_rms, np.full(short[0].shape[0], np.nan)])
-            kind = kind.copy()
-            kind[short[3]] = KIND_CIRCLE
-    if shift:  # back to the scan's own beam numbers; a run across the seam keeps last >= n
-        for runs in (bounds, circ_beams, line_beams):
-            runs += shift
-            runs -= n * (runs[:, :1] >= n)
-        edge_beam = (edge_beam + shift) % n
-    return Features(
-        stamp_s=scan.stamp_s,
-        circle_params=circ,
-        circle_cov=circ_cov,
-        circle_beams=circ_beams,
-        circle_rms_m=circ_rms,
-        line_params=line,
-        line_cov=line_cov,
-        line_endpoints=line_end,
-        line_beams=line_beams,
-        line_rms_m=line_rms,
-        edge_xy=edge_xy,
-        edge_cov=edge_cov,
-        edge_beam=edge_beam,
-        segment_beams=bounds,
-        segment_kind=kind,
-        segment_innov=seg_innov,
-        method=method,
-        n_beams=n,
-    )
+        found = _with_short_trunks(found, beams, p)
+    if beams.shift:
+        found = _in_scan_order(found, beams)
+    return _features(scan, method, found)
 
 
 def _seam(ranges: np.ndarray) -> int:

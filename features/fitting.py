@@ -5,9 +5,9 @@ Circle fits, all returning (x0, y0, r, ok):
   E = sum [(x - x0)^2 + (y - y0)^2 - r^2]^2, with lambda0 = 0.01, x10 on a failed step, /10 on
   a successful one, stopping when the relative change of E is below `tol` or after `max_iter`
   steps. It starts from the circle through the first three points (paper) and falls back to the
-  Kasa fit when those are nearly collinear. Note (METHOD_NOTES 4): eq. (6) *is* Kasa's algebraic
-  objective, so this converges to the Kasa solution and shares its bias toward small circles on
-  short arcs.
+  Kasa fit when those are nearly collinear. Note (docs/method.md section 4): eq. (6) *is*
+  Kasa's algebraic objective, so this converges to the Kasa solution and shares its bias toward
+  small circles on short arcs.
 - `fit_circle_kasa`: Kasa's algebraic fit in closed form (linear least squares).
 - `fit_circle_taubin`: Taubin's algebraic fit (Chernov's recommended initial guess), for context.
 - `fit_circle_geometric`: orthogonal-distance Levenberg-Marquardt on sum (|p - c| - r)^2,
@@ -35,11 +35,14 @@ __all__ = [
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _solve_sym3(a00, a01, a02, a11, a12, a22, b0, b1, b2):
-    """Solve a symmetric positive definite 3x3 system by Cholesky, without allocating.
+def _solve_sym3(A, b):
+    """Solve a symmetric positive definite 3x3 system A x = b by Cholesky, without allocating.
 
+    A: its upper triangle (a00, a01, a02, a11, a12, a22); b: (b0, b1, b2) (tuples of floats).
     Returns (x0, x1, x2, ok); ok=False when the matrix is not (numerically) positive definite.
     """
+    a00, a01, a02, a11, a12, a22 = A
+    b0, b1, b2 = b
     eps = 1e-13 * max(abs(a00), abs(a11), abs(a22))
     if not (a00 > eps):
         return 0.0, 0.0, 0.0, False
@@ -105,7 +108,7 @@ def fit_circle_kasa(x, y):
     if x.shape[0] < 3:
         return 0.0, 0.0, 0.0, False
     mx, my, Mxx, Myy, Mxy, Mxz, Myz, _ = _centred_moments(x, y)
-    B, C, D, ok = _solve_sym3(Mxx, Mxy, 0.0, Myy, 0.0, 1.0, -Mxz, -Myz, -(Mxx + Myy))
+    B, C, D, ok = _solve_sym3((Mxx, Mxy, 0.0, Myy, 0.0, 1.0), (-Mxz, -Myz, -(Mxx + Myy)))
     if not ok:
         return 0.0, 0.0, 0.0, False
     uc = -0.5 * B
@@ -163,8 +166,10 @@ def fit_circle_taubin(x, y):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _circle_through3(x1, y1, x2, y2, x3, y3):
-    """Circumcircle of three points; ok=False when they are (nearly) collinear."""
+def _circle_through3(x, y):
+    """Circumcircle of the first three points; ok=False when they are (nearly) collinear."""
+    x1, x2, x3 = x[0], x[1], x[2]
+    y1, y2, y3 = y[0], y[1], y[2]
     ax = x2 - x1
     ay = y2 - y1
     bx = x3 - x1
@@ -197,7 +202,7 @@ def fit_circle_paper(x, y, lambda0=0.01, max_iter=100, tol=1e-10, max_init_radiu
     n = x.shape[0]
     if n < 3:
         return 0.0, 0.0, 0.0, False, 0
-    x0, y0, r, ok = _circle_through3(x[0], y[0], x[1], y[1], x[2], y[2])
+    x0, y0, r, ok = _circle_through3(x, y)
     if not ok or r > max_init_radius:
         x0, y0, r, ok = fit_circle_kasa(x, y)  # fallback: nearly collinear first three points
         if not ok:
@@ -230,7 +235,7 @@ def fit_circle_paper(x, y, lambda0=0.01, max_iter=100, tol=1e-10, max_init_radiu
         while lam < 1e12:
             # eq. (9): (A^T A + lambda I) dp = -A^T g
             s0, s1, s2, okk = _solve_sym3(
-                h00 + lam, h01, h02, h11 + lam, h12, h22 + lam, g0, g1, g2
+                (h00 + lam, h01, h02, h11 + lam, h12, h22 + lam), (g0, g1, g2)
             )
             if not okk:
                 lam *= 10.0
@@ -307,7 +312,7 @@ def fit_circle_geometric(x, y, max_iter=50, tol=1e-12):
         dE = 0.0
         while lam < 1e12:
             f = 1.0 + lam
-            s0, s1, s2, okk = _solve_sym3(h00 * f, h01, h02, h11 * f, h12, h22 * f, g0, g1, g2)
+            s0, s1, s2, okk = _solve_sym3((h00 * f, h01, h02, h11 * f, h12, h22 * f), (g0, g1, g2))
             if not okk:
                 lam *= 10.0
                 continue
@@ -374,17 +379,8 @@ def circle_covariance(x, y, x0, y0, r, sigma2):
     # A = (J^T J)^-1 column by column, then cov = sigma2 A M A
     A = np.empty((3, 3))
     for c in range(3):
-        c0, c1, c2, ok = _solve_sym3(
-            h00,
-            h01,
-            h02,
-            h11,
-            h12,
-            h22,
-            1.0 if c == 0 else 0.0,
-            1.0 if c == 1 else 0.0,
-            1.0 if c == 2 else 0.0,
-        )
+        e_c = (1.0 if c == 0 else 0.0, 1.0 if c == 1 else 0.0, 1.0 if c == 2 else 0.0)
+        c0, c1, c2, ok = _solve_sym3((h00, h01, h02, h11, h12, h22), e_c)
         if not ok:
             return np.full((3, 3), np.nan), False
         A[0, c] = c0

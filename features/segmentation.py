@@ -12,7 +12,8 @@ Two implementations of the same per-beam loop:
 
 Conventions shared by both
 - No-return beams (NaN) end a segment and are never part of one.
-- Initialisation from the first two ranges: x = [d_2, d_1], P = sigma_r^2 I (METHOD_NOTES 2).
+- Initialisation from the first two ranges: x = [d_2, d_1], P = sigma_r^2 I (docs/method.md
+  section 2).
 - Degenerate (almost parallel) case, which the paper says to reject: when the predicted range
   grows by more than `max_growth` relative to the last range (equivalently the surface would be
   seen at more than `max_incidence_rad` from its normal, or D <= 0), the measurement is rejected
@@ -183,7 +184,8 @@ def segment_kernel(ranges, cos_gamma, sigma_r, q, gate, max_growth):
     return bounds[:ns], reason[:ns], innov, svar
 
 
-def _check(ranges_m, gamma_rad, sigma_r_m, q_m2, gate, max_incidence_rad):
+def _check(ranges_m, gamma_rad, sigma_r_m, q_m2, gate) -> np.ndarray:
+    """The ranges as float64 with NaN for no return, after checking the filter's parameters."""
     r = np.asarray(ranges_m, dtype=np.float64)
     if r.ndim != 1:
         raise FeaturesError(f"ranges_m: expected shape (B,), got {r.shape}")
@@ -193,8 +195,7 @@ def _check(ranges_m, gamma_rad, sigma_r_m, q_m2, gate, max_incidence_rad):
     if not (math.isfinite(q_m2) and q_m2 >= 0):
         raise FeaturesError(f"q_m2: must be finite and >= 0, got {q_m2!r}")
     with np.errstate(invalid="ignore"):
-        r = np.where(np.isfinite(r) & (r > 0), r, np.nan)
-    return r, max_growth_ratio(gamma_rad, max_incidence_rad)
+        return np.where(np.isfinite(r) & (r > 0), r, np.nan)
 
 
 def segment_ranges(
@@ -222,7 +223,9 @@ def segment_ranges(
     kernels = {"numba": segment_kernel, "numpy": segment_kernel_numpy}
     if kernel not in kernels:
         raise FeaturesError(f"kernel: expected 'numba' or 'numpy', got {kernel!r}")
-    r, growth = _check(ranges_m, gamma_rad, sigma_r_m, q_m2, gate, max_incidence_rad)
+    r = _check(ranges_m, gamma_rad, sigma_r_m, q_m2, gate)
+    growth = max_growth_ratio(gamma_rad, max_incidence_rad)
+    # the kernels' public signature (ranges, cos_gamma, sigma_r, q, gate, max_growth)
     return kernels[kernel](r, math.cos(gamma_rad), sigma_r_m, q_m2, gate, growth)
 
 

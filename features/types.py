@@ -298,7 +298,15 @@ class Features:
     @cached_property
     def circles(self) -> tuple[Circle, ...]:
         return tuple(
-            Circle(p[:2].copy(), float(p[2]), c, int(b[0]), int(b[1]), float(s), self.n_beams)
+            Circle(
+                center_xy=p[:2].copy(),
+                radius_m=float(p[2]),
+                cov=c,
+                first_beam=int(b[0]),
+                last_beam=int(b[1]),
+                rms_residual_m=float(s),
+                n_beams=self.n_beams,
+            )
             for p, c, b, s in zip(
                 self.circle_params, self.circle_cov, self.circle_beams, self.circle_rms_m
             )
@@ -307,7 +315,16 @@ class Features:
     @cached_property
     def lines(self) -> tuple[Line, ...]:
         return tuple(
-            Line(float(p[0]), float(p[1]), c, e, int(b[0]), int(b[1]), float(s), self.n_beams)
+            Line(
+                alpha_rad=float(p[0]),
+                rho_m=float(p[1]),
+                cov=c,
+                endpoints_xy=e,
+                first_beam=int(b[0]),
+                last_beam=int(b[1]),
+                rms_residual_m=float(s),
+                n_beams=self.n_beams,
+            )
             for p, c, e, b, s in zip(
                 self.line_params,
                 self.line_cov,
@@ -328,7 +345,12 @@ class Features:
     def segments(self) -> tuple[Segment, ...]:
         return tuple(
             Segment(
-                int(b[0]), int(b[1]), KIND_NAMES[int(k)], float(v[0]), float(v[1]), self.n_beams
+                first_beam=int(b[0]),
+                last_beam=int(b[1]),
+                kind=KIND_NAMES[int(k)],
+                mean_innovation_m=float(v[0]),
+                mean_innovation_var_m2=float(v[1]),
+                n_beams=self.n_beams,
             )
             for b, k, v in zip(self.segment_beams, self.segment_kind, self.segment_innov)
         )

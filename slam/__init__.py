@@ -1,8 +1,9 @@
 """EKF-SLAM with car-like odometry: the run's data, vehicle model, filter steps, map management,
 the run loop.
 
-    from slam import run, Sequence, SlamConfig
-    log = run(sequence, features="paper", association="ihgr")
+    from slam import run_slam, Sequence, SlamConfig
+    log = run_slam(sequence, SlamConfig())   # the configuration says everything about the run
+    log = run_slam(sequence, features="geometric", association="jcbb")   # methods replaced
 
 `slam` imports `features` and `association` only (never `experiments`).
 """
@@ -11,12 +12,13 @@ from slam.config import SlamConfig
 from slam.ekf import EkfState, add_landmark, initial_state, predict, update
 from slam.errors import SlamError
 from slam.log import TIMING_KEYS, SlamLog
+from slam.loop import run_slam
 from slam.mapping import MapPolicy, Tentatives
 from slam.measurement import DEFAULT_CONSTANT_NOISE, measurements_from_features
-from slam.run import NullVisualiser, run
 from slam.se2 import interpolate_poses, observe, wrap_angle
 from slam.sequence import Sequence
 from slam.vehicle import AckermannModel, Odometry, OdometryNoise, SteeringCalibration, integrate
+from slam.visual import NullVisualiser
 
 __all__ = [
     "DEFAULT_CONSTANT_NOISE",
@@ -40,7 +42,7 @@ __all__ = [
     "measurements_from_features",
     "observe",
     "predict",
-    "run",
+    "run_slam",
     "update",
     "wrap_angle",
 ]

@@ -1,7 +1,8 @@
-"""Input checks shared by the run's data types (`Sequence`, `Odometry`): one place for each rule.
-
-Each function takes the qualified name of what it checks (e.g. "Sequence.scan_t") and raises
-`SlamError` (a `ValueError`) naming it.
+"""Checks: the input checks shared by the run's data types (`Sequence`, `Odometry`), one place
+for each rule, each taking the qualified name of what it checks (e.g. "Sequence.scan_t"); and
+what a run needs beyond a valid `Sequence` and `SlamConfig` (`check_runnable`, before any work)
+and the one check the loop makes on every scan (`check_noise`). Errors are `SlamError` (a
+`ValueError`) naming the field and what to change.
 """
 
 from __future__ import annotations
@@ -10,7 +11,15 @@ import numpy as np
 
 from slam.errors import SlamError
 
-__all__ = ["float_array", "finite", "readonly", "times"]
+__all__ = [
+    "check_noise",
+    "check_runnable",
+    "check_types",
+    "finite",
+    "float_array",
+    "readonly",
+    "times",
+]
 
 
 def readonly(a: np.ndarray) -> np.ndarray:
@@ -56,3 +65,97 @@ def times(name: str, value) -> np.ndarray:
             f"{t[i + 1]!r} s follows {short}[{i}] = {t[i]!r} s ({bad.size} such step(s))"
         )
     return t
+
+
+# ---- a run's checks ----------------------------------------------------------------------------
+
+
+def check_types(seq, cfg) -> None:
+    """A `Sequence` and a `SlamConfig`, named when not."""
+    from slam.config import SlamConfig
+    from slam.sequence import Sequence
+
+    if not isinstance(seq, Sequence):
+        raise SlamError(f"sequence: expected a slam.Sequence, got {type(seq).__name__}")
+    if not isinstance(cfg, SlamConfig):
+        raise SlamError(f"config: expected a SlamConfig, got {type(cfg).__name__}")
+
+
+def check_runnable(seq, cfg, n_features: int | None = None) -> np.ndarray:
+    """Odometry, a vehicle, a steering calibration that keeps the angles physical, no long
+    odometry gaps, one precomputed feature set per scan (`n_features`, when given). Returns the
+    steering readings through `cfg.vehicle.steering`."""
+    check_types(seq, cfg)
+    if seq.odo_t is None:
+        raise SlamError(
+            "sequence: missing odometry (odo_t, odo_speed, odo_steer); EKF-SLAM needs it"
+        )
+    if seq.vehicle is None:
+        raise SlamError("sequence.vehicle: missing vehicle model (needed to use the odometry)")
+    steer = cfg.vehicle.steering.apply(seq.odo_steer)
+    _check_steering(seq, cfg, steer)
+    _check_gaps(seq, cfg.vehicle.max_odometry_gap_s)
+    if n_features is not None and n_features != seq.n_scans:
+        raise SlamError(f"features: {n_features} precomputed feature sets for {seq.n_scans} scans")
+    return steer
+
+
+def _check_steering(seq, cfg, steer: np.ndarray) -> None:
+    from slam.sequence import MAX_STEER_RAD
+
+    if not cfg.vehicle.steering.is_identity and np.any(np.abs(steer) > MAX_STEER_RAD):
+        i = int(np.argmax(np.abs(steer)))
+        raise SlamError(
+            f"vehicle.steering: turns odo_steer[{i}] = {float(seq.odo_steer[i]):.6g} rad into "
+            f"{float(steer[i]):.6g} rad, beyond +-{MAX_STEER_RAD} rad; check the calibration"
+        )
+    veh = seq.vehicle
+    k = float(veh.get("encoder_offset_m", 0.0)) / float(veh["wheelbase_m"])
+    den = 1.0 - k * np.tan(steer)
+    if np.any(den <= 0):  # v_c = v_e / (1 - (H/L) tan(alpha)) would be infinite or negative
+        i = int(np.flatnonzero(den <= 0)[0])
+        raise SlamError(
+            f"sequence.vehicle: encoder_offset_m / wheelbase_m = {k:.3g} with odo_steer[{i}] = "
+            f"{float(seq.odo_steer[i]):.3g} rad (calibrated: {float(steer[i]):.3g} rad) makes "
+            "the encoder-to-axle speed correction infinite or negative; check the vehicle "
+            "parameters and the steering units"
+        )
+
+
+def _check_gaps(seq, max_gap_s: float) -> None:
+    """The longest stretch of the run [scan_t[0], scan_t[-1]] on stale (held) odometry."""
+    scan_t, odo_t = seq.scan_t, seq.odo_t
+    lead = max(0.0, float(odo_t[0] - scan_t[0]))
+    tail = max(0.0, float(scan_t[-1] - odo_t[-1]))
+    clipped = np.clip(odo_t, scan_t[0], scan_t[-1])
+    steps = np.diff(clipped)
+    inner = float(steps.max()) if steps.size else 0.0
+    if max(lead, tail, inner) <= max_gap_s:
+        return
+    if lead > max_gap_s:
+        where = f"odometry starts at {odo_t[0]:.3f} s, {lead:.3f} s after the first scan"
+    elif tail > max_gap_s:
+        where = f"odometry ends at {odo_t[-1]:.3f} s, {tail:.3f} s before the last scan"
+    else:
+        i = int(np.argmax(steps))
+        where = f"no odometry from {clipped[i]:.3f} s to {clipped[i + 1]:.3f} s"
+    raise SlamError(
+        f"sequence.odo_t: missing odometry: {where} (vehicle.max_odometry_gap_s = {max_gap_s} s)"
+    )
+
+
+def check_noise(k: int, R: np.ndarray, usable: np.ndarray, model: str) -> None:
+    """Every usable measurement's R is finite and positive definite. The association gets the
+    loop's inputs unchecked (its trusted path), so a degenerate R (the "fit" model of a
+    degenerate fit with no floors) is named here rather than failing inside the solver."""
+    a, b, c = R[:, 0, 0], 0.5 * (R[:, 0, 1] + R[:, 1, 0]), R[:, 1, 1]
+    with np.errstate(invalid="ignore"):
+        ok = np.isfinite(R).all(axis=(1, 2)) & (a > 0) & (c > 0) & (a * c - b * b > 0)
+    bad = np.flatnonzero(usable & ~ok)
+    if bad.size:
+        i = int(bad[0])
+        raise SlamError(
+            f"measurement noise: scan {k}, feature {i} has a covariance R that is not positive "
+            f"definite ({R[i].tolist()}; noise model {model!r}); give the fit floors "
+            "(measurement.fit_floor_range_m, fit_floor_bearing_rad) or a constant noise model"
+        )

@@ -1,36 +1,74 @@
-"""`SlamConfig`: every setting of a `slam.run`, with the experiments' values as defaults, and
-its strict conversion from and to plain dicts (what a TOML configuration file holds).
+"""`SlamConfig`: every setting of a run, grouped by concern, and its strict conversion from and
+to plain dicts (what a TOML configuration file holds).
 
-`SlamConfig.from_dict(d)` refuses unknown keys and wrong types naming the key's path
-("odometry_noise.speed_sigma_mps: ..."), then the dataclasses' own checks refuse impossible
-values (negative sigmas, probabilities outside (0, 1)). `to_dict()` gives the same structure
-back, leaving out settings that are None (TOML has no null), so a dumped configuration can be
-fed back unchanged.
+A run is its configuration: the features (extractor and its parameters), the association
+(method, gates, window), the measurement model, the vehicle (odometry noise, steering
+calibration, laser and antenna poses), the start, the map policy and the filter. Written beside
+a result (`config.toml`), it reproduces the run to the bit.
+
+    [features]      method, [features.extractor] (`features.ExtractorParams`),
+                    [features.bailey] (the Bailey detector's noise model and constants)
+    [association]   method, gate_prob, new_feature_gate_prob, window_scans, view margins, params
+    [measurement]   noise ("auto" | "fit" | "constant"), constant_noise.<method>, fit floors,
+                    range_bias.<method>, max_range_m
+    [vehicle]       odometry_noise, steering, laser_pose, gps_antenna, max_odometry_gap_s,
+                    min_travel_m
+    [start]         initial_pose_sigma, initial_heading_rad, GPS start fit
+    [map_policy]    `slam.mapping.MapPolicy`
+    [filter]        first_estimates_jacobians
+
+`SlamConfig.from_dict(d)` refuses unknown keys (with a "did you mean" and, for the keys of the
+flat format of earlier versions, where the setting lives now), wrong types and impossible
+values, naming the key's path ("vehicle.odometry_noise.speed_sigma_mps: ..."). `to_dict()`
+gives the same structure back, leaving out settings that are None (TOML has no null), so a
+dumped configuration loads back equal.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 import types
 import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, is_dataclass
 
+from features import ExtractorParams
+from features.bailey import BaileyParams
 from slam.errors import SlamError
 from slam.mapping import MapPolicy
 from slam.measurement import (
     DEFAULT_CONSTANT_NOISE,
     DEFAULT_FIT_FLOOR,
     DEFAULT_RANGE_BIAS,
+    MeasurementModel,
     NoiseModel,
 )
 from slam.vehicle import OdometryNoise, SteeringCalibration
 
-__all__ = ["GPS_START_TRACKS", "OWN_COVARIANCE", "SlamConfig", "config_from_dict", "config_to_dict"]
+__all__ = [
+    "ASSOCIATION_METHODS",
+    "FEATURE_METHODS",
+    "GPS_START_TRACKS",
+    "OWN_COVARIANCE",
+    "AssociationConfig",
+    "BaileyConfig",
+    "FeaturesConfig",
+    "FilterConfig",
+    "MeasurementConfig",
+    "SlamConfig",
+    "StartConfig",
+    "VehicleConfig",
+    "config_from_dict",
+    "config_to_dict",
+]
 
-GPS_START_TRACKS = ("dead-reckoning", "slam")  # SlamConfig.gps_start_track
+# the extractors of `features.extract_features`, and the sequence's own precomputed detections
+FEATURE_METHODS = ("paper", "geometric", "kasa", "taubin", "bailey", "detections")
+ASSOCIATION_METHODS = ("ihgr", "jcbb", "nn", "ihgr-window")
+GPS_START_TRACKS = ("dead-reckoning", "slam")  # StartConfig.gps_track
 # Extractors whose circles' covariance ("fit" noise) describes their errors, used under
-# measurement_noise "auto": the first-order covariance of an orthogonal-distance fit at the
+# measurement noise "auto": the first-order covariance of an orthogonal-distance fit at the
 # reported circle (`features.fitting.circle_covariance`). Exact for `geometric`; for the paper's
 # Gauss-Newton on eq. (6) the calibration circles' normalised errors under it (floors added,
 # range bias removed) have mean squares 0.94 in range and 1.02 in bearing, against 1.79 to 0.33
@@ -39,154 +77,163 @@ GPS_START_TRACKS = ("dead-reckoning", "slam")  # SlamConfig.gps_start_track
 OWN_COVARIANCE = ("geometric", "paper")
 
 
-@dataclass(frozen=True)
-class SlamConfig:
-    """Parameters of the run; defaults are the ones the experiments use (the simulated Cycab).
+def _finite(owner: str, name: str, v, low: float = 0.0) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (low <= v < math.inf):
+        raise SlamError(f"{owner}.{name}: must be a finite number >= {low:g}, got {v!r}")
 
-    odometry_noise: sigma of each odometry sample's speed and steering readings.
-    steering: the front-wheel angle from the steering reading (`slam.vehicle.SteeringCalibration`,
-        offset + gain r + cubic r^3; the identity by default).
-    measurement_noise: "auto" (the circles' own covariance when the extractor gives one that
-        describes its errors: `geometric` and `paper` features (`OWN_COVARIANCE`; a precomputed
-        list whose covariances are all zero carries none), or detections carrying det_cov;
-        constant otherwise), "fit" or "constant".
-    constant_noise: the constant noise model of each extractor (`slam.measurement.NoiseModel`),
-        by method name; methods not given keep their `DEFAULT_CONSTANT_NOISE` entry, methods
+
+def _choice(owner: str, name: str, v, choices) -> None:
+    if v not in choices:
+        raise SlamError(f"{owner}.{name}: expected one of {list(choices)}, got {v!r}")
+
+
+@dataclass(frozen=True)
+class BaileyConfig:
+    """The Bailey detector (`features.bailey.extract_bailey`): the noise model its circles carry
+    (the Zaragoza SLAM school's for the Victoria Park detections: range sigma 0.05 m + 1% of
+    range, bearing sigma 0.5 deg; radius sigma 0.05 m) and its constants (`detector`)."""
+
+    range_sigma_m: float = 0.05
+    range_sigma_per_m: float = 0.01
+    bearing_sigma_rad: float = math.radians(0.5)
+    radius_sigma_m: float = 0.05
+    detector: BaileyParams = field(default_factory=BaileyParams)
+
+    def __post_init__(self) -> None:
+        for name in ("range_sigma_m", "range_sigma_per_m", "bearing_sigma_rad", "radius_sigma_m"):
+            _finite("features.bailey", name, getattr(self, name))
+
+
+@dataclass(frozen=True)
+class FeaturesConfig:
+    """Where the circles come from.
+
+    method: an extractor of `features.extract_features` ("paper", "geometric", "kasa", "taubin",
+        "bailey") run on the raw scans, or "detections" (the sequence's precomputed detections).
+    extractor: the parameters of the fitting extractors (`features.ExtractorParams`).
+    bailey: the Bailey detector's noise model and constants (method "bailey").
+    file: a features JSON (`trunkslam extract --out`) whose circles are used instead of
+        extracting (the command line reads it; `slam.run_slam` takes the features themselves);
+        `method` then names the noise model of its circles.
+    """
+
+    method: str = "paper"
+    extractor: ExtractorParams = field(default_factory=ExtractorParams)
+    bailey: BaileyConfig = field(default_factory=BaileyConfig)
+    file: str | None = None
+
+    def __post_init__(self) -> None:
+        _choice("features", "method", self.method, FEATURE_METHODS)
+
+    def extractor_kwargs(self) -> dict:
+        """The keyword arguments of `features.extract_features(scan, self.method, **kwargs)`."""
+        if self.method == "bailey":
+            b = self.bailey
+            return {
+                "range_sigma_m": b.range_sigma_m,
+                "range_sigma_per_m": b.range_sigma_per_m,
+                "bearing_sigma_rad": b.bearing_sigma_rad,
+                "radius_sigma_m": b.radius_sigma_m,
+                "params": b.detector,
+            }
+        return {f.name: getattr(self.extractor, f.name) for f in fields(self.extractor)}
+
+
+@dataclass(frozen=True)
+class AssociationConfig:
+    """Which measurement belongs to which landmark.
+
+    method: "ihgr" (LP relaxation and rounding, one scan), "jcbb", "nn", or "ihgr-window" (the
+        K-scan `association.SlidingWindowAssociator`, K = window_scans, in place of tentatives).
+    gate_prob: chi-square probability of the association gates. 0.999 rather than
+        association's 0.99: in the tree park a 3-sigma odometry heading step (one in about a
+        thousand scans) pushed both visible trees out of a 0.99 gate; they were re-mapped as new
+        landmarks and the run never recovered (2 of 50 runs, pose errors of 10-18 cm). Inside
+        the gate the choice is IHGR's likelihood costs, not the gate.
+    new_feature_gate_prob: an unassociated measurement starts a new landmark only when it lies
+        outside this (wider) gate of every landmark and tentative in view; between the two gates
+        it is ignored (status AMBIGUOUS): a measurement of a mapped tree that just failed its
+        gate does not become a duplicate.
+    window_scans: K of "ihgr-window", 2..4 intended (docs/experiments/association.md).
+    view_margin_m, view_margin_rad: landmarks this far outside the laser's range and field of
+        view are still offered to the association.
+    params: extra keyword arguments of the associator (`association.associate`; for
+        "ihgr-window" the `CostModel` densities and the rounding options).
+    """
+
+    method: str = "ihgr"
+    gate_prob: float = 0.999
+    new_feature_gate_prob: float = 0.9999
+    window_scans: int = 3
+    view_margin_m: float = 2.0
+    view_margin_rad: float = math.radians(10.0)
+    params: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        _choice("association", "method", self.method, ASSOCIATION_METHODS)
+        for name in ("gate_prob", "new_feature_gate_prob"):
+            v = getattr(self, name)
+            if not 0.0 < v < 1.0:
+                raise SlamError(f"association.{name}: must be in (0, 1), got {v!r}")
+        if isinstance(self.window_scans, bool) or not 1 <= self.window_scans <= 8:
+            raise SlamError(
+                f"association.window_scans: must be an integer in 1..8, got {self.window_scans!r}"
+            )
+        for name in ("view_margin_m", "view_margin_rad"):
+            _finite("association", name, getattr(self, name))
+
+    @property
+    def windowed(self) -> bool:
+        """Whether the K-scan window replaces the tentatives."""
+        return self.method == "ihgr-window"
+
+    @property
+    def gate_new(self) -> float:
+        """chi2 (2 dof) of the gate outside which a measurement may start a landmark."""
+        return -2.0 * math.log1p(-max(self.new_feature_gate_prob, self.gate_prob))
+
+
+@dataclass(frozen=True)
+class MeasurementConfig:
+    """How a circle becomes a range-bearing measurement of its centre, and with what noise.
+
+    noise: "auto" (the circles' own covariance when the extractor gives one that describes its
+        errors: `geometric` and `paper` (`OWN_COVARIANCE`; a precomputed list whose covariances
+        are all zero carries none), or detections carrying det_cov; constant otherwise), "fit"
+        or "constant".
+    constant_noise: the constant model of each extractor (`slam.measurement.NoiseModel`), by
+        method name; methods not given keep their `DEFAULT_CONSTANT_NOISE` entry, methods
         unknown to both use its "other" entry.
-    range_sigma_m, range_sigma_per_m, bearing_sigma_rad, cross_range_sigma_m: when set, they
-        override that part of the constant model for every method.
-    fit_floor_range_m, fit_floor_bearing_rad: added in quadrature to the fit's noise (model
+    fit_floor_range_m, fit_floor_bearing_rad: added in quadrature to a fit's covariance (model
         error the fit cannot see: range quantisation, mixed returns); the defaults are the
         maximum-likelihood floors of the `geometric` fit in the simulated tree park
         (`slam.measurement.DEFAULT_FIT_FLOOR`, calibration seeds 1000-1003).
     range_bias: known mean range error a + b r of each extractor's centres, by method name, as
-        (a_m, b_per_m), subtracted from the ranges r of its circles (extracted, or a sequence's
-        detections of that method); methods not given keep their `DEFAULT_RANGE_BIAS` entry
-        ((0, 0) when it has none).
-    laser_pose: (x_m, y_m, theta_rad) of the laser in the vehicle frame, replacing the
-        sequence's (a calibrated mounting); None keeps the sequence's.
-    gate_prob: chi-square probability of the association gates (passed to `associate`). 0.999
-        rather than association's 0.99: in the tree park a 3-sigma odometry heading step
-        (one in about a thousand scans) pushed both visible trees out of a 0.99 gate; they were
-        re-mapped as new landmarks and the run never recovered (2 of 50 runs, pose errors of
-        10-18 cm). Inside the gate the choice is IHGR's likelihood costs, not the gate.
-    new_feature_gate_prob: an unassociated measurement starts a tentative feature only when it
-        lies outside this (wider) gate of every landmark and tentative feature in view;
-        between the two gates it is ignored (status AMBIGUOUS), so a measurement of a mapped
-        tree that just failed its gate does not become a duplicate landmark.
-    association_params: extra keyword arguments of `association.associate` (for "ihgr-window":
-        the `CostModel` densities and the rounding options).
-    window_scans: K of the "ihgr-window" association (`association.SlidingWindowAssociator`),
-        2..4 intended; see the README for how the default was chosen.
-    map_policy: tentative features (`slam.mapping.MapPolicy`).
-    initial_pose_sigma: (sigma_x_m, sigma_y_m, sigma_theta_rad) of the start pose when it comes
-        from the truth or the origin (0: the map's frame is the start pose).
-    gps_start_fit_m: a start from GPS fits the antenna track of the first this many metres of
-        driving to the GPS fixes (position and heading, with their uncertainty from the fit);
-        see `slam.start`.
-    gps_start_track: the track fitted: "dead-reckoning" (the odometry alone; default) or "slam"
-        (the path of a first pass of this filter over those metres from a provisional start:
-        the landmarks keep its shape over hundreds of metres, where dead reckoning drifts by
-        degrees; the pass costs about the run's time over that stretch).
-    gps_sigma_m, initial_heading_sigma_rad: floors of the start uncertainty from GPS (the fit's
-        own uncertainty is used when it is larger).
-    max_odometry_gap_s: a longer stretch without odometry inside the run is an error.
-    min_travel_m: a scan is used (associated, updated, mapped) only when the odometry has moved
-        the vehicle at least this far since the last scan used; the others are predicted only
-        and their measurements logged with status SKIPPED (tentatives are neither seen nor
-        missed in them). 0 (default): every scan. A small value (the preset's 1 mm) skips the
-        scans of a vehicle standing still: a scan from the same place repeats the last one's
-        errors, which a filter that treats scans as independent would count again.
-    max_feature_range_m: circles farther away are not used.
-    view_margin_m, view_margin_rad: landmarks this far outside the laser's range and field of
-        view are still offered to the association.
+        (a_m, b_per_m), subtracted from its ranges; methods not given keep their
+        `DEFAULT_RANGE_BIAS` entry ((0, 0) when it has none).
+    max_range_m: circles farther away are not used (the laser's own maximum applies too).
     """
 
-    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
-    steering: SteeringCalibration = field(default_factory=SteeringCalibration)
-    measurement_noise: str = "auto"
+    noise: str = "auto"
     constant_noise: Mapping[str, NoiseModel] = field(default_factory=dict)
-    range_sigma_m: float | None = None
-    range_sigma_per_m: float | None = None
-    bearing_sigma_rad: float | None = None
-    cross_range_sigma_m: float | None = None
     fit_floor_range_m: float = DEFAULT_FIT_FLOOR[0]
     fit_floor_bearing_rad: float = DEFAULT_FIT_FLOOR[1]
     range_bias: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    laser_pose: tuple[float, float, float] | None = None
-    gate_prob: float = 0.999
-    new_feature_gate_prob: float = 0.9999
-    association_params: dict = field(default_factory=dict)
-    window_scans: int = 3
-    map_policy: MapPolicy = field(default_factory=MapPolicy)
-    initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    gps_start_fit_m: float = 50.0
-    gps_start_track: str = "dead-reckoning"
-    gps_sigma_m: float = 1.0
-    initial_heading_sigma_rad: float = math.radians(5.0)
-    first_estimates_jacobians: bool = False
-    max_odometry_gap_s: float = 1.0
-    min_travel_m: float = 0.0
-    max_feature_range_m: float = math.inf
-    view_margin_m: float = 2.0
-    view_margin_rad: float = math.radians(10.0)
+    max_range_m: float = math.inf
 
     def __post_init__(self) -> None:
-        if self.measurement_noise not in ("auto", "fit", "constant"):
-            raise SlamError(
-                f"SlamConfig.measurement_noise: expected 'auto', 'fit' or 'constant', got "
-                f"{self.measurement_noise!r}"
-            )
-        if self.gps_start_track not in GPS_START_TRACKS:
-            raise SlamError(
-                f"SlamConfig.gps_start_track: expected one of {list(GPS_START_TRACKS)}, got "
-                f"{self.gps_start_track!r}"
-            )
-        for name in ("gate_prob", "new_feature_gate_prob"):
-            v = getattr(self, name)
-            if not 0.0 < v < 1.0:
-                raise SlamError(f"SlamConfig.{name}: must be in (0, 1), got {v!r}")
-        for name in (
-            "range_sigma_m",
-            "range_sigma_per_m",
-            "bearing_sigma_rad",
-            "cross_range_sigma_m",
-        ):
-            v = getattr(self, name)
-            if v is not None and not (0 <= v < math.inf):
-                raise SlamError(f"SlamConfig.{name}: must be finite and >= 0, got {v!r}")
-        for name in (
-            "fit_floor_range_m",
-            "fit_floor_bearing_rad",
-            "gps_start_fit_m",
-            "gps_sigma_m",
-            "initial_heading_sigma_rad",
-            "view_margin_m",
-            "view_margin_rad",
-            "min_travel_m",
-        ):
-            v = getattr(self, name)
-            if not (0 <= v < math.inf):
-                raise SlamError(f"SlamConfig.{name}: must be finite and >= 0, got {v!r}")
-        if isinstance(self.window_scans, bool) or not 1 <= self.window_scans <= 8:
-            raise SlamError(
-                f"SlamConfig.window_scans: must be an integer in 1..8, got {self.window_scans!r}"
-            )
-        if not self.max_odometry_gap_s > 0:
-            raise SlamError("SlamConfig.max_odometry_gap_s: must be > 0")
-        if not self.max_feature_range_m > 0:
-            raise SlamError("SlamConfig.max_feature_range_m: must be > 0 (inf: no limit)")
-        if len(self.initial_pose_sigma) != 3 or min(self.initial_pose_sigma) < 0:
-            raise SlamError("SlamConfig.initial_pose_sigma: expected three sigmas >= 0")
-        if self.laser_pose is not None and (
-            len(self.laser_pose) != 3 or not all(math.isfinite(v) for v in self.laser_pose)
-        ):
-            raise SlamError("SlamConfig.laser_pose: expected three finite numbers (x, y, theta)")
+        _choice("measurement", "noise", self.noise, ("auto", "fit", "constant"))
+        for name in ("fit_floor_range_m", "fit_floor_bearing_rad"):
+            _finite("measurement", name, getattr(self, name))
+        if not self.max_range_m > 0:
+            raise SlamError("measurement.max_range_m: must be > 0 (inf: no limit)")
         models = dict(DEFAULT_CONSTANT_NOISE)  # the given methods replace their defaults
         for method, model in dict(self.constant_noise).items():
             m = NoiseModel(*model)
             if not all(0 <= v < math.inf for v in m):
-                raise SlamError(f"SlamConfig.constant_noise.{method}: sigmas must be finite, >= 0")
+                raise SlamError(
+                    f"measurement.constant_noise.{method}: sigmas must be finite and >= 0"
+                )
             models[method] = m
         object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
         biases = dict(DEFAULT_RANGE_BIAS)
@@ -195,42 +242,164 @@ class SlamConfig:
             ok = ok and all(isinstance(x, (int, float)) and math.isfinite(x) for x in v)
             if not ok or abs(v[0]) >= 1.0 or abs(v[1]) >= 0.1:
                 raise SlamError(
-                    f"SlamConfig.range_bias.{method}: expected (a_m, b_per_m) with |a| < 1 m and "
-                    f"|b| < 0.1, got {v!r}"
+                    f"measurement.range_bias.{method}: expected (a_m, b_per_m) with |a| < 1 m "
+                    f"and |b| < 0.1, got {v!r}"
                 )
             biases[method] = (float(v[0]), float(v[1]))
         object.__setattr__(self, "range_bias", types.MappingProxyType(biases))
 
-    def range_bias_for(self, method: str) -> tuple[float, float]:
-        """(a_m, b_per_m): the known mean range error a + b r of circles from `method`."""
-        return tuple(self.range_bias.get(method, (0.0, 0.0)))
-
-    def __reduce__(self):
-        """Pickled as its fields, the read-only `constant_noise` and `range_bias` as plain dicts
-        (a mapping proxy does not pickle), so a config can travel to worker processes."""
-        state = {f.name: getattr(self, f.name) for f in fields(self)}
-        state["constant_noise"] = dict(self.constant_noise)
-        state["range_bias"] = dict(self.range_bias)
-        return (_slam_config, (state,))
-
-    def noise_for(self, method: str, has_cov: bool | None = None) -> tuple[str, NoiseModel]:
-        """("fit" | "constant", NoiseModel) for circles from `method`. has_cov: whether they carry
-        their own covariance (default: the methods of `OWN_COVARIANCE`)."""
-        kind = self.measurement_noise
+    def model_for(self, method: str, has_cov: bool | None = None) -> MeasurementModel:
+        """The measurement model of circles from `method`. has_cov: whether they carry their own
+        covariance (default: the methods of `OWN_COVARIANCE`)."""
+        kind = self.noise
         if kind == "auto":
             own = method in OWN_COVARIANCE if has_cov is None else has_cov
             kind = "fit" if own else "constant"
-        base = self.constant_noise.get(method, self.constant_noise["other"])
-        given = (
-            self.range_sigma_m,
-            self.range_sigma_per_m,
-            self.bearing_sigma_rad,
-            self.cross_range_sigma_m,
+        constant = self.constant_noise.get(method, self.constant_noise["other"])
+        if kind == "constant" and (
+            constant[0] + constant[1] <= 0 or constant[2] + constant[3] <= 0
+        ):
+            raise SlamError(f"measurement: the constant noise model {tuple(constant)} is zero")
+        return MeasurementModel(
+            kind=kind,
+            constant=constant,
+            floor=(self.fit_floor_range_m, self.fit_floor_bearing_rad),
+            range_bias=tuple(self.range_bias.get(method, (0.0, 0.0))),
         )
-        model = NoiseModel(*(float(b if g is None else g) for b, g in zip(base, given)))
-        if kind == "constant" and (model[0] + model[1] <= 0 or model[2] + model[3] <= 0):
-            raise SlamError(f"SlamConfig: the constant noise model {tuple(model)} is zero")
-        return kind, model
+
+    def __reduce__(self):
+        """Pickled as its fields, the read-only mappings as plain dicts (a mapping proxy does
+        not pickle), so a config can travel to worker processes."""
+        state = {f.name: getattr(self, f.name) for f in fields(self)}
+        state["constant_noise"] = dict(self.constant_noise)
+        state["range_bias"] = dict(self.range_bias)
+        return (_build, (MeasurementConfig, state))
+
+
+def _build(cls, state: dict):
+    return cls(**state)
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    """The car: its odometry and where its sensors sit (vehicle frame: rear-axle centre, x
+    forward, y left).
+
+    odometry_noise: sigma of each odometry sample's speed and steering readings
+        (`slam.vehicle.OdometryNoise`, with its pose floor for slip).
+    steering: the front-wheel angle from the steering reading (`slam.vehicle.SteeringCalibration`,
+        offset + gain r + cubic r^3; the identity by default).
+    laser_pose: (x_m, y_m, theta_rad) of the laser, replacing the sequence's (a calibrated
+        mounting); None keeps the sequence's.
+    gps_antenna: (x_m, y_m) of the GPS antenna, replacing the sequence's; None keeps the
+        sequence's (the laser's position when it has none).
+    max_odometry_gap_s: a longer stretch without odometry inside the run is an error.
+    min_travel_m: a scan is used (associated, updated, mapped) only when the odometry has moved
+        the vehicle at least this far since the last scan used; the others are predicted only
+        (status SKIPPED). 0 (default): every scan. A small value (the ute's 1 mm) skips the scans
+        of a vehicle standing still: a scan from the same place repeats the last one's errors.
+    """
+
+    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+    steering: SteeringCalibration = field(default_factory=SteeringCalibration)
+    laser_pose: tuple[float, float, float] | None = None
+    gps_antenna: tuple[float, float] | None = None
+    max_odometry_gap_s: float = 1.0
+    min_travel_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, n in (("laser_pose", 3), ("gps_antenna", 2)):
+            v = getattr(self, name)
+            if v is not None and (len(v) != n or not all(math.isfinite(x) for x in v)):
+                raise SlamError(f"vehicle.{name}: expected {n} finite numbers, got {v!r}")
+        if not self.max_odometry_gap_s > 0:
+            raise SlamError("vehicle.max_odometry_gap_s: must be > 0")
+        _finite("vehicle", "min_travel_m", self.min_travel_m)
+
+
+@dataclass(frozen=True)
+class StartConfig:
+    """The filter's prior at the first scan (`slam.start`): the truth when the sequence has it,
+    else a fit of the antenna track to the GPS fixes of the first `gps_fit_m` metres, else the
+    origin.
+
+    initial_pose_sigma: (sigma_x_m, sigma_y_m, sigma_theta_rad) of a start from the truth or the
+        origin (0: the map's frame is the start pose).
+    initial_heading_rad: the start heading, overriding the GPS fit's (needed for a GPS start
+        without motion) or the origin's 0; None: not given.
+    gps_fit_m: metres of driving whose fixes the start is fitted to.
+    gps_track: the track fitted: "dead-reckoning" (the odometry alone) or "slam" (the path of a
+        first pass of this filter over those metres from a provisional start: the landmarks
+        keep its shape over hundreds of metres, where dead reckoning drifts by degrees).
+    gps_sigma_m, heading_sigma_rad: floors of the start uncertainty from GPS (the fit's own is
+        used when it is larger).
+    """
+
+    initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    initial_heading_rad: float | None = None
+    gps_fit_m: float = 50.0
+    gps_track: str = "dead-reckoning"
+    gps_sigma_m: float = 1.0
+    heading_sigma_rad: float = math.radians(5.0)
+
+    def __post_init__(self) -> None:
+        if len(self.initial_pose_sigma) != 3 or not all(
+            0 <= v < math.inf for v in self.initial_pose_sigma
+        ):
+            raise SlamError("start.initial_pose_sigma: expected three finite sigmas >= 0")
+        h = self.initial_heading_rad
+        if h is not None and (isinstance(h, bool) or not math.isfinite(h)):
+            raise SlamError(f"start.initial_heading_rad: must be a finite number, got {h!r}")
+        _choice("start", "gps_track", self.gps_track, GPS_START_TRACKS)
+        for name in ("gps_fit_m", "gps_sigma_m", "heading_sigma_rad"):
+            _finite("start", name, getattr(self, name))
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """The EKF itself.
+
+    first_estimates_jacobians: each landmark's Jacobian at its first estimate and the motion
+        Jacobian from the prior poses (Huang, Mourikis and Roumeliotis 2008), so that the filter
+        does not grow confident in the global heading, which nothing observes.
+    """
+
+    first_estimates_jacobians: bool = False
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    """Every setting of a run, by concern; the defaults are trunkslam's built-in ones
+    (`trunkslam slam` without --config). See the module doc for the sections."""
+
+    features: FeaturesConfig = field(default_factory=FeaturesConfig)
+    association: AssociationConfig = field(default_factory=AssociationConfig)
+    measurement: MeasurementConfig = field(default_factory=MeasurementConfig)
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    start: StartConfig = field(default_factory=StartConfig)
+    map_policy: MapPolicy = field(default_factory=MapPolicy)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            want = typing.get_type_hints(SlamConfig)[f.name]
+            if not isinstance(getattr(self, f.name), want):
+                raise SlamError(
+                    f"SlamConfig.{f.name}: expected a {want.__name__}, got "
+                    f"{type(getattr(self, f.name)).__name__}"
+                )
+
+    def with_(self, **sections) -> SlamConfig:
+        """A copy with settings replaced by dotted path: `with_(**{"association.method": "nn",
+        "features.extractor.short_trunks": True})`, or a whole section by its name."""
+        data = self.to_dict()
+        for path, value in sections.items():
+            *head, last = path.split(".")
+            node = data
+            for k in head:
+                node = node.setdefault(k, {})
+            node[last] = _plain(value)
+        return SlamConfig.from_dict(data)
 
     def to_dict(self) -> dict:
         """Plain nested dict (None settings left out); `from_dict` reads it back."""
@@ -243,8 +412,33 @@ class SlamConfig:
         return config_from_dict(cls, data)
 
 
-def _slam_config(state: dict) -> SlamConfig:
-    return SlamConfig(**state)
+# The flat keys of the format before the sections: where each lives now (for the error message).
+MOVED = {
+    "odometry_noise": "vehicle.odometry_noise",
+    "steering": "vehicle.steering",
+    "laser_pose": "vehicle.laser_pose",
+    "max_odometry_gap_s": "vehicle.max_odometry_gap_s",
+    "min_travel_m": "vehicle.min_travel_m",
+    "measurement_noise": "measurement.noise",
+    "constant_noise": "measurement.constant_noise",
+    "fit_floor_range_m": "measurement.fit_floor_range_m",
+    "fit_floor_bearing_rad": "measurement.fit_floor_bearing_rad",
+    "range_bias": "measurement.range_bias",
+    "max_feature_range_m": "measurement.max_range_m",
+    "gate_prob": "association.gate_prob",
+    "new_feature_gate_prob": "association.new_feature_gate_prob",
+    "window_scans": "association.window_scans",
+    "association_params": "association.params",
+    "view_margin_m": "association.view_margin_m",
+    "view_margin_rad": "association.view_margin_rad",
+    "initial_pose_sigma": "start.initial_pose_sigma",
+    "gps_start_fit_m": "start.gps_fit_m",
+    "gps_start_track": "start.gps_track",
+    "gps_sigma_m": "start.gps_sigma_m",
+    "initial_heading_sigma_rad": "start.heading_sigma_rad",
+    "first_estimates_jacobians": "filter.first_estimates_jacobians",
+}
+SWEEP_KEYS = {"study", "trials", "grid", "points", "base", "executor"}
 
 
 def config_to_dict(obj) -> dict:
@@ -270,24 +464,39 @@ def _plain(v):
     return v
 
 
+def _unknown_key(cls, key: str, names: set, path: str) -> SlamError:
+    where = f"{path}.{key}" if path else key
+    close = difflib.get_close_matches(key, sorted(names), n=1, cutoff=0.6)
+    if cls is SlamConfig and key in MOVED:
+        hint = f"; this setting is now {MOVED[key]} (configurations have sections)"
+    else:
+        hint = f"; did you mean {close[0]!r}?" if close else ""
+    return SlamError(
+        f"{where}: unknown setting of {cls.__name__}{hint} (known: {', '.join(sorted(names))})"
+    )
+
+
 def config_from_dict(cls, data: Mapping, path: str = ""):
     """`cls` (a dataclass) from a plain nested dict, strictly; see the module doc."""
     if not isinstance(data, Mapping):
         raise SlamError(f"{path or cls.__name__}: expected a table of settings, got {data!r}")
+    if cls is SlamConfig and SWEEP_KEYS & set(data):
+        raise SlamError(
+            f"{', '.join(sorted(SWEEP_KEYS & set(data)))}: this is a sweep specification (a "
+            "study over a grid of settings), not a SLAM configuration; run it with "
+            "`trunkslam sweep FILE`"
+        )
     hints = typing.get_type_hints(cls)
     names = {f.name for f in fields(cls)}
     unknown = sorted(set(data) - names)
     if unknown:
-        where = f"{path}." if path else ""
-        raise SlamError(
-            f"{where}{unknown[0]}: unknown setting of {cls.__name__} (known: {sorted(names)})"
-        )
+        raise _unknown_key(cls, unknown[0], names, path)
     kwargs = {k: _convert(hints[k], v, f"{path}.{k}" if path else k) for k, v in data.items()}
     try:
         return cls(**kwargs)
     except SlamError:
         raise
-    except (TypeError, ValueError) as exc:  # a nested type's own check
+    except (TypeError, ValueError) as exc:  # a nested type's own check (features: FeaturesError)
         raise SlamError(f"{path or cls.__name__}: {exc}") from None
 
 

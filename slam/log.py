@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -15,6 +16,7 @@ __all__ = [
     "TENTATIVE_HIT",
     "TIMING_KEYS",
     "LogBuilder",
+    "ScanCounts",
     "SlamLog",
 ]
 
@@ -56,7 +58,9 @@ class SlamLog:
     meas_track (K,): the landmark or tentative id each measurement was paired with or started
         (the id a tentative keeps if it joins the map), -1 for ambiguous and out-of-range ones.
     start_pose (3,), start_cov (3, 3): the filter's prior at the first scan (world frame).
-    laser_pose (3,): the laser's pose in the vehicle frame that the run used.
+    laser_pose (3,): the laser's pose in the vehicle frame that the run used (T_vehicle_laser).
+    antenna_pose (3,): the GPS antenna's in the vehicle frame (T_vehicle_antenna): the run's
+        configuration, else the sequence's, else the laser's (`slam.start.antenna_of`).
     odo_delta (N, 3), odo_cov (N, 3, 3): row k (k >= 1) is the odometry increment from scan
         k - 1 to scan k in the frame of the pose at k - 1 (x forward, y left, theta), and its
         covariance in that frame (the prediction's Q rotated into it, floor noise included);
@@ -112,10 +116,20 @@ class SlamLog:
     association_method: str
     config: dict
     window_stats: dict | None = None
+    antenna_pose: np.ndarray | None = None
 
     @property
     def n_scans(self) -> int:
         return int(self.scan_t.shape[0])
+
+
+class ScanCounts(NamedTuple):
+    """A scan's update in figures: nis (batch NIS, NaN without an update), n_used (measurements
+    in the update), n_pending (tentatives or open window measurements after the scan)."""
+
+    nis: float
+    n_used: int
+    n_pending: int
 
 
 class LogBuilder:
@@ -151,15 +165,17 @@ class LogBuilder:
         self.start_pose = np.zeros(3)
         self.start_cov = np.zeros((3, 3))
         self.laser_pose = np.zeros(3)
+        self.antenna_pose = np.zeros(3)
         self.n_obs: dict[int, int] = {}
         self.first_scan: dict[int, int] = {}
         self._meas_row0 = np.zeros(n, np.int64)  # first measurement row of each scan
 
-    def started(self, pose: np.ndarray, cov: np.ndarray, laser_pose: np.ndarray) -> None:
-        """The filter's prior at the first scan and the laser pose used."""
+    def started(self, pose: np.ndarray, cov: np.ndarray, laser_pose, antenna_pose) -> None:
+        """The filter's prior at the first scan, the laser and antenna poses used."""
         self.start_pose = np.array(pose, dtype=np.float64)
         self.start_cov = np.array(cov, dtype=np.float64)
         self.laser_pose = np.array(laser_pose, dtype=np.float64)
+        self.antenna_pose = np.array(antenna_pose, dtype=np.float64)
 
     def odometry(self, k: int, delta: np.ndarray, cov: np.ndarray) -> None:
         """The odometry increment from scan k - 1 to k (frame of k - 1) and its covariance."""
@@ -170,8 +186,9 @@ class LogBuilder:
         self.pred_pose[k] = pose
         self.pred_pose_cov[k] = cov
 
-    def observation(self, k: int, feature: int, landmark: int, z, innov, S) -> None:
-        """One measurement used in scan k's update."""
+    def observation(self, k: int, feature: int, landmark: int, *, z, innov, S) -> None:
+        """One measurement used in scan k's update: z (2,), its innovation (2,) and the
+        innovation covariance S (2, 2)."""
         self.n_obs[landmark] = self.n_obs.get(landmark, 0) + 1
         self.obs["scan"].append(k)
         self.obs["feature"].append(feature)
@@ -180,42 +197,30 @@ class LogBuilder:
         self.obs["innov"].append(innov)
         self.obs["S"].append(S)
 
-    def scan_done(
-        self,
-        k: int,
-        state,
-        n_tentative: int,
-        z,
-        R,
-        status,
-        track,
-        n_associated: int,
-        nis: float,
-        nis_dof: int,
-        times: list[float],
-        radius_m=None,
-    ) -> None:
-        """Scan k's estimate, counts, measurements with their status and circle radius
-        (`radius_m` (m,), or None), and phase times (`times`: perf_counter at the start and
-        after each of the five steps)."""
+    def scan_done(self, meas, state, track, counts: ScanCounts, times: list[float]) -> None:
+        """Scan k's (`meas.k`) estimate, counts, measurements with their status, track and
+        circle radius, and phase times (`times`: perf_counter at the start and after each of
+        the five steps)."""
+        k, z = meas.k, meas.z
         self.pose[k] = state.pose
         self.pose_cov[k] = state.pose_cov
-        self.nis[k] = nis
-        self.nis_dof[k] = nis_dof
+        self.nis[k] = counts.nis
+        self.nis_dof[k] = 2 * counts.n_used
         m = z.shape[0]
         self._meas_row0[k] = len(self.meas["scan"])
         self.counts["n_features"][k] = m
-        self.counts["n_associated"][k] = n_associated
-        self.counts["n_tentative"][k] = n_tentative
+        self.counts["n_associated"][k] = counts.n_used
+        self.counts["n_tentative"][k] = counts.n_pending
         self.counts["n_map"][k] = state.n_landmarks
+        radius = meas.radius_m
         for i in range(m):
             self.meas["scan"].append(k)
             self.meas["feature"].append(i)
             self.meas["z"].append(z[i])
-            self.meas["R"].append(R[i])
-            self.meas["status"].append(int(status[i]))
+            self.meas["R"].append(meas.R[i])
+            self.meas["status"].append(int(meas.status[i]))
             self.meas["track"].append(int(track[i]))
-            self.meas["radius"].append(np.nan if radius_m is None else float(radius_m[i]))
+            self.meas["radius"].append(float(radius[i]))
         for key, a, b in zip(TIMING_KEYS[:5], times[:-1], times[1:]):
             self.timing[key][k] = b - a
         self.timing["total"][k] = times[-1] - times[0]
@@ -279,4 +284,5 @@ class LogBuilder:
             association_method=association_method,
             config=config,
             window_stats=window_stats,
+            antenna_pose=self.antenna_pose,
         )

@@ -97,9 +97,14 @@ class Tentatives:
 
     @classmethod
     def empty(cls) -> Tentatives:
-        z = np.zeros
+        none = np.zeros(0, np.int64)
         return cls(
-            z((0, 2)), z((0, 2, 2)), z(0, np.int64), z(0, np.int64), z(0, np.int64), z(0, np.int64)
+            xy=np.zeros((0, 2)),
+            cov=np.zeros((0, 2, 2)),
+            hits=none,
+            missed=none,
+            first_scan=none,
+            ids=none,
         )
 
     def __len__(self) -> int:

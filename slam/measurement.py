@@ -13,6 +13,7 @@ subtracted from its ranges before either model is applied.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -21,6 +22,7 @@ __all__ = [
     "DEFAULT_CONSTANT_NOISE",
     "DEFAULT_FIT_FLOOR",
     "DEFAULT_RANGE_BIAS",
+    "MeasurementModel",
     "NoiseModel",
     "constant_noise",
     "measurements_from_features",
@@ -92,29 +94,56 @@ DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
 DEFAULT_FIT_FLOOR: tuple[float, float] = (0.0063, 0.000093)
 
 
+@dataclass(frozen=True)
+class MeasurementModel:
+    """The measurement model of one source of circles, resolved from the configuration
+    (`slam.config.MeasurementConfig.model_for`): every source (extracted features, a sequence's
+    detections, precomputed features) goes through `measure`.
+
+    kind: "fit" (the circle's own covariance plus `floor` (range m, bearing rad) sigmas in
+        quadrature) or "constant" (`constant_noise` of `constant`).
+    range_bias: (a_m, b_per_m), the source's known mean range error a + b r, subtracted from
+        every range r.
+    """
+
+    kind: str
+    constant: NoiseModel
+    floor: tuple[float, float] = (0.0, 0.0)
+    range_bias: tuple[float, float] = (0.0, 0.0)
+
+    def measure(self, z: np.ndarray, cov: np.ndarray | None = None):
+        """Measurements z (m, 2) [range m, bearing rad] with their covariance cov (m, 2, 2) as
+        the source gives it (None: none) -> (z less the range bias, R (m, 2, 2))."""
+        z = np.array(z, dtype=np.float64).reshape(-1, 2)
+        z[:, 0] -= self.range_bias[0] + self.range_bias[1] * z[:, 0]
+        if self.kind == "fit":
+            if cov is None:
+                raise ValueError("measurement noise 'fit' needs the source's covariance")
+            return z, cov + np.diag([self.floor[0] ** 2, self.floor[1] ** 2])
+        return z, constant_noise(z, self.constant)
+
+    def from_features(self, features) -> tuple[np.ndarray, np.ndarray]:
+        """Range-bearing measurements (C, 2) of the circle centres of `features` (laser frame)
+        and their covariances (C, 2, 2)."""
+        c = np.asarray(features.circle_params, dtype=np.float64).reshape(-1, 3)
+        if self.kind == "fit":
+            z, cov = polar_cov_from_xy(c[:, :2], np.asarray(features.circle_cov)[:, :2, :2])
+            return self.measure(z, cov)
+        z, _ = polar_cov_from_xy(c[:, :2], np.zeros((c.shape[0], 2, 2)))
+        return self.measure(z)
+
+
 def measurements_from_features(
     features,
     noise: tuple[str, tuple[float, float, float, float]],
     floor: tuple[float, float] = (0.0, 0.0),
     range_bias: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Range-bearing measurements (C, 2) of the circle centres and their covariances (C, 2, 2).
-
-    noise: ("fit", _) uses the centre's fit covariance, plus `floor` (range, bearing) sigmas in
-    quadrature; ("constant", (s_r, s_r_per_m, s_b, s_t)) uses
-    diag((s_r + s_r_per_m r)^2, s_b^2 + (s_t / r)^2).
-    range_bias: (a_m, b_per_m), the extractor's known mean range error a + b r, subtracted from
-        every range r.
-    """
-    c = np.asarray(features.circle_params, dtype=np.float64).reshape(-1, 3)
-    kind, model = noise
-    if kind == "fit":
-        z, R = polar_cov_from_xy(c[:, :2], np.asarray(features.circle_cov)[:, :2, :2])
-        z[:, 0] -= range_bias[0] + range_bias[1] * z[:, 0]
-        return z, R + np.diag([floor[0] ** 2, floor[1] ** 2])
-    z, _ = polar_cov_from_xy(c[:, :2], np.zeros((c.shape[0], 2, 2)))
-    z[:, 0] -= range_bias[0] + range_bias[1] * z[:, 0]
-    return z, constant_noise(z, model)
+    """Range-bearing measurements (C, 2) of the circle centres and their covariances (C, 2, 2)
+    under noise (kind, NoiseModel): `MeasurementModel(kind, model, floor, range_bias)`'s."""
+    kind, model = noise  # ("fit", None): the fit's covariance needs no constant model
+    constant = NoiseModel(0.0, 0.0, 0.0, 0.0) if model is None else NoiseModel(*model)
+    return MeasurementModel(kind, constant, floor, range_bias).from_features(features)
 
 
 def constant_noise(z: np.ndarray, model) -> np.ndarray:

@@ -309,9 +309,20 @@ class Sequence:
     name: str = ""
 
     def __post_init__(self) -> None:
-        put = lambda name, value: object.__setattr__(self, name, value)  # noqa: E731
+        ranges = self._check_scans()
+        self._check_odometry()
+        self._check_vehicle()
+        self._check_gps_and_truth()
+        self._check_labels(ranges)
+        if not isinstance(self.name, str):
+            raise SlamError(f"Sequence.name: expected a string, got {self.name!r}")
 
-        # Scans.
+    def _put(self, name: str, value) -> None:
+        object.__setattr__(self, name, value)
+
+    def _check_scans(self) -> np.ndarray | None:
+        """Times, raw ranges, beam geometry, laser pose and detections; returns the ranges."""
+        put = self._put
         scan_t = _t("scan_t", self.scan_t)
         n = scan_t.shape[0]
         if n == 0:
@@ -352,7 +363,11 @@ class Sequence:
         for name, v in _detections(self, n).items():
             put(name, v)
 
-        # Odometry: all three or none.
+        return ranges
+
+    def _check_odometry(self) -> None:
+        """odo_t, odo_speed, odo_steer: all three or none, in physical ranges."""
+        put = self._put
         odo = {k: getattr(self, k) for k in ("odo_t", "odo_speed", "odo_steer")}
         present = [k for k, v in odo.items() if v is not None]
         if present and len(present) != 3:
@@ -387,6 +402,10 @@ class Sequence:
                     f"Sequence.odo_speed: must be within +-{MAX_ODO_SPEED_MPS:g} m/s (a ground "
                     f"vehicle), found {float(self.odo_speed[k]):.4g} at sample {k} (wrong unit?)"
                 )
+
+    def _check_vehicle(self) -> None:
+        """The vehicle description, and the encoder correction it implies stays finite."""
+        put = self._put
         if self.vehicle is not None:
             put("vehicle", _vehicle(self.vehicle))
             h_over_l = self.vehicle.get("encoder_offset_m", 0.0) / self.vehicle["wheelbase_m"]
@@ -403,13 +422,13 @@ class Sequence:
                         "must stay above 0.001, datasets/FORMAT.md)"
                     )
 
-        # GPS.
+    def _check_gps_and_truth(self) -> None:
+        put = self._put
         for name, v in _timed_pair("gps_t", self.gps_t, "gps_xy", self.gps_xy, 2):
             put(name, v)
         if self.gps_pose is not None:
             put("gps_pose", _pose("gps_pose", self.gps_pose))
 
-        # Truth.
         for name, v in _timed_pair("truth_t", self.truth_t, "truth_pose", self.truth_pose, 3):
             put(name, v)
         if self.truth_landmarks is not None:
@@ -421,6 +440,10 @@ class Sequence:
                     f"Sequence.truth_landmarks: radius r must be > 0 m, row {i} has {lm[i, 2]!r}"
                 )
             put("truth_landmarks", lm)
+
+    def _check_labels(self, ranges: np.ndarray | None) -> None:
+        """Per-beam truth labels, one per raw range."""
+        n, n_beams = self.n_scans, self.n_beams
         if self.scan_labels is not None:
             lab = np.asarray(self.scan_labels)
             if lab.dtype.kind not in "iu":
@@ -435,9 +458,7 @@ class Sequence:
                     f"Sequence.scan_labels: labels must be >= {MIXED_LABEL} (-1 = no return, "
                     f"-2 = mixed return), found {int(lab.min())}"
                 )
-            put("scan_labels", readonly(lab.astype(np.int64)))
-        if not isinstance(self.name, str):
-            raise SlamError(f"Sequence.name: expected a string, got {self.name!r}")
+            self._put("scan_labels", readonly(lab.astype(np.int64)))
 
     @property
     def n_scans(self) -> int:

@@ -24,6 +24,7 @@ and 1 m) drops GPS jumps.
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 
@@ -33,7 +34,16 @@ from slam import se2
 from slam.errors import SlamError
 from slam.vehicle import AckermannModel, Odometry, integrate
 
-__all__ = ["GpsStart", "fit_gps_start", "fit_gps_start_to_track", "procrustes_2d"]
+__all__ = [
+    "GpsStart",
+    "antenna_of",
+    "fit_gps_start",
+    "fit_gps_start_to_track",
+    "initial_pose",
+    "procrustes_2d",
+]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -176,3 +186,89 @@ def _fit(A: np.ndarray, B: np.ndarray, heading_rad: float | None) -> tuple[float
     if heading_rad is None:
         return procrustes_2d(A, B)
     return float(heading_rad), (B - se2.rotate(float(heading_rad), A)).mean(axis=0)
+
+
+def antenna_of(seq, cfg, laser: np.ndarray) -> np.ndarray:
+    """The GPS antenna in the vehicle frame: the configuration's, else the sequence's, else the
+    laser's position (vehicle.gps_antenna, Sequence.gps_pose)."""
+    if cfg.vehicle.gps_antenna is not None:
+        return np.array([*cfg.vehicle.gps_antenna, 0.0])
+    return np.asarray(seq.gps_pose if seq.gps_pose is not None else laser, dtype=np.float64)
+
+
+def initial_pose(seq, cfg, motion, laser: np.ndarray, first_pass):
+    """(pose (3,), covariance (3, 3), how) of the filter's prior at the first scan, how being
+    "truth", "gps" or "origin" (`SlamConfig.start`).
+
+    motion: the run's `slam.vehicle.Motion`, for a dead-reckoned GPS fit; first_pass(cov0,
+    fit_m) -> (scan times, poses) of a pass of the filter from the origin, for
+    `gps_track = "slam"`."""
+    start = cfg.start
+    t0 = float(seq.scan_t[0])
+    truth_t = seq.truth_t
+    if truth_t is not None and not truth_t[0] <= t0 <= truth_t[-1]:
+        log.warning(
+            "the truth (%.3f .. %.3f s) does not cover the first scan (%.3f s); not starting "
+            "from it",
+            truth_t[0],
+            truth_t[-1],
+            t0,
+        )
+        truth_t = None
+    if truth_t is not None:
+        pose = se2.interpolate_poses(t0, seq.truth_t, seq.truth_pose)[0]
+        if start.initial_heading_rad is not None:
+            log.warning("start.initial_heading_rad ignored: the run starts from the truth")
+        return pose, np.diag(np.square(start.initial_pose_sigma)), "truth"
+    if seq.gps_t is not None:
+        return _gps_start(seq, cfg, motion, antenna_of(seq, cfg, laser), first_pass)
+    th = 0.0 if start.initial_heading_rad is None else float(start.initial_heading_rad)
+    return np.array([0.0, 0.0, th]), np.diag(np.square(start.initial_pose_sigma)), "origin"
+
+
+def _gps_start(seq, cfg, motion, antenna: np.ndarray, first_pass):
+    start = cfg.start
+    t0 = float(seq.scan_t[0])
+    if float(seq.gps_t[0]) - t0 > 1.0:
+        log.warning(
+            "first GPS fix at %.3f s is %.3f s after the first scan",
+            float(seq.gps_t[0]),
+            float(seq.gps_t[0]) - t0,
+        )
+    floors = np.array([start.gps_sigma_m, start.gps_sigma_m, start.heading_sigma_rad]) ** 2
+    heading = start.initial_heading_rad
+    if start.gps_track == "slam":
+        track_t, track_pose = first_pass(np.diag(floors), start.gps_fit_m)
+        fit = fit_gps_start_to_track(
+            track_t,
+            track_pose,
+            seq.gps_t,
+            seq.gps_xy,
+            antenna=antenna,
+            fit_m=start.gps_fit_m,
+            heading_rad=heading,
+        )
+        how = f"a first pass over {track_t.size} scans"
+    else:
+        fit = fit_gps_start(
+            t0,
+            seq.gps_t,
+            seq.gps_xy,
+            antenna=antenna,
+            model=motion.model,
+            odometry=motion.odometry,
+            fit_m=start.gps_fit_m,
+            heading_rad=heading,
+        )
+        how = "dead reckoning"
+    cov = fit.cov + np.diag(np.maximum(floors - np.diag(fit.cov), 0.0))
+    log.info(
+        "start from GPS (%s): %d fixes over %.1f m (%d rejected), rms %.2f m, heading %.2f deg",
+        how,
+        fit.n_fixes,
+        fit.distance_m,
+        fit.n_rejected,
+        fit.rms_m,
+        math.degrees(fit.pose[2]),
+    )
+    return fit.pose, cov, "gps"

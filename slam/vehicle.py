@@ -39,6 +39,7 @@ from slam.se2 import wrap_angle
 
 __all__ = [
     "AckermannModel",
+    "Motion",
     "Odometry",
     "OdometryNoise",
     "SteeringCalibration",
@@ -286,6 +287,25 @@ class Odometry:
         return dt[keep], self.speed_mps[idx[keep]], self.steer_rad[idx[keep]]
 
 
+@dataclass(frozen=True, eq=False)
+class Motion:
+    """A vehicle's motion from its odometry: the model, the samples, and their noise."""
+
+    model: AckermannModel
+    odometry: Odometry
+    noise: OdometryNoise
+
+    def integrate(self, pose: np.ndarray, t0_s: float, t1_s: float):
+        """(pose1 (3,), F (3, 3), Q (3, 3)) from t0_s to t1_s (`integrate`)."""
+        return integrate(self.model, pose, self.odometry, t0_s, t1_s, noise=self.noise)
+
+    def distance(self, t0_s: float, t1_s: float) -> float:
+        """Distance the rear-axle centre drove from t0_s to t1_s by the odometry (m)."""
+        dt, v, a = self.odometry.pieces(t0_s, t1_s)
+        k = self.model.encoder_offset_m / self.model.wheelbase_m
+        return float(np.sum(np.abs(v / (1.0 - k * np.tan(a))) * dt))
+
+
 def integrate(
     model: AckermannModel,
     pose: np.ndarray,
@@ -310,7 +330,7 @@ def integrate(
     dts, vs, alphas = odometry.pieces(float(t0_s), float(t1_s))
     pose = np.asarray(pose, dtype=np.float64)
     if kernel == "numpy":
-        p, F, Q = _integrate_numpy(model, pose, dts, vs, alphas, noise)
+        p, F, Q = _integrate_numpy(model, pose, (dts, vs, alphas), noise)
     else:
         p, F, Q = _integrate_kernel(
             pose,
@@ -330,7 +350,8 @@ def integrate(
     return p, F, Q
 
 
-def _integrate_numpy(model, pose, dts, vs, alphas, noise):
+def _integrate_numpy(model, pose, pieces, noise):
+    dts, vs, alphas = pieces
     p = pose.copy()
     F = np.eye(3)
     Q = np.zeros((3, 3))

@@ -65,12 +65,12 @@ def victoria_park_1000() -> dict:
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_victoria_park
     from experiments.paper.victoria_park import nis_inside
-    from slam import run
+    from slam import run_slam
 
     seq = load_victoria_park(full=True, n_scans=1000)
     cfg = load_slam_config("victoria_park_ute")
-    lg = run(seq, features="detections", association="ihgr", config=cfg)
-    sc = score_sequence(seq, lg.scan_t, lg.pose, np.asarray(cfg.laser_pose))
+    lg = run_slam(seq, cfg, features="detections", association="ihgr")
+    sc = score_sequence(seq, lg.scan_t, lg.pose, lg.antenna_pose)
     return {
         "landmarks": int(lg.landmark_xy.shape[0]),
         "rmse_m": round(sc.all_rmse, 4),

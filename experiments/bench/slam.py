@@ -4,7 +4,7 @@ The map has to grow to hundreds of landmarks, which the tree park cannot give, s
 drives the filter down a long avenue (`experiments.sim.landmarks.avenue`): trees on both sides
 of a straight road, 5 Hz scans and 20 Hz odometry with the Cycab noise, every tree ahead within
 20 m measured as a circle centre with the `paper` noise model (the extractor itself is timed by
-`trunkslam bench extract`). `slam.run` times its phases per scan; the rows give their medians
+`trunkslam bench extract`). `slam.run_slam` times its phases per scan; the rows give their medians
 over the scans whose map size falls in each bin. One process; numpy's BLAS may use more than
 one thread for the larger matrices.
 """
@@ -19,7 +19,7 @@ import numpy as np
 from experiments.io.provenance import machine
 from experiments.io.writers import markdown_table
 from experiments.sim.landmarks import avenue
-from slam import TIMING_KEYS, SlamConfig, run
+from slam import TIMING_KEYS, SlamConfig, run_slam
 
 __all__ = ["bench", "bench_victoria_park", "format_table", "records_table"]
 
@@ -28,7 +28,7 @@ BINS = (0, 25, 50, 100, 200, 300, 400, 600, 800, 1200)
 
 
 def _scans(progress, desc: str):
-    """`slam.run`'s progress callback (after each scan, outside its timed steps) as a
+    """`slam.run_slam`'s progress callback (after each scan, outside its timed steps) as a
     progress(description, done, total), every 10 scans; None without `progress`."""
     if progress is None:
         return None
@@ -47,11 +47,11 @@ def bench(
     an optional callback(description, done, total), after each tenth scan."""
     seq, feats = avenue(n_trees, np.random.default_rng(seed))
     t0 = time.perf_counter()
-    log = run(
+    log = run_slam(
         seq,
+        SlamConfig(),
         features=feats,
         association=association,
-        config=SlamConfig(),
         progress=_scans(progress, "slam, avenue"),
     )
     return _rows(log, time.perf_counter() - t0, bins, "avenue")
@@ -67,10 +67,10 @@ def bench_victoria_park(
 
     seq = load_victoria_park(root, full=True)
     cfg = load_slam_config("victoria_park_ute")
-    kw = dict(features="detections", association=association, config=cfg)
-    run(seq, **kw, progress=_scans(progress, "slam, Victoria Park (warm-up)"))
+    cfg = cfg.with_(**{"features.method": "detections", "association.method": association})
+    run_slam(seq, cfg, progress=_scans(progress, "slam, Victoria Park (warm-up)"))
     t0 = time.perf_counter()
-    log = run(seq, **kw, progress=_scans(progress, "slam, Victoria Park"))
+    log = run_slam(seq, cfg, progress=_scans(progress, "slam, Victoria Park"))
     rows = _rows(log, time.perf_counter() - t0, bins, "Victoria Park")
     return rows
 

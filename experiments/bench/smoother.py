@@ -15,7 +15,7 @@ import numpy as np
 
 from experiments.bench.slam import records_table
 from experiments.errors import MissingDataError
-from slam import run
+from slam import run_slam
 from slam.smoother import SmootherOptions, problem_from_log, smooth, solve_graph_file
 
 __all__ = ["bench_smoother", "format_table"]
@@ -74,7 +74,7 @@ def bench_smoother(
 
 
 def _our_run(label: str, seq, features: str, cfg) -> list[dict]:
-    log = run(seq, features=features, association="ihgr", config=cfg)
+    log = run_slam(seq, cfg, features=features, association="ihgr")
     problem = problem_from_log(log)
     rows = []
     for name, options in SOLVERS.items():

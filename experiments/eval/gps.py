@@ -154,10 +154,9 @@ def top_speed(seq) -> float:
     return max(1.25 * float(np.max(np.abs(seq.odo_speed))), 1.0)
 
 
-def score_sequence(seq, scan_t: np.ndarray, pose: np.ndarray, laser_pose=None) -> GpsScore:
-    """`score_against_gps` for a run over `seq` (its GPS, its antenna: gps_pose, else the laser,
-    `laser_pose` when the run used a calibrated one)."""
-    ant = seq.gps_pose if seq.gps_pose is not None else seq.laser_pose
-    if seq.gps_pose is None and laser_pose is not None:
-        ant = laser_pose
-    return score_against_gps(scan_t, pose, seq.gps_t, seq.gps_xy, ant, top_speed(seq))
+def score_sequence(seq, scan_t: np.ndarray, pose: np.ndarray, antenna=None) -> GpsScore:
+    """`score_against_gps` for a run over `seq`: its GPS, at the antenna `antenna` (the run's
+    `SlamLog.antenna_pose`; None: the sequence's gps_pose, else its laser)."""
+    if antenna is None:
+        antenna = seq.gps_pose if seq.gps_pose is not None else seq.laser_pose
+    return score_against_gps(scan_t, pose, seq.gps_t, seq.gps_xy, antenna, top_speed(seq))

@@ -59,7 +59,7 @@ class Series:
 
 
 def slam_series(lg: SlamLog, truth_t=None, truth_pose=None) -> list[Series]:
-    """The series of one run (`slam.run`'s log). With truth (times (T,), poses (T, 3) of the
+    """The series of one run (`slam.run_slam`'s log). With truth (times (T,), poses (T, 3) of the
     rear-axle centre), the pose error after each update against the truth at the scan times the
     truth covers, with +-3 sigma of the filter's covariance."""
     n = lg.n_scans

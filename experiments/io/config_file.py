@@ -1,9 +1,11 @@
 """SLAM configuration files (TOML): read with the standard `tomllib`, written with `tomli_w`.
 
-The file's keys are the fields of `slam.SlamConfig` (nested tables for `odometry_noise`,
-`map_policy`, `constant_noise.<method>` and `association_params`); keys left out keep their
-defaults. `SlamConfig.from_dict` refuses unknown keys, wrong types and impossible values, and
-the error names the file and the key. Presets: datasets/configs/*.toml.
+The file's tables are the sections of `slam.SlamConfig` ([features], [association],
+[measurement], [vehicle], [start], [map_policy], [filter]); keys left out keep their defaults.
+`SlamConfig.from_dict` refuses unknown keys (suggesting the nearest, or where a key of the
+earlier flat format lives now), wrong types and impossible values, and the error names the file
+and the key. Presets: datasets/configs/*.toml (`presets`); sweep specifications live apart, in
+datasets/sweeps/, and are refused here with a message saying what they are.
 """
 
 from __future__ import annotations
@@ -17,9 +19,18 @@ from experiments.errors import ConfigError, DataError
 from experiments.io.paths import REPO_ROOT, read_text_file
 from slam import SlamConfig, SlamError
 
-__all__ = ["PRESETS_DIR", "config_toml", "load_slam_config", "preset_path"]
+__all__ = ["PRESETS_DIR", "config_toml", "load_slam_config", "preset_path", "presets"]
 
 PRESETS_DIR = REPO_ROOT / "datasets" / "configs"
+
+
+def presets() -> dict[str, str]:
+    """Preset name -> its one-line description (the first comment line of its file)."""
+    out = {}
+    for p in sorted(PRESETS_DIR.glob("*.toml")):
+        first = next((ln for ln in p.read_text().splitlines() if ln.startswith("#")), "# ")
+        out[p.stem] = first.lstrip("# ").strip()
+    return out
 
 
 def preset_path(name_or_path: str | Path) -> Path:
@@ -29,8 +40,9 @@ def preset_path(name_or_path: str | Path) -> Path:
         candidate = PRESETS_DIR / f"{name_or_path}.toml"
         if candidate.is_file():
             return candidate
-        known = sorted(q.stem for q in PRESETS_DIR.glob("*.toml"))
-        raise ConfigError(f"config {name_or_path!r}: not a file nor a preset (presets: {known})")
+        raise ConfigError(
+            f"config {name_or_path!r}: not a file nor a preset (presets: {sorted(presets())})"
+        )
     return p
 
 

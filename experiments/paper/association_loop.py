@@ -1,6 +1,6 @@
 """The association methods inside the SLAM loop (the `association` experiment's second part).
 
-Single-scan IHGR, the K-scan IHGR window (`slam.run(association="ihgr-window")`, K = 2, 3, 4),
+Single-scan IHGR, the K-scan IHGR window (`slam.run_slam(association="ihgr-window")`, K = 2, 3, 4),
 JCBB and NN, each running the whole EKF-SLAM loop, where the association's mistakes feed back
 into the filter:
 
@@ -39,9 +39,7 @@ from experiments.eval.poses import pose_errors
 from experiments.paper.slam import extractor_params
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
-from slam import SlamConfig, interpolate_poses, se2
-from slam import run as slam_run
-from slam.vehicle import OdometryNoise
+from slam import SlamConfig, interpolate_poses, run_slam, se2
 
 __all__ = [
     "LOOP_LABELS",
@@ -71,8 +69,12 @@ TOL_M = 1.0  # a landmark within this of a tree stands for it
 SEEN_SCANS = 3  # a tree detected in this many scans could have been mapped
 
 
-def _config(base: SlamConfig, K: int) -> SlamConfig:
-    return replace(base, window_scans=K) if K else base
+def _config(base: SlamConfig, association: str, K: int) -> SlamConfig:
+    """`base` with the association method (and the window's K when given)."""
+    changes = {"association.method": association}
+    if K:
+        changes["association.window_scans"] = K
+    return base.with_(**changes)
 
 
 def _window_figures(stats: dict | None) -> dict:
@@ -149,16 +151,20 @@ def tree_park_trial(job: tuple, seed: int) -> dict:
         speed_sigma_mps=base_cyc.speed_sigma_mps * scale,
         steer_sigma_rad=base_cyc.steer_sigma_rad * scale,
     )
-    on = OdometryNoise()
-    base = SlamConfig(
-        odometry_noise=replace(
-            on, speed_sigma_mps=cyc.speed_sigma_mps, steer_sigma_rad=cyc.steer_sigma_rad
-        )
+    # the filter's odometry noise as simulated (with the built-in pose floor); paper's circles
+    params = extractor_params("paper", cyc)
+    base = SlamConfig().with_(
+        **{
+            "vehicle.odometry_noise.speed_sigma_mps": cyc.speed_sigma_mps,
+            "vehicle.odometry_noise.steer_sigma_rad": cyc.steer_sigma_rad,
+            "features.method": "paper",
+            **{f"features.extractor.{k}": v for k, v in params.items()},
+        }
     )
     seq = simulate_cycab_run(np.random.default_rng(seed), "tree_park", cyc)
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-    params = extractor_params("paper", cyc)
-    feats = [extract_features(seq.scan(k), "paper", **params) for k in range(seq.n_scans)]
+    kwargs = base.features.extractor_kwargs()
+    feats = [extract_features(seq.scan(k), "paper", **kwargs) for k in range(seq.n_scans)]
     objects = [
         [
             dominant_label(run_labels(seq.scan_labels[k], a, b), returns_only=True)[0]
@@ -175,7 +181,7 @@ def tree_park_trial(job: tuple, seed: int) -> dict:
     seen = seen_count >= SEEN_SCANS
     out = {}
     for label, assoc, K in methods:
-        lg = slam_run(seq, features=feats, association=assoc, config=_config(base, K))
+        lg = run_slam(seq, _config(base, assoc, K), features=feats)
         e = pose_errors(lg.pose, truth)[1:]
         false, used = false_pairings(lg, lambda k, i, o=objects: o[k][i])
         dup, missed = duplicates_and_missed(lg.landmark_xy, trees[:, :2], seen, TOL_M)
@@ -237,11 +243,10 @@ def victoria_park_trial(job: tuple, seed=None) -> dict:
     if n_scans is not None:
         full = head(full, n_scans)
     cfg = load_slam_config(PRESET)
-    laser = np.asarray(cfg.laser_pose if cfg.laser_pose is not None else full.laser_pose)
-    lg = slam_run(full, features="detections", association=assoc, config=_config(cfg, K))
-    sc = score_sequence(full, lg.scan_t, lg.pose, laser)
+    lg = run_slam(full, _config(cfg.with_(**{"features.method": "detections"}), assoc, K))
+    sc = score_sequence(full, lg.scan_t, lg.pose, lg.antenna_pose)
     n = min(ground.shape[0], lg.n_scans)
-    ours = np.array([se2.compose(p, laser)[:2] for p in lg.pose[:n]])
+    ours = np.array([se2.compose(p, lg.laser_pose)[:2] for p in lg.pose[:n]])
     theta, t = procrustes_2d(ground[:n, :2], ours)
     tw = se2.rotate(theta, ref_trees[:, :2]) + t
     dup, missed = duplicates_and_missed(lg.landmark_xy, tw, None, TOL_M)
@@ -278,7 +283,7 @@ LOOP_LABELS = {
 
 
 NOTES = (
-    "Every method runs the whole EKF-SLAM loop (`slam.run`); its mistakes feed back into the "
+    "Every method runs the whole EKF-SLAM loop (`slam.run_slam`); its mistakes feed back into the "
     "filter. Tree park: experiment 2's simulated runs (paper features, 240 scans) with the "
     "odometry noise of the simulation and of the filter scaled x1, x2, x4; run i of every row "
     "uses the same seed. Victoria Park: the full run with the published detections and the "
@@ -294,7 +299,7 @@ NOTES = (
     "worst: the largest over every scan of every run; GPS RMSE: the antenna point against the "
     "GPS fixes (`experiments.eval.gps`).\n"
     "- ms per scan: the filter alone, wall time on the machine that wrote this file.\n"
-    "- IHGR window: `slam.run(association='ihgr-window')`, K = 2, 3, 4; a new landmark needs "
+    "- IHGR window: `slam.run_slam(association='ihgr-window')`, K = 2, 3, 4; a new landmark needs "
     "min(3, K) sightings in the window. 'window LPs fractional': window steps whose first LP "
     "relaxation was fractional, out of all steps; 'window steps rounded': steps where the "
     "rounding changed the LP's answer (more than one LP solve).\n"

@@ -15,6 +15,7 @@ the floors of the geometric fit's covariance (`calibrate_fit_floor`, noise_calib
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -49,8 +50,7 @@ def calibration_trial(job: tuple, seed) -> dict:
     seq = simulate_cycab_run(np.random.default_rng(seed), scene, cycab)
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
     lm = seq.truth_landmarks
-    cfg = SlamConfig()
-    floor = (cfg.fit_floor_range_m, cfg.fit_floor_bearing_rad)
+    cfg = SlamConfig().measurement
     for k in range(seq.n_scans):
         lw = se2.compose(truth[k], seq.laser_pose)
         d = lm[:, :2] - lw[:2]
@@ -60,7 +60,8 @@ def calibration_trial(job: tuple, seed) -> dict:
             f = extract_features(seq.scan(k), m, **extractor_params(m, cycab))
             if not f.n_circles:
                 continue
-            _, R = measurements_from_features(f, cfg.noise_for(m), floor)
+            # the filter's noise model, before any range bias (the ranges are the fit's)
+            _, R = replace(cfg.model_for(m), range_bias=(0.0, 0.0)).from_features(f)
             for i, ((a, b), p) in enumerate(zip(f.circle_beams, f.circle_params)):
                 lab = run_labels(seq.scan_labels[k], a, b)
                 j, _, n_ret = dominant_label(lab, returns_only=True)
@@ -230,7 +231,7 @@ def run(ctx) -> None:
         add(m, "fitted", "range_bias_a", "m", f["range_bias_a_m"], "fitted range bias a (m)")
         b_fit = f["range_bias_b_per_m"]
         add(m, "fitted", "range_bias_b", "m/m", b_fit, "fitted range bias b (m/m)")
-        a_use, b_use = SlamConfig().range_bias_for(m)
+        a_use, b_use = SlamConfig().measurement.model_for(m).range_bias
         add(m, "in_use", "range_bias_a", "m", a_use, "in use range bias a (m)")
         add(m, "in_use", "range_bias_b", "m/m", b_use, "in use range bias b (m/m)")
     ctx.outputs += write_tidy_table(
@@ -252,7 +253,7 @@ def run(ctx) -> None:
             "range errors by maximum likelihood under those sigmas (least squares weighted by "
             "1 / sigma^2, experiments/paper/calibration.py range_bias_line); 'in use': "
             "slam.measurement.DEFAULT_RANGE_BIAS (the fits rounded to 0.1 mm and 0.01 mm per m), "
-            "subtracted from the ranges in slam.run."
+            "subtracted from the ranges in slam.run_slam."
         ),
     )
     fl = calibrate_fit_floor()

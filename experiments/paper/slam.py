@@ -53,16 +53,15 @@ from experiments.eval.poses import consistency as consistency_figures
 from experiments.eval.poses import nees, nees_bounds, pose_errors
 from experiments.eval.series import slam_panels, slam_series
 from experiments.exec import SerialExecutor, spawn_seeds
+from experiments.io.config_file import config_toml
 from experiments.io.writers import dumps_json, json_types, write_atomic, write_tidy_table
 from experiments.paper import products
 from experiments.paper.products import FigureSpec
 from experiments.sim import sensor_preset
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
-from slam import SlamConfig, interpolate_poses, se2
-from slam import run as slam_run
+from slam import SlamConfig, interpolate_poses, run_slam, se2
 from slam.smoother import problem_from_log, smooth
-from slam.vehicle import OdometryNoise
 
 __all__ = [
     "CYCAB_SLAM",
@@ -100,8 +99,11 @@ STYLE = {"paper": "-.", "geometric": "--", "bailey": "-"}
 # true errors are smallest. Measured on calibration seeds (docs/notebook.md): the floor held
 # the pose NEES of dead reckoning at 2.66 over scans 1-20 (2.98 without), and of the filter with
 # ideal Gaussian centres at 2.69 over the run (2.94 without).
-CYCAB_SLAM = SlamConfig(
-    odometry_noise=OdometryNoise(floor_xy_m_per_sqrt_s=0.0, floor_theta_rad_per_sqrt_s=0.0)
+CYCAB_SLAM = SlamConfig().with_(
+    **{
+        "vehicle.odometry_noise.floor_xy_m_per_sqrt_s": 0.0,
+        "vehicle.odometry_noise.floor_theta_rad_per_sqrt_s": 0.0,
+    }
 )
 
 
@@ -145,35 +147,35 @@ class Exp2Config:
 # `DEFAULT_FIT_FLOOR`) or changes the detections. kind "synthetic": the method's circles on
 # trunks only, each centre replaced by the truth plus Gaussian noise drawn from the method's
 # constant noise model (same detections, ideal errors, no bias to correct); "": as extracted.
-NO_PAPER_BIAS = {"range_bias": {"paper": (0.0, 0.0)}}
+NO_PAPER_BIAS = {"measurement.range_bias": {"paper": [0.0, 0.0]}}
 SENSITIVITY = (
     (  # the synthetic centres' noise is the constant model's, so the filter is told that one
         "paper detections, synthetic centres",
         "paper",
-        {**NO_PAPER_BIAS, "measurement_noise": "constant"},
+        {**NO_PAPER_BIAS, "measurement.noise": "constant"},
         "synthetic",
     ),
     ("paper, without the range-bias correction", "paper", NO_PAPER_BIAS, ""),
-    ("paper, constant noise instead of the fit's", "paper", {"measurement_noise": "constant"}, ""),
+    ("paper, constant noise instead of the fit's", "paper", {"measurement.noise": "constant"}, ""),
     (
         "geometric, without the fit floors",
         "geometric",
-        {"fit_floor_range_m": 0.0, "fit_floor_bearing_rad": 0.0},
+        {"measurement.fit_floor_range_m": 0.0, "measurement.fit_floor_bearing_rad": 0.0},
         "",
     ),
     (
         "geometric, constant noise instead of the fit's",
         "geometric",
-        {"measurement_noise": "constant"},
+        {"measurement.noise": "constant"},
         "",
     ),
     (
         "bailey, without the range-bias correction",
         "bailey",
-        {"range_bias": {"bailey": (0.0, 0.0)}},
+        {"measurement.range_bias": {"bailey": [0.0, 0.0]}},
         "",
     ),
-    ("bailey, circles beyond 12 m ignored", "bailey", {"max_feature_range_m": 12.0}, ""),
+    ("bailey, circles beyond 12 m ignored", "bailey", {"measurement.max_range_m": 12.0}, ""),
 )
 
 
@@ -184,6 +186,14 @@ def extractor_params(method: str, cycab: CycabParams) -> dict:
         return {}
     s = sensor_preset(cycab.sensor, range_sigma_m=cycab.range_sigma_m)
     return {"sigma_r_m": s.effective_sigma_m}
+
+
+def run_config(cfg: Exp2Config, method: str) -> SlamConfig:
+    """The whole configuration of experiment 2's filter for `method`: `cfg.slam` with the
+    method, its extractor's parameters (`extractor_params`) and the association."""
+    changes = {f"features.extractor.{k}": v for k, v in extractor_params(method, cfg.cycab).items()}
+    changes |= {"features.method": method, "association.method": cfg.association}
+    return cfg.slam.with_(**changes)
 
 
 def synthetic_features(
@@ -292,19 +302,18 @@ def slam_trial(job: tuple[Exp2Config, int, bool], seed) -> dict:
     feats: dict[str, list] = {}
     for m in sorted({v[1] for v in variants}):
         t0 = time.perf_counter()
-        params = extractor_params(m, cfg.cycab)
+        params = run_config(cfg, m).features.extractor_kwargs()
         feats[m] = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
         out["time_extract"][m] = (time.perf_counter() - t0) / seq.n_scans
     noise_rng = rng.spawn(1)[0]
     for name, m, overrides, kind in variants:
-        scfg = replace(cfg.slam, **overrides)
+        scfg = run_config(cfg, m).with_(**overrides)
         fs = feats[m]
         if kind == "synthetic":
-            fs = synthetic_features(
-                fs, seq, laser_w, scfg.noise_for(m)[1], noise_rng, cfg.false_match_m
-            )
-        lg = slam_run(seq, features=fs, association=cfg.association, config=scfg)
-        # the filter's own time per scan (`slam.run` warms up before it times the scans)
+            model = scfg.measurement.model_for(m).constant
+            fs = synthetic_features(fs, seq, laser_w, model, noise_rng, cfg.false_match_m)
+        lg = run_slam(seq, scfg, features=fs)
+        # the filter's own time per scan (`slam.run_slam` warms up before it times the scans)
         o: dict = {"time_slam": float(np.mean(lg.timing_s["total"]))}
         e = pose_errors(lg.pose, truth)
         # the paper's formula, over the scans after the first (which starts at the truth)
@@ -769,17 +778,9 @@ def recording_trial(cfg: Exp2Config, seed) -> dict[str, bytes]:
 
     seq = simulate_cycab_run(np.random.default_rng(seed), cfg.scene, cfg.cycab)
     m = "paper" if "paper" in cfg.methods else cfg.methods[0]
-    params = extractor_params(m, cfg.cycab)
     with MemoryRecorder("slam", series=slam_panels(True)) as rec:
         rec.log_truth_trees(seq.truth_landmarks)
-        lg = slam_run(
-            seq,
-            features=m,
-            feature_params=params,
-            association=cfg.association,
-            config=cfg.slam,
-            visualiser=rec,
-        )
+        lg = run_slam(seq, run_config(cfg, m), visualiser=rec)
         rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
     return {"slam.rrd": rec.data}
 
@@ -813,5 +814,8 @@ def run(ctx, cfg: Exp2Config | None = None) -> Exp2Results:
     ctx.outputs.append(
         write_atomic(out / "slam_key_figures.json", dumps_json(json_types(key_figures(res))))
     )
+    for m in cfg.methods:  # each method's filter, whole: `trunkslam slam RUN.npz --config` it
+        header = f"experiment 2 (Tables 3-4), {m}: the filter of every run of the study"
+        write_atomic(ctx.path(f"table3_config_{m}.toml"), config_toml(run_config(cfg, m), header))
     log.info("experiment 2: %d runs in %.1f s", cfg.n_runs, res.seconds)
     return res

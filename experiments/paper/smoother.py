@@ -32,8 +32,7 @@ from experiments.io.config_file import load_slam_config
 from experiments.io.victoria_park import gtsam_graph, load_victoria_park
 from experiments.io.writers import write_tidy_table
 from experiments.paper import products
-from slam import run as slam_run
-from slam import se2
+from slam import run_slam, se2
 from slam.smoother import problem_from_log, smooth, solve_graph_file
 
 __all__ = ["GRAPH_CHUNK", "run", "smoother_trial"]
@@ -147,13 +146,12 @@ def _victoria_park(quick: bool) -> dict:
     cfg = load_slam_config(PRESET)
     n = 1500 if quick else full.n_scans
     full = head(full, n)
-    laser = np.asarray(cfg.laser_pose if cfg.laser_pose is not None else full.laser_pose)
     t0 = time.perf_counter()
-    lg = slam_run(full, features="detections", association="ihgr", config=cfg)
+    lg = run_slam(full, cfg.with_(**{"features.method": "detections"}))
     ekf_s = time.perf_counter() - t0
     sm = smooth(problem_from_log(lg))
-    sc_e = score_sequence(full, lg.scan_t, lg.pose, laser)
-    sc_s = score_sequence(full, lg.scan_t, sm.pose, laser)
+    sc_e = score_sequence(full, lg.scan_t, lg.pose, lg.antenna_pose)
+    sc_s = score_sequence(full, lg.scan_t, sm.pose, lg.antenna_pose)
     sig = np.sqrt(np.linalg.eigvalsh(sm.landmark_cov)[:, -1])
     sig_e = np.sqrt(np.linalg.eigvalsh(lg.landmark_cov)[:, -1])
     label = f"Victoria Park, {n} scans"
@@ -180,8 +178,8 @@ def _victoria_park(quick: bool) -> dict:
         },
     ]
     ant = {
-        "EKF": np.array([se2.compose(p, laser)[:2] for p in lg.pose]),
-        "smoother": np.array([se2.compose(p, laser)[:2] for p in sm.pose]),
+        "EKF": np.array([se2.compose(p, lg.antenna_pose)[:2] for p in lg.pose]),
+        "smoother": np.array([se2.compose(p, lg.antenna_pose)[:2] for p in sm.pose]),
     }
     errors = {"EKF": (sc_e.t_s, sc_e.errors), "smoother": (sc_s.t_s, sc_s.errors)}
     title = "Victoria Park: EKF and smoothed antenna paths over the GPS fixes (smoothed map)"

@@ -1,6 +1,6 @@
 """`trunkslam sweep CONFIG.toml`: a study run over a grid (or a list) of configuration values.
 
-The sweep file (TOML; examples in datasets/configs/sweep_*.toml):
+The sweep file (TOML; examples in datasets/sweeps/sweep_*.toml):
 
     study = "slam"            # association, slam or circles (`STUDIES`)
     trials = 20               # trials per point
@@ -204,7 +204,8 @@ STUDIES = {
     ),
     "slam": Study(
         "EKF-SLAM on the simulated tree park (experiment 2, Tables 3-4): cycab.* the car, "
-        "sensors and odometry noise, slam.* the filter (slam.gate_prob, ...), association",
+        "sensors and odometry noise, slam.* the filter (slam.association.gate_prob, ...), "
+        "association",
         _slam_defaults,
         _slam_config,
         slam_trial,
@@ -221,6 +222,19 @@ STUDIES = {
 def study_defaults(name: str) -> dict:
     """The study's configuration at its defaults, as dotted names -> values."""
     return _flatten(_study(name).defaults())
+
+
+def fields_toml(name: str) -> str:
+    """The study's fields at their defaults as the [base] table of a sweep file (valid TOML,
+    one dotted name per line): what `trunkslam sweep --fields` prints."""
+    import tomli_w
+
+    fields = study_defaults(name)
+    unset = [k for k, v in fields.items() if v is None]  # TOML has no null: left as comments
+    head = f"# {name}: {_study(name).about}\n"
+    head += "".join(f"# {k}: not set by default (the study chooses; settable)\n" for k in unset)
+    given = {k: v for k, v in fields.items() if v is not None}
+    return head + f"study = {name!r}\n\n" + tomli_w.dumps({"base": given})
 
 
 def _study(name) -> Study:

@@ -36,17 +36,16 @@ from scipy.stats import chi2
 from experiments.errors import MissingDataError
 from experiments.eval.gps import score_sequence
 from experiments.eval.series import slam_panels, slam_series
-from experiments.io.config_file import load_slam_config
+from experiments.io.config_file import config_toml, load_slam_config
 from experiments.io.victoria_park import (
     VP_N_RAW_SCANS,
     VP_N_SCANS,
     load_ss2002_reference,
     load_victoria_park,
 )
-from experiments.io.writers import json_types, write_tidy_table
+from experiments.io.writers import json_types, write_atomic, write_tidy_table
 from experiments.paper import products
-from slam import SlamLog, se2
-from slam import run as slam_run
+from slam import SlamConfig, SlamLog, run_slam, se2
 from slam.start import procrustes_2d
 
 __all__ = [
@@ -68,14 +67,6 @@ METHODS = ("ihgr", "jcbb", "nn")
 # The GPS reports every 0.2 s (median) with dropouts; the figures shade a time of more than this
 # without a fix, and their lines stop there (the GPS reported no position in it).
 GPS_GAP_S = 2.0
-# The fitted extractors on real trunks: 75% of the trunks the published detector finds span 1-3
-# beams, too few to fit; `short_trunks` makes circles of them with a radius prior (the median
-# published radius of scans 1-2000, 0.20 m, spread 0.1 m: its interquartile range 0.14-0.29 m).
-SHORT_TRUNKS = {
-    "short_trunks": True,
-    "short_trunk_radius_m": 0.2,
-    "short_trunk_radius_sigma_m": 0.1,
-}
 # Published figures for this dataset (the issue's list; their set-ups differ from ours).
 # other set-ups' published figures: run -> the columns they give (PHD-SLAM: an RMSE range)
 PUBLISHED = {
@@ -143,13 +134,22 @@ class _Timed:
         return timed
 
 
-def _one(label, seq, features, association, cfg, ref, extra=None, visualiser=None):
+def run_config(features: str, association: str) -> SlamConfig:
+    """The configuration of a run of the table: the preset with its features' and association's
+    methods replaced (the preset's extractor parameters, `short_trunks` included, hold for
+    every extractor)."""
+    cfg = load_slam_config(PRESET)
+    return cfg.with_(**{"features.method": features, "association.method": association})
+
+
+def _one(label, seq, cfg, ref, given=None, visualiser=None):
+    """(row, log, GPS score) of the run of `cfg` over `seq`; `given`: its features, extracted
+    by the caller as `cfg` says (they are then not extracted twice)."""
     vis = _Timed(visualiser) if visualiser is not None else None
     t0 = time.perf_counter()
-    lg = slam_run(seq, features=features, association=association, config=cfg, visualiser=vis)
+    lg = run_slam(seq, cfg, features=given, visualiser=vis)
     seconds = time.perf_counter() - t0 - (vis.seconds if vis is not None else 0.0)
-    laser = np.asarray(cfg.laser_pose if cfg.laser_pose is not None else seq.laser_pose)
-    sc = score_sequence(seq, lg.scan_t, lg.pose, laser)
+    sc = score_sequence(seq, lg.scan_t, lg.pose, lg.antenna_pose)
     late = sc.t_s > seq.scan_t[min(VP_N_RAW_SCANS, seq.n_scans) - 1]
     rmse_late = float(np.sqrt(np.mean(sc.errors[late] ** 2))) if late.any() else math.nan
     row = {
@@ -168,13 +168,14 @@ def _one(label, seq, features, association, cfg, ref, extra=None, visualiser=Non
         "fixes": sc.matched,
         "jumps": sc.jumps,
         "landmarks": int(lg.landmark_xy.shape[0]),
-        "reference_trees_1m": reference_match(lg, laser, *ref),
+        "reference_trees_1m": reference_match(lg, lg.laser_pose, *ref),
         "nis_inside": float(np.mean(nis_inside(lg))),
         "circles_per_scan": float(lg.n_features.mean()),
         "seconds": seconds,
         "ms_per_scan": 1e3 * float(np.mean(lg.timing_s["total"])),
     }
-    row.update(extra or {})
+    if given is not None:
+        row["published_matched"] = _published_matched(seq, given)
     return row, lg, sc
 
 
@@ -198,23 +199,22 @@ def vp_trial(job: tuple, seed=None) -> tuple[dict, dict[str, bytes]]:
     label, which, features, assoc, quick, keep = job
     full, raw, ref = _data(quick)
     seq = full if which == "full" else raw
-    cfg = load_slam_config(PRESET)
-    extra = None
+    cfg = run_config(features, assoc)
+    given = None
     if features != "detections":
         from features import extract_features
 
-        params = {} if features == "bailey" else SHORT_TRUNKS
-        features = [extract_features(seq.scan(k), features, **params) for k in range(seq.n_scans)]
-        extra = {"published_matched": _published_matched(seq, features)}
+        kwargs = cfg.features.extractor_kwargs()
+        given = [extract_features(seq.scan(k), features, **kwargs) for k in range(seq.n_scans)]
     if not keep:
-        row, _, _ = _one(label, seq, features, assoc, cfg, ref, extra)
+        row, _, _ = _one(label, seq, cfg, ref, given)
         return row, {}
     from experiments.render.viz import MemoryRecorder
 
     with MemoryRecorder("slam", decimate=20, series=slam_panels(False)) as rec:
-        row, lg, sc = _one(label, seq, features, assoc, cfg, ref, extra, visualiser=rec)
+        row, lg, sc = _one(label, seq, cfg, ref, given, visualiser=rec)
         rec.log_series(lg.scan_t, slam_series(lg))
-    return row, {"victoria_park.rrd": rec.data, **_figures(label, lg, sc, seq, cfg)}
+    return row, {"victoria_park.rrd": rec.data, **_figures(label, lg, sc, seq)}
 
 
 def run(ctx) -> None:
@@ -251,6 +251,12 @@ def run(ctx) -> None:
     def finish(got: list) -> None:
         _write(ctx, [row for row, _ in got])
         products.write(ctx, got[0][1])
+        for label, which, features, assoc in jobs:  # each run's configuration beside its row
+            part = "full" if which == "full" else "scans_1_2000"
+            name = f"victoria_park_config_{part}_{features}_{assoc}.toml"
+            data = "vp_full.npz (--full)" if which == "full" else "vp.npz"
+            header = f"{label}\ntrunkslam slam {data} --config {name}"
+            write_atomic(ctx.path(name), config_toml(run_config(features, assoc), header))
 
     ctx.later(batch, finish)
 
@@ -351,11 +357,11 @@ def _write(ctx, rows) -> None:
     )
 
 
-def _figures(label: str, lg, sc, full, cfg) -> dict[str, bytes]:
+def _figures(label: str, lg, sc, full) -> dict[str, bytes]:
     """vp_map.png and vp_timeseries.png of the run `lg` (scored `sc`) over `full`, as bytes."""
     from experiments.render import plots
 
-    ant = np.array([se2.compose(p, cfg.laser_pose or full.laser_pose)[:2] for p in lg.pose])
+    ant = np.array([se2.compose(p, lg.antenna_pose)[:2] for p in lg.pose])
     title = "Victoria Park: estimated antenna path and map over the GPS fixes"
     vp_map = products.png(plots.plot_vp_map, full.gps_xy, {label: ant}, lg.landmark_xy, title)
     t_end = float(full.scan_t[-1])

@@ -61,7 +61,6 @@ enters, and scans 2001-7249 never do.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import time
@@ -75,8 +74,7 @@ from experiments.io.victoria_park import load_victoria_park
 from experiments.io.writers import write_atomic, write_tidy_table
 from experiments.paper import vp_start, vp_steering
 from experiments.paper.vp_steering import fit_steering
-from slam import OdometryNoise, SlamConfig, SteeringCalibration
-from slam import run as slam_run
+from slam import OdometryNoise, SlamConfig, SteeringCalibration, run_slam
 from slam.log import SKIPPED
 from slam.measurement import NoiseModel
 
@@ -99,18 +97,27 @@ FIT_SCANS = 2000
 MAX_WIDENINGS = 4  # of the consistency step's bracket (x16 either way)
 EVALUATIONS = {False: 200, True: 320}  # Nelder-Mead's budget, without and with the motion terms
 LN_AREA = math.log(80.0 * math.pi)  # the measurement space of the ute's laser, m x rad
-BASE = SlamConfig(
-    first_estimates_jacobians=True,
-    gps_start_fit_m=50.0,
-    gps_sigma_m=0.3,
-    initial_heading_sigma_rad=math.radians(1.0),
-    # the simulated extractors' fit floors and range biases belong to the simulated LMS200 and
-    # tree park; on the real ute they are unknown: none (as in the preset)
-    fit_floor_range_m=0.0,
-    fit_floor_bearing_rad=0.0,
-    range_bias={"paper": (0.0, 0.0), "geometric": (0.0, 0.0), "bailey": (0.0, 0.0)},
-    # the scans of a ute standing still repeat the last one's errors: not used
-    min_travel_m=0.001,
+BASE = SlamConfig().with_(
+    **{
+        "features.method": "detections",
+        # isolated 1-3 beam segments of real trunks become circles (the fitting extractors)
+        "features.extractor.short_trunks": True,
+        "filter.first_estimates_jacobians": True,
+        "start.gps_fit_m": 50.0,
+        "start.gps_sigma_m": 0.3,
+        "start.heading_sigma_rad": math.radians(1.0),
+        # the simulated extractors' fit floors and range biases belong to the simulated LMS200
+        # and tree park; on the real ute they are unknown: none (as in the preset)
+        "measurement.fit_floor_range_m": 0.0,
+        "measurement.fit_floor_bearing_rad": 0.0,
+        "measurement.range_bias": {
+            "paper": [0.0, 0.0],
+            "geometric": [0.0, 0.0],
+            "bailey": [0.0, 0.0],
+        },
+        # the scans of a ute standing still repeat the last one's errors: not used
+        "vehicle.min_travel_m": 0.001,
+    }
 )
 # laser yaw (rad), ln speed sigma (m/s), ln steer sigma (rad), ln a (m), ln b (-), ln c (rad),
 # ln speed sigma per speed (-), ln steer sigma per lateral acceleration (rad per m/s^2)
@@ -147,12 +154,15 @@ def config_from(theta, base: SlamConfig = BASE, laser=(3.78, 0.50)) -> SlamConfi
         speed_sigma_per_speed=growth[0],
         steer_sigma_per_lateral_mps2=growth[1],
     )
-    return dataclasses.replace(
-        base,
-        odometry_noise=odometry,
-        measurement_noise="constant",
-        constant_noise={m: model for m in ("bailey", "paper", "geometric", "other")},
-        laser_pose=(laser[0], laser[1], yaw),
+    return base.with_(
+        **{
+            "vehicle.odometry_noise": odometry,
+            "vehicle.laser_pose": [laser[0], laser[1], yaw],
+            "measurement.noise": "constant",
+            "measurement.constant_noise": {
+                m: model._asdict() for m in ("bailey", "paper", "geometric", "other")
+            },
+        }
     )
 
 
@@ -160,7 +170,7 @@ def objective(seq, theta, base: SlamConfig = BASE) -> tuple[float, dict]:
     """J(theta) on `seq` and the run's figures (landmarks, NIS per dof, unexplained count);
     `base`: the fixed settings (BASE with the fitted steering calibration)."""
     cfg = config_from(theta, base)
-    lg = slam_run(seq, features="detections", association="ihgr", config=cfg)
+    lg = run_slam(seq, cfg)
     upd = lg.scan_nis_dof > 0
     nll = 0.5 * float(
         np.sum(
@@ -235,15 +245,15 @@ def scale_measurement_noise(cfg: SlamConfig, k: float) -> SlamConfig:
             m.bearing_sigma_rad * k,
             m.cross_range_sigma_m * k,
         )
-        for name, m in cfg.constant_noise.items()
+        for name, m in cfg.measurement.constant_noise.items()
     }
-    return dataclasses.replace(cfg, constant_noise=scaled)
+    return cfg.with_(**{"measurement.constant_noise": {n: m._asdict() for n, m in scaled.items()}})
 
 
 def nis_per_dof(seq, cfg: SlamConfig) -> float:
     """Sum of the scans' NIS over the sum of their degrees of freedom, for a run over `seq`
     with the published detections and IHGR (NaN without an update)."""
-    lg = slam_run(seq, features="detections", association="ihgr", config=cfg)
+    lg = run_slam(seq, cfg)
     upd = lg.scan_nis_dof > 0
     dof = int(lg.scan_nis_dof[upd].sum())
     return float(np.sum(lg.scan_nis[upd]) / dof) if dof else math.nan
@@ -308,7 +318,7 @@ def run(ctx) -> None:
         return
     t0 = time.perf_counter()
     steer = fit_steering(full, FIT_SCANS, 10 if ctx.quick else vp_steering.EVALUATIONS)
-    base = dataclasses.replace(BASE, steering=steer.steering)
+    base = BASE.with_(**{"vehicle.steering": steer.steering})
     fits = {}
     for motion in (False, True):
         n = 5 if ctx.quick else EVALUATIONS[motion]
@@ -433,8 +443,12 @@ def preset_config(theta, steering: SteeringCalibration, start_fit_m: float) -> S
     """The preset: the fixed settings (BASE), the fitted parameters `theta` (the model's 6 or
     8), the steering calibration and the start fitted along the filter's own path over the
     first `start_fit_m` metres of GPS (`vp_start`)."""
-    base = dataclasses.replace(
-        BASE, steering=steering, gps_start_track="slam", gps_start_fit_m=float(start_fit_m)
+    base = BASE.with_(
+        **{
+            "vehicle.steering": steering,
+            "start.gps_track": "slam",
+            "start.gps_fit_m": float(start_fit_m),
+        }
     )
     return config_from(theta, base)
 
@@ -448,7 +462,8 @@ is used), then scaled the measurement sigmas by the factor that makes the NIS pe
 then chose the metres of GPS the start is fitted to along the filter's own path (the shortest
 stretch from which longer ones agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
 the same constant measurement model for every extractor, scans at rest skipped (1 mm).
-Use: trunkslam slam vp_full.npz --features detections --config victoria_park_ute"""
+Its extractor parameters turn short_trunks on: most real trunks span 1-3 beams.
+Use: trunkslam slam vp_full.npz --config victoria_park_ute"""
 
 START_LABELS = {
     "fit_m": "GPS stretch D (m of path)",

@@ -21,7 +21,6 @@ do. The rule (`derive`):
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 
@@ -32,8 +31,7 @@ from experiments.errors import DataError, MissingDataError
 from experiments.io.config_file import load_slam_config, preset_path
 from experiments.io.victoria_park import load_victoria_park
 from experiments.io.writers import write_tidy_table
-from slam import SlamLog, se2
-from slam import run as slam_run
+from slam import SlamLog, run_slam, se2
 
 __all__ = ["BIN_EDGES_M", "derive", "detection_rates", "run"]
 
@@ -105,13 +103,11 @@ def run(ctx) -> None:
         ctx.config["victoria-park-pruning"] = f"skipped: {exc}"
         return
     cfg = load_slam_config(preset_path("victoria_park_ute"))
-    cfg = dataclasses.replace(
-        cfg, map_policy=dataclasses.replace(cfg.map_policy, prune_after_expected=0)
-    )
-    lg = slam_run(seq, features="detections", association="ihgr", config=cfg)
+    cfg = cfg.with_(**{"map_policy.prune_after_expected": 0})
+    lg = run_slam(seq, cfg, features="detections", association="ihgr")
     a0 = float(seq.scan_angle_min)
     fov = (a0, a0 + float(seq.scan_angle_increment) * (seq.n_beams - 1))
-    rates = detection_rates(lg, np.asarray(cfg.laser_pose, float), fov)
+    rates = detection_rates(lg, lg.laser_pose, fov)
     derived = derive(rates)
     ctx.config["victoria-park-pruning"] = {"scans": seq.n_scans, **derived}
     records = []

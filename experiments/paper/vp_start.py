@@ -23,8 +23,7 @@ import math
 import numpy as np
 
 from experiments.errors import DataError
-from slam import SlamConfig, se2
-from slam import run as slam_run
+from slam import SlamConfig, run_slam, se2
 from slam.start import fit_gps_start_to_track
 
 __all__ = ["STEP_M", "TOLERANCE_DEG", "derive", "headings"]
@@ -39,16 +38,18 @@ def headings(seq, cfg: SlamConfig, step_m: float = STEP_M) -> list[tuple[float, 
     D = step_m, 2 step_m, ... and last the whole path."""
     if seq.gps_t is None:
         raise DataError("sequence: the start stretch needs GPS fixes")
-    lg = slam_run(seq, features="detections", association="ihgr", config=cfg)
+    lg = run_slam(seq, cfg, features="detections", association="ihgr")
     inv = se2.inverse(lg.start_pose)
     track = np.array([se2.compose(inv, p) for p in lg.pose])
     track[0] = 0.0  # the track starts at the prior's mean (the first scan has no update)
-    ant = np.asarray(seq.gps_pose if seq.gps_pose is not None else lg.laser_pose, dtype=float)
+    ant = lg.antenna_pose
     path = np.array([se2.compose(p, ant)[:2] for p in track])
     length = float(np.sum(np.hypot(*np.diff(path, axis=0).T)))
     out = []
     for d in [*np.arange(step_m, length, step_m), length]:
-        fit = fit_gps_start_to_track(lg.scan_t, track, seq.gps_t, seq.gps_xy, ant, float(d))
+        fit = fit_gps_start_to_track(
+            lg.scan_t, track, seq.gps_t, seq.gps_xy, antenna=ant, fit_m=float(d)
+        )
         out.append((float(d), math.degrees(fit.pose[2]), fit.n_fixes))
     return out
 

@@ -25,30 +25,24 @@ from experiments.io.writers import (
     write_atomic,
 )
 from experiments.render.viz import open_recording
-from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, se2
-from slam import run as slam_run
+from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, run_slam, se2
 
-__all__ = ["landmark_radii", "run_slam", "summarise"]
+__all__ = ["landmark_radii", "run_slam_file", "summarise"]
 
 
-def run_slam(
+def run_slam_file(
     input_path: Path | str,
-    features: str = "paper",
-    association: str = "ihgr",
-    out_dir: Path | str = Path("slam_out"),
-    rerun_path: Path | str | None = None,
-    initial_heading: float | None = None,
-    *,
     config: SlamConfig | None = None,
-    features_file: Path | str | None = None,
+    out_dir: Path | str = Path("slam_out"),
+    *,
+    rerun_path: Path | str | None = None,
     progress=None,
     ellipse_scale: float = 10.0,
 ) -> dict:
-    """Run EKF-SLAM over the sequence file `input_path` and write the results into out_dir.
+    """Run EKF-SLAM over the sequence file `input_path` as `config` says (default
+    `SlamConfig()`; `features.file`, when set, is a features JSON from `trunkslam extract` whose
+    circles are used instead of extracting) and write the results into out_dir.
 
-    features: an extractor ("paper", "geometric", "bailey") run on the raw scans, or
-        "detections" (the sequence's own precomputed detections); features_file: a features
-        JSON from `trunkslam extract` instead (then `features` is ignored).
     Writes
     trajectory.tum   the rear-axle centre at the scan times, `t x y z qx qy qz qw` (z = 0,
                      rotation about z by theta), readable by evo
@@ -58,15 +52,14 @@ def run_slam(
                      of its covariance, units in the column names (`io.results.TRAJECTORY_COLUMNS`)
     map.csv          id, centre (world), radius, covariance (xx, xy, yy), scan it joined the
                      map, scans seen in (`io.results.MAP_COLUMNS`)
-    config.toml      the resolved configuration (`--config` reads it back)
+    config.toml      the whole configuration of the run: `--config` with it reproduces the run
     run_log.npz      what the GTSAM smoother needs (`trunkslam smooth`; experiments.io.run_log)
     summary.json     input, methods, start, counts, timings (mean, median, p95, max per phase),
                      errors against GPS (`experiments.eval.gps`) when the sequence has GPS, and
                      against the truth (Table-3 errors, mean NEES) when it has truth
-    Returns the summary. initial_heading: start heading in radians (GPS starts). config: the
-    filter's settings (default `SlamConfig()`: the simulated Cycab's). rerun_path: also write a
-    recording (`experiments.render.viz`, kind "slam"; simulated truth trees and path when the
-    sequence has them), its covariance ellipses drawn `ellipse_scale` times their 95% size.
+    Returns the summary. rerun_path: also write a recording (`experiments.render.viz`, kind
+    "slam"; simulated truth trees and path when the sequence has them), its covariance
+    ellipses drawn `ellipse_scale` times their 95% size.
 
     The files are written as one set (`experiments.io.writers.atomic_folder`): into a temporary
     folder beside out_dir, summary.json last, then swapped for out_dir as a whole; an
@@ -75,65 +68,75 @@ def run_slam(
     inputs. The recording (rerun_path) is written to a temporary name and renamed; inside
     out_dir it becomes part of the set.
     """
-    out = check_output_folder(out_dir, "--out", (SUMMARY,), inputs=[input_path, features_file])
-    rerun_in_out = None
-    if rerun_path is not None:
-        rerun_path = Path(rerun_path)
-        if rerun_path.resolve().is_relative_to(out.resolve()):
-            rerun_in_out = rerun_path.resolve().relative_to(out.resolve())
-            if rerun_in_out == Path("."):
-                raise DataError(f"--rerun {rerun_path}: is the --out folder")
-        else:
-            check_output_file(rerun_path, "--rerun", inputs=[input_path, features_file])
-    seq = load_sequence(input_path)
     cfg = config or SlamConfig()
-    source = features
+    features_file = cfg.features.file
+    out = check_output_folder(out_dir, "--out", (SUMMARY,), inputs=[input_path, features_file])
+    rerun_in_out = _recording_place(rerun_path, out, [input_path, features_file])
+    seq = load_sequence(input_path)
+    given = None
     if features_file is not None:
-        source = load_features_json(features_file, seq.n_scans, seq.n_beams)
+        given = load_features_json(features_file, seq.n_scans, seq.n_beams)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_folder(out) as stage:
         rec_path = rerun_path if rerun_in_out is None else stage / rerun_in_out
-        has_truth = seq.truth_t is not None
-        with open_recording(
-            rec_path, "slam", ellipse_scale=ellipse_scale, series=slam_panels(has_truth)
-        ) as rec:
-            if seq.truth_landmarks is not None:
-                rec.log_truth_trees(seq.truth_landmarks)
-            t0 = time.perf_counter()
-            lg = slam_run(
-                seq,
-                features=source,
-                association=association,
-                config=cfg,
-                visualiser=rec,
-                initial_heading_rad=initial_heading,
-                progress=progress,
-            )
-            seconds = time.perf_counter() - t0
-            rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
-        write_atomic(stage / "trajectory.tum", trajectory_tum(lg.scan_t, lg.pose))
-        if seq.gps_t is not None:
-            ant = seq.gps_pose if seq.gps_pose is not None else _laser(seq, cfg)
-            ant_xy = np.array([se2.compose(p, ant) for p in lg.pose])
-            write_atomic(stage / "trajectory_gps_antenna.tum", trajectory_tum(lg.scan_t, ant_xy))
-        write_atomic(stage / "trajectory.csv", trajectory_csv(lg.scan_t, lg.pose, lg.pose_cov))
-        write_atomic(
-            stage / "map.csv",
-            map_csv(
-                lg.landmark_id,
-                lg.landmark_xy,
-                lg.landmark_cov,
-                lg.landmark_first_scan,
-                lg.landmark_n_obs,
-                landmark_radii(lg),
-            ),
-        )
-        write_atomic(stage / "config.toml", config_toml(cfg, f"trunkslam slam {input_path}"))
-        write_run_log(stage / RUN_LOG_NAME, lg)
-        summary = summarise(lg, seq, seconds, laser_pose=_laser(seq, cfg))
+        t0 = time.perf_counter()
+        lg = _run_recorded(seq, cfg, given, rec_path, (progress, ellipse_scale))
+        seconds = time.perf_counter() - t0
+        _write_run(stage, seq, cfg, lg, f"trunkslam slam {input_path}")
+        summary = summarise(lg, seq, seconds)
         summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
         write_atomic(stage / SUMMARY, dumps_json(summary))  # last: the set is complete
     return summary
+
+
+def _recording_place(rerun_path, out: Path, inputs) -> Path | None:
+    """Where a --rerun path lies inside the --out folder (None: outside it, checked as a file)."""
+    if rerun_path is None:
+        return None
+    rerun_path = Path(rerun_path)
+    if rerun_path.resolve().is_relative_to(out.resolve()):
+        inside = rerun_path.resolve().relative_to(out.resolve())
+        if inside == Path("."):
+            raise DataError(f"--rerun {rerun_path}: is the --out folder")
+        return inside
+    check_output_file(rerun_path, "--rerun", inputs=inputs)
+    return None
+
+
+def _run_recorded(seq: Sequence, cfg: SlamConfig, given, rec_path, view) -> SlamLog:
+    """The run, recorded to `rec_path` when given; view = (progress callback, ellipse scale)."""
+    progress, ellipse_scale = view
+    has_truth = seq.truth_t is not None
+    with open_recording(
+        rec_path, "slam", ellipse_scale=ellipse_scale, series=slam_panels(has_truth)
+    ) as rec:
+        if seq.truth_landmarks is not None:
+            rec.log_truth_trees(seq.truth_landmarks)
+        lg = run_slam(seq, cfg, features=given, visualiser=rec, progress=progress)
+        rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
+    return lg
+
+
+def _write_run(stage: Path, seq: Sequence, cfg: SlamConfig, lg: SlamLog, command: str) -> None:
+    """The run's files but the summary: trajectories, map, configuration, run log."""
+    write_atomic(stage / "trajectory.tum", trajectory_tum(lg.scan_t, lg.pose))
+    if seq.gps_t is not None:
+        xy = np.array([se2.compose(p, lg.antenna_pose) for p in lg.pose])
+        write_atomic(stage / "trajectory_gps_antenna.tum", trajectory_tum(lg.scan_t, xy))
+    write_atomic(stage / "trajectory.csv", trajectory_csv(lg.scan_t, lg.pose, lg.pose_cov))
+    write_atomic(
+        stage / "map.csv",
+        map_csv(
+            lg.landmark_id,
+            lg.landmark_xy,
+            lg.landmark_cov,
+            lg.landmark_first_scan,
+            lg.landmark_n_obs,
+            landmark_radii(lg),
+        ),
+    )
+    write_atomic(stage / "config.toml", config_toml(cfg, command))
+    write_run_log(stage / RUN_LOG_NAME, lg)
 
 
 SUMMARY = "summary.json"
@@ -154,11 +157,7 @@ def _str(p) -> str | None:
     return None if p is None else str(p)
 
 
-def _laser(seq: Sequence, cfg: SlamConfig) -> np.ndarray:
-    return np.asarray(seq.laser_pose if cfg.laser_pose is None else cfg.laser_pose, float)
-
-
-def summarise(lg: SlamLog, seq: Sequence, seconds: float, laser_pose=None) -> dict:
+def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
     """Counts, timings per phase, the configuration, errors against GPS (when the sequence has
     GPS) and against the truth (scans the truth covers, the first left out since the run may
     start there)."""
@@ -187,7 +186,8 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float, laser_pose=None) -> di
         **({"window": lg.window_stats} if lg.window_stats else {}),
     }
     if seq.gps_t is not None:
-        summary["gps"] = score_sequence(seq, lg.scan_t, lg.pose, laser_pose).to_dict()
+        score = score_sequence(seq, lg.scan_t, lg.pose, lg.antenna_pose)
+        summary["gps"] = {**score.to_dict(), "antenna_pose": lg.antenna_pose.tolist()}
     inside = (
         np.zeros(seq.n_scans, bool)
         if seq.truth_t is None

@@ -103,7 +103,7 @@ def _scores(run_dir: Path, problem: Problem, r: SmootherResult) -> dict:
         return {"scored": f"no: {summary['input']} is not the sequence of this run"}
     out: dict = {"scored": summary["input"]}
     if seq.gps_t is not None:
-        out["gps"] = score_sequence(seq, problem.scan_t, r.pose, problem.laser_pose).to_dict()
+        out["gps"] = score_sequence(seq, problem.scan_t, r.pose, _antenna(seq, problem)).to_dict()
     if seq.truth_t is not None:
         inside = (seq.scan_t >= seq.truth_t[0]) & (seq.scan_t <= seq.truth_t[-1])
         inside[0] = False
@@ -120,3 +120,8 @@ def _scores(run_dir: Path, problem: Problem, r: SmootherResult) -> dict:
                 "scans_scored": int(inside.sum()),
             }
     return out
+
+
+def _antenna(seq, problem) -> np.ndarray:
+    """The GPS antenna in the vehicle frame: the sequence's, else the run's laser."""
+    return seq.gps_pose if seq.gps_pose is not None else problem.laser_pose

@@ -20,7 +20,7 @@ Entities. A frame entity carries a 2D pose as a rerun transform; its children ar
                              label), lines, edges (red); the hues of the PNG figures
   world/truth/...            simulated truth: trees (white dots, true outlines) or pillars,
                              true pose (`vehicle`) and path (`path`)
-SLAM runs (slam.run's visualiser interface):
+SLAM runs (slam.run_slam's visualiser interface):
   world/vehicle              estimated pose (frame entity) with its arrow (`world/vehicle/arrow`)
   world/vehicle_ellipse      95% position ellipse, drawn `ellipse_scale` times its size
   world/path                 estimated path so far
@@ -339,7 +339,7 @@ class Recorder(NullRecorder):
             static=static,
         )
 
-    # ---- SLAM (the visualiser interface of slam.run; world frame) -------------------------------
+    # ---- SLAM (the visualiser interface of slam.run_slam; world frame) -----------------------
 
     def log_truth_trees(self, circles_xyr) -> None:
         """Simulated trees (L, 3) [x, y, r], world frame, for all times: white dots (seen at any

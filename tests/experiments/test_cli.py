@@ -195,14 +195,14 @@ def test_simulate_drive_then_slam(tmp_path):
     assert max(s["truth"]["mean_abs_error"].values()) < 0.05
     # a scan every 0.5 m of driving (about every other scan), with either association
     cfg = tmp_path / "sparse.toml"
-    cfg.write_text("min_travel_m = 0.5\n")
+    cfg.write_text("[vehicle]\nmin_travel_m = 0.5\n")
     for extra in ([], ["--window", "2"]):
         res = runner.invoke(
             app, ["slam", str(run), "--config", str(cfg), "--out", str(out), *extra]
         )
         assert res.exit_code == 0, res.output
         s = json.loads((out / "summary.json").read_text())
-        assert 20 <= s["scans_skipped"] <= 40 and s["config"]["min_travel_m"] == 0.5
+        assert 20 <= s["scans_skipped"] <= 40 and s["config"]["vehicle"]["min_travel_m"] == 0.5
         assert s["landmarks"] >= 3 and max(s["truth"]["mean_abs_error"].values()) < 0.05
 
 
@@ -214,7 +214,7 @@ def test_slam_with_the_ihgr_window(tmp_path):
     res = runner.invoke(app, ["slam", str(run), "--window", "2", "--out", str(out)])
     assert res.exit_code == 0, res.output
     s = json.loads((out / "summary.json").read_text())
-    assert s["association"] == "ihgr-window" and s["config"]["window_scans"] == 2
+    assert s["association"] == "ihgr-window" and s["config"]["association"]["window_scans"] == 2
     assert s["window"]["K"] == 2 and s["window"]["steps"] == 40 and s["landmarks"] >= 3
     assert "window_scans = 2" in (out / "config.toml").read_text()
     res = runner.invoke(app, ["slam", str(run), "--association", "ihgr-window", "--out", str(out)])
@@ -282,13 +282,13 @@ def test_smooth_without_or_with_a_corrupt_run_log_is_a_clear_error(tmp_path):
 
 def test_run_log_round_trip_and_inconsistent_content(tmp_path):
     from experiments.io.run_log import read_run_log, write_run_log
-    from slam import run as slam_run
+    from slam import run_slam
     from slam.smoother import MEAS_TENTATIVE
 
     path = tmp_path / "run.npz"
     res = runner.invoke(app, ["simulate-drive", "--scans", "40", "--seed", "1", "--out", str(path)])
     assert res.exit_code == 0, res.output
-    log = slam_run(load_sequence(path), features="geometric")
+    log = run_slam(load_sequence(path), features="geometric")
     write_run_log(tmp_path / "run_log.npz", log)
     ekf, names = read_run_log(tmp_path)
     everything, _ = read_run_log(tmp_path / "run_log.npz", measurements="all")

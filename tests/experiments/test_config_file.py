@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import tomllib
 
@@ -13,21 +12,25 @@ from experiments.cli import app
 from experiments.errors import ConfigError, DataError
 from experiments.io.config_file import PRESETS_DIR, config_toml, load_slam_config
 from slam import MapPolicy, OdometryNoise, SlamConfig, SteeringCalibration
+from slam.config import AssociationConfig, FilterConfig, MeasurementConfig, VehicleConfig
 from slam.measurement import DEFAULT_CONSTANT_NOISE, NoiseModel
 
 runner = CliRunner()
 
 CUSTOM = SlamConfig(
-    odometry_noise=OdometryNoise(0.5, 0.07),
-    steering=SteeringCalibration(gain=1.01, cubic_per_rad2=0.2),
-    measurement_noise="constant",
-    constant_noise={"bailey": NoiseModel(0.03, 0.002, 0.004, 0.0)},
-    laser_pose=(3.78, 0.5, -0.02),
-    gate_prob=0.99,
+    association=AssociationConfig(gate_prob=0.99, params={"p_detect": 0.8}),
+    measurement=MeasurementConfig(
+        noise="constant",
+        constant_noise={"bailey": NoiseModel(0.03, 0.002, 0.004, 0.0)},
+        max_range_m=40.0,
+    ),
+    vehicle=VehicleConfig(
+        odometry_noise=OdometryNoise(0.5, 0.07),
+        steering=SteeringCalibration(gain=1.01, cubic_per_rad2=0.2),
+        laser_pose=(3.78, 0.5, -0.02),
+    ),
     map_policy=MapPolicy(confirm_scans=2, drop_after_missed=3),
-    first_estimates_jacobians=True,
-    association_params={"p_detect": 0.8},
-    max_feature_range_m=40.0,
+    filter=FilterConfig(first_estimates_jacobians=True),
 )
 
 
@@ -36,40 +39,56 @@ def test_a_configuration_round_trips_through_toml(tmp_path):
     path.write_text(config_toml(CUSTOM, "a header\nover two lines"))
     back = load_slam_config(path)
     assert back == CUSTOM
-    assert back.constant_noise["bailey"] == NoiseModel(0.03, 0.002, 0.004, 0.0)
-    assert back.constant_noise["paper"] == DEFAULT_CONSTANT_NOISE["paper"]  # defaults kept
-    assert back.noise_for("bailey") == ("constant", NoiseModel(0.03, 0.002, 0.004, 0.0))
+    noise = back.measurement.constant_noise
+    assert noise["bailey"] == NoiseModel(0.03, 0.002, 0.004, 0.0)
+    assert noise["paper"] == DEFAULT_CONSTANT_NOISE["paper"]  # defaults kept
+    model = back.measurement.model_for("bailey")
+    assert (model.kind, model.constant) == ("constant", NoiseModel(0.03, 0.002, 0.004, 0.0))
     assert path.read_text().startswith("# a header\n# over two lines\n")
     # infinity survives TOML too
     inf = tmp_path / "inf.toml"
     inf.write_text(config_toml(SlamConfig()))
-    assert load_slam_config(inf).max_feature_range_m == math.inf
+    assert load_slam_config(inf).measurement.max_range_m == math.inf
 
 
 def test_partial_files_keep_the_defaults(tmp_path):
     path = tmp_path / "p.toml"
-    path.write_text("gate_prob = 0.95\n[odometry_noise]\nspeed_sigma_mps = 1\n")
+    path.write_text(
+        "[association]\ngate_prob = 0.95\n[vehicle.odometry_noise]\nspeed_sigma_mps = 1\n"
+    )
     cfg = load_slam_config(path)
-    assert cfg == dataclasses.replace(
-        SlamConfig(), gate_prob=0.95, odometry_noise=OdometryNoise(speed_sigma_mps=1.0)
+    assert cfg == SlamConfig().with_(
+        **{
+            "association.gate_prob": 0.95,
+            "vehicle.odometry_noise": OdometryNoise(speed_sigma_mps=1.0),
+        }
     )
 
 
 @pytest.mark.parametrize(
     "text, words",
     [
-        ("gate_prbo = 0.9\n", ["gate_prbo", "unknown setting"]),
-        ("[odometry_noise]\nspeed_sigma = 1.0\n", ["odometry_noise.speed_sigma", "unknown"]),
-        ('gate_prob = "high"\n', ["gate_prob", "expected a number"]),
-        ("gate_prob = 1.5\n", ["gate_prob", "(0, 1)"]),
-        ("[odometry_noise]\nspeed_sigma_mps = -0.1\n", ["speed_sigma_mps", ">= 0"]),
+        ("[association]\ngate_prbo = 0.9\n", ["association.gate_prbo", "unknown setting"]),
+        (
+            "[vehicle.odometry_noise]\nspeed_sigma = 1.0\n",
+            ["vehicle.odometry_noise.speed_sigma", "unknown"],
+        ),
+        ('[association]\ngate_prob = "high"\n', ["association.gate_prob", "expected a number"]),
+        ("[association]\ngate_prob = 1.5\n", ["association.gate_prob", "(0, 1)"]),
+        ("[vehicle.odometry_noise]\nspeed_sigma_mps = -0.1\n", ["speed_sigma_mps", ">= 0"]),
         ("[map_policy]\nconfirm_scans = 2.5\n", ["map_policy.confirm_scans", "whole number"]),
-        ("laser_pose = [1.0, 2.0]\n", ["laser_pose", "3 numbers"]),
-        ("first_estimates_jacobians = 1\n", ["first_estimates_jacobians", "true or false"]),
-        ("[constant_noise.bailey]\nrange_sigma_m = 0.1\n", ["constant_noise.bailey", "missing"]),
-        ("odometry_noise = 3\n", ["odometry_noise", "table"]),
-        ("[steering]\ngain = -1.0\n", ["SteeringCalibration.gain", "> 0"]),
-        ("[steering]\ncubic = 0.2\n", ["steering.cubic", "unknown setting"]),
+        ("[vehicle]\nlaser_pose = [1.0, 2.0]\n", ["vehicle.laser_pose", "3 numbers"]),
+        (
+            "[filter]\nfirst_estimates_jacobians = 1\n",
+            ["filter.first_estimates_jacobians", "true or false"],
+        ),
+        (
+            "[measurement.constant_noise.bailey]\nrange_sigma_m = 0.1\n",
+            ["measurement.constant_noise.bailey", "missing"],
+        ),
+        ("[vehicle]\nodometry_noise = 3\n", ["vehicle.odometry_noise", "table"]),
+        ("[vehicle.steering]\ngain = -1.0\n", ["SteeringCalibration.gain", "> 0"]),
+        ("[vehicle.steering]\ncubic = 0.2\n", ["vehicle.steering.cubic", "unknown setting"]),
     ],
 )
 def test_bad_settings_name_the_key(tmp_path, text, words):
@@ -98,11 +117,11 @@ def test_presets():
 
     assert load_slam_config("cycab") == CYCAB_SLAM == Exp2Config().slam
     # the defaults but the odometry model's pose floor, which the simulated car does not have
-    assert dataclasses.replace(CYCAB_SLAM, odometry_noise=OdometryNoise()) == SlamConfig()
+    assert CYCAB_SLAM.with_(**{"vehicle.odometry_noise": OdometryNoise()}) == SlamConfig()
     vp = load_slam_config("victoria_park_ute")
-    assert vp.first_estimates_jacobians and vp.laser_pose[:2] == (3.78, 0.5)
-    assert 0.1 < vp.odometry_noise.speed_sigma_mps < 2.0
-    assert vp.noise_for("bailey")[0] == "constant"
+    assert vp.filter.first_estimates_jacobians and vp.vehicle.laser_pose[:2] == (3.78, 0.5)
+    assert 0.1 < vp.vehicle.odometry_noise.speed_sigma_mps < 2.0
+    assert vp.measurement.model_for("bailey").kind == "constant"
 
 
 def test_cli_dump_config_reads_back(tmp_path):

@@ -381,7 +381,7 @@ def test_sweep_keeps_the_other_trials_when_one_fails(tmp_path):
 def test_example_sweep_files_parse():
     from pathlib import Path
 
-    files = sorted((Path(__file__).resolve().parents[2] / "datasets" / "configs").glob("sweep_*"))
+    files = sorted((Path(__file__).resolve().parents[2] / "datasets" / "sweeps").glob("sweep_*"))
     assert len(files) >= 3
     for f in files:
         spec = load_sweep(f)

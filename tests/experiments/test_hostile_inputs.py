@@ -252,25 +252,26 @@ def test_bailey_with_an_extractor_parameter_is_named():
     assert extract_features(_scan(), "bailey", range_sigma_m=0.1).method == "bailey"
 
 
-def test_slam_run_features_none_or_a_callable_returning_none(files):
-    import slam
-    from slam import SlamError
+def test_slam_run_features_not_features_or_a_callable_returning_none(files):
+    from slam import SlamConfig, SlamError, run_slam
+    from slam.config import StartConfig
 
     seq = load_sequence(files[1])
     with pytest.raises(SlamError, match="features: expected"):
-        slam.run(seq, features=None)
+        run_slam(seq, features=3.5)  # None is the configuration's method
     with pytest.raises(SlamError, match="features: scan 0 gave NoneType"):
-        slam.run(seq, features=lambda k, scan: None)
+        run_slam(seq, features=lambda k, scan: None)
     with pytest.raises(SlamError, match="features: item 0"):
-        slam.run(seq, features=[None] * seq.n_scans)
-    with pytest.raises(SlamError, match="initial_heading_rad"):
-        slam.run(seq, initial_heading_rad=math.nan)
+        run_slam(seq, features=[None] * seq.n_scans)
+    with pytest.raises(SlamError, match="start.initial_heading_rad"):
+        run_slam(seq, SlamConfig(start=StartConfig(initial_heading_rad=math.nan)))
 
 
 def test_presolve_no_and_max_feature_range_nan_are_refused():
     from association import AssociationError, associate
     from association.window import SlidingWindowAssociator
-    from slam import SlamConfig, SlamError
+    from slam import SlamError
+    from slam.config import MeasurementConfig
 
     z = np.array([[5.0, 0.1]])
     H = np.zeros((1, 2, 5))
@@ -282,8 +283,8 @@ def test_presolve_no_and_max_feature_range_nan_are_refused():
     ):
         with pytest.raises(AssociationError, match="presolve: must be True or False"):
             make()
-    with pytest.raises(SlamError, match="max_feature_range_m"):
-        SlamConfig(max_feature_range_m=math.nan)
+    with pytest.raises(SlamError, match="measurement.max_range_m"):
+        MeasurementConfig(max_range_m=math.nan)
 
 
 # ---- silent wrong answers ----------------------------------------------------------------------

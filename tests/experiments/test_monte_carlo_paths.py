@@ -27,7 +27,8 @@ from experiments.sim.trajectory import (
     simulate_cycab_run,
 )
 from features.types import Features
-from slam import SlamConfig, interpolate_poses, run, se2
+from slam import SlamConfig, interpolate_poses, run_slam, se2
+from slam.config import MeasurementConfig
 
 CELL = math.pi / 360  # the beam spacing
 SIGMA_B = CELL / math.sqrt(12)  # sd of an error uniform over one cell
@@ -66,15 +67,17 @@ def _quantised_features(seq) -> list:
 def _nees_in_bounds(cycab: CycabParams) -> tuple[float, float]:
     """(share of scans inside, share above) the 95% bounds of the run-averaged pose NEES."""
     cfg = SlamConfig(
-        measurement_noise="constant",
-        constant_noise={"bailey": (SIGMA_R, 0.0, SIGMA_B, 0.0)},
-        range_bias={"bailey": (0.0, 0.0)},
+        measurement=MeasurementConfig(
+            noise="constant",
+            constant_noise={"bailey": (SIGMA_R, 0.0, SIGMA_B, 0.0)},
+            range_bias={"bailey": (0.0, 0.0)},
+        )
     )
     out = []
     for g in np.random.default_rng(7).spawn(N_RUNS):
         seq = simulate_cycab_run(g, "tree_park", cycab)
         truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-        lg = run(seq, features=_quantised_features(seq), config=cfg)
+        lg = run_slam(seq, features=_quantised_features(seq), config=cfg)
         out.append(nees(pose_errors(lg.pose, truth)[1:], lg.pose_cov[1:]))
     avg = np.mean(out, axis=0)
     lo, hi = nees_bounds(N_RUNS)
@@ -158,7 +161,7 @@ def test_negative_path_variation_is_refused_by_name(name):
 def test_experiment_2s_filter_is_told_the_simulated_odometry_noise_and_no_slip():
     from experiments.paper.slam import CYCAB_SLAM, Exp2Config
 
-    sim, model = Exp2Config().cycab, Exp2Config().slam.odometry_noise
+    sim, model = Exp2Config().cycab, Exp2Config().slam.vehicle.odometry_noise
     assert Exp2Config().slam == CYCAB_SLAM
     assert (model.speed_sigma_mps, model.steer_sigma_rad) == (
         sim.speed_sigma_mps,

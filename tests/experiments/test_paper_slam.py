@@ -19,12 +19,12 @@ from experiments.paper.reproduce import run_experiments
 from experiments.paper.runner import RunContext
 from experiments.paper.slam import PAPER_TABLE3, SCAN_SETS, Exp2Config, key_figures, monte_carlo
 from experiments.paper.slam import run as run_experiment2
-from experiments.pipeline.slam import run_slam
+from experiments.pipeline.slam import run_slam_file
 from experiments.render.viz import NullRecorder, Recorder
 from experiments.sim import load_scene
 from experiments.sim.trajectory import CycabParams, simulate_cycab_run
 from features.types import Features
-from slam import NullVisualiser
+from slam import NullVisualiser, SlamConfig
 from slam.vehicle import AckermannModel, Odometry, integrate
 
 
@@ -181,7 +181,8 @@ def test_slam_command_writes_trajectory_map_and_summary(tmp_path):
     seq = simulate_cycab_run(np.random.default_rng(4), "tree_park", CycabParams(n_scans=50))
     src = save_sequence(seq, tmp_path / "run.npz")
     out = tmp_path / "out"
-    summary = run_slam(src, "geometric", "ihgr", out, tmp_path / "run.rrd", None)
+    cfg = SlamConfig().with_(**{"features.method": "geometric", "association.method": "ihgr"})
+    summary = run_slam_file(src, cfg, out, rerun_path=tmp_path / "run.rrd")
     tum = np.loadtxt(out / "trajectory.tum")
     assert tum.shape == (50, 8)
     np.testing.assert_allclose(tum[:, 0], seq.scan_t)

@@ -10,9 +10,10 @@ from support import read_recording, simulated_scan_file
 from experiments.io.sequence_file import save_sequence
 from experiments.paper.circles import pillar_monte_carlo
 from experiments.pipeline.extract import run_extract
-from experiments.pipeline.slam import run_slam
+from experiments.pipeline.slam import run_slam_file
 from experiments.render.viz import Recorder
 from experiments.sim import CycabParams, simulate_cycab_run
+from slam import SlamConfig
 
 
 def views_by_class(rec: dict, cls: str) -> list[tuple]:
@@ -29,7 +30,8 @@ def slam_recording(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("slam_rec")
     seq = simulate_cycab_run(np.random.default_rng(3), "tree_park", CycabParams(n_scans=40))
     src = save_sequence(seq, tmp / "run.npz")
-    run_slam(src, "geometric", "ihgr", tmp / "out", tmp / "run.rrd", None)
+    cfg = SlamConfig().with_(**{"features.method": "geometric", "association.method": "ihgr"})
+    run_slam_file(src, cfg, tmp / "out", rerun_path=tmp / "run.rrd")
     return read_recording(tmp / "run.rrd")
 
 
@@ -122,9 +124,9 @@ _MS_PER_SCAN = """
 import json, numpy as np
 from experiments.eval.series import slam_series
 from experiments.sim import CycabParams, simulate_cycab_run
-from slam import run
+from slam import run_slam
 seq = simulate_cycab_run(np.random.default_rng(3), "tree_park", CycabParams(n_scans=40))
-lg = run(seq, features="geometric", association="ihgr")
+lg = run_slam(seq, features="geometric", association="ihgr")
 ms = next(s for s in slam_series(lg) if s.name == "ms_per_scan").values[:, 0]
 print(json.dumps(ms.tolist()))
 """
@@ -135,7 +137,7 @@ def test_time_per_scan_panel_has_no_first_scan_spike():
     """In a fresh process (numba kernels not yet loaded, lazy imports not yet done) the
     recording's ms-a-scan series of a small simulated run: the first scans are not outliers
     (below 10x the median, or no slower than the slowest later scan), so the panel's axis
-    shows the run. Without `slam.run`'s warm-up scan 0 takes seconds against a median of ms.
+    shows the run. Without `slam.run_slam`'s warm-up scan 0 takes seconds against a median of ms.
 
     Each scan's time is its fastest in 3 fresh processes: a scan takes about 0.5 ms, and when
     other work shares the cores (a parallel test run) the process loses a time slice, some

@@ -271,13 +271,14 @@ def test_scale_measurement_noise_scales_every_sigma_and_rejects_bad_factors():
 
     cfg = load_slam_config(preset_path("victoria_park_ute"))
     half = scale_measurement_noise(cfg, 0.5)
-    assert set(half.constant_noise) == set(cfg.constant_noise)
-    for name, m in cfg.constant_noise.items():
-        h = half.constant_noise[name]
+    assert set(half.measurement.constant_noise) == set(cfg.measurement.constant_noise)
+    for name, m in cfg.measurement.constant_noise.items():
+        h = half.measurement.constant_noise[name]
         assert h.range_sigma_m == 0.5 * m.range_sigma_m
         assert h.range_sigma_per_m == 0.5 * m.range_sigma_per_m
         assert h.bearing_sigma_rad == 0.5 * m.bearing_sigma_rad
-    assert half.odometry_noise == cfg.odometry_noise and half.laser_pose == cfg.laser_pose
+    assert half.vehicle.odometry_noise == cfg.vehicle.odometry_noise
+    assert half.vehicle.laser_pose == cfg.vehicle.laser_pose
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ConfigError, match="k: the noise factor"):
             scale_measurement_noise(cfg, bad)
@@ -312,9 +313,9 @@ def test_consistency_scale_brings_nis_per_dof_to_one(vp_dir):
 def test_calibration_parameters_with_and_without_the_motion_terms():
     from experiments.paper.vp_calibration import START, config_from
 
-    plain = config_from(START[:6]).odometry_noise
+    plain = config_from(START[:6]).vehicle.odometry_noise
     assert plain.speed_sigma_per_speed == 0 and plain.steer_sigma_per_lateral_mps2 == 0
-    grown = config_from(START).odometry_noise
+    grown = config_from(START).vehicle.odometry_noise
     assert grown.speed_sigma_per_speed == pytest.approx(0.05)
     assert grown.steer_sigma_per_lateral_mps2 == pytest.approx(0.05)
     assert grown.speed_sigma_mps == plain.speed_sigma_mps == pytest.approx(0.5)
@@ -346,23 +347,24 @@ def test_calibration_writes_what_the_preset_holds():
     from experiments.paper.vp_calibration import preset_config
 
     preset = load_slam_config(preset_path("victoria_park_ute"))
-    m = preset.constant_noise["bailey"]
+    m = preset.measurement.constant_noise["bailey"]
+    odometry = preset.vehicle.odometry_noise
     theta = [
-        preset.laser_pose[2],
+        preset.vehicle.laser_pose[2],
         *np.log(
             [
-                preset.odometry_noise.speed_sigma_mps,
-                preset.odometry_noise.steer_sigma_rad,
+                odometry.speed_sigma_mps,
+                odometry.steer_sigma_rad,
                 m.range_sigma_m,
                 m.range_sigma_per_m,
                 m.bearing_sigma_rad,
-                preset.odometry_noise.speed_sigma_per_speed,
-                preset.odometry_noise.steer_sigma_per_lateral_mps2,
+                odometry.speed_sigma_per_speed,
+                odometry.steer_sigma_per_lateral_mps2,
             ]
         ),
     ]
-    assert preset.gps_start_track == "slam" and not preset.steering.is_identity
-    got = preset_config(theta, preset.steering, preset.gps_start_fit_m).to_dict()
+    assert preset.start.gps_track == "slam" and not preset.vehicle.steering.is_identity
+    got = preset_config(theta, preset.vehicle.steering, preset.start.gps_fit_m).to_dict()
     want = preset.to_dict()
 
     def flat(d, pre=""):
@@ -403,7 +405,7 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
 
     cfg = load_slam_config(preset_path("victoria_park_ute"))
     rows = vp_start.headings(load_victoria_park(vp_dir, n_scans=2000), cfg)
-    assert vp_start.derive(rows) == cfg.gps_start_fit_m
-    later = [h for d, h, _ in rows if d >= cfg.gps_start_fit_m]
+    assert vp_start.derive(rows) == cfg.start.gps_fit_m
+    later = [h for d, h, _ in rows if d >= cfg.start.gps_fit_m]
     assert max(later) - min(later) <= 2 * vp_start.TOLERANCE_DEG
     assert rows[-1][0] > 900  # scans 1-2000 drive about a kilometre

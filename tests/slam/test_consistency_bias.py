@@ -10,7 +10,9 @@ import pytest
 
 from experiments.eval.poses import nees, nees_bounds, pose_errors
 from features.types import Features
-from slam import SlamConfig, interpolate_poses, run, se2
+from slam import SlamConfig, interpolate_poses, run_slam, se2
+from slam.config import MeasurementConfig, StartConfig
+from slam.measurement import NoiseModel
 from slam.vehicle import OdometryNoise
 
 from .test_run import LASER, drive_sequence
@@ -19,8 +21,7 @@ TREES = np.array(
     [[8.0, 4.0], [12.0, -3.0], [16.0, 5.0], [20.0, -4.0], [6.0, 9.0], [3.0, 12.0], [-2.0, 10.0]]
 )
 SIGMA_R, SIGMA_B = 0.01, 0.002
-NOISE = {"range_sigma_m": SIGMA_R, "range_sigma_per_m": 0.0, "bearing_sigma_rad": SIGMA_B}
-NOISE["cross_range_sigma_m"] = 0.0
+NOISE = NoiseModel(SIGMA_R, 0.0, SIGMA_B, 0.0)  # the constant model of the "paper" circles
 BIAS_M = -0.03  # injected: every centre 3 cm too close, in every scan (fully correlated)
 
 
@@ -64,14 +65,16 @@ def runs():
 @pytest.mark.parametrize("told", [True, False], ids=["bias-known", "bias-unknown"])
 def test_known_range_bias_keeps_the_pose_nees_inside_its_bounds(runs, told):
     cfg = SlamConfig(
-        measurement_noise="constant",
-        range_bias={"paper": (BIAS_M if told else 0.0, 0.0)},
-        initial_pose_sigma=(0.0, 0.0, 0.0),
-        **NOISE,
+        measurement=MeasurementConfig(
+            noise="constant",
+            constant_noise={"paper": NOISE},
+            range_bias={"paper": (BIAS_M if told else 0.0, 0.0)},
+        ),
+        start=StartConfig(initial_pose_sigma=(0.0, 0.0, 0.0)),
     )
     e_runs = []
     for seq, truth, feats in runs:
-        lg = run(seq, features=feats, config=cfg)
+        lg = run_slam(seq, features=feats, config=cfg)
         assert lg.landmark_xy.shape[0] == TREES.shape[0]
         e = pose_errors(lg.pose, truth)
         e_runs.append(nees(e[1:], lg.pose_cov[1:]))

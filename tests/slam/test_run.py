@@ -1,4 +1,4 @@
-"""slam.run: the loop on whole sequences (start, dead reckoning, map management, errors)."""
+"""slam.run_slam: the loop on whole sequences (start, dead reckoning, map management, errors)."""
 
 from __future__ import annotations
 
@@ -18,17 +18,32 @@ from slam import (
     SlamError,
     SteeringCalibration,
     interpolate_poses,
-    run,
+    run_slam,
     se2,
 )
+from slam.config import AssociationConfig, MeasurementConfig, StartConfig, VehicleConfig
 from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT
 from slam.mapping import Tentatives
-from slam.measurement import DEFAULT_CONSTANT_NOISE, DEFAULT_FIT_FLOOR
+from slam.measurement import DEFAULT_CONSTANT_NOISE, DEFAULT_FIT_FLOOR, NoiseModel
 from slam.vehicle import AckermannModel, Odometry, integrate
 
 CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
 LASER = (1.55, 0.0, 0.0)
-EXACT = SlamConfig(measurement_noise="constant")
+EXACT = SlamConfig(measurement=MeasurementConfig(noise="constant"))
+# The constant noise of the "paper" circles the tests make: 1 cm in range, 1 mrad in bearing;
+# TIGHT_RB gives range and bearing only and keeps the paper model's cross-range term.
+TIGHT = NoiseModel(0.01, 0.0, 0.001, 0.0)
+TIGHT_RB = DEFAULT_CONSTANT_NOISE["paper"]._replace(
+    range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001
+)
+
+
+def paper_noise(model: NoiseModel, **settings) -> SlamConfig:
+    """The built-in configuration with `model` as the constant noise of "paper" circles, and
+    other `settings` by dotted path (`SlamConfig.with_`)."""
+    return SlamConfig(measurement=MeasurementConfig(constant_noise={"paper": model})).with_(
+        **settings
+    )
 
 
 def drive_sequence(
@@ -66,7 +81,7 @@ def drive_sequence(
 @pytest.mark.parametrize("steer", [0.0, 0.3], ids=["straight", "circle"])
 def test_exact_odometry_without_features_reproduces_the_truth(steer):
     seq = drive_sequence(1.5, steer)
-    log = run(seq, features="paper")
+    log = run_slam(seq, features="paper")
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
     err = log.pose - truth
     err[:, 2] = (err[:, 2] + np.pi) % (2 * np.pi) - np.pi
@@ -117,17 +132,7 @@ LANDMARKS = np.array([[10.0, 3.0], [14.0, -4.0], [20.0, 6.0], [26.0, -2.0]])
 def test_landmarks_join_the_map_after_three_scans_and_stay_unique(method):
     seq = drive_sequence(1.5, 0.0, n_scans=30)
     feats = point_features(seq, LANDMARKS, np.random.default_rng(0))
-    log = run(
-        seq,
-        features=feats,
-        association=method,
-        config=SlamConfig(
-            range_sigma_m=0.01,
-            range_sigma_per_m=0.0,
-            bearing_sigma_rad=0.001,
-            cross_range_sigma_m=0.0,
-        ),
-    )
+    log = run_slam(seq, features=feats, association=method, config=paper_noise(TIGHT))
     assert log.association_method == method
     # every landmark seen from scan 0 is a tentative at 0, seen again at 1, confirmed at 2
     first = log.meas_scan == 0
@@ -147,7 +152,7 @@ def test_a_false_feature_seen_twice_never_joins_the_map():
     seq = drive_sequence(1.5, 0.0, n_scans=20)
     ghost = {5: [(6.0, 1.0)], 6: [(5.76, 1.0)]}  # a bush seen in two scans only
     feats = point_features(seq, LANDMARKS, np.random.default_rng(1), extra=ghost)
-    log = run(seq, features=feats)
+    log = run_slam(seq, features=feats)
     assert log.landmark_xy.shape[0] == 4
     at5 = (log.meas_scan == 5) & (log.meas_feature == log.meas_feature[log.meas_scan == 5].max())
     at6 = (log.meas_scan == 6) & (log.meas_feature == log.meas_feature[log.meas_scan == 6].max())
@@ -179,19 +184,16 @@ def test_ambiguous_measurement_is_not_a_new_landmark():
     p = f.circle_params.copy()
     p[0, :2] *= 1.0 + 0.05 / np.hypot(*p[0, :2])
     feats[8] = dataclasses.replace(f, circle_params=p)
-    cfg = SlamConfig(
-        range_sigma_m=0.01,
-        range_sigma_per_m=0.0,
-        bearing_sigma_rad=0.001,
-        cross_range_sigma_m=0.0,
-        gate_prob=0.99,
-        new_feature_gate_prob=0.99999999,
+    cfg = paper_noise(
+        TIGHT, **{"association.gate_prob": 0.99, "association.new_feature_gate_prob": 0.99999999}
     )
-    log = run(seq, features=feats, config=cfg)
+    log = run_slam(seq, features=feats, config=cfg)
     assert log.meas_status[log.meas_scan == 8][0] == AMBIGUOUS
     assert log.landmark_xy.shape[0] == 1
     # with both gates equal the same measurement starts a (duplicate) tentative feature
-    log = run(seq, features=feats, config=dataclasses.replace(cfg, new_feature_gate_prob=0.99))
+    log = run_slam(
+        seq, features=feats, config=cfg.with_(**{"association.new_feature_gate_prob": 0.99})
+    )
     assert log.meas_status[log.meas_scan == 8][0] == NEW_TENTATIVE
 
 
@@ -202,16 +204,16 @@ def test_start_from_gps_with_heading_from_motion_or_option():
     c, s = math.cos(0.3), math.sin(0.3)
     xy = np.array([2.0, -1.0]) + np.outer(2.0 * t, [c, s]) + np.array([c * 1.55, s * 1.55])
     g = dataclasses.replace(seq, gps_t=t, gps_xy=xy)
-    log = run(g)
+    log = run_slam(g)
     assert log.start == "gps"
     np.testing.assert_allclose(log.pose[0], [2.0, -1.0, 0.3], atol=1e-9)
     assert log.pose_cov[0, 0, 0] == pytest.approx(1.0)  # gps_sigma_m = 1 m
-    log = run(g, initial_heading_rad=0.5)
+    log = run_slam(g, SlamConfig(start=StartConfig(initial_heading_rad=0.5)))
     assert log.pose[0, 2] == pytest.approx(0.5)
     still = dataclasses.replace(seq, gps_t=t[:3], gps_xy=np.zeros((3, 2)))
     with pytest.raises(SlamError, match="start heading is unknown"):
-        run(still)
-    origin = run(seq)
+        run_slam(still)
+    origin = run_slam(seq)
     assert origin.start == "origin" and np.all(origin.pose[0] == 0)
 
 
@@ -237,15 +239,11 @@ def test_gps_start_from_a_first_pass_outlasts_drifting_dead_reckoning():
         gps_t=t,
         gps_xy=xy,
     )
-    cfg = SlamConfig(
-        range_sigma_m=0.01,
-        range_sigma_per_m=0.0,
-        bearing_sigma_rad=0.001,
-        gps_start_fit_m=60.0,
-        initial_heading_sigma_rad=math.radians(1.0),
+    cfg = paper_noise(
+        TIGHT_RB, **{"start.gps_fit_m": 60.0, "start.heading_sigma_rad": math.radians(1.0)}
     )
-    dr = run(seq, features=feats, config=cfg)
-    two = run(seq, features=feats, config=dataclasses.replace(cfg, gps_start_track="slam"))
+    dr = run_slam(seq, features=feats, config=cfg)
+    two = run_slam(seq, features=feats, config=cfg.with_(**{"start.gps_track": "slam"}))
     assert dr.start == two.start == "gps"
     dr_err = abs(dr.pose[0, 2] - 0.3)
     two_err = abs(two.pose[0, 2] - 0.3)
@@ -254,8 +252,8 @@ def test_gps_start_from_a_first_pass_outlasts_drifting_dead_reckoning():
     dr_off, two_off = (np.hypot(*(g.pose[0, :2] - [2.0, -1.0])) for g in (dr, two))
     assert two_off < 0.2 < dr_off  # measured 0.16 and 1.60 m
     assert two.pose_cov[0, 2, 2] == pytest.approx(math.radians(1.0) ** 2)  # the floor
-    with pytest.raises(SlamError, match="gps_start_track: expected one of"):
-        SlamConfig(gps_start_track="gps")
+    with pytest.raises(SlamError, match="start.gps_track: expected one of"):
+        StartConfig(gps_track="gps")
 
 
 def test_gps_start_to_track_checks_its_track():
@@ -288,7 +286,7 @@ class Recording(NullVisualiser):
 def test_visualiser_receives_every_scan():
     seq = drive_sequence(1.5, 0.0, n_scans=10)
     vis = Recording()
-    run(seq, features=point_features(seq, LANDMARKS, np.random.default_rng(3)), visualiser=vis)
+    run_slam(seq, features=point_features(seq, LANDMARKS, np.random.default_rng(3)), visualiser=vis)
     for name in (
         "set_scan",
         "log_scan",
@@ -308,45 +306,45 @@ def test_visualiser_receives_every_scan():
 def test_bad_runs_give_clear_errors():
     seq = drive_sequence(1.0, 0.0, n_scans=5)
     with pytest.raises(SlamError, match="expected a slam.Sequence"):
-        run(SimpleNamespace(**{f.name: getattr(seq, f.name) for f in dataclasses.fields(seq)}))
+        run_slam(SimpleNamespace(**{f.name: getattr(seq, f.name) for f in dataclasses.fields(seq)}))
     with pytest.raises(SlamError, match="missing odometry"):
-        run(dataclasses.replace(seq, odo_t=None, odo_speed=None, odo_steer=None))
+        run_slam(dataclasses.replace(seq, odo_t=None, odo_speed=None, odo_steer=None))
     with pytest.raises(SlamError, match="missing vehicle"):
-        run(dataclasses.replace(seq, vehicle=None))
+        run_slam(dataclasses.replace(seq, vehicle=None))
     t = np.arange(17) * 0.05
     gap = np.concatenate([t[:3], t[12:]])  # no odometry from 0.10 s to 0.60 s
     with pytest.raises(SlamError, match=r"no odometry from 0.100 s to 0.600 s"):
-        run(
+        run_slam(
             dataclasses.replace(
                 seq, odo_t=gap, odo_speed=np.ones(gap.size), odo_steer=np.zeros(gap.size)
             ),
-            config=SlamConfig(max_odometry_gap_s=0.3),
+            config=SlamConfig(vehicle=VehicleConfig(max_odometry_gap_s=0.3)),
         )
     with pytest.raises(SlamError, match="ends at"):
-        run(
+        run_slam(
             dataclasses.replace(seq, odo_t=t[:4], odo_speed=np.ones(4), odo_steer=np.zeros(4)),
-            config=SlamConfig(max_odometry_gap_s=0.3),
+            config=SlamConfig(vehicle=VehicleConfig(max_odometry_gap_s=0.3)),
         )
     with pytest.raises(SlamError, match="3 precomputed feature sets for 5 scans"):
-        run(seq, features=[Features.empty()] * 3)
+        run_slam(seq, features=[Features.empty()] * 3)
     with pytest.raises(SlamError, match="method"):
-        run(seq, association="hungarian")
+        run_slam(seq, association="hungarian")
     with pytest.raises(SlamError, match="SlamConfig"):
-        run(seq, config={"gate_prob": 0.9})
+        run_slam(seq, config={"gate_prob": 0.9})
     # the Sequence itself refuses unsorted times with the variable's name
     with pytest.raises(SlamError, match="scan_t"):
         dataclasses.replace(seq, scan_t=np.array([0, 1, 1, 2, 3.0]))
 
 
 def test_config_validation():
-    with pytest.raises(ValueError, match="measurement_noise"):
-        SlamConfig(measurement_noise="fitted")
-    with pytest.raises(ValueError, match="gate_prob"):
-        SlamConfig(gate_prob=1.0)
-    kind, model = SlamConfig().noise_for("geometric")
-    assert kind == "fit"
-    kind, model = SlamConfig(range_sigma_m=0.5).noise_for("bailey")
-    assert kind == "constant" and model[0] == 0.5
+    with pytest.raises(ValueError, match="measurement.noise"):
+        MeasurementConfig(noise="fitted")
+    with pytest.raises(ValueError, match="association.gate_prob"):
+        AssociationConfig(gate_prob=1.0)
+    assert SlamConfig().measurement.model_for("geometric").kind == "fit"
+    wide = DEFAULT_CONSTANT_NOISE["bailey"]._replace(range_sigma_m=0.5)
+    model = MeasurementConfig(constant_noise={"bailey": wide}).model_for("bailey")
+    assert model.kind == "constant" and model.constant[0] == 0.5
 
 
 def test_steering_calibration_equals_calibrated_readings():
@@ -356,30 +354,30 @@ def test_steering_calibration_equals_calibrated_readings():
     seq = drive_sequence(1.5, 0.25, n_scans=30)
     feats = point_features(seq, LANDMARKS, np.random.default_rng(4))
     cal = SteeringCalibration(offset_rad=0.002, gain=1.02, cubic_per_rad2=0.2)
-    cfg = SlamConfig(range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001)
-    got = run(seq, features=feats, config=dataclasses.replace(cfg, steering=cal))
+    cfg = paper_noise(TIGHT_RB)
+    got = run_slam(seq, features=feats, config=cfg.with_(**{"vehicle.steering": cal}))
     pre = dataclasses.replace(seq, odo_steer=cal.apply(seq.odo_steer))
-    want = run(pre, features=feats, config=cfg)
+    want = run_slam(pre, features=feats, config=cfg)
     np.testing.assert_array_equal(got.pose, want.pose)
     np.testing.assert_array_equal(got.final_P, want.final_P)
-    plain = run(seq, features=feats, config=cfg)
+    plain = run_slam(seq, features=feats, config=cfg)
     assert np.abs(plain.pred_pose[1:, 2] - got.pred_pose[1:, 2]).max() > 1e-4  # it matters
-    wild = dataclasses.replace(cfg, steering=SteeringCalibration(cubic_per_rad2=100.0))
-    with pytest.raises(SlamError, match=r"SlamConfig.steering: turns odo_steer\[0\] = 0.25 rad"):
-        run(seq, features=feats, config=wild)
+    wild = cfg.with_(**{"vehicle.steering": SteeringCalibration(cubic_per_rad2=100.0)})
+    with pytest.raises(SlamError, match=r"vehicle.steering: turns odo_steer\[0\] = 0.25 rad"):
+        run_slam(seq, features=feats, config=wild)
 
 
 def test_truth_that_starts_after_the_first_scan_is_not_the_start():
     seq = drive_sequence(1.5, 0.1)
     late = dataclasses.replace(seq, truth_t=seq.truth_t[20:], truth_pose=seq.truth_pose[20:])
-    log = run(late, features="paper")
+    log = run_slam(late, features="paper")
     assert log.start == "origin"
     np.testing.assert_allclose(log.pose[0], [0.0, 0.0, 0.0], atol=1e-12)
 
 
 def test_initial_heading_does_not_override_the_truth_start():
     seq = drive_sequence(1.5, 0.0)
-    log = run(seq, features="paper", initial_heading_rad=2.0)
+    log = run_slam(seq, SlamConfig(start=StartConfig(initial_heading_rad=2.0)), features="paper")
     assert log.start == "truth" and log.pose[0, 2] == pytest.approx(0.3, abs=1e-12)
 
 
@@ -441,8 +439,8 @@ def as_detections(seq: Sequence, feats: list, method: str) -> Sequence:
 def test_detections_drive_the_filter_exactly_as_the_same_circles(method):
     seq = drive_sequence(1.5, 0.1, n_scans=40)
     feats = point_features(seq, LANDMARKS, np.random.default_rng(7), extra={5: [(6.0, 1.0)]})
-    by_features = run(seq, features=feats, association=method)
-    by_detections = run(
+    by_features = run_slam(seq, features=feats, association=method)
+    by_detections = run_slam(
         as_detections(seq, feats, "paper"), features="detections", association=method
     )
     assert by_detections.features_method == "paper"
@@ -459,29 +457,39 @@ def test_detections_noise_model_and_errors():
     det = as_detections(seq, feats, "bailey")
     cov = np.array([np.diag([0.04**2, 0.002**2])] * det.det_scan.size)
     with_cov = dataclasses.replace(det, det_cov=cov)
-    lg = run(with_cov, features="detections")  # auto: the detections' own covariance + floors
+    lg = run_slam(with_cov, features="detections")  # auto: the detections' own covariance + floors
     f_r, f_b = DEFAULT_FIT_FLOOR
     np.testing.assert_allclose(lg.meas_R, cov + np.diag([f_r**2, f_b**2]))
-    no_floor = SlamConfig(fit_floor_range_m=0.0, fit_floor_bearing_rad=0.0)
-    np.testing.assert_allclose(run(with_cov, features="detections", config=no_floor).meas_R, cov)
-    lg = run(with_cov, features="detections", config=SlamConfig(measurement_noise="constant"))
+    no_floor = SlamConfig(
+        measurement=MeasurementConfig(fit_floor_range_m=0.0, fit_floor_bearing_rad=0.0)
+    )
+    np.testing.assert_allclose(
+        run_slam(with_cov, features="detections", config=no_floor).meas_R, cov
+    )
+    lg = run_slam(
+        with_cov,
+        features="detections",
+        config=SlamConfig().with_(**{"measurement.noise": "constant"}),
+    )
     z = lg.meas_z
     s_r, s_rm = DEFAULT_CONSTANT_NOISE["bailey"][:2]  # the bailey constant model
     expected = s_r + s_rm * z[:, 0]
     np.testing.assert_allclose(np.sqrt(lg.meas_R[:, 0, 0]), expected)
     with pytest.raises(SlamError, match="'fit' needs det_cov"):
-        run(det, features="detections", config=SlamConfig(measurement_noise="fit"))
+        run_slam(
+            det, features="detections", config=SlamConfig().with_(**{"measurement.noise": "fit"})
+        )
     # circles with a zero covariance, their own ("fit") noise and no floors: named before the
     # loop hands them to the (unchecked) association
-    fit_no_floor = dataclasses.replace(no_floor, measurement_noise="fit")
+    fit_no_floor = no_floor.with_(**{"measurement.noise": "fit"})
     with pytest.raises(SlamError, match="scan 0, feature 0 has a covariance R that is not posi"):
-        run(seq, features=feats, config=fit_no_floor)
+        run_slam(seq, features=feats, config=fit_no_floor)
     with pytest.raises(SlamError, match="has none"):
-        run(seq, features="detections")
+        run_slam(seq, features="detections")
     no_ranges = dataclasses.replace(det, scan_ranges=None, scan_n_beams=361)
-    assert run(no_ranges, features="detections").landmark_xy.shape[0] == 4
+    assert run_slam(no_ranges, features="detections").landmark_xy.shape[0] == 4
     with pytest.raises(SlamError, match="extracts from raw scans"):
-        run(no_ranges, features="paper")
+        run_slam(no_ranges, features="paper")
 
 
 def test_config_pickles_with_its_read_only_tables():
@@ -490,12 +498,14 @@ def test_config_pickles_with_its_read_only_tables():
     import pickle
 
     cfg = SlamConfig(
-        range_bias={"paper": (-0.01, 0.001)}, constant_noise={"paper": (0.01, 0, 0, 0)}
+        measurement=MeasurementConfig(
+            range_bias={"paper": (-0.01, 0.001)}, constant_noise={"paper": (0.01, 0, 0, 0)}
+        )
     )
     back = pickle.loads(pickle.dumps(cfg))
     assert back == cfg
-    assert back.range_bias_for("paper") == (-0.01, 0.001)
-    assert tuple(back.constant_noise["paper"]) == (0.01, 0, 0, 0)
+    assert back.measurement.model_for("paper").range_bias == (-0.01, 0.001)
+    assert tuple(back.measurement.constant_noise["paper"]) == (0.01, 0, 0, 0)
 
 
 def test_warm_up_takes_the_first_call_costs_out_of_the_timed_loop(monkeypatch):
@@ -504,7 +514,9 @@ def test_warm_up_takes_the_first_call_costs_out_of_the_timed_loop(monkeypatch):
     timing carries that cost; without it scan 0 does. The estimate is the same either way."""
     import importlib
 
-    mod = importlib.import_module("slam.run")
+    from slam.maps import TentativeMap
+
+    mod = importlib.import_module("slam.loop")  # its clock: the steps' timing
     clock = SimpleNamespace(t=0.0, seen=set())
     monkeypatch.setattr(mod, "time", SimpleNamespace(perf_counter=lambda: clock.t))
 
@@ -516,14 +528,22 @@ def test_warm_up_takes_the_first_call_costs_out_of_the_timed_loop(monkeypatch):
 
         return step
 
-    for name in ("_predict", "_measure", "_associate", "_update", "_manage"):
-        monkeypatch.setattr(mod, name, charged(name, getattr(mod, name)))
+    # the five steps: the loop's own predict, measure and update, the map manager's
+    # associate and manage
+    for owner, name in (
+        (mod.Slam, "predict"),
+        (mod.Slam, "measure"),
+        (TentativeMap, "associate"),
+        (mod.Slam, "update"),
+        (TentativeMap, "manage"),
+    ):
+        monkeypatch.setattr(owner, name, charged(name, getattr(owner, name)))
     seq = drive_sequence(1.5, 0.0, n_scans=30)
     feats = point_features(seq, LANDMARKS, np.random.default_rng(0))
-    warm = run(seq, features=feats)
+    warm = run_slam(seq, features=feats)
     assert warm.timing_s["total"].max() == 5.0  # five steps of 1 s on every scan
     clock.seen.clear()
-    cold = run(seq, features=feats, warm_up=False)
+    cold = run_slam(seq, features=feats, warm_up=False)
     assert cold.timing_s["total"][0] == 5000.0  # every step's first call, on scan 0
     for name in ("pose", "pose_cov", "landmark_xy", "scan_nis", "meas_status"):
         np.testing.assert_array_equal(getattr(warm, name), getattr(cold, name), err_msg=name)
@@ -554,10 +574,10 @@ def test_pruning_removes_a_mapped_ghost_the_laser_stops_seeing_and_keeps_the_tre
     feats = point_features(
         seq, LANDMARKS, np.random.default_rng(2), extra=_in_laser_frame(seq, bush, (2, 3, 4))
     )
-    base = run(seq, features=feats)
+    base = run_slam(seq, features=feats)
     assert base.landmark_xy.shape[0] == 5  # the bush is a landmark for good
     policy = MapPolicy(prune_after_expected=5, prune_hit_ratio=0.3, prune_range_m=40.0)
-    log = run(seq, features=feats, config=SlamConfig(map_policy=policy))
+    log = run_slam(seq, features=feats, config=SlamConfig(map_policy=policy))
     assert log.n_map[8] == 5 and log.n_map[9] == 4 and log.n_map[-1] == 4
     d = np.hypot(*(log.landmark_xy[:, None, :] - LANDMARKS[None]).transpose(2, 0, 1))
     assert np.all(d.min(axis=1) < 0.05) and len(set(d.argmin(axis=1))) == 4
@@ -568,7 +588,7 @@ def test_pruning_removes_a_mapped_ghost_the_laser_stops_seeing_and_keeps_the_tre
     assert np.isin(pb.meas_landmark, log.landmark_id).all()
     # beyond the pruning range the bush is never expected, so it stays
     near = MapPolicy(prune_after_expected=5, prune_hit_ratio=0.3, prune_range_m=20.0)
-    assert run(seq, features=feats, config=SlamConfig(map_policy=near)).n_map[-1] == 5
+    assert run_slam(seq, features=feats, config=SlamConfig(map_policy=near)).n_map[-1] == 5
 
 
 @pytest.mark.parametrize(
@@ -596,8 +616,8 @@ def test_scans_at_rest_are_skipped_as_if_they_were_not_there():
 
     seq = drive_sequence(1.5, 0.05, stop=(12, 20))
     feats = point_features(seq, LANDMARKS, np.random.default_rng(2))
-    cfg = SlamConfig(range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001)
-    skip = run(seq, features=feats, config=dataclasses.replace(cfg, min_travel_m=0.001))
+    cfg = paper_noise(TIGHT_RB)
+    skip = run_slam(seq, features=feats, config=cfg.with_(**{"vehicle.min_travel_m": 0.001}))
     rest = np.arange(13, 21)  # scan k's interval holds samples 4k - 4 .. 4k - 1; 48-79 are 0
     at_rest = np.isin(skip.meas_scan, rest)
     assert at_rest.any() and np.all(skip.meas_status[at_rest] == SKIPPED)
@@ -607,15 +627,15 @@ def test_scans_at_rest_are_skipped_as_if_they_were_not_there():
     np.testing.assert_array_equal(skip.pose[rest], np.repeat(skip.pose[12:13], rest.size, 0))
     keep = np.setdiff1d(np.arange(seq.n_scans), rest)
     cut = dataclasses.replace(seq, scan_t=seq.scan_t[keep], scan_ranges=seq.scan_ranges[keep])
-    ref = run(cut, features=[feats[k] for k in keep], config=cfg)
+    ref = run_slam(cut, features=[feats[k] for k in keep], config=cfg)
     np.testing.assert_allclose(skip.pose[keep], ref.pose, atol=1e-9)
     np.testing.assert_allclose(skip.final_P, ref.final_P, atol=1e-12)
     np.testing.assert_allclose(skip.landmark_xy, ref.landmark_xy, atol=1e-9)
     # every scan is used by default, and a longer minimum uses every other scan (0.3 m each)
-    every = run(seq, features=feats, config=cfg)
+    every = run_slam(seq, features=feats, config=cfg)
     assert not np.any(every.meas_status == SKIPPED)
-    half = run(seq, features=feats, config=dataclasses.replace(cfg, min_travel_m=0.5))
+    half = run_slam(seq, features=feats, config=cfg.with_(**{"vehicle.min_travel_m": 0.5}))
     used = np.flatnonzero(~np.isnan(half.scan_nis))
     assert used.size > 5 and np.all(np.diff(used[used < 12]) == 2)
-    with pytest.raises(SlamError, match="min_travel_m"):
-        SlamConfig(min_travel_m=-1.0)
+    with pytest.raises(SlamError, match="vehicle.min_travel_m"):
+        VehicleConfig(min_travel_m=-1.0)

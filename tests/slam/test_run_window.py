@@ -1,4 +1,4 @@
-"""slam.run with association "ihgr-window": the K-scan IHGR window inside the loop."""
+"""slam.run_slam with association "ihgr-window": the K-scan IHGR window inside the loop."""
 
 from __future__ import annotations
 
@@ -7,27 +7,25 @@ import dataclasses
 import numpy as np
 import pytest
 
-from slam import SlamConfig, SlamError, run
+from slam import SlamConfig, SlamError, run_slam
+from slam.config import AssociationConfig, MeasurementConfig
 from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE
 from slam.smoother import problem_from_log
 
-from .test_run import LANDMARKS, drive_sequence, point_features
+from .test_run import LANDMARKS, TIGHT, drive_sequence, point_features
 
-TIGHT = {
-    "range_sigma_m": 0.01,
-    "range_sigma_per_m": 0.0,
-    "bearing_sigma_rad": 0.001,
-    "cross_range_sigma_m": 0.0,
-}
+
+def window(K: int, noise=None) -> SlamConfig:
+    """The K-scan window, and `noise` as the constant noise of the tests' "paper" circles."""
+    m = MeasurementConfig() if noise is None else MeasurementConfig(constant_noise={"paper": noise})
+    return SlamConfig(association=AssociationConfig(window_scans=K), measurement=m)
 
 
 @pytest.mark.parametrize("K", [2, 3, 4])
 def test_window_maps_each_landmark_once_from_its_track(K):
     seq = drive_sequence(1.5, 0.0, n_scans=30)
     feats = point_features(seq, LANDMARKS, np.random.default_rng(0))
-    log = run(
-        seq, features=feats, association="ihgr-window", config=SlamConfig(window_scans=K, **TIGHT)
-    )
+    log = run_slam(seq, features=feats, association="ihgr-window", config=window(K, TIGHT))
     assert log.association_method == "ihgr-window"
     need = min(3, K)  # the map policy's 3 sightings, at most the window's K scans
     for k in range(need - 1):  # first sightings stay open in the window
@@ -54,7 +52,7 @@ def test_window_does_not_map_a_ghost_seen_in_two_scans():
     seq = drive_sequence(1.5, 0.0, n_scans=20)
     ghost = {5: [(6.0, 1.0)], 6: [(5.76, 1.0)]}  # a bush seen in two scans only
     feats = point_features(seq, LANDMARKS, np.random.default_rng(1), extra=ghost)
-    log = run(seq, features=feats, association="ihgr-window", config=SlamConfig(window_scans=3))
+    log = run_slam(seq, features=feats, association="ihgr-window", config=window(3))
     assert log.landmark_xy.shape[0] == 4
     for k in (5, 6):
         last = (log.meas_scan == k) & (
@@ -62,7 +60,7 @@ def test_window_does_not_map_a_ghost_seen_in_two_scans():
         )
         assert log.meas_status[last][0] == NEW_TENTATIVE
     # with K = 2 two sightings are enough: the window maps it (the price of a short window)
-    log2 = run(seq, features=feats, association="ihgr-window", config=SlamConfig(window_scans=2))
+    log2 = run_slam(seq, features=feats, association="ihgr-window", config=window(2))
     assert log2.landmark_xy.shape[0] == 5
 
 
@@ -81,8 +79,8 @@ def test_window_ignores_an_ambiguous_measurement_near_a_mapped_landmark():
         circle_beams=np.zeros((len(params), 2), np.int64),
         circle_rms_m=np.zeros(len(params)),
     )
-    cfg = SlamConfig(window_scans=3, **{**TIGHT, "range_sigma_m": 0.002, "bearing_sigma_rad": 2e-4})
-    log = run(seq, features=feats, association="ihgr-window", config=cfg)
+    cfg = window(3, TIGHT._replace(range_sigma_m=0.002, bearing_sigma_rad=2e-4))
+    log = run_slam(seq, features=feats, association="ihgr-window", config=cfg)
     row = (log.meas_scan == k) & (log.meas_feature == len(params) - 1)
     assert log.meas_status[row][0] == AMBIGUOUS
     assert log.landmark_xy.shape[0] == 4
@@ -113,9 +111,9 @@ def test_window_decisions_do_not_depend_on_measurement_order():
                 circle_rms_m=f.circle_rms_m[p],
             )
         )
-    cfg = SlamConfig(window_scans=3)
-    a = run(seq, features=feats, association="ihgr-window", config=cfg)
-    b = run(seq, features=shuffled, association="ihgr-window", config=cfg)
+    cfg = window(3)
+    a = run_slam(seq, features=feats, association="ihgr-window", config=cfg)
+    b = run_slam(seq, features=shuffled, association="ihgr-window", config=cfg)
     assert a.landmark_xy.shape[0] == b.landmark_xy.shape[0] >= 6
     np.testing.assert_allclose(a.pose, b.pose, atol=1e-9)
     np.testing.assert_allclose(
@@ -136,13 +134,13 @@ def test_window_decisions_do_not_depend_on_measurement_order():
 def test_window_settings_are_checked():
     seq = drive_sequence(1.5, 0.0, n_scans=5)
     feats = point_features(seq, LANDMARKS, np.random.default_rng(0))
-    with pytest.raises(SlamError, match="window_scans"):
-        SlamConfig(window_scans=0)
-    with pytest.raises(SlamError, match="window_scans"):
-        SlamConfig.from_dict({"window_scans": 2.5})
-    assert SlamConfig.from_dict({"window_scans": 4}).window_scans == 4
-    bad = SlamConfig(association_params={"max_nodes": 10})
+    with pytest.raises(SlamError, match="association.window_scans"):
+        AssociationConfig(window_scans=0)
+    with pytest.raises(SlamError, match="association.window_scans"):
+        SlamConfig.from_dict({"association": {"window_scans": 2.5}})
+    assert SlamConfig.from_dict({"association": {"window_scans": 4}}).association.window_scans == 4
+    bad = SlamConfig(association=AssociationConfig(params={"max_nodes": 10}))
     with pytest.raises(SlamError, match="max_nodes"):
-        run(seq, features=feats, association="ihgr-window", config=bad)
+        run_slam(seq, features=feats, association="ihgr-window", config=bad)
     with pytest.raises(SlamError, match="ihgr-window"):
-        run(seq, features=feats, association="window")
+        run_slam(seq, features=feats, association="window")

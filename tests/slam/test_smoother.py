@@ -11,8 +11,10 @@ import pytest
 from support import num_jac
 
 from features.types import Features
-from slam import SlamConfig, SlamError, interpolate_poses, run, se2
+from slam import SlamConfig, SlamError, interpolate_poses, run_slam, se2
+from slam.config import MeasurementConfig, StartConfig, VehicleConfig
 from slam.ekf import Filter, initial_state
+from slam.measurement import NoiseModel
 from slam.smoother import (
     MEAS_INIT,
     MEAS_UPDATE,
@@ -147,14 +149,11 @@ def simulated_run(seed: int = 1, outlier=None, n_scans: int = 60, steer: float =
     scan_truth = interpolate_poses(seq.scan_t, t, truth)
     feats = point_features(scan_truth, seq.scan_t, rng, outlier=outlier)
     cfg = SlamConfig(
-        range_sigma_m=0.05,
-        range_sigma_per_m=0.0,
-        bearing_sigma_rad=0.005,
-        cross_range_sigma_m=0.0,
-        odometry_noise=noise,
-        initial_pose_sigma=(0.01, 0.01, 0.001),
+        measurement=MeasurementConfig(constant_noise={"paper": NoiseModel(0.05, 0.0, 0.005, 0.0)}),
+        vehicle=VehicleConfig(odometry_noise=noise),
+        start=StartConfig(initial_pose_sigma=(0.01, 0.01, 0.001)),
     )
-    return run(seq, features=feats, config=cfg), scan_truth
+    return run_slam(seq, features=feats, config=cfg), scan_truth
 
 
 def hand_built(p: Problem):

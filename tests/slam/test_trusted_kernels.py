@@ -5,14 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from association import gate_matrix
+from association.inputs import chol2_solve
+from slam import se2
 from slam.ekf import _batch_blocks
-from slam.run import _gates, _gates_kernel, _sub_problem
+from slam.maps import _project_kernel, _sub_problem
 
 _PAIR = np.array([0, 1])
 
 
 def _sub_problem_numpy(H5, cand, P_lm, cov_t):
-    """The vectorised build `_sub_problem` replaced (`slam.run._associate`)."""
+    """The vectorised build `_sub_problem` replaced (`slam.maps.TentativeMap.associate`)."""
     nc = cand.size
     H = np.zeros((nc, 2, 3 + 2 * nc))
     H[:, :, :3] = H5[cand, :, :3]
@@ -23,6 +26,16 @@ def _sub_problem_numpy(H5, cand, P_lm, cov_t):
     a = P_lm.shape[0] + 2 * np.arange(cov_t.shape[0])[:, None, None]
     P_sub[a + _PAIR[:, None], a + _PAIR] = cov_t
     return H, P_sub
+
+
+def _gate_matrix_numpy(z, R, z_hat, S_feat, gate):
+    """The individual gates of every pair, vectorised: S_ij = S_feat_j + R_i, the bearing of
+    nu_ij wrapped (`se2.wrap_angle`), d2_ij by `chol2_solve`. Also returns d2 (m, n)."""
+    S = S_feat[None, :, :, :] + R[:, None, :, :]  # (m, n, 2, 2)
+    nu = z[:, None, :] - z_hat[None, :, :]
+    nu[..., 1] = se2.wrap_angle(nu[..., 1])
+    d2, _, ok = chol2_solve(S, nu)
+    return ok & (d2 <= gate), d2
 
 
 def _batch_blocks_numpy(idx, H5, R):
@@ -47,18 +60,44 @@ def _spd(rng, n, k, scale):
 
 
 @pytest.mark.parametrize("seed", range(30))
-def test_gates_kernel_gives_the_gates_of_the_vectorised_twin(seed):
+def test_gate_matrix_gives_the_gates_of_the_vectorised_twin(seed):
+    """`gate_matrix` does `chol2_solve`'s arithmetic operation for operation, so its d2 is the
+    vectorised one to the bit: the gates agree exactly, also with the gate set at one of the
+    pairs' own d2 (the pair exactly on the boundary passes in both), and a pair whose S is not
+    positive definite passes in neither."""
     rng = np.random.default_rng(seed)
     m, n = int(rng.integers(0, 9)), int(rng.integers(0, 40))
     z = np.column_stack([rng.uniform(1, 30, m), rng.uniform(-1.6, 1.6, m)])
     z_hat = np.column_stack([rng.uniform(1, 30, n), rng.uniform(-3.2, 3.2, n)])
     R = _spd(rng, m, 2, 0.01)
     H5 = rng.normal(size=(n, 2, 5))
+    S_feat = np.einsum("nij,njk,nlk->nil", H5, _spd(rng, n, 5, 0.1), H5)
+    if n > 2:  # one feature whose S is not positive definite with any measurement's R
+        S_feat[1] = -np.eye(2)
+    _, d2 = _gate_matrix_numpy(z, R, z_hat, S_feat, 0.0)
+    finite = np.sort(d2[np.isfinite(d2)])
+    on_the_boundary = finite[:: max(1, finite.size // 5)].tolist()
+    for gate in (1.0, 9.21, 30.0, *on_the_boundary):
+        want, _ = _gate_matrix_numpy(z, R, z_hat, S_feat, gate)
+        assert np.array_equal(gate_matrix(z, R, z_hat, S_feat, gate), want), gate
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_project_kernel_equals_einsum_to_the_rounding_of_its_sums(seed):
+    """Each entry of H5 C5 H5^T is a sum of 25 products of three factors, summed by the kernel
+    and by np.einsum in their own orders: each is within gamma_27 = 27 u / (1 - 27 u) (u the
+    unit roundoff) of sum |h c h| from the exact value (Higham, Accuracy and Stability of
+    Numerical Algorithms, 2nd ed., sec. 3.1), so they differ by at most twice that."""
+    rng = np.random.default_rng(120 + seed)
+    n = int(rng.integers(0, 30))
+    H5 = rng.normal(size=(n, 2, 5))
     C5 = _spd(rng, n, 5, 0.1)
-    for gate in (1.0, 9.21, 30.0):
-        assert np.array_equal(
-            _gates_kernel(z, R, z_hat, H5, C5, gate), _gates(z, R, z_hat, H5, C5, gate)
-        )
+    got = _project_kernel(H5, C5)
+    want = np.einsum("nij,njk,nlk->nil", H5, C5, H5)
+    u = np.finfo(np.float64).eps / 2
+    bound = 2 * (27 * u / (1 - 27 * u)) * np.einsum("nij,njk,nlk->nil", *map(np.abs, (H5, C5, H5)))
+    assert got.shape == want.shape == (n, 2, 2)
+    assert np.all(np.abs(got - want) <= bound)
 
 
 @pytest.mark.parametrize("seed", range(20))

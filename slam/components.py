@@ -1,0 +1,94 @@
+"""The components of a run, chosen once from its configuration (kiss-icp's `get_*` factories):
+the source of its measurements (`slam.sources`), the associator, the vehicle's motion
+(`slam.vehicle.Motion`), the laser's mounting and what the laser sees (`slam.maps.View`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from slam.checks import check_runnable, check_types
+from slam.config import SlamConfig
+from slam.errors import SlamError
+from slam.maps import View
+from slam.sequence import Sequence
+from slam.sources import make_source
+from slam.vehicle import AckermannModel, Motion, Odometry
+
+__all__ = ["Components", "components", "laser_pose"]
+
+
+def laser_pose(seq: Sequence, cfg: SlamConfig) -> np.ndarray:
+    """T_vehicle_laser (3,): the configuration's mounting, else the sequence's."""
+    given = cfg.vehicle.laser_pose
+    return np.asarray(seq.laser_pose if given is None else given, dtype=np.float64)
+
+
+@dataclass(frozen=True, eq=False)
+class Components:
+    """What a run is made of, chosen once from its configuration (`components`): the source of
+    its measurements, the associator, the vehicle's motion, the laser's mounting (T_vehicle_laser)
+    and what the laser sees."""
+
+    seq: Sequence
+    cfg: SlamConfig
+    source: object  # slam.sources: (k, scan) -> (Features, z, R), with .method, .model, .count
+    associator: object  # association.associate's signature minus `method`, with .method
+    motion: Motion
+    T_vehicle_laser: np.ndarray
+    view: View
+
+
+def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) -> Components:
+    """The run's components; `features` and `association` are the caller's own (a list of
+    Features or a callable; a callable), None for the configuration's."""
+    check_types(seq, cfg)  # before the source reads the sequence
+    source = make_source(seq, cfg, features)
+    steer = check_runnable(seq, cfg, source.count)
+    a0, da = float(seq.scan_angle_min), float(seq.scan_angle_increment)
+    return Components(
+        seq=seq,
+        cfg=cfg,
+        source=source,
+        associator=_associator(cfg, association),
+        motion=Motion(
+            AckermannModel.from_vehicle(seq.vehicle),
+            Odometry(seq.odo_t, seq.odo_speed, steer),
+            cfg.vehicle.odometry_noise,
+        ),
+        T_vehicle_laser=laser_pose(seq, cfg),
+        view=View(
+            fov=(a0, a0 + da * (seq.n_beams - 1)),
+            max_range=min(float(seq.scan_max_range), cfg.measurement.max_range_m),
+            margin_m=cfg.association.view_margin_m,
+            margin_rad=cfg.association.view_margin_rad,
+        ),
+    )
+
+
+def _associator(cfg: SlamConfig, given=None):
+    """A callable with `associate`'s signature minus `method`, carrying `.method` (its name);
+    the configured method's, or the caller's `given` callable."""
+    if given is not None:
+        if not callable(given):
+            raise SlamError(f"association: expected a method name or a callable, got {given!r}")
+
+        def custom(*args, **kwargs):
+            return given(*args, **kwargs)
+
+        custom.method = getattr(given, "__name__", "custom")
+        return custom
+    from association import associate
+
+    method = "ihgr" if cfg.association.windowed else cfg.association.method
+
+    def call(z, R, z_hat, H, P, gate_prob=0.99, **params):
+        # The loop's inputs are valid by construction (finite, P symmetric PSD as the filter
+        # keeps it): the trusted path, without the checks that would cost more than the solve.
+        return associate(
+            z, R, z_hat, H, P, method=method, gate_prob=gate_prob, validate=False, **params
+        )
+
+    call.method = cfg.association.method
+    return call

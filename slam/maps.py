@@ -1,0 +1,431 @@
+"""Map managers: who associates a scan's measurements and decides what joins the map. One per
+run, chosen once from the configuration (`make_map_manager`), with the same two steps:
+
+- `associate(state, meas, drift)`: which landmark (or tentative) each measurement belongs to;
+- `manage(state, meas, a, track)`: tentatives seen again count a sighting, new measurements
+  start landmarks-to-be, confirmed ones join the filter's state; returns how many are pending.
+
+`TentativeMap` (association "ihgr", "jcbb", "nn") keeps new features as tentatives outside the
+state until they have been associated in `MapPolicy.confirm_scans` scans (`slam.mapping`).
+`WindowMap` ("ihgr-window") gives that job to the K-scan `association.SlidingWindowAssociator`:
+every scan it is offered the landmarks in view and the laser's world pose with the odometry
+drift over the window as its relative uncertainty; it commits the newest scan's pairings and
+re-decides, over the window, which earlier unpaired measurements are first sightings of one new
+landmark, which a mapped landmark missed by its own scan explains, and which are clutter.
+`Pruner` removes landmarks the laser should see and does not (`MapPolicy.prunes`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from association import gate_matrix
+from slam import se2
+from slam.config import SlamConfig
+from slam.ekf import Filter, landmark_columns
+from slam.errors import SlamError
+from slam.log import AMBIGUOUS, CONFIRMED, OUT_OF_RANGE, TENTATIVE_HIT, LogBuilder
+from slam.mapping import MapPolicy, Tentatives, sighting
+from slam.sources import Measurements
+
+__all__ = ["Association", "Pruner", "TentativeMap", "View", "WindowMap", "make_map_manager"]
+
+_POSE = np.array([0, 1, 2], np.int64)
+
+
+@dataclass(frozen=True)
+class View:
+    """What the laser can see: fov (first, last beam angle, rad, laser frame), max_range (m),
+    and the margins (m, rad) within which a landmark outside is still offered."""
+
+    fov: tuple[float, float]
+    max_range: float
+    margin_m: float = 0.0
+    margin_rad: float = 0.0
+
+    def contains(self, z_hat: np.ndarray, margins: bool = True, max_range: float | None = None):
+        """(n,) bool: predictions z_hat (n, 2) within range and field of view (plus the margins
+        when `margins`; `max_range` below the view's own when given)."""
+        if z_hat.shape[0] == 0:
+            return np.zeros(0, bool)
+        m_rad, m_m = (self.margin_rad, self.margin_m) if margins else (0.0, 0.0)
+        fov0, fov1 = self.fov
+        b = z_hat[:, 1]
+        in_fov = (b >= fov0 - m_rad) & (b <= fov1 + m_rad)
+        if fov1 - fov0 + 2 * m_rad >= 2 * math.pi:
+            in_fov[:] = True
+        r = self.max_range if max_range is None else min(self.max_range, max_range)
+        return in_fov & (z_hat[:, 0] <= r + m_m)
+
+
+@dataclass(frozen=True, eq=False)
+class Association:
+    """One scan's association: assign (m,) is an index into [landmarks in view, tentatives in
+    view] or -1; ambiguous (m,) marks unassigned measurements inside the wider gate of something;
+    lm_idx, t_idx: state positions of the landmarks in view and indices of the tentatives.
+    Window only: sightings (m,) scans of the window that saw an unpaired measurement's landmark
+    (`WindowDecision.sightings`); tracks: measurement -> [(scans_ago, measurement)] of its
+    chosen new-landmark track (indices into each scan's full measurement list)."""
+
+    assign: np.ndarray
+    ambiguous: np.ndarray
+    lm_idx: np.ndarray
+    t_idx: np.ndarray
+    sightings: np.ndarray | None = None
+    tracks: dict | None = None
+
+    def to_map(self) -> np.ndarray:
+        """The measurements paired with map landmarks (not tentatives)."""
+        i = np.flatnonzero(self.assign >= 0)
+        return i[self.assign[i] < self.lm_idx.size]
+
+
+@dataclass(eq=False)
+class _Context:
+    """What a map manager shares with the loop: the configuration, the laser's mounting, the
+    view, the log (landmark counts and first scans), the next free landmark id."""
+
+    cfg: SlamConfig
+    laser: np.ndarray
+    view: View
+    book: LogBuilder
+    next_id: int = 0
+
+    def new_id(self) -> int:
+        self.next_id += 1
+        return self.next_id - 1
+
+    def map_landmark(self, state: Filter, meas: Measurements, i: int, lid: int, n_obs: int):
+        """Measurement i of the scan initialises landmark `lid` (seen in `n_obs` scans)."""
+        state.add_landmark(meas.z[i], meas.R[i], self.laser, lid)
+        meas.status[i] = CONFIRMED
+        self.book.n_obs[lid] = int(n_obs)
+        self.book.first_scan[lid] = meas.k
+
+
+class TentativeMap:
+    """Single-scan association (`associator`: `association.associate`'s signature minus
+    `method`) against the landmarks and tentatives in view; tentatives outside the state."""
+
+    def __init__(self, ctx: _Context, associator) -> None:
+        self.ctx = ctx
+        self.associator = associator
+        self.tent = Tentatives.empty()
+
+    @property
+    def tentative_xy(self) -> np.ndarray:
+        return self.tent.xy
+
+    def stats(self) -> None:
+        return None
+
+    def associate(self, state: Filter, meas: Measurements, drift: np.ndarray) -> Association:
+        """The usable measurements against the landmarks and tentatives that can be in view.
+
+        Each candidate's innovation covariance comes from its 5 x 5 block [pose, point]
+        (tentatives with their own covariance and no correlation with the pose). Candidates
+        that gate with no measurement, even at the wider new-feature gate, cannot be paired and
+        do not make anything ambiguous, so only the others are offered to the associator, on
+        the sub-state [pose, those landmarks, those tentatives]: exact, and the cost no longer
+        grows with the map."""
+        ctx, tent, acfg = self.ctx, self.tent, self.ctx.cfg.association
+        z_lm, H_lm = se2.observe(state.pose, state.landmarks_xy, ctx.laser)
+        z_t, H_t = se2.observe(state.pose, tent.xy, ctx.laser)
+        lm_idx = np.flatnonzero(ctx.view.contains(z_lm))
+        t_idx = np.flatnonzero(ctx.view.contains(z_t))
+        n_l, n = lm_idx.size, lm_idx.size + t_idx.size
+        m = meas.z.shape[0]
+        assign = np.full(m, -1, np.int64)
+        ambiguous = np.zeros(m, bool)
+        use = np.flatnonzero(meas.status != OUT_OF_RANGE)
+        if not (use.size and n):
+            return Association(assign, ambiguous, lm_idx, t_idx)
+        zh = np.concatenate([z_lm[lm_idx], z_t[t_idx]])
+        H5 = np.concatenate([H_lm[lm_idx], H_t[t_idx]])  # (n, 2, 5)
+        C5 = np.zeros((n, 5, 5))  # covariance of [pose, point] of each candidate
+        C5[:n_l] = state.cov(landmark_columns(lm_idx))
+        C5[n_l:, :3, :3] = state.pose_cov
+        C5[n_l:, 3:, 3:] = tent.cov[t_idx]
+        z_use, R_use = meas.z[use], meas.R[use]
+        gated = gate_matrix(z_use, R_use, zh, _project(H5, C5), acfg.gate_new)  # (m_use, n)
+        ambiguous[use] = gated.any(axis=1)
+        cand = np.flatnonzero(gated.any(axis=0))
+        if cand.size:
+            c_lm = cand[cand < n_l]
+            sub = np.concatenate([_POSE, landmark_columns(lm_idx[c_lm])[:, 3:].ravel()])
+            c_t = t_idx[cand[cand >= n_l] - n_l]  # the tentatives, after the landmarks
+            H, P_sub = _sub_problem(H5, cand, state.cov(sub), tent.cov[c_t])
+            a_use = self.associator(
+                z_use, R_use, zh[cand], H, P_sub, gate_prob=acfg.gate_prob, **acfg.params
+            )
+            a_use = np.asarray(a_use, dtype=np.int64)
+            assign[use] = np.where(a_use >= 0, cand[np.maximum(a_use, 0)], -1)
+        ambiguous &= assign < 0
+        return Association(assign, ambiguous, lm_idx, t_idx)
+
+    def manage(self, state: Filter, meas: Measurements, a: Association, track) -> int:
+        """Tentatives seen again count a sighting (and join the map at the policy's count), new
+        measurements start tentatives, ambiguous ones are ignored, unseen tentatives drop out.
+        Sets each measurement's status and track (the id of the tentative it was paired with
+        or started); returns the number of tentatives."""
+        ctx, tent, z, R, status = self.ctx, self.tent, meas.z, meas.R, meas.status
+        policy = ctx.cfg.map_policy
+        n_l = a.lm_idx.size
+        matched, matched_meas, new, new_meas = {}, {}, [], []
+        for i in np.flatnonzero(a.assign >= n_l):
+            ti = int(a.t_idx[a.assign[i] - n_l])
+            matched[ti] = sighting(state.pose, state.pose_cov, z[i], R[i], ctx.laser)
+            matched_meas[ti] = int(i)
+            status[i] = TENTATIVE_HIT
+            track[i] = int(tent.ids[ti])
+        for i in np.flatnonzero((a.assign < 0) & (status != OUT_OF_RANGE)):
+            if a.ambiguous[i]:
+                status[i] = AMBIGUOUS
+                continue
+            mxy, C = sighting(state.pose, state.pose_cov, z[i], R[i], ctx.laser)
+            lid = ctx.new_id()
+            new.append((mxy, C, lid))
+            new_meas.append(int(i))
+            track[i] = lid
+        if policy.confirm_scans == 1:  # every sighting joins the map at once
+            for (_, _, lid), i in zip(new, new_meas):
+                ctx.map_landmark(state, meas, i, lid, 1)
+            new = []
+        self.tent, confirm = tent.step(matched, new, meas.k, policy)
+        for ti in confirm:
+            ctx.map_landmark(state, meas, matched_meas[ti], int(tent.ids[ti]), tent.hits[ti] + 1)
+        return len(self.tent)
+
+
+class WindowMap:
+    """The K-scan IHGR window (association "ihgr-window") in place of the tentatives; it
+    remembers, for each of the last K - 1 scans, the positions of its usable measurements (the
+    associator numbers only those) and the process noise of its prediction."""
+
+    def __init__(self, ctx: _Context) -> None:
+        from association import CostModel, SlidingWindowAssociator
+        from association.rounding import ROUNDING_OPTIONS
+
+        acfg = ctx.cfg.association
+        cost_keys = {f.name for f in dataclasses.fields(CostModel)}
+        unknown = set(acfg.params) - cost_keys - set(ROUNDING_OPTIONS)
+        if unknown:
+            raise SlamError(
+                f"association.params: {sorted(unknown)} are not parameters of 'ihgr-window' "
+                f"(allowed: {sorted(cost_keys | set(ROUNDING_OPTIONS))})"
+            )
+        model = CostModel(**{k: v for k, v in acfg.params.items() if k in cost_keys})
+        rounding = {k: v for k, v in acfg.params.items() if k in ROUNDING_OPTIONS}
+        self.ctx = ctx
+        self.assoc = SlidingWindowAssociator(acfg.window_scans, acfg.gate_prob, model, **rounding)
+        self.scans: list = []  # [(use (m_use,) int, Q (3, 3))], oldest first
+        self.counts = dict.fromkeys(
+            ("steps", "fractional_lps", "rounded_steps", "lp_solves", "track_hypotheses"), 0
+        )
+
+    tentative_xy = np.zeros((0, 2))
+
+    def stats(self) -> dict:
+        """Window figures of the run: steps, how many first LPs were fractional, how many steps
+        the rounding changed (more than one LP solve), LP solves, track hypotheses built."""
+        return {"K": self.assoc.K, **self.counts}
+
+    def associate(self, state: Filter, meas: Measurements, drift: np.ndarray) -> Association:
+        """Every landmark in view is offered (a track is not built where it could be a mapped
+        landmark, so the window must see them all), on the sub-state [pose, those landmarks];
+        the laser's world pose goes with the odometry drift over the window as its relative
+        covariance. drift: this scan's prediction noise (3, 3), world frame."""
+        ctx, K = self.ctx, self.assoc.K
+        z_lm, H_lm = se2.observe(state.pose, state.landmarks_xy, ctx.laser)
+        lm_idx = np.flatnonzero(ctx.view.contains(z_lm))
+        n, m = lm_idx.size, meas.z.shape[0]
+        ambiguous = np.zeros(m, bool)
+        use = np.flatnonzero(meas.status != OUT_OF_RANGE)
+        cols = landmark_columns(lm_idx)  # (n, 5)
+        if use.size and n:
+            S = _project(H_lm[lm_idx], state.cov(cols))
+            gate = ctx.cfg.association.gate_new
+            ambiguous[use] = gate_matrix(meas.z[use], meas.R[use], z_lm[lm_idx], S, gate).any(1)
+        H = np.zeros((n, 2, 3 + 2 * n))
+        H[:, :, :3] = H_lm[lm_idx, :, :3]
+        for j in range(n):
+            H[j, :, 3 + 2 * j : 5 + 2 * j] = H_lm[lm_idx[j], :, 3:5]
+        P_sub = state.cov(np.concatenate([_POSE, cols[:, 3:].ravel()]).astype(np.int64))
+        # the odometry drift over the window: this scan's prediction noise and the last K - 2's
+        window_drift = drift + sum((q for _, q in self.scans[len(self.scans) - (K - 2) :]), 0.0)
+        if K < 2:
+            window_drift = np.zeros((3, 3))
+        p_laser, dp = se2.sensor_position(state.pose, ctx.laser)
+        J = np.array([[1.0, 0.0, dp[0]], [0.0, 1.0, dp[1]], [0.0, 0.0, 1.0]])
+        out = self.assoc.step(
+            meas.z[use],
+            meas.R[use],
+            z_lm[lm_idx],
+            H,
+            0.5 * (P_sub + P_sub.T),
+            sensor_pose=np.array([p_laser[0], p_laser[1], state.pose[2] + ctx.laser[2]]),
+            sensor_pose_cov=0.5 * (J @ window_drift @ J.T + (J @ window_drift @ J.T).T),
+            feature_ids=state.landmark_ids[lm_idx].astype(np.int64),
+        )
+        self._count(self.assoc.last)
+        assign = np.full(m, -1, np.int64)
+        assign[use] = out
+        sightings = np.zeros(m, np.int64)
+        sightings[use] = self.assoc.last.sightings
+        tracks = self._tracks(self.assoc.last, use)
+        self.scans = (self.scans + [(use, drift)])[-(K - 1) :] if K > 1 else []
+        ambiguous &= assign < 0
+        return Association(
+            assign=assign,
+            ambiguous=ambiguous,
+            lm_idx=lm_idx,
+            t_idx=np.zeros(0, np.int64),
+            sightings=sightings,
+            tracks=tracks,
+        )
+
+    def _count(self, dec) -> None:
+        c = self.counts
+        c["steps"] += 1
+        c["fractional_lps"] += int(dec.rounding.fractional)
+        c["rounded_steps"] += int(dec.rounding.lp_solves > 1)
+        c["lp_solves"] += int(dec.rounding.lp_solves)
+        c["track_hypotheses"] += int(dec.n_tracks)
+
+    def _tracks(self, dec, use: np.ndarray) -> dict:
+        """The chosen new-landmark tracks ending in this scan, in the scans' own numbering."""
+        past = {ago: u for ago, (u, _) in enumerate(reversed(self.scans), start=1)}
+        past[0] = use
+        tracks = {}
+        for members in dec.tracks:
+            ago_last, i_last = members[-1]
+            if ago_last == 0:
+                tracks[int(use[i_last])] = [
+                    (ago, int(past[ago][i])) for ago, i in members if ago in past
+                ]
+        return tracks
+
+    def manage(self, state: Filter, meas: Measurements, a: Association, track) -> int:
+        """An unpaired measurement whose track was seen in min(confirm_scans, K) scans of the
+        window joins the map; ambiguous ones are ignored and leave the window's pool like the
+        mapped ones; the rest stay open (status NEW_TENTATIVE). Returns the open ones."""
+        ctx, status = self.ctx, meas.status
+        need = min(ctx.cfg.map_policy.confirm_scans, self.assoc.K)
+        use = self.scans[-1][0] if self.scans else np.flatnonzero(status != OUT_OF_RANGE)
+        use_pos = {int(i): j for j, i in enumerate(use)}
+        closed, n_open = [], 0
+        for i in np.flatnonzero((a.assign < 0) & (status != OUT_OF_RANGE)):
+            if a.ambiguous[i]:
+                status[i] = AMBIGUOUS
+                closed.append(use_pos[int(i)])
+                continue
+            if a.sightings[i] < need:
+                n_open += 1
+                continue
+            lid = ctx.new_id()
+            ctx.map_landmark(state, meas, int(i), lid, max(int(a.sightings[i]), 1))
+            track[i] = lid
+            for ago, j in a.tracks.get(int(i), []):
+                if ago > 0:
+                    ctx.book.retrack(meas.k - ago, j, lid)
+            closed.append(use_pos[int(i)])
+        if closed:
+            self.assoc.mark_mapped(closed)
+        return n_open
+
+
+@dataclass(eq=False)
+class Pruner:
+    """Map policy's pruning, after the scan's update and map management: count for every
+    landmark already in the map before this scan whether it was expected (predicted inside the
+    field of view, no margins, and within the pruning and usable range) and whether it was
+    associated; remove those expected often enough and seen too rarely (`MapPolicy`)."""
+
+    policy: MapPolicy
+    view: View
+    laser: np.ndarray
+    # landmark id -> [scans expected in view, scans associated] since it joined the map
+    count: dict[int, list[int]] = field(default_factory=dict)
+
+    def __call__(self, state: Filter, status: np.ndarray) -> None:
+        ids = state.landmark_ids
+        if not ids.size:
+            return
+        z_hat, _ = se2.observe(state.pose, state.landmarks_xy, self.laser)
+        expected = self.view.contains(z_hat, margins=False, max_range=self.policy.prune_range_m)
+        seen = set(status[status >= 0].tolist())
+        drop = []
+        for lid, e in zip(ids.tolist(), expected.tolist()):
+            c = self.count.get(lid)
+            if c is None:  # joined the map in this scan: counted from the next one
+                self.count[lid] = [0, 0]
+                continue
+            if e:
+                c[0] += 1
+                c[1] += lid in seen
+                policy = self.policy
+                if c[0] >= policy.prune_after_expected and c[1] < policy.prune_hit_ratio * c[0]:
+                    drop.append(lid)
+        if drop:
+            state.remove_landmarks(drop)
+            for lid in drop:
+                del self.count[lid]
+
+
+def make_map_manager(cfg: SlamConfig, laser, view: View, book: LogBuilder, associator):
+    """The run's map manager (`WindowMap` for "ihgr-window", else `TentativeMap` around the
+    associator callable)."""
+    ctx = _Context(cfg, laser, view, book)
+    return WindowMap(ctx) if cfg.association.windowed else TentativeMap(ctx, associator)
+
+
+def _project(H5: np.ndarray, C5: np.ndarray) -> np.ndarray:
+    """(n, 2, 2) H5_j C5_j H5_j^T of each candidate's [pose, point] block."""
+    return _project_kernel(np.ascontiguousarray(H5), np.ascontiguousarray(C5))
+
+
+@njit(cache=True)
+def _project_kernel(H5, C5):
+    n = H5.shape[0]
+    out = np.zeros((n, 2, 2))
+    for t in range(n):
+        for i in range(2):
+            for u in range(2):
+                acc = 0.0
+                for j in range(5):
+                    hij = H5[t, i, j]
+                    for k in range(5):
+                        acc += hij * C5[t, j, k] * H5[t, u, k]
+                out[t, i, u] = acc
+    return out
+
+
+@njit(cache=True)
+def _sub_problem(H5, cand, P_lm, cov_t):
+    """The association's sub-problem on the state [pose, candidate landmarks, candidate
+    tentatives]: H (nc, 2, 3 + 2 nc), candidate j's point in columns 3 + 2 j, 4 + 2 j, and its
+    covariance P_sub, which is P_lm (the pose and the candidate landmarks, from the filter)
+    followed by the tentatives' own 2 x 2 blocks cov_t (no correlation with anything). The
+    candidates `cand` index H5, landmarks first."""
+    nc = cand.size
+    d = 3 + 2 * nc
+    H = np.zeros((nc, 2, d))
+    for j in range(nc):
+        c = cand[j]
+        for r in range(2):
+            for q in range(3):
+                H[j, r, q] = H5[c, r, q]
+            H[j, r, 3 + 2 * j] = H5[c, r, 3]
+            H[j, r, 4 + 2 * j] = H5[c, r, 4]
+    P_sub = np.zeros((d, d))
+    n_sub = P_lm.shape[0]
+    P_sub[:n_sub, :n_sub] = P_lm
+    for t in range(cov_t.shape[0]):
+        a = n_sub + 2 * t
+        P_sub[a : a + 2, a : a + 2] = cov_t[t]
+    return H, P_sub

@@ -1,0 +1,155 @@
+"""Where a run's measurements come from: one source per run, chosen once from the configuration
+(`make_source`), each giving scan k's circles as range-bearing measurements through the one
+measurement model of the configuration (`slam.measurement.MeasurementModel.measure`).
+
+- `ExtractorSource`: `features.extract_features` on the raw scans, with the configuration's
+  extractor parameters (`SlamConfig.features`);
+- `DetectionsSource`: the sequence's precomputed detections (`Sequence.detections`);
+- `GivenSource`: a list of precomputed `Features` (a features file, an experiment's extraction),
+  or a callable (k, scan) -> Features.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from features.types import Features
+from slam.config import OWN_COVARIANCE, SlamConfig
+from slam.errors import SlamError
+from slam.measurement import MeasurementModel
+from slam.sequence import Sequence
+
+__all__ = ["DetectionsSource", "ExtractorSource", "GivenSource", "Measurements", "make_source"]
+
+
+@dataclass(frozen=True, eq=False)
+class Measurements:
+    """Scan k's circles as measurements of their centres, laser frame.
+
+    scan: the `features.Scan` (None without raw ranges); features: its `Features` (for the
+    log and the visualiser); z (m, 2) [range m, bearing rad] and R (m, 2, 2) from the source's
+    measurement model; status (m,) int64, filled in by the loop (`slam.log` codes)."""
+
+    k: int
+    scan: object
+    features: Features
+    z: np.ndarray
+    R: np.ndarray
+    status: np.ndarray
+
+    @property
+    def radius_m(self) -> np.ndarray:
+        """(m,) the circles' radii (NaN where the source has none)."""
+        return np.asarray(self.features.circle_params, float).reshape(-1, 3)[:, 2]
+
+
+class ExtractorSource:
+    """Circles extracted from the raw scans by `method` with the configured parameters."""
+
+    def __init__(self, seq: Sequence, cfg: SlamConfig) -> None:
+        self.method = cfg.features.method
+        if not seq.has_ranges:
+            raise SlamError(
+                f"features: {self.method!r} extracts from raw scans, and this sequence has none; "
+                "use the method 'detections'"
+            )
+        self.kwargs = cfg.features.extractor_kwargs()
+        self.model = cfg.measurement.model_for(self.method)
+        self.count = None  # not precomputed
+
+    def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
+        from features import extract_features
+
+        f = extract_features(scan, self.method, **self.kwargs)
+        return (f, *self.model.from_features(f))
+
+
+class DetectionsSource:
+    """The sequence's precomputed detections: z as stored (less the known range bias of their
+    method), R their covariance plus the fit floor or the constant model of their method; the
+    Features (circles at the detections) are for the log and the visualiser."""
+
+    def __init__(self, seq: Sequence, cfg: SlamConfig) -> None:
+        if not seq.has_detections:
+            raise SlamError(
+                "features: 'detections' needs a sequence with precomputed detections (det_scan, "
+                f"...); {seq.name or 'this sequence'!r} has none"
+            )
+        self.seq = seq
+        self.method = seq.det_method
+        self.model: MeasurementModel = cfg.measurement.model_for(
+            seq.det_method, seq.det_cov is not None
+        )
+        if self.model.kind == "fit" and seq.det_cov is None:
+            raise SlamError("measurement.noise: 'fit' needs det_cov in the sequence's detections")
+        # the arrays of no lines, edges or segments, shared by every scan's Features (read-only)
+        self._empty = Features.empty(0.0, seq.det_method, seq.n_beams)
+        self.count = None
+
+    def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
+        stored, radius, cov = self.seq.detections(k)
+        z, R = self.model.measure(stored, cov)
+        n = z.shape[0]
+        c, s = np.cos(z[:, 1]), np.sin(z[:, 1])
+        f = dataclasses.replace(
+            self._empty,
+            stamp_s=float(self.seq.scan_t[k]),
+            circle_params=np.column_stack([stored[:, 0] * c, stored[:, 0] * s, radius]),
+            circle_cov=np.zeros((n, 3, 3)),
+            circle_beams=np.zeros((n, 2), np.int64),
+            circle_rms_m=np.full(n, np.nan),
+        )
+        return f, z, R
+
+
+class GivenSource:
+    """Features the caller made: a list of N `Features` (one per scan) or a callable (k, scan)
+    -> Features. A list whose circles' covariances are all zero carries none of its own
+    (measurement noise "auto" then takes the constant model, not the fit floors alone)."""
+
+    def __init__(self, given, cfg: SlamConfig) -> None:
+        if callable(given):
+            self._get: Callable = given
+            self.method = getattr(given, "method", "custom")
+            self.count, has_cov = None, self.method in OWN_COVARIANCE
+        elif isinstance(given, (list, tuple)):
+            feats = list(given)
+            bad = [k for k, f in enumerate(feats) if not isinstance(f, Features)]
+            if bad:
+                raise SlamError(
+                    f"features: item {bad[0]} is {type(feats[bad[0]]).__name__}, expected a "
+                    "features.Features"
+                )
+            self._get = lambda k, scan: feats[k]
+            self.method = feats[0].method if feats else "custom"
+            self.count = len(feats)
+            own = self.method in OWN_COVARIANCE
+            has_cov = own and any(np.any(np.asarray(f.circle_cov)) for f in feats if f.n_circles)
+        else:
+            raise SlamError(
+                "features: expected a method name, a callable (k, scan) -> Features or a list "
+                f"of Features, got {type(given).__name__}"
+            )
+        self.model = cfg.measurement.model_for(self.method, has_cov)
+
+    def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
+        f = self._get(k, scan)
+        if not isinstance(f, Features):
+            raise SlamError(
+                f"features: scan {k} gave {type(f).__name__}, expected a features.Features"
+            )
+        return (f, *self.model.from_features(f))
+
+
+def make_source(seq: Sequence, cfg: SlamConfig, given=None):
+    """The run's source: `given` features (a list or a callable) when there are some, else the
+    configuration's method ("detections" or an extractor)."""
+    if given is not None:
+        return GivenSource(given, cfg)
+    if cfg.features.method == "detections":
+        return DetectionsSource(seq, cfg)
+    return ExtractorSource(seq, cfg)

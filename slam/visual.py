@@ -1,0 +1,49 @@
+"""What a run shows as it goes: the visualiser interface (`NullVisualiser`, which does
+nothing, as kiss-icp's StubVisualizer) and the one function that feeds it a scan."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slam import se2
+
+__all__ = ["NullVisualiser", "show_scan"]
+
+
+class NullVisualiser:
+    """The visualiser interface; does nothing (kiss-icp's StubVisualizer).
+
+    Poses are world [x, y, theta]; `pose` of log_scan/log_features is the laser's world pose.
+    """
+
+    def set_scan(self, k: int, stamp_s: float | None = None) -> None: ...
+    def log_scan(self, scan, pose=None, path: str = "world/scan") -> None: ...
+    def log_features(self, scan, features, pose=None, path: str = "world/features") -> None: ...
+    def log_vehicle(self, pose, cov) -> None: ...
+    def log_landmarks(self, xy, cov, ids) -> None: ...
+    def log_tentatives(self, xy) -> None: ...
+    def log_associations(self, from_xy, to_xy) -> None: ...
+    def log_truth(self, pose) -> None: ...
+
+
+def show_scan(vis, loop, meas) -> None:
+    """Scan `meas.k` of the run `loop` (`slam.loop.Slam`) and its measurements `meas`."""
+    seq, state, k = loop.seq, loop.state, meas.k
+    vis.set_scan(k, float(seq.scan_t[k]))
+    T_world_vehicle = state.pose
+    T_world_laser = se2.compose(T_world_vehicle, loop.laser)
+    vis.log_scan(meas.scan, T_world_laser)
+    vis.log_features(meas.scan, meas.features, T_world_laser)
+    vis.log_vehicle(T_world_vehicle, state.pose_cov)
+    vis.log_landmarks(state.landmarks_xy, state.landmark_covs, state.landmark_ids)
+    vis.log_tentatives(loop.maps.tentative_xy)
+    used = np.flatnonzero(meas.status >= 0)
+    if used.size:
+        ang = T_world_laser[2] + meas.z[used, 1]
+        frm = T_world_laser[:2] + meas.z[used, 0:1] * np.stack([np.cos(ang), np.sin(ang)], 1)
+        to = np.array([state.landmarks_xy[state.index_of(int(i))] for i in meas.status[used]])
+        vis.log_associations(frm, to)
+    else:
+        vis.log_associations(np.zeros((0, 2)), np.zeros((0, 2)))
+    if seq.truth_t is not None:
+        vis.log_truth(se2.interpolate_poses(seq.scan_t[k], seq.truth_t, seq.truth_pose)[0])

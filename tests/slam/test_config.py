@@ -1,0 +1,145 @@
+"""SlamConfig: one grouped configuration, strict, and the same after a round trip through TOML."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+
+import pytest
+
+from experiments.errors import ConfigError
+from experiments.io.config_file import (
+    PRESETS_DIR,
+    config_toml,
+    load_slam_config,
+    preset_path,
+    presets,
+)
+from experiments.paper.slam import CYCAB_SLAM
+from features import ExtractorParams
+from slam import SlamConfig, SlamError
+from slam.config import MOVED, AssociationConfig, FeaturesConfig
+
+
+def _toml(cfg: SlamConfig) -> str:
+    return config_toml(cfg, "header")
+
+
+@pytest.mark.parametrize("name", sorted(presets()))
+def test_every_preset_round_trips_dump_load_dump(name, tmp_path):
+    cfg = load_slam_config(name)
+    text = _toml(cfg)
+    p = tmp_path / "c.toml"
+    p.write_text(text)
+    again = load_slam_config(p)
+    assert again == cfg
+    assert _toml(again) == text
+
+
+def test_defaults_round_trip_and_every_section_is_written():
+    cfg = SlamConfig()
+    d = cfg.to_dict()
+    assert set(d) == {
+        "features",
+        "association",
+        "measurement",
+        "vehicle",
+        "start",
+        "map_policy",
+        "filter",
+    }
+    assert SlamConfig.from_dict(tomllib.loads(_toml(cfg))) == cfg
+    # the extractor's every parameter is in the file, so the file is the whole truth
+    assert set(d["features"]["extractor"]) == set(ExtractorParams.__dataclass_fields__)
+
+
+def test_cycab_preset_is_experiment_2s_filter():
+    assert load_slam_config("cycab") == CYCAB_SLAM
+
+
+def test_victoria_park_preset_holds_what_the_experiment_runs():
+    cfg = load_slam_config("victoria_park_ute")
+    assert cfg.features.method == "detections"
+    assert cfg.features.extractor.short_trunks is True
+    assert cfg.measurement.noise == "constant"
+    assert cfg.filter.first_estimates_jacobians is True
+    assert cfg.start.gps_track == "slam"
+
+
+def test_presets_are_presets_and_sweeps_live_apart():
+    names = presets()
+    assert set(names) == {"cycab", "victoria_park_ute"}
+    assert all(about for about in names.values())
+    assert not list(PRESETS_DIR.glob("sweep_*"))
+    sweep = PRESETS_DIR.parent / "sweeps" / "sweep_slam_noise.toml"
+    assert sweep.is_file()
+    with pytest.raises(ConfigError, match="sweep specification.*trunkslam sweep"):
+        load_slam_config(sweep)
+
+
+def test_unknown_keys_get_a_suggestion():
+    with pytest.raises(SlamError, match=r"assocation: unknown setting.*did you mean 'association'"):
+        SlamConfig.from_dict({"assocation": {}})
+    with pytest.raises(
+        SlamError, match=r"features\.extractor\.sigm_r_m: .*did you mean 'sigma_r_m'"
+    ):
+        SlamConfig.from_dict({"features": {"extractor": {"sigm_r_m": 0.01}}})
+    with pytest.raises(SlamError, match=r"association\.gate_prb: .*did you mean 'gate_prob'"):
+        SlamConfig.from_dict({"association": {"gate_prb": 0.9}})
+
+
+@pytest.mark.parametrize("old", sorted(MOVED))
+def test_a_key_of_the_flat_format_says_where_it_lives_now(old):
+    with pytest.raises(SlamError, match=f"{old}: unknown setting.*now {MOVED[old]}"):
+        SlamConfig.from_dict({old: 1})
+    section, key = MOVED[old].split(".")  # and that is a setting of its section
+    assert key in {f.name for f in dataclasses.fields(getattr(SlamConfig(), section))}
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"features": {"extractor": {"r_min_m": -0.1}}}, "features.extractor: r_min_m"),
+        ({"features": {"extractor": {"short_trunk_radius_m": -1.0}}}, "short_trunk_radius_m"),
+        ({"features": {"extractor": {"sigma_r_m": "big"}}}, r"features\.extractor\.sigma_r_m"),
+        ({"features": {"method": "hough"}}, r"features\.method: expected one of"),
+        ({"features": {"bailey": {"detector": {"max_chord_m": math.nan}}}}, "max_chord_m"),
+        ({"association": {"gate_prob": 1.0}}, r"association\.gate_prob: must be in \(0, 1\)"),
+        ({"association": {"window_scans": 0}}, r"association\.window_scans"),
+        ({"measurement": {"noise": "fitted"}}, r"measurement\.noise"),
+        ({"vehicle": {"laser_pose": [1.0, 2.0]}}, r"vehicle\.laser_pose"),
+        ({"vehicle": {"min_travel_m": -1.0}}, r"vehicle\.min_travel_m"),
+        ({"start": {"gps_track": "gps"}}, r"start\.gps_track"),
+        ({"map_policy": {"confirm_scans": 0}}, "confirm_scans"),
+        ({"filter": {"first_estimates_jacobians": 1}}, r"filter\.first_estimates_jacobians"),
+        ({"vehicle": 3}, "vehicle: expected a table"),
+    ],
+)
+def test_bad_values_name_the_key(data, message):
+    with pytest.raises(SlamError, match=message):
+        SlamConfig.from_dict(data)
+
+
+def test_with_replaces_by_dotted_path_and_checks():
+    cfg = SlamConfig().with_(
+        **{"association.method": "nn", "features.extractor.short_trunks": True}
+    )
+    assert cfg.association == AssociationConfig(method="nn")
+    assert cfg.features.extractor.short_trunks is True
+    assert cfg.features == FeaturesConfig(extractor=ExtractorParams(short_trunks=True))
+    with pytest.raises(SlamError, match="association.method"):
+        SlamConfig().with_(**{"association.method": "hough"})
+
+
+def test_a_preset_name_or_a_path(tmp_path):
+    assert preset_path("cycab") == PRESETS_DIR / "cycab.toml"
+    with pytest.raises(ConfigError, match=r"presets: \['cycab', 'victoria_park_ute'\]"):
+        preset_path("nope")
+
+
+def test_config_pickles_for_the_workers():
+    import pickle
+
+    cfg = load_slam_config("victoria_park_ute")
+    assert pickle.loads(pickle.dumps(cfg)) == cfg
