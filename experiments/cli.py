@@ -505,56 +505,80 @@ def presets() -> None:
         typer.echo(f"{name:20s} {about}")
 
 
+# The options of `trunkslam slam` that replace one setting of the configuration each.
+ConfigOption = Annotated[
+    str | None,
+    typer.Option(
+        "--config",
+        help="the run's settings: a TOML file (a run's config.toml reproduces it) or a "
+        "preset of `trunkslam presets` [default: the built-in settings, SlamConfig()]",
+    ),
+]
+FeaturesOption = Annotated[
+    SlamFeatures | None,
+    typer.Option(
+        "--features",
+        help="replaces the settings' [features] method: an extractor on the raw scans, or "
+        "the sequence's detections [default: the settings', paper]",
+    ),
+]
+FeaturesFileOption = Annotated[
+    Path | None,
+    typer.Option(
+        "--features-file",
+        help="features JSON from `trunkslam extract`, used instead of extracting "
+        "([features] file) [default: none]",
+    ),
+]
+AssociationOption = Annotated[
+    Association | None,
+    typer.Option(
+        "--association",
+        help="replaces the settings' [association] method: single-scan IHGR, the K-scan "
+        "IHGR window (K: --window), JCBB or NN [default: the settings', ihgr]",
+    ),
+]
+WindowOption = Annotated[
+    int | None,
+    typer.Option(
+        "--window",
+        min=1,
+        max=8,
+        help="K of the IHGR window (implies --association ihgr-window) "
+        "[default: the settings' window_scans, 3]",
+    ),
+]
+HeadingOption = Annotated[
+    float | None,
+    typer.Option(
+        "--initial-heading",
+        help="start heading, rad, when starting from GPS ([start] initial_heading_rad) "
+        "[default: from the GPS fit]",
+    ),
+]
+EllipseOption = Annotated[
+    float,
+    typer.Option(
+        "--ellipse-scale",
+        min=0.01,
+        help="covariance ellipses in the recording are drawn this many times their 95% size "
+        "(x1: true size)",
+    ),
+]
+
+
 @app.command("slam")
 @handle_errors
 def slam_cmd(
     input: Annotated[
         Path | None, typer.Argument(help="sequence file (.npz), see datasets/FORMAT.md")
     ] = None,
-    config: Annotated[
-        str | None,
-        typer.Option(
-            help="the run's settings: a TOML file (a run's config.toml reproduces it) or a "
-            "preset of `trunkslam presets` [default: the built-in settings, SlamConfig()]"
-        ),
-    ] = None,
-    features: Annotated[
-        SlamFeatures | None,
-        typer.Option(
-            help="replaces the settings' [features] method: an extractor on the raw scans, or "
-            "the sequence's detections [default: the settings', paper]"
-        ),
-    ] = None,
-    features_file: Annotated[
-        Path | None,
-        typer.Option(
-            help="features JSON from `trunkslam extract`, used instead of extracting "
-            "([features] file) [default: none]"
-        ),
-    ] = None,
-    association: Annotated[
-        Association | None,
-        typer.Option(
-            help="replaces the settings' [association] method: single-scan IHGR, the K-scan "
-            "IHGR window (K: --window), JCBB or NN [default: the settings', ihgr]"
-        ),
-    ] = None,
-    window: Annotated[
-        int | None,
-        typer.Option(
-            min=1,
-            max=8,
-            help="K of the IHGR window (implies --association ihgr-window) "
-            "[default: the settings' window_scans, 3]",
-        ),
-    ] = None,
-    initial_heading: Annotated[
-        float | None,
-        typer.Option(
-            help="start heading, rad, when starting from GPS ([start] initial_heading_rad) "
-            "[default: from the GPS fit]"
-        ),
-    ] = None,
+    config: ConfigOption = None,
+    features: FeaturesOption = None,
+    features_file: FeaturesFileOption = None,
+    association: AssociationOption = None,
+    window: WindowOption = None,
+    initial_heading: HeadingOption = None,
     dump_config: Annotated[
         bool, typer.Option(help="print the resolved settings as TOML and exit")
     ] = False,
@@ -562,14 +586,7 @@ def slam_cmd(
     rerun: Annotated[
         Path | None, typer.Option(help="also write a rerun recording (.rrd) [default: none]")
     ] = None,
-    ellipse_scale: Annotated[
-        float,
-        typer.Option(
-            min=0.01,
-            help="covariance ellipses in the recording are drawn this many times their 95% size "
-            "(x1: true size)",
-        ),
-    ] = 10.0,
+    ellipse_scale: EllipseOption = 10.0,
     smooth: Annotated[
         bool, typer.Option(help="then re-solve the run with the GTSAM smoother (batch)")
     ] = False,

@@ -5,12 +5,16 @@
 - rooms of `experiments`: a room imports only rooms below it (`errors` at the bottom; `io`,
   `sim`, `eval` and `exec` never import `paper`, `bench`, `pipeline`, `render` or `cli`);
 - third-party packages confined to one module (gtsam, rerun, matplotlib, dask);
-- no private name (`_x`) or private module imported from another module.
+- no private name (`_x`) or private module imported from another module;
+- STYLE.md section 4b's signs of a missing name: no function over 80 lines (numba kernels
+  aside) and no call with more than five positional arguments (calls of numba kernels, of a
+  logger and of builtins aside).
 """
 
 from __future__ import annotations
 
 import ast
+import builtins
 from pathlib import Path
 
 import pytest
@@ -131,3 +135,122 @@ def test_library_code_never_points_into_tests():
 
 def test_datasets_is_not_a_python_package():
     assert not (ROOT / "datasets" / "__init__.py").exists()
+
+
+# ---- STYLE.md section 4b: a function longer than a screen, a call with too many arguments -------
+
+MAX_FUNCTION_LINES = 80
+MAX_POSITIONAL = 5
+KERNEL_DECORATORS = {"njit", "vectorize"}  # numba's: a kernel is one loop, not split for reading
+LOGGERS = {"log", "logger", "logging"}  # log.info("%s ... %s", a, b, ...): a format's arguments
+BUILTINS = set(dir(builtins))  # zip(a, b, c, ...), print, range, max, min, ...
+# Calls allowed by where they are and what they call, with the reason.
+ALLOWED_CALLS = {
+    # the numba segmentation kernel or its plain-numpy twin (the test oracle), chosen by name
+    # from a dict: the same arguments as the kernel
+    ("features/segmentation.py", "kernels[kernel]")
+}
+
+
+def _trees() -> dict[Path, ast.Module]:
+    return {p: ast.parse(p.read_text(), filename=str(p)) for p in FILES}
+
+
+TREES = _trees()
+
+
+def _name(node: ast.expr) -> str:
+    """The last name of a decorator or a callee: njit for `njit`, `numba.njit(cache=True)`."""
+    if isinstance(node, ast.Call):
+        node = node.func
+    if isinstance(node, ast.Attribute):
+        return node.attr
+    return node.id if isinstance(node, ast.Name) else ""
+
+
+def _is_kernel(fn: ast.FunctionDef) -> bool:
+    return any(_name(d) in KERNEL_DECORATORS for d in fn.decorator_list)
+
+
+def _functions(tree: ast.Module):
+    return [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+
+
+# every numba kernel of the packages, by name: a kernel's arguments are arrays and scalars
+KERNELS = {fn.name for tree in TREES.values() for fn in _functions(tree) if _is_kernel(fn)}
+
+
+def long_functions(tree: ast.Module) -> list[str]:
+    """Every function (nested ones too) over MAX_FUNCTION_LINES lines from its def to its last
+    line, numba kernels aside, as "name (line): n lines"."""
+    return [
+        f"{fn.name} (line {fn.lineno}): {fn.end_lineno - fn.lineno + 1} lines"
+        for fn in _functions(tree)
+        if fn.end_lineno - fn.lineno + 1 > MAX_FUNCTION_LINES and not _is_kernel(fn)
+    ]
+
+
+def _call_allowed(call: ast.Call, rel: str) -> bool:
+    f = call.func
+    if isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id in LOGGERS:
+        return True
+    if isinstance(f, ast.Name) and f.id in BUILTINS:
+        return True
+    return _name(f) in KERNELS or (rel, ast.unparse(f)) in ALLOWED_CALLS
+
+
+def long_calls(tree: ast.Module, rel: str) -> list[str]:
+    """Every call with more than MAX_POSITIONAL positional arguments (a *starred one counts
+    once), but for kernels, loggers and builtins, as "callee (line): n positional"."""
+    return [
+        f"{ast.unparse(n.func)} (line {n.lineno}): {len(n.args)} positional"
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Call) and len(n.args) > MAX_POSITIONAL and not _call_allowed(n, rel)
+    ]
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_function_over_80_lines(path):
+    """A function longer than a screen is a concept without a name (STYLE.md section 4b)."""
+    bad = long_functions(TREES[path])
+    assert not bad, f"{path.relative_to(ROOT)}: {bad}"
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_call_with_more_than_five_positional_arguments(path):
+    """A call with more than five positional arguments is a record waiting to exist (STYLE.md
+    section 4b): give the arguments keywords, or the record a type."""
+    rel = str(path.relative_to(ROOT))
+    bad = long_calls(TREES[path], rel)
+    assert not bad, f"{rel}: {bad}"
+
+
+def test_the_size_checks_see_what_they_check():
+    """The checks find a long function and a long call in code written for it, and leave
+    kernels, loggers, builtins and the allowed call alone."""
+    src = (
+        "from numba import njit\n"
+        "@njit(cache=True)\n"
+        "def kern(a, b, c, d, e, f):\n" + "    a = 1\n" * 90 + "    return a\n"
+        "def long(x):\n" + "    x += 1\n" * 80 + "    return x\n"
+        "def short(x):\n    return x\n"
+        "def caller(a, b, c, d, e, f):\n"
+        "    kern(a, b, c, d, e, f)\n"
+        "    segment_kernel(a, b, c, d, e, f)\n"
+        "    log.info('%s %s %s %s %s', a, b, c, d, e)\n"
+        "    zip(a, b, c, d, e, f)\n"
+        "    kernels[kernel](a, b, c, d, e, f)\n"
+        "    record(a, b, c, d, e, f)\n"
+        "    record(*(a, b, c, d, e, f))\n"
+    )
+    tree = ast.parse(src)
+    assert long_functions(tree) == ["long (line 95): 82 lines"]
+    # only the packages' own kernels are allowed (segment_kernel), not any njit function
+    assert "segment_kernel" in KERNELS and "kern" not in KERNELS
+
+    def callees(rel: str) -> list[str]:
+        return [c.split(" (")[0] for c in long_calls(tree, rel)]
+
+    # the call through the dict is allowed in segmentation.py only; *starred counts once
+    assert callees("features/segmentation.py") == ["kern", "record"]
+    assert callees("elsewhere.py") == ["kern", "kernels[kernel]", "record"]

@@ -159,4 +159,6 @@ def score_sequence(seq, scan_t: np.ndarray, pose: np.ndarray, antenna=None) -> G
     `SlamLog.antenna_pose`; None: the sequence's gps_pose, else its laser)."""
     if antenna is None:
         antenna = seq.gps_pose if seq.gps_pose is not None else seq.laser_pose
-    return score_against_gps(scan_t, pose, seq.gps_t, seq.gps_xy, antenna, top_speed(seq))
+    return score_against_gps(
+        scan_t, pose, seq.gps_t, seq.gps_xy, antenna_pose=antenna, max_speed_mps=top_speed(seq)
+    )

@@ -277,48 +277,68 @@ def load_victoria_park(
     step(1, n_files)
     if t_all.size < limit:
         raise DataError(f"{root / VP_FILES['reference']}: TLsr has only {t_all.size} times")
-    scan_t = t_all[:n]
     ranges = None
     if not full:
         ranges = load_raw_sick_ranges(root)[:n]
         step(2, n_files)
-    k = np.concatenate([np.full(d.shape[1], i) for i, d in enumerate(dets[:n])]).astype(np.int64)
-    d = np.concatenate(dets[:n], axis=1)
-
-    dr = load_mat(root, "odometry", ("time", "speed", "steering"))
-    odo_ms = _column("odometry", dr, "time")
-    speed = _column("odometry", dr, "speed", odo_ms.size)
-    steer = _column("odometry", dr, "steering", odo_ms.size)
+    detections = _detections(dets[:n])
+    odometry = _odometry(root)
     step(n_files - 1, n_files)
-
-    gps = load_mat(root, "gps", ("timeGps", "La_m", "Lo_m"))
-    gps_ms = _column("gps", gps, "timeGps")
-    lo = _column("gps", gps, "Lo_m", gps_ms.size)
-    la = _column("gps", gps, "La_m", gps_ms.size)
+    gps = _gps(root)
     step(n_files, n_files)
-
     return Sequence(
-        scan_t=scan_t,
+        scan_t=t_all[:n],
         scan_ranges=ranges,
         scan_n_beams=361,
         scan_angle_min=VP_ANGLE_MIN_RAD,
         scan_angle_increment=VP_ANGLE_INCREMENT_RAD,
         laser_pose=np.array(VP_LASER_POSE),
         scan_max_range=VP_MAX_RANGE_M,
-        det_scan=k,
-        det_range=d[0],
-        det_bearing=d[1] - math.pi / 2,
-        det_radius=d[2] / 2,
-        det_method="bailey",
-        odo_t=odo_ms.astype(np.float64) / 1000.0,
-        odo_speed=speed,
-        odo_steer=steer,
+        **detections,
+        **odometry,
         vehicle=dict(VP_VEHICLE),
-        gps_t=gps_ms.astype(np.float64) / 1000.0,
-        gps_xy=np.stack([lo, la], axis=1),
-        gps_pose=np.array(VP_LASER_POSE),
+        **gps,
         name="victoria_park (full run, published detections)" if full else "victoria_park",
     )
+
+
+def _detections(dets: list[np.ndarray]) -> dict[str, np.ndarray | str]:
+    """The published detections of the scans (one 3 x n array each: range, bearing from the
+    vehicle's right, diameter) as the `Sequence` fields det_*, in the laser frame."""
+    k = np.concatenate([np.full(d.shape[1], i) for i, d in enumerate(dets)]).astype(np.int64)
+    d = np.concatenate(dets, axis=1)
+    return {
+        "det_scan": k,
+        "det_range": d[0],
+        "det_bearing": d[1] - math.pi / 2,
+        "det_radius": d[2] / 2,
+        "det_method": "bailey",
+    }
+
+
+def _odometry(root: Path) -> dict[str, np.ndarray]:
+    """The odometry file as the `Sequence` fields odo_*: times (s), speed (m/s), steering."""
+    dr = load_mat(root, "odometry", ("time", "speed", "steering"))
+    odo_ms = _column("odometry", dr, "time")
+    return {
+        "odo_t": odo_ms.astype(np.float64) / 1000.0,
+        "odo_speed": _column("odometry", dr, "speed", odo_ms.size),
+        "odo_steer": _column("odometry", dr, "steering", odo_ms.size),
+    }
+
+
+def _gps(root: Path) -> dict[str, np.ndarray]:
+    """The GPS file as the `Sequence` fields gps_*: times (s), fixes [east, north] (m), and the
+    antenna's pose in the vehicle frame (at the laser)."""
+    gps = load_mat(root, "gps", ("timeGps", "La_m", "Lo_m"))
+    gps_ms = _column("gps", gps, "timeGps")
+    lo = _column("gps", gps, "Lo_m", gps_ms.size)
+    la = _column("gps", gps, "La_m", gps_ms.size)
+    return {
+        "gps_t": gps_ms.astype(np.float64) / 1000.0,
+        "gps_xy": np.stack([lo, la], axis=1),
+        "gps_pose": np.array(VP_LASER_POSE),
+    }
 
 
 def load_ss2002_reference(root: Path | str | None = None) -> tuple[np.ndarray, np.ndarray]:

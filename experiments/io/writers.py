@@ -51,6 +51,7 @@ __all__ = [
     "read_tidy_csv",
     "tidy_csv",
     "tidy_markdown",
+    "tidy_table",
     "write_atomic",
     "write_tidy_table",
 ]
@@ -514,6 +515,48 @@ def tidy_csv(records: Sequence[dict], fields: Sequence[str] | None = None) -> st
     return buf.getvalue()
 
 
+def tidy_table(
+    name: str,
+    records: Sequence[dict],
+    index: Sequence[str],
+    columns: Sequence[str] = (),
+    values: str | Sequence[str] = "value",
+    *,
+    labels: dict | None = None,
+    title: str = "",
+    notes: str = "",
+    parts: Sequence[tuple[str, Sequence[str]]] = (),
+) -> tuple[str, str]:
+    """The texts `write_tidy_table` writes, (Markdown, CSV), for the table `name` (its file
+    stem: the Markdown's pivots name `name`.csv as their source). See `write_tidy_table`."""
+    fields = list(dict.fromkeys(k for r in records for k in r))
+    names = [values] if isinstance(values, str) else list(values)
+    shown = {*index, *columns, *names}
+    if set(fields) - shown:
+        raise ValueError(f"write_tidy_table: fields {sorted(set(fields) - shown)} not in the pivot")
+    split = [v for _, vs in parts for v in vs]
+    if parts and sorted(split) != sorted(names):
+        raise ValueError(
+            "write_tidy_table: parts must hold every value once; missing "
+            f"{sorted(set(names) - set(split))}, unknown or repeated "
+            f"{sorted({v for v in split if v not in names or split.count(v) > 1})}"
+        )
+    records = [{f: r.get(f) for f in fields} for r in records]
+    source = name + ".csv"
+    md = f"# {title}\n\n" if title else ""
+    if parts:
+        md += "\n".join(
+            f"## {heading}\n\n"
+            + tidy_markdown(records, index, columns, list(vs), labels, source=source)
+            for heading, vs in parts
+        )
+    else:
+        md += tidy_markdown(records, index, columns, values, labels, source=source)
+    if notes:
+        md += "\n" + notes.strip() + "\n"
+    return md, tidy_csv(records, fields)
+
+
 def write_tidy_table(
     stem: Path,
     records: Sequence[dict],
@@ -536,36 +579,19 @@ def write_tidy_table(
     values, marked as a pivot of the CSV like a whole table): a table too wide to read, shown
     by concern. Together the parts hold every one of `values`, each once. The CSV is the same
     either way."""
-    fields = list(dict.fromkeys(k for r in records for k in r))
-    names = [values] if isinstance(values, str) else list(values)
-    shown = {*index, *columns, *names}
-    if set(fields) - shown:
-        raise ValueError(f"write_tidy_table: fields {sorted(set(fields) - shown)} not in the pivot")
-    split = [v for _, vs in parts for v in vs]
-    if parts and sorted(split) != sorted(names):
-        raise ValueError(
-            "write_tidy_table: parts must hold every value once; missing "
-            f"{sorted(set(names) - set(split))}, unknown or repeated "
-            f"{sorted({v for v in split if v not in names or split.count(v) > 1})}"
-        )
-    records = [{f: r.get(f) for f in fields} for r in records]
     stem = Path(stem)
-    source = stem.name + ".csv"
-    md = f"# {title}\n\n" if title else ""
-    if parts:
-        md += "\n".join(
-            f"## {heading}\n\n"
-            + tidy_markdown(records, index, columns, list(vs), labels, source=source)
-            for heading, vs in parts
-        )
-    else:
-        md += tidy_markdown(records, index, columns, values, labels, source=source)
-    if notes:
-        md += "\n" + notes.strip() + "\n"
-    return [
-        write_atomic(stem.with_suffix(".md"), md),
-        write_atomic(stem.with_suffix(".csv"), tidy_csv(records, fields)),
-    ]
+    md, text = tidy_table(
+        stem.name,
+        records,
+        index,
+        columns,
+        values,
+        labels=labels,
+        title=title,
+        notes=notes,
+        parts=parts,
+    )
+    return [write_atomic(stem.with_suffix(".md"), md), write_atomic(stem.with_suffix(".csv"), text)]
 
 
 def dumps_json(obj) -> str:

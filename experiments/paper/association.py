@@ -23,7 +23,7 @@ import io
 import logging
 import math
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
@@ -31,14 +31,17 @@ from association import CostModel, SlidingWindowAssociator, associate_detailed, 
 from association.inputs import prepare
 from association.single import single_scan_problem
 from experiments.exec import SerialExecutor
-from experiments.io.writers import markdown_table, write_atomic, write_tidy_table
+from experiments.io.writers import markdown_table, write_atomic
 from experiments.paper import products
+from experiments.paper.products import TableSpec
 from experiments.render import plots
 from experiments.sim.landmarks import LandmarkScan, LandmarkSimConfig, simulate_landmark_scans
 
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "RATE_TABLE",
+    "RateStudy",
     "cost_model_for",
     "instances_trial",
     "optimality_instances",
@@ -115,7 +118,7 @@ def run_methods(
                 a = s.feed(win)
             else:
                 params = cm if m == "ihgr" else ({"max_nodes": max_nodes} if m == "jcbb" else {})
-                res = associate_detailed(s.z, s.R, s.z_hat, s.H, s.P, m, gate_prob, **params)
+                res = associate_detailed(**s.inputs, method=m, gate_prob=gate_prob, **params)
                 a = res.assignment
             dt = time.perf_counter() - t0
             if t < EVAL_FROM_SCAN:
@@ -257,7 +260,7 @@ def _single_scan_instances(rng, n):
             sigma_heading_rad=math.radians(rng.uniform(1.0, 5.0)),
         )
         s = simulate_landmark_scans(cfg, rng)[0]
-        prep = prepare(s.z, s.R, s.z_hat, s.H, s.P, 0.99)
+        prep = prepare(**s.inputs, gate_prob=0.99)
         c, A, e, _, _ = single_scan_problem(prep, cost_model_for(cfg))
         out.append((c, A, e))
     return out
@@ -474,30 +477,66 @@ def _rate_records(rows) -> list[dict]:
     ]
 
 
+@dataclass(frozen=True)
+class RateStudy:
+    """The correct-association rate study's results: `rate_study`'s rows, from n_seq
+    sequences per point simulated around `base`."""
+
+    base: LandmarkSimConfig
+    n_seq: int
+    rows: list[dict]
+
+
+RATE_TABLE = TableSpec(
+    "association",
+    lambda study: _rate_records(study.rows),
+    index=("sweep", "sweep_value", "method"),
+    values=None,
+    labels=RATE_LABELS,
+    title="Correct-association rate on simulated maps",
+    notes=lambda study: _rate_notes(study.base, study.n_seq, study.rows),
+)
+
+
+def _loop_table() -> TableSpec:
+    """The in-the-loop table (association_loop.csv), of `association_loop.tree_park_loop`'s
+    (and `victoria_park_batch`'s) rows; its Markdown is a section of association.md."""
+    from experiments.paper import association_loop as al
+
+    return TableSpec(
+        "association_loop",
+        al.loop_records,
+        index=("data", "method"),
+        values=None,
+        labels=al.LOOP_LABELS,
+        notes=al.NOTES,
+    )
+
+
+# the optimality study's instances per family: (--quick, full)
+OPTIMALITY_INSTANCES = {
+    "single-scan (simulated)": (12, 250),
+    "K=3 window (simulated SLAM)": (8, 150),
+    "K=4 window, empty map (track formation)": (8, 150),
+    "random 3-scan set partitioning": (12, 200),
+}
+
+
+def _sizes(quick: bool) -> tuple[int, dict, dict[str, int]]:
+    """(sequences per point, sweeps, optimality instances per family) of the full or the
+    quick run (--quick: 2 sequences, each sweep's first, middle and last value)."""
+    if not quick:
+        return 40, SWEEPS, {fam: n for fam, (_, n) in OPTIMALITY_INSTANCES.items()}
+    sweeps = {k: (f, lab, [vals[0], vals[2], vals[-1]]) for k, (f, lab, vals) in SWEEPS.items()}
+    return 2, sweeps, {fam: n for fam, (n, _) in OPTIMALITY_INSTANCES.items()}
+
+
 def run(ctx) -> None:
+    """The registered experiment `association`: the rate study and its figure, the methods in
+    the SLAM loop (a section of association.md), then the optimality study."""
     cfg_out = ctx.config.setdefault("association", {})
     base = LandmarkSimConfig()
-    n_seq = 2 if ctx.quick else 40
-    sweeps = (
-        {k: (f, lab, [vals[0], vals[2], vals[-1]]) for k, (f, lab, vals) in SWEEPS.items()}
-        if ctx.quick
-        else SWEEPS
-    )
-    n_opt = (
-        {
-            "single-scan (simulated)": 12,
-            "K=3 window (simulated SLAM)": 8,
-            "K=4 window, empty map (track formation)": 8,
-            "random 3-scan set partitioning": 12,
-        }
-        if ctx.quick
-        else {
-            "single-scan (simulated)": 250,
-            "K=3 window (simulated SLAM)": 150,
-            "K=4 window, empty map (track formation)": 150,
-            "random 3-scan set partitioning": 200,
-        }
-    )
+    n_seq, sweeps, n_opt = _sizes(ctx.quick)
     cfg_out.update(
         {
             "sim_defaults": {
@@ -513,7 +552,6 @@ def run(ctx) -> None:
             "optimality_instances": n_opt,
         }
     )
-
     # the optimality study's instances, drawn on a worker while the rate study runs
     opt_rng = ctx.rng("association_optimality")
     drawn = ctx.submit(
@@ -522,17 +560,13 @@ def run(ctx) -> None:
         [opt_rng.bit_generator.seed_seq],
         desc="association optimality instances",
     )
-    rows = rate_study(ctx.rng("association_rates"), n_seq, base, sweeps, ctx.progress, ctx.executor)
-    notes = _rate_notes(base, n_seq, rows)
-    records = _rate_records(rows)
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "association",
-        records,
-        index=["sweep", "sweep_value", "method"],
-        values=list(records[0])[3:],
-        labels=RATE_LABELS,
-        title="Correct-association rate on simulated maps",
-        notes=notes,
+    rows = rate_study(
+        ctx.rng("association_rates"),
+        n_seq,
+        base,
+        sweeps,
+        progress=ctx.progress,
+        executor=ctx.executor,
     )
     labels = {k: lab for k, (_, lab, _) in SWEEPS.items()}
     spec = (
@@ -542,27 +576,19 @@ def run(ctx) -> None:
         {"method_labels": METHOD_LABELS, "sweep_xlabels": labels},
     )
     products.figures(ctx, [spec], desc="association figure")
-
-    _loop_section(ctx, cfg_out)
-
+    loop_rows, vp_note = _loop_study(ctx, cfg_out)
+    _write_rates_and_loop(ctx, RateStudy(base, n_seq, rows), loop_rows, vp_note)
     orows = optimality_study(
         opt_rng, n_opt, ctx.progress, ctx.executor, instances=drawn.result(ctx.progress)[0]
     )
-    summary = summarise_optimality(orows)
     oc = odd_cycle()
-    md = "# IHGR against the exact integer optimum\n\n" + markdown_table(OPT_HEADER, summary)
-    md += _optimality_notes(oc, summary)
-    ctx.outputs.append(write_atomic(ctx.out_dir / "association_optimality.md", md))
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(orows[0]))
-    w.writeheader()
-    w.writerows(orows)
-    ctx.outputs.append(write_atomic(ctx.out_dir / "association_optimality.csv", buf.getvalue()))
+    _write_optimality(ctx, orows, oc)
     cfg_out["odd_cycle"] = oc
 
 
-def _loop_section(ctx, cfg_out: dict) -> None:
-    """Append the in-the-loop section to association.md and write association_loop.csv."""
+def _loop_study(ctx, cfg_out: dict) -> tuple[list[dict], str]:
+    """The methods in the SLAM loop (`experiments.paper.association_loop`): (rows, a note when
+    Victoria Park was skipped)."""
     from experiments.errors import MissingDataError
     from experiments.paper import association_loop as al
 
@@ -591,21 +617,32 @@ def _loop_section(ctx, cfg_out: dict) -> None:
         "victoria_park_scans": vp_scans or "all",
         "methods": [label for label, _, _ in al.LOOP_METHODS],
     }
-    records = al.loop_records(rows)
-    paths = write_tidy_table(
-        ctx.out_dir / "association_loop",
-        records,
-        index=["data", "method"],
-        values=list(records[0])[2:],
-        labels=al.LOOP_LABELS,
-        notes=al.NOTES,
-    )
-    md_loop = paths[0].read_text()
-    paths[0].unlink()
-    md = (ctx.out_dir / "association.md").read_text()
-    md += "\n## In the SLAM loop\n\n" + md_loop + vp_note
+    return rows, vp_note
+
+
+def _write_rates_and_loop(ctx, rates: RateStudy, loop_rows: list[dict], vp_note: str) -> None:
+    """association.md (the rate table, then the section "In the SLAM loop"), association.csv
+    and association_loop.csv."""
+    rate_md, rate_csv = RATE_TABLE.texts(rates)
+    loop_md, loop_csv = _loop_table().texts(loop_rows)
+    md = rate_md + "\n## In the SLAM loop\n\n" + loop_md + vp_note
     ctx.outputs.append(write_atomic(ctx.out_dir / "association.md", md))
-    ctx.outputs.append(paths[1])
+    ctx.outputs.append(write_atomic(ctx.out_dir / "association.csv", rate_csv))
+    ctx.outputs.append(write_atomic(ctx.out_dir / "association_loop.csv", loop_csv))
+
+
+def _write_optimality(ctx, orows: list[dict], oc: dict) -> None:
+    """association_optimality.md (the summary per family and variant, notes) and .csv (one
+    row per instance and variant)."""
+    summary = summarise_optimality(orows)
+    md = "# IHGR against the exact integer optimum\n\n" + markdown_table(OPT_HEADER, summary)
+    md += _optimality_notes(oc, summary)
+    ctx.outputs.append(write_atomic(ctx.out_dir / "association_optimality.md", md))
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(orows[0]))
+    w.writeheader()
+    w.writerows(orows)
+    ctx.outputs.append(write_atomic(ctx.out_dir / "association_optimality.csv", buf.getvalue()))
 
 
 def _rate_notes(base: LandmarkSimConfig, n_seq: int, rows) -> str:

@@ -15,13 +15,16 @@ the floors of the geometric fit's covariance (`calibrate_fit_floor`, noise_calib
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
 from experiments.eval.detections import dominant_label, run_labels
 from experiments.exec import SerialExecutor
-from experiments.io.writers import write_tidy_table
+from experiments.paper import products
+from experiments.paper.products import TableSpec
 from experiments.paper.slam import METHODS, extractor_params
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
@@ -29,10 +32,16 @@ from slam import DEFAULT_CONSTANT_NOISE, SlamConfig, interpolate_poses, se2, wra
 from slam.measurement import DEFAULT_FIT_FLOOR, measurements_from_features
 
 __all__ = [
+    "FLOOR_QUANTITIES",
+    "NOISE_QUANTITIES",
     "SEEDS",
+    "TABLES",
+    "Calibration",
+    "Quantity",
     "calibrate_fit_floor",
     "calibrate_measurement_noise",
     "calibration_trial",
+    "quantity_records",
     "range_bias_line",
     "run",
 ]
@@ -196,103 +205,167 @@ def _fit(nll, start, xatol: float) -> np.ndarray:
     return np.abs(minimize(nll, start, method="Nelder-Mead", options=opts).x)
 
 
+class Quantity(NamedTuple):
+    """A column of the calibration tables: where its value comes from ("measured", "fitted",
+    "in_use"), what it is, its unit, its header, and how it is read from one method's fit,
+    value(method, fit)."""
+
+    source: str
+    quantity: str
+    unit: str
+    label: str
+    value: Callable[[str, dict], float]
+
+
+def _fitted(key: str) -> Callable[[str, dict], float]:
+    return lambda method, fit: fit[key]
+
+
+def _noise_in_use(i: int) -> Callable[[str, dict], float]:
+    return lambda method, fit: DEFAULT_CONSTANT_NOISE[method][i]
+
+
+def _bias_in_use(i: int) -> Callable[[str, dict], float]:
+    return lambda method, fit: SlamConfig().measurement.model_for(method).range_bias[i]
+
+
+# the constant-noise model's fields: (fits key, quantity, unit), in `NoiseModel`'s order
+NOISE_FIELDS = (
+    ("range_sigma_m", "range_sigma", "m"),
+    ("range_sigma_per_m", "range_sigma_per_range", "m/m"),
+    ("bearing_sigma_rad", "bearing_sigma", "rad"),
+    ("cross_range_sigma_m", "cross_range_sigma", "m"),
+)
+# noise_calibration's columns, from `calibrate_measurement_noise`'s fits
+NOISE_QUANTITIES = (
+    Quantity("measured", "circles", "count", "circles", _fitted("n")),
+    Quantity("measured", "range_error_mean", "m", "range mean (m)", _fitted("range_mean_m")),
+    Quantity(
+        "measured",
+        "range_error_mean_normalised",
+        "1",
+        "range mean / filter sigma",
+        _fitted("range_error_mean_normalised"),
+    ),
+    Quantity("measured", "range_error_rms", "m", "range RMS (m)", _fitted("range_rms_m")),
+    Quantity(
+        "measured", "bearing_error_rms", "rad", "bearing RMS (rad)", _fitted("bearing_rms_rad")
+    ),
+    *(Quantity("fitted", q, unit, f"fitted {key}", _fitted(key)) for key, q, unit in NOISE_FIELDS),
+    *(
+        Quantity("in_use", q, unit, f"in use {key}", _noise_in_use(i))
+        for i, (key, q, unit) in enumerate(NOISE_FIELDS)
+    ),
+    *(
+        Quantity("fitted", q, "1", q.replace("_", " "), _fitted(q))
+        for q in ("normalised_var_range", "normalised_var_bearing")
+    ),
+    Quantity("fitted", "range_bias_a", "m", "fitted range bias a (m)", _fitted("range_bias_a_m")),
+    Quantity(
+        "fitted", "range_bias_b", "m/m", "fitted range bias b (m/m)", _fitted("range_bias_b_per_m")
+    ),
+    Quantity("in_use", "range_bias_a", "m", "in use range bias a (m)", _bias_in_use(0)),
+    Quantity("in_use", "range_bias_b", "m/m", "in use range bias b (m/m)", _bias_in_use(1)),
+)
+# noise_calibration_floor's columns, from `calibrate_fit_floor`'s fit
+FLOOR_QUANTITIES = (
+    Quantity("measured", "circles", "count", "circles", _fitted("n")),
+    Quantity("fitted", "floor_range", "m", "floor range (m)", _fitted("floor_range_m")),
+    Quantity("fitted", "floor_bearing", "rad", "floor bearing (rad)", _fitted("floor_bearing_rad")),
+    Quantity("in_use", "floor_range", "m", "in use range (m)", lambda m, f: DEFAULT_FIT_FLOOR[0]),
+    Quantity(
+        "in_use", "floor_bearing", "rad", "in use bearing (rad)", lambda m, f: DEFAULT_FIT_FLOOR[1]
+    ),
+    Quantity(
+        "fitted",
+        "nis_per_dof_fit_covariance",
+        "1",
+        "NIS per dof, fit covariance",
+        _fitted("nis_per_dof_fit"),
+    ),
+    Quantity(
+        "fitted",
+        "nis_per_dof_with_floors",
+        "1",
+        "NIS per dof, with floors",
+        _fitted("nis_per_dof_floors"),
+    ),
+)
+
+
+def quantity_records(fits: dict[str, dict], quantities) -> list[dict]:
+    """Tidy records of the fits (method -> fit): per method, one per quantity."""
+    return [
+        {
+            "method": m,
+            "source": q.source,
+            "quantity": q.quantity,
+            "unit": q.unit,
+            "value": q.value(m, fit),
+        }
+        for m, fit in fits.items()
+        for q in quantities
+    ]
+
+
+def _table(stem: str, quantities, fits_of: Callable, title: str, notes: str) -> TableSpec:
+    """A calibration table: per method (rows) the quantities (columns) of its fit."""
+    return TableSpec(
+        stem,
+        lambda study: quantity_records(fits_of(study), quantities),
+        index=("method",),
+        columns=("source", "quantity", "unit"),
+        labels={(q.source, q.quantity, q.unit): q.label for q in quantities},
+        title=title,
+        notes=notes,
+    )
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The results of the calibration: the constant noise model's fits per method
+    (`calibrate_measurement_noise`), the geometric fit's floors (`calibrate_fit_floor`)."""
+
+    fits: dict[str, dict]
+    floor: dict
+
+
+TABLES = (
+    _table(
+        "noise_calibration",
+        NOISE_QUANTITIES,
+        lambda study: study.fits,
+        "Constant measurement-noise model: maximum-likelihood fits (tree park)",
+        f"Seeds {list(SEEDS)}, 240 scans each on paths varied as in experiment 2, circles "
+        "whose beams with a return mostly hit one trunk. sigma_range = a + b r, "
+        "sigma_bearing^2 = c^2 + (t / r)^2. 'in use' is "
+        "slam.DEFAULT_CONSTANT_NOISE (the fits rounded up to two digits). A normalised "
+        "variance of 1 means the fitted model matches the errors. 'range mean / filter "
+        "sigma': the mean range error in units of the sigma the filter gives each circle "
+        "(the default configuration: the constant model in use, the geometric fit's "
+        "covariance with its floors). 'fitted range bias': the line a + b r through the "
+        "range errors by maximum likelihood under those sigmas (least squares weighted by "
+        "1 / sigma^2, experiments/paper/calibration.py range_bias_line); 'in use': "
+        "slam.measurement.DEFAULT_RANGE_BIAS (the fits rounded to 0.1 mm and 0.01 mm per m), "
+        "subtracted from the ranges in slam.run_slam.",
+    ),
+    _table(
+        "noise_calibration_floor",
+        FLOOR_QUANTITIES,
+        lambda study: {"geometric": study.floor},
+        "Floors of the geometric fit's covariance: maximum-likelihood fit (tree park)",
+        f"Seeds {list(SEEDS)}, the circles of noise_calibration.md. R = R_fit + diag(f_r^2, "
+        "f_b^2) fitted by maximum likelihood of the centre errors; 'in use' is "
+        "slam.measurement.DEFAULT_FIT_FLOOR (SlamConfig.fit_floor_range_m, "
+        "fit_floor_bearing_rad; the fits rounded up to two digits).",
+    ),
+)
+
+
 def run(ctx) -> None:
     """The registered experiment `noise-calibration`: the fits beside the values in use."""
     fits = calibrate_measurement_noise(executor=ctx.executor)
     ctx.config["noise-calibration"] = {"seeds": list(SEEDS), "scene": "tree_park"}
-    records: list[dict] = []
-    labels: dict = {}
-
-    def add(method, source, quantity, unit, value, label) -> None:
-        labels[(source, quantity, unit)] = label
-        records.append(
-            {"method": method, "source": source, "quantity": quantity, "unit": unit, "value": value}
-        )
-
-    noise = (  # the constant-noise model's fields: (fits key, quantity, unit)
-        ("range_sigma_m", "range_sigma", "m"),
-        ("range_sigma_per_m", "range_sigma_per_range", "m/m"),
-        ("bearing_sigma_rad", "bearing_sigma", "rad"),
-        ("cross_range_sigma_m", "cross_range_sigma", "m"),
-    )
-    for m, f in fits.items():
-        add(m, "measured", "circles", "count", f["n"], "circles")
-        add(m, "measured", "range_error_mean", "m", f["range_mean_m"], "range mean (m)")
-        zm = f["range_error_mean_normalised"]
-        add(m, "measured", "range_error_mean_normalised", "1", zm, "range mean / filter sigma")
-        add(m, "measured", "range_error_rms", "m", f["range_rms_m"], "range RMS (m)")
-        add(m, "measured", "bearing_error_rms", "rad", f["bearing_rms_rad"], "bearing RMS (rad)")
-        for key, q, unit in noise:
-            add(m, "fitted", q, unit, f[key], f"fitted {key}")
-        for (key, q, unit), v in zip(noise, DEFAULT_CONSTANT_NOISE[m]):
-            add(m, "in_use", q, unit, v, f"in use {key}")
-        for q in ("normalised_var_range", "normalised_var_bearing"):
-            add(m, "fitted", q, "1", f[q], q.replace("_", " "))
-        add(m, "fitted", "range_bias_a", "m", f["range_bias_a_m"], "fitted range bias a (m)")
-        b_fit = f["range_bias_b_per_m"]
-        add(m, "fitted", "range_bias_b", "m/m", b_fit, "fitted range bias b (m/m)")
-        a_use, b_use = SlamConfig().measurement.model_for(m).range_bias
-        add(m, "in_use", "range_bias_a", "m", a_use, "in use range bias a (m)")
-        add(m, "in_use", "range_bias_b", "m/m", b_use, "in use range bias b (m/m)")
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "noise_calibration",
-        records,
-        index=["method"],
-        columns=["source", "quantity", "unit"],
-        labels=labels,
-        title="Constant measurement-noise model: maximum-likelihood fits (tree park)",
-        notes=(
-            f"Seeds {list(SEEDS)}, 240 scans each on paths varied as in experiment 2, circles "
-            "whose beams with a return mostly hit one trunk. sigma_range = a + b r, "
-            "sigma_bearing^2 = c^2 + (t / r)^2. 'in use' is "
-            "slam.DEFAULT_CONSTANT_NOISE (the fits rounded up to two digits). A normalised "
-            "variance of 1 means the fitted model matches the errors. 'range mean / filter "
-            "sigma': the mean range error in units of the sigma the filter gives each circle "
-            "(the default configuration: the constant model in use, the geometric fit's "
-            "covariance with its floors). 'fitted range bias': the line a + b r through the "
-            "range errors by maximum likelihood under those sigmas (least squares weighted by "
-            "1 / sigma^2, experiments/paper/calibration.py range_bias_line); 'in use': "
-            "slam.measurement.DEFAULT_RANGE_BIAS (the fits rounded to 0.1 mm and 0.01 mm per m), "
-            "subtracted from the ranges in slam.run_slam."
-        ),
-    )
-    fl = calibrate_fit_floor()
-    ctx.config["noise-calibration"]["fit_floor"] = fl
-    floor = [
-        ("measured", "circles", "count", fl["n"], "circles"),
-        ("fitted", "floor_range", "m", fl["floor_range_m"], "floor range (m)"),
-        ("fitted", "floor_bearing", "rad", fl["floor_bearing_rad"], "floor bearing (rad)"),
-        ("in_use", "floor_range", "m", DEFAULT_FIT_FLOOR[0], "in use range (m)"),
-        ("in_use", "floor_bearing", "rad", DEFAULT_FIT_FLOOR[1], "in use bearing (rad)"),
-        (
-            "fitted",
-            "nis_per_dof_fit_covariance",
-            "1",
-            fl["nis_per_dof_fit"],
-            "NIS per dof, fit covariance",
-        ),
-        (
-            "fitted",
-            "nis_per_dof_with_floors",
-            "1",
-            fl["nis_per_dof_floors"],
-            "NIS per dof, with floors",
-        ),
-    ]
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "noise_calibration_floor",
-        [
-            {"method": "geometric", "source": s_, "quantity": q, "unit": u, "value": v}
-            for s_, q, u, v, _ in floor
-        ],
-        index=["method"],
-        columns=["source", "quantity", "unit"],
-        labels={(s_, q, u): lab for s_, q, u, _, lab in floor},
-        title="Floors of the geometric fit's covariance: maximum-likelihood fit (tree park)",
-        notes=(
-            f"Seeds {list(SEEDS)}, the circles of noise_calibration.md. R = R_fit + diag(f_r^2, "
-            "f_b^2) fitted by maximum likelihood of the centre errors; 'in use' is "
-            "slam.measurement.DEFAULT_FIT_FLOOR (SlamConfig.fit_floor_range_m, "
-            "fit_floor_bearing_rad; the fits rounded up to two digits)."
-        ),
-    )
+    floor = calibrate_fit_floor()
+    ctx.config["noise-calibration"]["fit_floor"] = floor
+    products.tables(ctx, TABLES, Calibration(fits, floor))

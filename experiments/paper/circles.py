@@ -30,8 +30,8 @@ import numpy as np
 from experiments.eval.circles import center_error, circle_crlb, radius_error
 from experiments.eval.detections import assign_circles
 from experiments.exec import SerialExecutor, spawn_seeds
-from experiments.io.writers import write_tidy_table
 from experiments.paper import products
+from experiments.paper.products import TableSpec
 from experiments.render import plots
 from experiments.sim import load_scene, scene_from_dict, sensor_preset, simulate_scan
 from features import extract_features
@@ -40,6 +40,10 @@ from slam import se2
 __all__ = [
     "METHODS",
     "PAPER_TABLE1",
+    "PILLAR_TABLES",
+    "SWEEP_TABLE",
+    "CircleSweep",
+    "PillarStudy",
     "log_first_draws",
     "pillar_figures",
     "pillar_monte_carlo",
@@ -312,6 +316,169 @@ def _table(summary, pillars, key, methods, published: dict | None) -> list[dict]
     return out
 
 
+@dataclass(frozen=True)
+class PillarStudy:
+    """The results of Tables 1 and 2: the Monte Carlo, its summary per method and pillar
+    (`summarise`), the paper's fit and Bailey's on the scans where both extracted the pillar
+    (`paired`), and the geometric fit against the Cramer-Rao bound (`efficiency`)."""
+
+    mc: MonteCarlo
+    summary: dict
+    paired: list
+    efficiency: list
+
+    @classmethod
+    def of(cls, mc: MonteCarlo) -> PillarStudy:
+        return cls(mc, summarise(mc), paired(mc), efficiency(mc))
+
+    def findings(self) -> dict:
+        """What the manifest records of it: the pillars where the paper's fit beats Bailey's
+        (mean CE, mean RE), and the geometric fit's RMS centre error over the bound."""
+        both = [r for r in self.paired if r[1] > 0]
+        ratios = np.array([r[5] for r in self.efficiency])
+        return {
+            "paper_beats_bailey_ce": [r[0] for r in both if r[2] < r[3]],
+            "paper_beats_bailey_re": [r[0] for r in both if r[4] < r[5]],
+            "crlb_ratio_median": float(np.median(ratios)) if len(ratios) else None,
+            "crlb_ratio_max": float(ratios.max()) if len(ratios) else None,
+            "crlb_within_1p5": float(np.mean(ratios <= 1.5)) if len(ratios) else None,
+        }
+
+
+def _pillar_table(stem: str, key: str, pillars, published, extra: str = "") -> TableSpec:
+    """Table 1 (key "ce") or 2 ("re") over `pillars` (None: every pillar of the court)."""
+    number = "Table 1" if key == "ce" else "Table 2"
+
+    def pillars_of(st: PillarStudy):
+        return pillars or tuple(st.mc.names)
+
+    def notes(st: PillarStudy) -> str:
+        return (
+            f"{st.mc.n_trials} noise draws at each of the six positions; CE eq. (10), RE eq. "
+            "(11), relative to the pillar's distance and radius; mean (the paper's statistic), "
+            "median and RMS over the scans in which the method extracted the pillar. Compare "
+            "the Cramer-Rao bound (method crlb, an RMS) with the RMS rows: a mean of 2-D "
+            "Gaussian errors is about 0.89 of their RMS. Source paper_published: the paper's "
+            "numbers (means)." + extra
+        )
+
+    return TableSpec(
+        stem,
+        lambda st: _table(st.summary, pillars_of(st), key, METHODS, published),
+        index=("source", "method", "statistic", "unit"),
+        columns=("pillar",),
+        title=lambda st: (
+            f"{number}: {key.upper()} of pillars {', '.join(pillars_of(st))} "
+            "(simulated pillar court)"
+        ),
+        notes=notes,
+    )
+
+
+def _bias_records(st: PillarStudy) -> list[dict]:
+    s = st.summary
+    return [
+        {
+            "method": m,
+            "pillar": p,
+            "radius_bias_m": s[m][p].get("r_bias_m", math.nan),
+            "centre_range_bias_m": s[m][p].get("range_bias_m", math.nan),
+            "rms_centre_error_m": s[m][p].get("rms_center_m", math.nan),
+            "extracted_scans": s[m][p]["n"],
+        }
+        for m in METHODS
+        for p in st.mc.names
+    ]
+
+
+def _paired_records(st: PillarStudy) -> list[dict]:
+    return [
+        {"pillar": r[0], "scans_both": r[1], "method": m, "ce_mean": ce, "re_mean": re}
+        for r in st.paired
+        for m, ce, re in (("paper", r[2], r[4]), ("bailey", r[3], r[5]))
+    ]
+
+
+# the columns of crlb_efficiency (`efficiency`'s rows)
+EFFICIENCY_FIELDS = (
+    "position",
+    "pillar",
+    "beams",
+    "crlb_rms_centre_m",
+    "geometric_rms_centre_m",
+    "ratio",
+    "scans",
+)
+
+
+def _efficiency_notes(st: PillarStudy) -> str:
+    f = st.findings()
+    return (
+        f"Ratio median {f['crlb_ratio_median']:.3f}, max {f['crlb_ratio_max']:.3f}; "
+        f"{100 * f['crlb_within_1p5']:.0f}% of cells within 1.5x. The bound assumes "
+        "Gaussian range noise of the stated sigma (noise and quantisation combined)."
+    )
+
+
+# The tables of `trunkslam reproduce table1 table2`, written from a `PillarStudy`.
+PILLAR_TABLES = (
+    _pillar_table("table1_ce", "ce", TABLE_PILLARS, PAPER_TABLE1),
+    _pillar_table(
+        "table2_re",
+        "re",
+        TABLE_PILLARS,
+        None,
+        " The paper's Table 2 (RE) values did not survive in our copy of the paper.",
+    ),
+    _pillar_table("table1_ce_all", "ce", None, PAPER_TABLE1),
+    _pillar_table("table2_re_all", "re", None, None),
+    TableSpec(
+        "circle_bias",
+        _bias_records,
+        index=("method", "pillar"),
+        values=None,
+        labels={
+            "radius_bias_m": "radius bias (m)",
+            "centre_range_bias_m": "centre-range bias (m)",
+            "rms_centre_error_m": "RMS centre error (m)",
+            "extracted_scans": "extracted scans",
+        },
+        title="Signed errors (bias) per method",
+        notes="Negative radius bias = circle too small; negative centre-range bias = centre too "
+        "near the sensor (the Kasa bias of the paper's fit on short arcs).",
+    ),
+    TableSpec(
+        "paper_vs_bailey",
+        _paired_records,
+        index=("pillar", "scans_both"),
+        columns=("method",),
+        values=("ce_mean", "re_mean"),
+        labels={
+            "scans_both": "scans extracted by both",
+            **{
+                (m, v): f"mean {v[:2].upper()} {m}"
+                for m in ("paper", "bailey")
+                for v in ("ce_mean", "re_mean")
+            },
+        },
+        title="The paper's fit against the Bailey detector on the same scans",
+        notes="Only the scans in which both methods extracted the pillar.",
+    ),
+    TableSpec(
+        "crlb_efficiency",
+        lambda st: [dict(zip(EFFICIENCY_FIELDS, r)) for r in st.efficiency],
+        index=EFFICIENCY_FIELDS[:2],
+        values=EFFICIENCY_FIELDS[2:],
+        labels={
+            "crlb_rms_centre_m": "CRLB RMS centre (m)",
+            "geometric_rms_centre_m": "geometric RMS centre (m)",
+        },
+        title="Geometric fit against the Cramer-Rao bound (positions with >= 5 beams)",
+        notes=_efficiency_notes,
+    ),
+)
+
+
 def run_tables(ctx) -> None:
     """Tables 1 and 2 (and their all-pillar versions), the bias and efficiency tables, figures."""
     n = 20 if ctx.quick else 200
@@ -326,118 +493,23 @@ def run_tables(ctx) -> None:
             "methods": list(METHODS),
         }
     )
-    # the recording and the figures: one trial, first, beside the Monte Carlo's
+    _submit_products(ctx, n)
+    mc = pillar_monte_carlo(n, ctx.rng("table1"), progress=ctx.progress, executor=ctx.executor)
+    study = PillarStudy.of(mc)
+    cfg["extractor_sigma_r_m"] = mc.sigma_m
+    cfg.update(study.findings())
+    products.tables(ctx, PILLAR_TABLES, study)
+
+
+def _submit_products(ctx, n: int) -> None:
+    """The recording and the figures: one trial, first, beside the Monte Carlo's; written
+    after the experiments. Its scans are the Monte Carlo's first draws at each position."""
     P = len(_court().scan_positions)
     seeds = spawn_seeds(ctx.rng("table1"), P * (n + 1))  # as pillar_monte_carlo draws them
     job = (METHODS, 0.01, tuple(seeds[P + p * n] for p in range(P)))
     figures_seed = ctx.rng("pillar_figures").bit_generator.seed_seq
     made = ctx.submit(products_trial, [job], [figures_seed], desc="pillar court figures")
     ctx.later(made, lambda got: products.write(ctx, got[0]))
-    mc = pillar_monte_carlo(n, ctx.rng("table1"), progress=ctx.progress, executor=ctx.executor)
-    s = summarise(mc)
-    cfg["extractor_sigma_r_m"] = mc.sigma_m
-    note = (
-        f"{n} noise draws at each of the six positions; CE eq. (10), RE eq. (11), relative to "
-        "the pillar's distance and radius; mean (the paper's statistic), median and RMS over "
-        "the scans in which the method extracted the pillar. Compare the Cramer-Rao bound "
-        "(method crlb, an RMS) with the RMS rows: a mean of 2-D Gaussian errors is about 0.89 "
-        "of their RMS. Source paper_published: the paper's numbers (means)."
-    )
-    for stem, key, pillars, pub, extra in (
-        ("table1_ce", "ce", TABLE_PILLARS, PAPER_TABLE1, ""),
-        (
-            "table2_re",
-            "re",
-            TABLE_PILLARS,
-            None,
-            " The paper's Table 2 (RE) values did not survive in our copy of the paper.",
-        ),
-        ("table1_ce_all", "ce", tuple(mc.names), PAPER_TABLE1, ""),
-        ("table2_re_all", "re", tuple(mc.names), None, ""),
-    ):
-        ctx.outputs += write_tidy_table(
-            ctx.out_dir / stem,
-            _table(s, pillars, key, METHODS, pub),
-            index=["source", "method", "statistic", "unit"],
-            columns=["pillar"],
-            title=f"{'Table 1' if key == 'ce' else 'Table 2'}: {key.upper()} of pillars "
-            f"{', '.join(pillars)} (simulated pillar court)",
-            notes=note + extra,
-        )
-    bias = [
-        {
-            "method": m,
-            "pillar": p,
-            "radius_bias_m": s[m][p].get("r_bias_m", math.nan),
-            "centre_range_bias_m": s[m][p].get("range_bias_m", math.nan),
-            "rms_centre_error_m": s[m][p].get("rms_center_m", math.nan),
-            "extracted_scans": s[m][p]["n"],
-        }
-        for m in METHODS
-        for p in mc.names
-    ]
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "circle_bias",
-        bias,
-        index=["method", "pillar"],
-        values=list(bias[0])[2:],
-        labels={
-            "radius_bias_m": "radius bias (m)",
-            "centre_range_bias_m": "centre-range bias (m)",
-            "rms_centre_error_m": "RMS centre error (m)",
-            "extracted_scans": "extracted scans",
-        },
-        title="Signed errors (bias) per method",
-        notes="Negative radius bias = circle too small; negative centre-range bias = centre too "
-        "near the sensor (the Kasa bias of the paper's fit on short arcs).",
-    )
-    pr = paired(mc)
-    pairs = [
-        {"pillar": r[0], "scans_both": r[1], "method": m, "ce_mean": ce, "re_mean": re}
-        for r in pr
-        for m, ce, re in (("paper", r[2], r[4]), ("bailey", r[3], r[5]))
-    ]
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "paper_vs_bailey",
-        pairs,
-        index=["pillar", "scans_both"],
-        columns=["method"],
-        values=["ce_mean", "re_mean"],
-        labels={
-            "scans_both": "scans extracted by both",
-            **{
-                (m, v): f"mean {v[:2].upper()} {m}"
-                for m in ("paper", "bailey")
-                for v in ("ce_mean", "re_mean")
-            },
-        },
-        title="The paper's fit against the Bailey detector on the same scans",
-        notes="Only the scans in which both methods extracted the pillar.",
-    )
-    both = [r for r in pr if r[1] > 0]
-    cfg["paper_beats_bailey_ce"] = [r[0] for r in both if r[2] < r[3]]
-    cfg["paper_beats_bailey_re"] = [r[0] for r in both if r[4] < r[5]]
-    eff = efficiency(mc)
-    ratios = np.array([r[5] for r in eff])
-    cfg["crlb_ratio_median"] = float(np.median(ratios)) if len(ratios) else None
-    cfg["crlb_ratio_max"] = float(ratios.max()) if len(ratios) else None
-    cfg["crlb_within_1p5"] = float(np.mean(ratios <= 1.5)) if len(ratios) else None
-    eff_fields = ("position", "pillar", "beams", "crlb_rms_centre_m", "geometric_rms_centre_m")
-    eff_fields += ("ratio", "scans")
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "crlb_efficiency",
-        [dict(zip(eff_fields, r)) for r in eff],
-        index=["position", "pillar"],
-        values=list(eff_fields[2:]),
-        labels={
-            "crlb_rms_centre_m": "CRLB RMS centre (m)",
-            "geometric_rms_centre_m": "geometric RMS centre (m)",
-        },
-        title="Geometric fit against the Cramer-Rao bound (positions with >= 5 beams)",
-        notes=f"Ratio median {cfg['crlb_ratio_median']:.3f}, max {cfg['crlb_ratio_max']:.3f}; "
-        f"{100 * cfg['crlb_within_1p5']:.0f}% of cells within 1.5x. The bound assumes "
-        "Gaussian range noise of the stated sigma (noise and quantisation combined).",
-    )
 
 
 def pillar_figures(rng: np.random.Generator, rec) -> dict[str, bytes]:
@@ -470,10 +542,10 @@ def pillar_figures(rng: np.random.Generator, rec) -> dict[str, bytes]:
             files[fig] = products.png(
                 plots.plot_features,
                 scan.points_xy,
-                plots.segments_of(f),
-                circles,
-                f.edge_xy,
-                f"Circles and edges at position {k + 1} (simulated; laser frame)",
+                segments=plots.segments_of(f),
+                circles=circles,
+                edges_xy=f.edge_xy,
+                title=f"Circles and edges at position {k + 1} (simulated; laser frame)",
                 zoom=plots.zoom_box(truth_l),
                 truth_xyr=truth_l,
             )
@@ -537,6 +609,51 @@ def sweep_trial(point: dict, seed) -> dict:
     return sweep_point(np.random.default_rng(seed), **point)
 
 
+@dataclass(frozen=True)
+class CircleSweep:
+    """The circle sweep's results: n_trials scans per point; results[swept field][value] =
+    `sweep_point`'s result there (the others held at `SWEEP_DEFAULT`)."""
+
+    n_trials: int
+    results: dict
+
+
+def _sweep_records(sweep: CircleSweep) -> list[dict]:
+    return [
+        {
+            "sweep": var,
+            "sweep_value": v,
+            "method": m,
+            "rms_ce": ce,
+            "rms_re": re,
+            "extracted_fraction": frac,
+        }
+        for var, points in sweep.results.items()
+        for v, res in points.items()
+        for m, (ce, re, frac) in res.items()
+    ]
+
+
+SWEEP_TABLE = TableSpec(
+    "circle_sweep",
+    _sweep_records,
+    index=("sweep", "sweep_value", "method"),
+    values=("rms_ce", "rms_re", "extracted_fraction"),
+    labels={
+        "sweep_value": "value",
+        "rms_ce": "RMS CE",
+        "rms_re": "RMS RE",
+        "extracted_fraction": "extracted fraction",
+    },
+    title="Circle accuracy against range, radius and range noise",
+    notes=lambda sweep: (
+        f"One pillar straight ahead of a PLS200, {sweep.n_trials} scans per "
+        f"point; the others held at {SWEEP_DEFAULT}. The crlb rows are the Cramer-Rao bound (RMS, "
+        "relative)."
+    ),
+)
+
+
 def run_sweep(ctx) -> None:
     n = 10 if ctx.quick else 100
     ctx.config.setdefault("circle-sweep", {}).update(
@@ -547,35 +664,9 @@ def run_sweep(ctx) -> None:
     got = ctx.map(
         sweep_trial, jobs, spawn_seeds(ctx.rng("circle-sweep"), len(jobs)), "circle sweep"
     )
-    rows = []
     results: dict = {var: {} for var in SWEEPS}
     for (var, v), res in zip(points, got):
         results[var][v] = res
-        for m, (ce, re, frac) in res.items():
-            rows.append(
-                {
-                    "sweep": var,
-                    "sweep_value": v,
-                    "method": m,
-                    "rms_ce": ce,
-                    "rms_re": re,
-                    "extracted_fraction": frac,
-                }
-            )
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "circle_sweep",
-        rows,
-        index=["sweep", "sweep_value", "method"],
-        values=["rms_ce", "rms_re", "extracted_fraction"],
-        labels={
-            "sweep_value": "value",
-            "rms_ce": "RMS CE",
-            "rms_re": "RMS RE",
-            "extracted_fraction": "extracted fraction",
-        },
-        title="Circle accuracy against range, radius and range noise",
-        notes=f"One pillar straight ahead of a PLS200, {n} scans per point; the others held at "
-        f"{SWEEP_DEFAULT}. The crlb rows are the Cramer-Rao bound (RMS, relative).",
-    )
+    products.tables(ctx, [SWEEP_TABLE], CircleSweep(n, results))
     spec = ("circle_sweep.png", plots.plot_sweep, (results,), {"held": SWEEP_DEFAULT})
     products.figures(ctx, [spec], desc="circle sweep figure")

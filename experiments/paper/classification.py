@@ -162,4 +162,11 @@ def classification_study(
             wall_fc[t] = float(np.mean([c for _, c in res]))
         else:
             bush[t] = float(np.mean(res))
-    return ClassificationResult(rate, beams, wall_frac, wall_fc, bush, n_trials)
+    return ClassificationResult(
+        circle_rate=rate,
+        beams=beams,
+        wall_line_fraction=wall_frac,
+        wall_false_circles=wall_fc,
+        bush_circle_rate=bush,
+        n_trials=n_trials,
+    )

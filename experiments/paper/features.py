@@ -131,14 +131,14 @@ def victoria_park_scans(quick: bool, rec) -> tuple[dict | str, bytes | None]:
     figure = products.png(
         plots.plot_features,
         scan.points_xy,
-        plots.segments_of(f),
-        [
+        segments=plots.segments_of(f),
+        circles=[
             ("paper", f.circle_params, plots.METHOD_COLORS["paper"]),
             ("bailey", b.circle_params, plots.METHOD_COLORS["bailey"]),
         ],
-        f.edge_xy,
-        f"Victoria Park scan index {best_k} (0-based, as in the manifest and the recording; "
-        f"t = {scan.stamp_s:.2f} s; laser frame)",
+        edges_xy=f.edge_xy,
+        title=f"Victoria Park scan index {best_k} (0-based, as in the manifest and the "
+        f"recording; t = {scan.stamp_s:.2f} s; laser frame)",
         zoom=plots.zoom_box(f.circle_params),
     )
     return {"scan_index": best_k, "scans_logged": n}, figure

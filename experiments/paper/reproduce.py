@@ -52,6 +52,114 @@ def _remove(folder: Path, names: set[str]) -> None:
             d.rmdir()
 
 
+class _Ledger:
+    """The bookkeeping of one result set while its experiments run in `stage` (the temporary
+    folder): per experiment the files and configuration keys it added, its deferred parts, its
+    time, and the failures. An experiment that fails loses its files, its keys and its
+    deferred parts; the others go on."""
+
+    def __init__(self, ctx: RunContext, stage: Path, failures: tuple) -> None:
+        self.ctx = ctx
+        self.stage = stage
+        self.failures = failures  # errors that fail one experiment; any other stops the run
+        self.failed: dict[str, str] = {}
+        self.timings: dict[str, float] = {}
+        self.owned: dict[str, tuple[set[str], set[str]]] = {}
+        self.deferred: list[tuple[str, Batch, Callable]] = []
+
+    def fail(self, name: str, exc: BaseException, files: set[str], keys: set[str]) -> None:
+        log.error("experiment %s failed: %s", name, exc)
+        self.failed[name] = f"{type(exc).__name__}: {exc}"
+        self.timings.pop(name, None)
+        _remove(self.stage, files)
+        for k in keys:
+            self.ctx.config.pop(k, None)
+        for n, batch, _ in self.deferred:
+            if n == name:
+                batch.cancel()
+
+    def run(self, fn: Callable, group: list[str]) -> bool:
+        """Run one experiment (`group`: the names its function stands for); False when it
+        failed on bad input."""
+        ctx = self.ctx
+        name = " ".join(group)
+        log.info("running %s", name)
+        t0, c0 = time.perf_counter(), time.process_time()
+        before_files, before_config = _files(self.stage), set(ctx.config)
+        n_deferred = len(ctx.deferred)
+        try:
+            fn(ctx)
+        except self.failures as exc:
+            self.deferred += [(name, b, f) for b, f in ctx.deferred[n_deferred:]]
+            self.fail(name, exc, _files(self.stage) - before_files, set(ctx.config) - before_config)
+            return False
+        except BaseException:
+            for b, _ in ctx.deferred:  # a bug or an interruption: nothing more is wanted
+                b.cancel()
+            raise
+        self.deferred += [(name, b, f) for b, f in ctx.deferred[n_deferred:]]
+        self.timings[name] = round(time.perf_counter() - t0, 2)
+        # the resolved parameters, under every name the run stands for
+        written = [k for k in ctx.config if k not in before_config and ctx.config[k]]
+        shared = ctx.config[written[0]] if written else {}
+        for n in group:
+            ctx.config[n] = ctx.config.get(n) or shared
+        self.owned[name] = (_files(self.stage) - before_files, set(ctx.config) - before_config)
+        log.info(
+            "%s done in %.1f s (%.1f s CPU in this process)",
+            name,
+            self.timings[name],
+            time.process_time() - c0,
+        )
+        return True
+
+    def finish_deferred(self) -> None:
+        """The parts the experiments deferred (`RunContext.later`), in the order handed over:
+        their trials ran beside the later experiments' trials."""
+        for k, (name, batch, finish) in enumerate(self.deferred):
+            if name in self.failed:
+                continue
+            t0, c0 = time.perf_counter(), time.process_time()
+            before_files = _files(self.stage)
+            try:
+                finish(batch.result(self.ctx.progress))
+            except self.failures as exc:
+                files, keys = self.owned[name]
+                self.fail(name, exc, files | (_files(self.stage) - before_files), keys)
+                continue
+            except BaseException:
+                for _, b, _ in self.deferred[k + 1 :]:
+                    b.cancel()
+                raise
+            self.owned[name][0].update(_files(self.stage) - before_files)
+            self.timings[name] = round(self.timings[name] + time.perf_counter() - t0, 2)
+            log.info(
+                "%s: deferred part (%s) done in %.1f s (%.1f s CPU in this process)",
+                name,
+                batch.desc,
+                time.perf_counter() - t0,
+                time.process_time() - c0,
+            )
+
+    def manifest(self, names: list[str], executor: Executor) -> dict:
+        """manifest.json: what ran, how, with which parameters, and every file of the set."""
+        ctx = self.ctx
+        return {
+            "experiments": names,
+            "quick": ctx.quick,
+            "seed": ctx.seed,
+            "git_commit": git_commit(),
+            "finished": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
+            "machine": machine(),
+            "versions": versions(),
+            "config": ctx.config,
+            "seconds": self.timings,
+            "executor": executor.describe(),
+            "failed": self.failed,
+            "outputs": sorted(_files(self.stage)),
+        }
+
+
 def run_experiments(
     names: list[str],
     out_dir: Path,
@@ -76,106 +184,22 @@ def run_experiments(
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     # errors that fail one experiment; OSError (a full disk, ...) and bugs stop the whole run
     failures = tuple(e for e in input_errors() if e is not OSError)
-    failed: dict[str, str] = {}
-    timings: dict[str, float] = {}
     with atomic_folder(out_dir) as stage:
         ctx = RunContext(out_dir=stage, quick=quick, seed=seed, executor=executor)
         if progress is not None:
             ctx.progress = progress
-        step = ctx.progress
-        # per experiment: the files and configuration keys it added, and its deferred parts
-        owned: dict[str, tuple[set[str], set[str]]] = {}
-        deferred: list[tuple[str, Batch, Callable]] = []
-
-        def fail(name: str, exc: BaseException, files: set[str], keys: set[str]) -> None:
-            log.error("experiment %s failed: %s", name, exc)
-            failed[name] = f"{type(exc).__name__}: {exc}"
-            timings.pop(name, None)
-            _remove(stage, files)
-            for k in keys:
-                ctx.config.pop(k, None)
-            for n, batch, _ in deferred:
-                if n == name:
-                    batch.cancel()
-
+        ledger = _Ledger(ctx, stage, failures)
         for i, (fn, group) in enumerate(groups.items()):
-            step("experiments", i, len(groups))
-            name = " ".join(group)
-            log.info("running %s", name)
-            t0, c0 = time.perf_counter(), time.process_time()
-            before_files, before_config = _files(stage), set(ctx.config)
-            n_deferred = len(ctx.deferred)
-            try:
-                fn(ctx)
-            except failures as exc:
-                deferred += [(name, b, f) for b, f in ctx.deferred[n_deferred:]]
-                fail(name, exc, _files(stage) - before_files, set(ctx.config) - before_config)
-                continue
-            except BaseException:
-                for b, _ in ctx.deferred:  # a bug or an interruption: nothing more is wanted
-                    b.cancel()
-                raise
-            deferred += [(name, b, f) for b, f in ctx.deferred[n_deferred:]]
-            timings[name] = round(time.perf_counter() - t0, 2)
-            # the resolved parameters, under every name the run stands for
-            written = [k for k in ctx.config if k not in before_config and ctx.config[k]]
-            shared = ctx.config[written[0]] if written else {}
-            for n in group:
-                ctx.config[n] = ctx.config.get(n) or shared
-            owned[name] = (_files(stage) - before_files, set(ctx.config) - before_config)
-            log.info(
-                "%s done in %.1f s (%.1f s CPU in this process)",
-                name,
-                timings[name],
-                time.process_time() - c0,
-            )
-            step("experiments", i + 1, len(groups))
-        # the parts the experiments deferred (`RunContext.later`), in the order handed over:
-        # their trials ran beside the later experiments' trials
-        for k, (name, batch, finish) in enumerate(deferred):
-            if name in failed:
-                continue
-            t0, c0 = time.perf_counter(), time.process_time()
-            before_files = _files(stage)
-            try:
-                finish(batch.result(ctx.progress))
-            except failures as exc:
-                files, keys = owned[name]
-                fail(name, exc, files | (_files(stage) - before_files), keys)
-                continue
-            except BaseException:
-                for _, b, _ in deferred[k + 1 :]:
-                    b.cancel()
-                raise
-            owned[name][0].update(_files(stage) - before_files)
-            timings[name] = round(timings[name] + time.perf_counter() - t0, 2)
-            log.info(
-                "%s: deferred part (%s) done in %.1f s (%.1f s CPU in this process)",
-                name,
-                batch.desc,
-                time.perf_counter() - t0,
-                time.process_time() - c0,
-            )
-        outputs = sorted(_files(stage))
-        manifest = {
-            "experiments": names,
-            "quick": quick,
-            "seed": seed,
-            "git_commit": git_commit(),
-            "finished": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
-            "machine": machine(),
-            "versions": versions(),
-            "config": ctx.config,
-            "seconds": timings,
-            "executor": executor.describe(),
-            "failed": failed,
-            "outputs": outputs,
-        }
+            ctx.progress("experiments", i, len(groups))
+            if ledger.run(fn, group):
+                ctx.progress("experiments", i + 1, len(groups))
+        ledger.finish_deferred()
+        manifest = ledger.manifest(names, executor)
         write_atomic(stage / MANIFEST, dumps_json(manifest))  # last: the set is complete
-    if failed:
-        what = "; ".join(f"{k}: {v}" for k, v in failed.items())
+    if ledger.failed:
+        what = "; ".join(f"{k}: {v}" for k, v in ledger.failed.items())
         raise ExperimentFailed(
-            f"{len(failed)} experiment(s) failed ({what}). The other results are in {out_dir}/ "
-            f"({MANIFEST} lists the failure); nothing of the earlier run was kept."
+            f"{len(ledger.failed)} experiment(s) failed ({what}). The other results are in "
+            f"{out_dir}/ ({MANIFEST} lists the failure); nothing of the earlier run was kept."
         )
-    return [out_dir / p for p in outputs] + [out_dir / MANIFEST]
+    return [out_dir / p for p in manifest["outputs"]] + [out_dir / MANIFEST]

@@ -11,6 +11,9 @@ Set-up (the paper's section 3, second experiment, replicated in simulation):
   Monte Carlo  50 runs (5 with --quick), each a fresh simulation (odometry noise, scan noise,
              mixed returns); the three methods see the same scans in a run.
 
+The study (`monte_carlo`) gives the runs' figures (`Exp2Results`); the report (`report`) writes
+from them alone the tables declared in `TABLES`, the figures and the key figures.
+
 Writes (into ctx.out_dir)
   table3.md/.csv        average absolute pose error (the paper's formula), mean and spread over
                         the runs, beside the paper's numbers
@@ -42,9 +45,11 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import SimpleNamespace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -54,9 +59,9 @@ from experiments.eval.poses import nees, nees_bounds, pose_errors
 from experiments.eval.series import slam_panels, slam_series
 from experiments.exec import SerialExecutor, spawn_seeds
 from experiments.io.config_file import config_toml
-from experiments.io.writers import dumps_json, json_types, write_atomic, write_tidy_table
+from experiments.io.writers import dumps_json, json_types, write_atomic
 from experiments.paper import products
-from experiments.paper.products import FigureSpec
+from experiments.paper.products import FigureSpec, TableSpec
 from experiments.sim import sensor_preset
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
@@ -69,16 +74,21 @@ __all__ = [
     "PAPER_TABLE3",
     "PAPER_TABLE4",
     "SCAN_SETS",
+    "TABLES",
     "Exp2Config",
     "Exp2Results",
     "consistency",
+    "consistency_records",
     "extractor_params",
     "key_figures",
     "monte_carlo",
     "recording_trial",
+    "report",
     "run",
     "slam_trial",
+    "table3_records",
     "table4_rates",
+    "table4_records",
 ]
 
 log = logging.getLogger(__name__)
@@ -311,7 +321,9 @@ def slam_trial(job: tuple[Exp2Config, int, bool], seed) -> dict:
         fs = feats[m]
         if kind == "synthetic":
             model = scfg.measurement.model_for(m).constant
-            fs = synthetic_features(fs, seq, laser_w, model, noise_rng, cfg.false_match_m)
+            fs = synthetic_features(
+                fs, seq, laser_w, model, noise_rng, false_match_m=cfg.false_match_m
+            )
         lg = run_slam(seq, scfg, features=fs)
         # the filter's own time per scan (`slam.run_slam` warms up before it times the scans)
         o: dict = {"time_slam": float(np.mean(lg.timing_s["total"]))}
@@ -464,51 +476,64 @@ def key_figures(res: Exp2Results) -> dict:
     return out
 
 
-def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
-    cfg = res.config
-    R = cfg.n_runs
-    methods = cfg.methods
-    paths: list[Path] = []
-    # Table 3
-    smoothed = bool(res.sm_abs_err)
-    t3: list[dict] = []
-    labels3: dict = {}
+class _Table3Column(NamedTuple):
+    """A column of Table 3: its key (source, method, estimator, statistic), its header, and its
+    values, one per row of `QUANTITIES3` (dx, dy, dtheta)."""
 
-    def add3(source, method, estimator, statistic, values, label) -> None:
-        labels3[(source, method, estimator, statistic)] = label
-        for (q, unit), v in zip(QUANTITIES3, values):
-            t3.append(
-                {
-                    "source": source,
-                    "method": method,
-                    "estimator": estimator,
-                    "quantity": q,
-                    "unit": unit,
-                    "statistic": statistic,
-                    "value": float(v),
-                }
-            )
+    key: tuple[str, str, str, str]
+    label: str
+    values: Sequence[float]
 
-    for m in methods:
+
+def _table3_columns(res: Exp2Results) -> list[_Table3Column]:
+    """Per method the EKF's mean and spread over the runs (and the smoother's mean), then the
+    paper's published means."""
+    cols = []
+    for m in res.config.methods:
         e = res.abs_err[m]
-        add3("simulation", m, "ekf", "mean", [e[:, i].mean() for i in range(3)], f"{m} mean")
-        std = [e[:, i].std(ddof=1) if R > 1 else math.nan for i in range(3)]
-        add3("simulation", m, "ekf", "std", std, f"{m} std")
-        if smoothed:
+        mean = [e[:, i].mean() for i in range(3)]
+        std = [e[:, i].std(ddof=1) if res.config.n_runs > 1 else math.nan for i in range(3)]
+        cols.append(_Table3Column(("simulation", m, "ekf", "mean"), f"{m} mean", mean))
+        cols.append(_Table3Column(("simulation", m, "ekf", "std"), f"{m} std", std))
+        if res.sm_abs_err:
             sm = [res.sm_abs_err[m][:, i].mean() for i in range(3)]
-            add3("simulation", m, "smoother", "mean", sm, f"{m} smoother mean")
-    add3("paper_published", "paper", "ekf", "mean", PAPER_TABLE3["paper"], "paper's proposed")
-    add3("paper_published", "bailey", "ekf", "mean", PAPER_TABLE3["bailey"], "paper's Bailey")
-    mean = {m: res.abs_err[m].mean(axis=0) for m in methods}
+            cols.append(
+                _Table3Column(("simulation", m, "smoother", "mean"), f"{m} smoother mean", sm)
+            )
+    for m, label in (("paper", "paper's proposed"), ("bailey", "paper's Bailey")):
+        cols.append(_Table3Column(("paper_published", m, "ekf", "mean"), label, PAPER_TABLE3[m]))
+    return cols
+
+
+def table3_records(res: Exp2Results) -> list[dict]:
+    """Table 3 as tidy records: source, method, estimator, quantity, unit, statistic, value."""
+    return [
+        {
+            "source": source,
+            "method": method,
+            "estimator": estimator,
+            "quantity": q,
+            "unit": unit,
+            "statistic": statistic,
+            "value": float(v),
+        }
+        for (source, method, estimator, statistic), _, values in _table3_columns(res)
+        for (q, unit), v in zip(QUANTITIES3, values)
+    ]
+
+
+def _table3_notes(res: Exp2Results) -> str:
+    cfg = res.config
+    mean = {m: res.abs_err[m].mean(axis=0) for m in cfg.methods}
     notes = [
         (
-            f"{R} Monte Carlo runs of {cfg.cycab.n_scans} scans (scene {cfg.scene}, association "
-            f"{cfg.association}); per run the mean over the scans after the first of |dx|, |dy|, "
-            "|dtheta| (the paper's formula, pose after each scan's update), then the mean and the "
-            "standard deviation over the runs. The reference is the simulated EXACT pose, not the "
-            "simulated 2 cm DGPS: scoring x, y against a 2 cm DGPS would add its own noise (mean "
-            "|error| of 2 cm Gaussian noise: 0.016 m per axis), as large as the errors here. The "
-            "paper's numbers are one real run against a real DGPS."
+            f"{cfg.n_runs} Monte Carlo runs of {cfg.cycab.n_scans} scans (scene {cfg.scene}, "
+            f"association {cfg.association}); per run the mean over the scans after the first of "
+            "|dx|, |dy|, |dtheta| (the paper's formula, pose after each scan's update), then the "
+            "mean and the standard deviation over the runs. The reference is the simulated EXACT "
+            "pose, not the simulated 2 cm DGPS: scoring x, y against a 2 cm DGPS would add its "
+            "own noise (mean |error| of 2 cm Gaussian noise: 0.016 m per axis), as large as the "
+            "errors here. The paper's numbers are one real run against a real DGPS."
         )
     ]
     if "paper" in mean and "bailey" in mean:
@@ -517,10 +542,10 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
     if "paper" in mean and "geometric" in mean:
         geo = [bool(mean["geometric"][i] <= mean["paper"][i]) for i in range(3)]
         notes.append(f"geometric <= paper in dx, dy, dtheta: {geo}.")
-    if smoothed:
+    if res.sm_abs_err:
         below = {
             m: [bool(res.sm_abs_err[m][:, i].mean() <= mean[m][i]) for i in range(3)]
-            for m in methods
+            for m in cfg.methods
         }
         notes.append(
             "smoother: the GTSAM smoother of each run (`slam.smoother`, batch Levenberg-"
@@ -528,40 +553,39 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
             "each scan uses the whole run, the EKF's only the scans up to it. Smoother <= EKF in "
             f"dx, dy, dtheta: {below}."
         )
-    paths += write_tidy_table(
-        out_dir / "table3",
-        t3,
-        index=["quantity", "unit"],
-        columns=["source", "method", "estimator", "statistic"],
-        labels=labels3,
-        title="Table 3: average absolute pose error",
-        notes="\n\n".join(notes),
-    )
-    # Table 4
-    t4: list[dict] = []
+    return "\n\n".join(notes)
+
+
+def table4_records(res: Exp2Results) -> list[dict]:
+    """Table 4 as tidy records: per source and method the false-detection rate of each scan
+    set, and (simulation) the circles per scan over the whole run."""
+    cfg = res.config
     last = cfg.cycab.n_scans - 1
+    out: list[dict] = []
     for source, method, rates, circles in (
-        *(("simulation", m, table4_rates(res, m), float(res.detected[m].mean())) for m in methods),
+        *(
+            ("simulation", m, table4_rates(res, m), float(res.detected[m].mean()))
+            for m in cfg.methods
+        ),
         ("paper_published", "paper", PAPER_TABLE4["paper"], None),
         ("paper_published", "bailey", PAPER_TABLE4["bailey"], None),
     ):
-        for (a, b), v in zip(SCAN_SETS, rates):
-            t4.append(
-                {
-                    "source": source,
-                    "method": method,
-                    "quantity": "false_detection_rate",
-                    "first_scan": a,
-                    "last_scan": b,
-                    "unit": "fraction",
-                    "value": v,
-                }
-            )
+        ident = {"source": source, "method": method}
+        out += [
+            {
+                **ident,
+                "quantity": "false_detection_rate",
+                "first_scan": a,
+                "last_scan": b,
+                "unit": "fraction",
+                "value": v,
+            }
+            for (a, b), v in zip(SCAN_SETS, rates)
+        ]
         if circles is not None:
-            t4.append(
+            out.append(
                 {
-                    "source": source,
-                    "method": method,
+                    **ident,
                     "quantity": "circles_per_scan",
                     "first_scan": 0,
                     "last_scan": last,
@@ -569,26 +593,32 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
                     "value": circles,
                 }
             )
-    labels4 = {("false_detection_rate", a, b, "fraction"): f"scans {a}-{b}" for a, b in SCAN_SETS}
-    labels4[("circles_per_scan", 0, last, "count")] = "circles per scan"
-    notes4 = (
+    return out
+
+
+def _table4_labels(res: Exp2Results) -> dict:
+    labels: dict = {
+        ("false_detection_rate", a, b, "fraction"): f"scans {a}-{b}" for a, b in SCAN_SETS
+    }
+    labels[("circles_per_scan", 0, res.config.cycab.n_scans - 1, "count")] = "circles per scan"
+    return labels
+
+
+def _table4_notes(res: Exp2Results) -> str:
+    return (
         f"The paper's rate: false features / detected features in a scan, averaged over the "
         f"scans of each set that have a detection (scan indices from 0, the sets inclusive) "
-        f"and the {R} runs. A circle is false when the beams it was fitted to do not mostly hit "
-        f"one trunk (per-beam truth labels: bushes, walls, mixed returns) or its centre lies more "
-        f"than {cfg.false_match_m} m from that trunk's. The paper and geometric extractors find "
-        "the same circles (they differ only in the fit), so their rates are equal."
+        f"and the {res.config.n_runs} runs. A circle is false when the beams it was fitted to do "
+        f"not mostly hit one trunk (per-beam truth labels: bushes, walls, mixed returns) or its "
+        f"centre lies more than {res.config.false_match_m} m from that trunk's. The paper and "
+        "geometric extractors find the same circles (they differ only in the fit), so their "
+        "rates are equal."
     )
-    paths += write_tidy_table(
-        out_dir / "table4",
-        t4,
-        index=["source", "method"],
-        columns=["quantity", "first_scan", "last_scan", "unit"],
-        labels=labels4,
-        title="Table 4: false-detection rate",
-        notes=notes4,
-    )
-    # Consistency
+
+
+def consistency_records(res: Exp2Results) -> list[dict]:
+    """The consistency table as tidy records: one per method or variant (NEES, NIS, the
+    smoother's NEES, the map, the filter's time per scan)."""
     rows = []
     for name in res.nees:
         c = consistency(res, name)
@@ -610,7 +640,12 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
                 "ms_per_scan": 1e3 * float(res.time_slam[name].mean()),
             }
         )
-    notes_c = (
+    return rows
+
+
+def _consistency_notes(res: Exp2Results) -> str:
+    cfg = res.config
+    notes = (
         "Vehicle-pose NEES (3 dof) averaged over the runs at each scan after the first; the "
         "fraction of scans where it lies inside its 95% chi-square bounds (target: at least "
         "0.9). NIS: per scan, the batch NIS summed over the runs against the chi-square bounds "
@@ -623,15 +658,37 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
         f"{cfg.sensitivity_runs} runs."
     )
     if res.sm_nees:
-        notes_c += (
+        notes += (
             " Smoother NEES: the same statistic for the GTSAM smoother's poses with their "
             "marginal covariances (same runs, same associations)."
         )
-    paths += write_tidy_table(
-        out_dir / "consistency",
-        rows,
-        index=["method"],
-        values=list(rows[0])[1:],
+    return notes
+
+
+TABLES = (
+    TableSpec(
+        "table3",
+        table3_records,
+        index=("quantity", "unit"),
+        columns=("source", "method", "estimator", "statistic"),
+        labels=lambda res: {c.key: c.label for c in _table3_columns(res)},
+        title="Table 3: average absolute pose error",
+        notes=_table3_notes,
+    ),
+    TableSpec(
+        "table4",
+        table4_records,
+        index=("source", "method"),
+        columns=("quantity", "first_scan", "last_scan", "unit"),
+        labels=_table4_labels,
+        title="Table 4: false-detection rate",
+        notes=_table4_notes,
+    ),
+    TableSpec(
+        "consistency",
+        consistency_records,
+        index=("method",),
+        values=None,
         labels={
             "nees_mean": "NEES mean",
             "nees_in_bounds": "NEES in 95% bounds",
@@ -647,9 +704,9 @@ def _write_tables(res: Exp2Results, out_dir: Path) -> list[Path]:
             "ms_per_scan": "ms per scan",
         },
         title="Consistency of the EKF (NEES, NIS)",
-        notes=notes_c,
-    )
-    return paths
+        notes=_consistency_notes,
+    ),
+)
 
 
 # ---- figures and recording ----------------------------------------------------------------------
@@ -666,46 +723,63 @@ def _tree_of_landmarks(lg, lm: np.ndarray, tol: float) -> dict[int, int]:
 
 def _figure_specs(res: Exp2Results) -> list[FigureSpec]:
     """Figs. 7, 10, 11 and the NEES figure: (file name, plot function, arguments, keyword
-    arguments) each, drawn on the executor (`experiments.paper.products`)."""
-    from experiments.render import plots
+    arguments) each, drawn on the executor (`experiments.paper.products`). Figs. 10 and 11
+    compare the paper's features with Bailey's (the methods run, when not both)."""
     from experiments.sim import load_scene
 
-    cfg = res.config
     seq = res.seq0
-    scene = load_scene(cfg.scene)
+    scene = load_scene(res.config.scene)
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-    specs: list[FigureSpec] = []
+    pair = [m for m in ("paper", "bailey") if m in res.logs0] or list(res.logs0)
+    return [
+        _fig7_path(res, scene, truth),
+        _fig10_innovations(res, scene, pair),
+        _fig11_pose_errors(res, truth, pair),
+        _nees_figure(res),
+    ]
+
+
+def _fig7_path(res: Exp2Results, scene, truth: np.ndarray) -> FigureSpec:
+    """Fig. 7: the true and estimated path of run 0 with the trees (paper features)."""
+    from experiments.render import plots
+
     main = "paper" if "paper" in res.logs0 else next(iter(res.logs0))
     lg = res.logs0[main]
-    specs.append(
-        (
-            "fig7_slam_path.png",
-            plots.plot_slam_path,
-            (
-                truth[:, :2],
-                lg.pose[:, :2],
-                seq.truth_landmarks,
-                lg.landmark_xy,
-                lg.landmark_cov,
-                f"Fig. 7: true (dashed) and estimated path, {main} features, IHGR (run 0)",
-            ),
-            {
-                "walls": [w.points_xy for w in scene.walls],
-                "bushes": [b.points_xy for b in scene.bushes],
-            },
-        )
+    title = f"Fig. 7: true (dashed) and estimated path, {main} features, IHGR (run 0)"
+    args = (
+        truth[:, :2],
+        lg.pose[:, :2],
+        res.seq0.truth_landmarks,
+        lg.landmark_xy,
+        lg.landmark_cov,
+        title,
     )
-    pair = [m for m in ("paper", "bailey") if m in res.logs0] or list(res.logs0)
-    # Fig. 10: innovations of the tree observed most often by both methods
-    trees = {
-        m: _tree_of_landmarks(res.logs0[m], seq.truth_landmarks, cfg.false_match_m) for m in pair
-    }
-    counts = {}
-    for m in pair:
+    walls = [w.points_xy for w in scene.walls]
+    bushes = [b.points_xy for b in scene.bushes]
+    return ("fig7_slam_path.png", plots.plot_slam_path, args, {"walls": walls, "bushes": bushes})
+
+
+def _most_observed_tree(res: Exp2Results, methods: list[str]) -> tuple[int | None, dict]:
+    """(the tree observed most often by every one of `methods` in run 0, or None; per method
+    {landmark id: its tree})."""
+    lm = res.seq0.truth_landmarks
+    trees = {m: _tree_of_landmarks(res.logs0[m], lm, res.config.false_match_m) for m in methods}
+    counts: dict = {}
+    for m in methods:
         lgm = res.logs0[m]
         for lid, j in trees[m].items():
             counts.setdefault(j, {})[m] = int(np.sum(lgm.obs_landmark == lid))
-    best = max(counts, key=lambda j: min(counts[j].get(m, 0) for m in pair)) if counts else None
+    if not counts:
+        return None, trees
+    return max(counts, key=lambda j: min(counts[j].get(m, 0) for m in methods)), trees
+
+
+def _fig10_innovations(res: Exp2Results, scene, pair: list[str]) -> FigureSpec:
+    """Fig. 10: range and bearing innovations with 3 sigma of the tree observed most often by
+    both methods (run 0)."""
+    from experiments.render import plots
+
+    best, trees = _most_observed_tree(res, pair)
     series = []
     for m in pair:
         lgm = res.logs0[m]
@@ -722,15 +796,14 @@ def _figure_specs(res: Exp2Results) -> list[FigureSpec]:
             }
         )
     name = scene.circles[best].name if best is not None else "-"
-    specs.append(
-        (
-            "fig10_innovations.png",
-            plots.plot_innovations,
-            (series, f"Fig. 10: innovations of tree {name} with 3 sigma bounds (run 0)"),
-            {},
-        )
-    )
-    # Fig. 11: errors of the prediction with 3 sigma
+    title = f"Fig. 10: innovations of tree {name} with 3 sigma bounds (run 0)"
+    return ("fig10_innovations.png", plots.plot_innovations, (series, title), {})
+
+
+def _fig11_pose_errors(res: Exp2Results, truth: np.ndarray, pair: list[str]) -> FigureSpec:
+    """Fig. 11: the errors of the predicted pose with 3 sigma (run 0)."""
+    from experiments.render import plots
+
     series = []
     for m in pair:
         lgm = res.logs0[m]
@@ -739,35 +812,29 @@ def _figure_specs(res: Exp2Results) -> list[FigureSpec]:
         series.append(
             {
                 "label": m,
-                "scan": np.arange(seq.n_scans),
+                "scan": np.arange(res.seq0.n_scans),
                 "err": e,
                 "sigma": sig,
                 "style": STYLE.get(m, "-"),
             }
         )
-    specs.append(
-        (
-            "fig11_pose_errors.png",
-            plots.plot_pose_errors,
-            (series, "Fig. 11: predicted pose errors with 3 sigma bounds (run 0)"),
-            {},
-        )
+    title = "Fig. 11: predicted pose errors with 3 sigma bounds (run 0)"
+    return ("fig11_pose_errors.png", plots.plot_pose_errors, (series, title), {})
+
+
+def _nees_figure(res: Exp2Results) -> FigureSpec:
+    """The average NEES per scan of every method, with its 95% bounds."""
+    from experiments.render import plots
+
+    cfg = res.config
+    args = (
+        {n: consistency(res, n)["nees_avg"] for n in cfg.methods},
+        nees_bounds(cfg.n_runs),
+        f"Average vehicle-pose NEES over {cfg.n_runs} runs",
+        "NEES (3 dof, no unit)",
     )
-    lo, hi = nees_bounds(cfg.n_runs)
-    specs.append(
-        (
-            "nees.png",
-            plots.plot_consistency,
-            (
-                {n: consistency(res, n)["nees_avg"] for n in cfg.methods},
-                (lo, hi),
-                f"Average vehicle-pose NEES over {cfg.n_runs} runs",
-                "NEES (3 dof, no unit)",
-            ),
-            {"expected": 3.0, "first_scan": 1},  # consistency() leaves scan 0 out
-        )
-    )
-    return specs
+    # consistency() leaves scan 0 out
+    return ("nees.png", plots.plot_consistency, args, {"expected": 3.0, "first_scan": 1})
 
 
 def recording_trial(cfg: Exp2Config, seed) -> dict[str, bytes]:
@@ -808,14 +875,22 @@ def run(ctx, cfg: Exp2Config | None = None) -> Exp2Results:
     recording = ctx.submit(recording_trial, [cfg], [run0], desc="slam recording")
     ctx.later(recording, lambda got: products.write(ctx, got[0]))
     res = monte_carlo(cfg, ctx.rng("slam"), progress=ctx.progress, executor=ctx.executor)
-    out = Path(ctx.out_dir)
-    ctx.outputs += _write_tables(res, out)
+    report(ctx, res)
+    log.info("experiment 2: %d runs in %.1f s", cfg.n_runs, res.seconds)
+    return res
+
+
+def report(ctx, res: Exp2Results) -> None:
+    """Experiment 2's files from its results: the tables (`TABLES`), the figures (drawn on the
+    executor), the key figures, and each method's filter as a configuration file."""
+    products.tables(ctx, TABLES, res)
     products.figures(ctx, _figure_specs(res), desc="slam figures")
+    out = Path(ctx.out_dir)
     ctx.outputs.append(
         write_atomic(out / "slam_key_figures.json", dumps_json(json_types(key_figures(res))))
     )
-    for m in cfg.methods:  # each method's filter, whole: `trunkslam slam RUN.npz --config` it
+    for m in res.config.methods:  # each method's filter, whole: `trunkslam slam RUN.npz --config`
         header = f"experiment 2 (Tables 3-4), {m}: the filter of every run of the study"
-        write_atomic(ctx.path(f"table3_config_{m}.toml"), config_toml(run_config(cfg, m), header))
-    log.info("experiment 2: %d runs in %.1f s", cfg.n_runs, res.seconds)
-    return res
+        write_atomic(
+            ctx.path(f"table3_config_{m}.toml"), config_toml(run_config(res.config, m), header)
+        )

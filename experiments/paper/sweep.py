@@ -345,7 +345,16 @@ def load_sweep(path: Path | str) -> SweepSpec:
     ex = data.get("executor", {})
     if set(ex) - {"workers", "dask"}:
         raise ConfigError(f"{path}: [executor] takes workers and dask, got {sorted(ex)}")
-    return SweepSpec(data["study"], trials, seed, points, swept, values, ex, data)
+    return SweepSpec(
+        study=data["study"],
+        trials=trials,
+        seed=seed,
+        points=points,
+        swept=swept,
+        values=values,
+        executor=ex,
+        source=data,
+    )
 
 
 def _copy(d):

@@ -43,20 +43,23 @@ from experiments.io.victoria_park import (
     load_ss2002_reference,
     load_victoria_park,
 )
-from experiments.io.writers import json_types, write_atomic, write_tidy_table
+from experiments.io.writers import json_types, write_atomic
 from experiments.paper import products
+from experiments.paper.products import TableSpec
 from slam import SlamConfig, SlamLog, run_slam, se2
 from slam.start import procrustes_2d
 
 __all__ = [
     "GPS_GAP_S",
     "PRESET",
+    "PARTS",
     "PUBLISHED",
-    "TABLES",
+    "TABLE",
     "head",
     "nis_inside",
     "reference_match",
     "run",
+    "table_records",
     "vp_trial",
 ]
 
@@ -249,7 +252,7 @@ def run(ctx) -> None:
     )
 
     def finish(got: list) -> None:
-        _write(ctx, [row for row, _ in got])
+        products.tables(ctx, [TABLE], [row for row, _ in got])
         products.write(ctx, got[0][1])
         for label, which, features, assoc in jobs:  # each run's configuration beside its row
             part = "full" if which == "full" else "scans_1_2000"
@@ -301,39 +304,44 @@ COLUMNS = [
 
 
 # victoria_park.md: the columns of the CSV (all but run and source) as narrow tables, by concern
-TABLES = [
+PARTS = (
     (
         "Distance to GPS (all fixes, as estimated)",
-        ["scans", "rmse_m", "rmse_low_m", "rmse_high_m", "median_m", "p95_m"],
+        ("scans", "rmse_m", "rmse_low_m", "rmse_high_m", "median_m", "p95_m"),
     ),
     (
         "Distance to GPS without jumps, after alignment, and on the unseen part",
-        [
+        (
             "rmse_clean_m",
             "rmse_aligned_m",
             "median_aligned_m",
             "p95_aligned_m",
             "rotation_deg",
             "rmse_2001_7249_m",
-        ],
+        ),
     ),
-    ("Map and consistency", ["landmarks", "reference_trees_1m", "nis_inside"]),
+    ("Map and consistency", ("landmarks", "reference_trees_1m", "nis_inside")),
     (
         "Extraction and run time",
-        ["circles_per_scan", "published_matched", "seconds", "ms_per_scan"],
+        ("circles_per_scan", "published_matched", "seconds", "ms_per_scan"),
     ),
-]
+)
 
 
-def _write(ctx, rows) -> None:
+def table_records(rows: list[dict]) -> list[dict]:
+    """The table's records: our runs (`vp_trial`'s rows, in their order), then the published
+    figures (`PUBLISHED`)."""
     records = [{"source": "ours", **{k: r.get(k) for k, _ in COLUMNS}} for r in rows]
     records += [{"source": "published", "run": name, **v} for name, v in PUBLISHED.items()]
-    r0 = rows[0]
-    notes = (
+    return records
+
+
+def _notes(rows: list[dict]) -> str:
+    return (
         "GPS: every fix in the run's time span matched to the pose interpolated at its time, at "
         "the antenna (the laser, (3.78, 0.50) m in the vehicle frame); jumps (fixes implying "
-        f"more than 1.25 x the top odometry speed) flagged ({r0['jumps']} in the full run) and "
-        "left in the RMSE columns, out of the 'without jumps' and the aligned ones. Aligned: "
+        f"more than 1.25 x the top odometry speed) flagged ({rows[0]['jumps']} in the full run) "
+        "and left in the RMSE columns, out of the 'without jumps' and the aligned ones. Aligned: "
         "after the rigid 2D transform fitted to the fixes. The RMSE of scans 2001-7249 covers "
         "only the fixes after scan 2000, the part the calibration never saw. NIS inside: the "
         "share of the scans with an update (scans predicted only, at rest, have none). "
@@ -344,17 +352,19 @@ def _write(ctx, rows) -> None:
         "PHD-SLAM reports a range of RMSE (from, to). The first row's run is the one recorded in "
         "victoria_park.rrd; its seconds leave out the time spent in the recording calls."
     )
-    title = "Victoria Park: EKF-SLAM against GPS"
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "victoria_park",
-        records,
-        index=["source", "run"],
-        values=[k for k, _ in COLUMNS[1:]],
-        labels=dict(COLUMNS),
-        title=title,
-        notes=notes,
-        parts=TABLES,
-    )
+
+
+# victoria_park.md/.csv, from the rows of the runs (`vp_trial`)
+TABLE = TableSpec(
+    "victoria_park",
+    table_records,
+    index=("source", "run"),
+    values=tuple(k for k, _ in COLUMNS[1:]),
+    parts=PARTS,
+    labels=dict(COLUMNS),
+    title="Victoria Park: EKF-SLAM against GPS",
+    notes=_notes,
+)
 
 
 def _figures(label: str, lg, sc, full) -> dict[str, bytes]:
@@ -388,12 +398,12 @@ def _figures(label: str, lg, sc, full) -> dict[str, bytes]:
         plots.plot_vp_timeseries,
         sc.t_s,
         errors,
-        sc.jump,
-        gaps,
-        lg.scan_t,
-        window,
-        sizes,
-        title,
+        jumps=sc.jump,
+        gaps=gaps,
+        scan_t=lg.scan_t,
+        nis_in=window,
+        map_size=sizes,
+        title=title,
         gap_s=GPS_GAP_S,
     )
     return {"vp_map.png": vp_map, "vp_timeseries.png": timeseries}

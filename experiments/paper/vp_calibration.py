@@ -64,6 +64,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize
@@ -71,8 +72,9 @@ from scipy.optimize import minimize
 from experiments.errors import ConfigError, MissingDataError
 from experiments.io.config_file import config_toml
 from experiments.io.victoria_park import load_victoria_park
-from experiments.io.writers import write_atomic, write_tidy_table
-from experiments.paper import vp_start, vp_steering
+from experiments.io.writers import write_atomic
+from experiments.paper import products, vp_start, vp_steering
+from experiments.paper.products import TableSpec
 from experiments.paper.vp_steering import fit_steering
 from slam import OdometryNoise, SlamConfig, SteeringCalibration, run_slam
 from slam.log import SKIPPED
@@ -81,7 +83,11 @@ from slam.measurement import NoiseModel
 __all__ = [
     "BASE",
     "FIT_SCANS",
+    "TABLES",
+    "VpCalibration",
     "calibrate",
+    "calibration_records",
+    "calibration_study",
     "config_from",
     "consistency_scale",
     "nis_per_dof",
@@ -307,45 +313,82 @@ def consistency_scale(
     return {"k": best[0], "nis_per_dof": best[1], "evaluations": evals}
 
 
-def run(ctx) -> None:
-    """The registered experiment `victoria-park-calibration`."""
-    try:
-        seq = load_victoria_park(n_scans=FIT_SCANS)
-        full = load_victoria_park(full=True)  # the steering fit's held-out GPS stretches
-    except MissingDataError as exc:
-        log.warning("Victoria Park calibration skipped: %s", exc)
-        ctx.config["victoria-park-calibration"] = f"skipped: {exc}"
-        return
+@dataclass(frozen=True)
+class VpCalibration:
+    """The results of the calibration, in the order found.
+
+    steer: the steering fit (`vp_steering.fit_steering`); fits: motion terms (False, True) ->
+    `calibrate`'s result; motion: the lower BIC's (`select_model`); start: (J, the run's
+    figures) at START; consistency: `consistency_scale`'s result; theta: the preset's
+    parameters (the chosen fit, measurement sigmas x k) and final: (J, figures) there;
+    start_rows: `vp_start.headings` along the preset's path; start_fit_m: the metres of GPS the
+    start is fitted to (`vp_start.derive`); seconds: the time it took.
+    """
+
+    steer: object
+    fits: dict
+    motion: bool
+    start: tuple[float, dict]
+    consistency: dict
+    theta: np.ndarray
+    final: tuple[float, dict]
+    start_rows: list
+    start_fit_m: float
+    seconds: float
+
+    def preset(self) -> SlamConfig:
+        """The preset's configuration (`preset_config`)."""
+        return preset_config(self.theta, self.steer.steering, self.start_fit_m)
+
+
+def calibration_study(seq, full, quick: bool = False, progress=None) -> VpCalibration:
+    """The whole procedure (the module doc) on `seq` (scans 1-`FIT_SCANS`), the steering fit's
+    held-out GPS stretches from `full`. quick: a few evaluations of each step (a smoke run)."""
     t0 = time.perf_counter()
-    steer = fit_steering(full, FIT_SCANS, 10 if ctx.quick else vp_steering.EVALUATIONS)
+    steer = fit_steering(full, FIT_SCANS, 10 if quick else vp_steering.EVALUATIONS)
     base = BASE.with_(**{"vehicle.steering": steer.steering})
     fits = {}
     for motion in (False, True):
-        n = 5 if ctx.quick else EVALUATIONS[motion]
+        n = 5 if quick else EVALUATIONS[motion]
         # the motion-dependent model contains the constant one (growth 0): its fit starts from
         # the constant fit's optimum with small growth terms, so it can only do better
         start = np.r_[fits[False]["theta"], GROWTH_START] if motion else None
-        fits[motion] = calibrate(seq, n, ctx.progress, motion_terms=motion, base=base, start=start)
+        fits[motion] = calibrate(seq, n, progress, motion_terms=motion, base=base, start=start)
     motion = select_model(fits[False], fits[True])
     fit = fits[motion]
-    start_J, start_info = objective(seq, START[:6], base)
-    cons = consistency_scale(seq, config_from(fit["theta"], base), iterations=1 if ctx.quick else 7)
-    ln_k = math.log(cons["k"])
-    theta_c = np.asarray(fit["theta"], dtype=float)
-    theta_c[MEASUREMENT] += ln_k
-    cons_J, cons_info = objective(seq, theta_c, base)
-    start_rows = vp_start.headings(seq, config_from(theta_c, base))
-    start_m = vp_start.derive(start_rows)
-    cfg = preset_config(theta_c, steer.steering, start_m)
-    ctx.config["victoria-park-calibration"] = {
+    at_start = objective(seq, START[:6], base)
+    cons = consistency_scale(seq, config_from(fit["theta"], base), iterations=1 if quick else 7)
+    theta = np.asarray(fit["theta"], dtype=float)
+    theta[MEASUREMENT] += math.log(cons["k"])
+    final = objective(seq, theta, base)
+    start_rows = vp_start.headings(seq, config_from(theta, base))
+    return VpCalibration(
+        steer=steer,
+        fits=fits,
+        motion=motion,
+        start=at_start,
+        consistency=cons,
+        theta=theta,
+        final=final,
+        start_rows=start_rows,
+        start_fit_m=vp_start.derive(start_rows),
+        seconds=time.perf_counter() - t0,
+    )
+
+
+def _manifest_entry(st: VpCalibration) -> dict:
+    """What the manifest records of the calibration."""
+    s = st.steer
+    fits = st.fits
+    return {
         "scans": FIT_SCANS,
         "steering": {
-            "offset_rad": steer.steering.offset_rad,
-            "gain": steer.steering.gain,
-            "cubic_per_rad2": steer.steering.cubic_per_rad2,
-            "stretches": [steer.fit_stretches, steer.held_out_stretches],
-            "fit_mse_m2": [steer.fit_mse_before, steer.fit_mse_after],
-            "held_out_mse_m2": [steer.held_out_mse_before, steer.held_out_mse_after],
+            "offset_rad": s.steering.offset_rad,
+            "gain": s.steering.gain,
+            "cubic_per_rad2": s.steering.cubic_per_rad2,
+            "stretches": [s.fit_stretches, s.held_out_stretches],
+            "fit_mse_m2": [s.fit_mse_before, s.fit_mse_after],
+            "held_out_mse_m2": [s.held_out_mse_before, s.held_out_mse_after],
         },
         "evaluations": {
             "constant": fits[False]["evaluations"],
@@ -355,14 +398,40 @@ def run(ctx) -> None:
         "fitted_constant": fits[False]["values"],
         "fitted_motion": fits[True]["values"],
         "bic": {"constant": bic(fits[False]), "motion": bic(fits[True])},
-        "chosen": "motion" if motion else "constant",
-        "consistency_factor": cons["k"],
-        "start_fit_m": start_m,
-        "start_headings_deg": start_rows,
-        "consistency_evaluations": cons["evaluations"],
-        "seconds": round(time.perf_counter() - t0, 1),
+        "chosen": "motion" if st.motion else "constant",
+        "consistency_factor": st.consistency["k"],
+        "start_fit_m": st.start_fit_m,
+        "start_headings_deg": st.start_rows,
+        "consistency_evaluations": st.consistency["evaluations"],
+        "seconds": round(st.seconds, 1),
     }
-    records = [
+
+
+def calibration_records(st: VpCalibration) -> list[dict]:
+    """The calibration table's records: the start, each fit, the preset (one row each)."""
+    fits = st.fits
+    rows = (
+        ("start (SLAM-school model, 0.5 m/s, 3 deg)", START[:6], *st.start),
+        (
+            f"maximum likelihood, constant odometry noise (BIC {bic(fits[False]):.0f})",
+            fits[False]["theta"],
+            fits[False]["J"],
+            fits[False],
+        ),
+        (
+            f"maximum likelihood, motion-dependent odometry noise (BIC {bic(fits[True]):.0f})",
+            fits[True]["theta"],
+            fits[True]["J"],
+            fits[True],
+        ),
+        (
+            "preset: the lower BIC, measurement sigmas x "
+            f"{st.consistency['k']:.3f} (NIS per dof 1)",
+            st.theta,
+            *st.final,
+        ),
+    )
+    return [
         {
             "parameters": name,
             **dict(zip(CALIBRATION_LABELS, _row(theta))),
@@ -371,71 +440,56 @@ def run(ctx) -> None:
             "nis_per_dof": info["nis_per_dof"],
             "unexplained_measurements": info["unexplained"],
         }
-        for name, theta, J, info in (
-            ("start (SLAM-school model, 0.5 m/s, 3 deg)", START[:6], start_J, start_info),
-            (
-                f"maximum likelihood, constant odometry noise (BIC {bic(fits[False]):.0f})",
-                fits[False]["theta"],
-                fits[False]["J"],
-                fits[False],
-            ),
-            (
-                f"maximum likelihood, motion-dependent odometry noise (BIC {bic(fits[True]):.0f})",
-                fits[True]["theta"],
-                fits[True]["J"],
-                fits[True],
-            ),
-            (
-                f"preset: the lower BIC, measurement sigmas x {cons['k']:.3f} (NIS per dof 1)",
-                theta_c,
-                cons_J,
-                cons_info,
-            ),
-        )
+        for name, theta, J, info in rows
     ]
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "victoria_park_calibration",
-        records,
-        index=["parameters"],
-        values=list(records[0])[1:],
-        labels=CALIBRATION_LABELS,
-        title="Victoria Park: the ute's noise and laser yaw by maximum likelihood (scans 1-2000)",
-        notes=(
-            f"{fits[False]['evaluations']} and {fits[True]['evaluations']} evaluations of the run "
-            f"over scans 1-{FIT_SCANS} with the published detections (IHGR, FEJ, GPS start fit "
-            "over 50 m, scans at rest skipped). J: the negative log-likelihood of the "
-            "innovations plus ln(80 m pi rad) per unexplained measurement "
-            "(experiments/paper/vp_calibration.py); BIC = 2 J + parameters x ln(measurements). "
-            "Last row: the preset, the fit with the lower BIC, its measurement sigmas scaled by "
-            "the factor that makes the NIS per dof 1 on the same scans (bisection). No GPS error "
-            "enters it. Steering calibration, fixed in every row (experiments/paper/"
-            f"vp_steering.py, dead reckoning against {steer.fit_stretches} GPS stretches of "
-            f"{vp_steering.STRETCH_S:.0f} s of the same scans): offset "
-            f"{math.degrees(steer.steering.offset_rad):.3f} deg, gain {steer.steering.gain:.4f}, "
-            f"cubic {steer.steering.cubic_per_rad2:.4f} per rad^2; the stretches' mean squared "
-            f"distance {steer.fit_mse_before:.2f} -> {steer.fit_mse_after:.2f} m^2 (the "
-            f"{steer.held_out_stretches} stretches of scans 2001-7249, never fitted: "
-            f"{steer.held_out_mse_before:.2f} -> {steer.held_out_mse_after:.2f} m^2)."
-        ),
+
+
+def _calibration_notes(st: VpCalibration) -> str:
+    steer, fits = st.steer, st.fits
+    return (
+        f"{fits[False]['evaluations']} and {fits[True]['evaluations']} evaluations of the run "
+        f"over scans 1-{FIT_SCANS} with the published detections (IHGR, FEJ, GPS start fit "
+        "over 50 m, scans at rest skipped). J: the negative log-likelihood of the "
+        "innovations plus ln(80 m pi rad) per unexplained measurement "
+        "(experiments/paper/vp_calibration.py); BIC = 2 J + parameters x ln(measurements). "
+        "Last row: the preset, the fit with the lower BIC, its measurement sigmas scaled by "
+        "the factor that makes the NIS per dof 1 on the same scans (bisection). No GPS error "
+        "enters it. Steering calibration, fixed in every row (experiments/paper/"
+        f"vp_steering.py, dead reckoning against {steer.fit_stretches} GPS stretches of "
+        f"{vp_steering.STRETCH_S:.0f} s of the same scans): offset "
+        f"{math.degrees(steer.steering.offset_rad):.3f} deg, gain {steer.steering.gain:.4f}, "
+        f"cubic {steer.steering.cubic_per_rad2:.4f} per rad^2; the stretches' mean squared "
+        f"distance {steer.fit_mse_before:.2f} -> {steer.fit_mse_after:.2f} m^2 (the "
+        f"{steer.held_out_stretches} stretches of scans 2001-7249, never fitted: "
+        f"{steer.held_out_mse_before:.2f} -> {steer.held_out_mse_after:.2f} m^2)."
     )
-    ctx.outputs += write_tidy_table(
-        ctx.out_dir / "victoria_park_start",
-        [{"fit_m": d, "start_heading_deg": h, "fixes": n} for d, h, n in start_rows],
-        index=["fit_m"],
-        values=["start_heading_deg", "fixes"],
-        labels=START_LABELS,
-        title="Victoria Park: the start heading against the metres of GPS it is fitted to",
-        notes=(
-            "The filter's path over scans 1-2000 (the preset's noise, published detections, "
-            "IHGR) fitted rigidly to the GPS fixes of its first D metres (slam.start."
-            f"fit_gps_start_to_track); last row: the whole path. Chosen: D = {start_m:.0f} m, "
-            f"the shortest D from which every longer fit is within {vp_start.TOLERANCE_DEG} deg "
-            "of the whole path's (experiments/paper/vp_start.py). No GPS error of a run enters "
-            "it."
-        ),
+
+
+def _start_notes(st: VpCalibration) -> str:
+    return (
+        "The filter's path over scans 1-2000 (the preset's noise, published detections, "
+        "IHGR) fitted rigidly to the GPS fixes of its first D metres (slam.start."
+        f"fit_gps_start_to_track); last row: the whole path. Chosen: D = {st.start_fit_m:.0f} m, "
+        f"the shortest D from which every longer fit is within {vp_start.TOLERANCE_DEG} deg "
+        "of the whole path's (experiments/paper/vp_start.py). No GPS error of a run enters "
+        "it."
     )
+
+
+def run(ctx) -> None:
+    """The registered experiment `victoria-park-calibration`."""
+    try:
+        seq = load_victoria_park(n_scans=FIT_SCANS)
+        full = load_victoria_park(full=True)  # the steering fit's held-out GPS stretches
+    except MissingDataError as exc:
+        log.warning("Victoria Park calibration skipped: %s", exc)
+        ctx.config["victoria-park-calibration"] = f"skipped: {exc}"
+        return
+    st = calibration_study(seq, full, quick=ctx.quick, progress=ctx.progress)
+    ctx.config["victoria-park-calibration"] = _manifest_entry(st)
+    products.tables(ctx, TABLES, st)
     ctx.outputs.append(
-        write_atomic(ctx.path("victoria_park_ute.toml"), config_toml(cfg, PRESET_HEADER))
+        write_atomic(ctx.path("victoria_park_ute.toml"), config_toml(st.preset(), PRESET_HEADER))
     )
 
 
@@ -484,6 +538,28 @@ CALIBRATION_LABELS = {  # the fitted parameters' fields (in `_row`'s order) and 
     "nis_per_dof": "NIS per dof",
     "unexplained_measurements": "unexplained measurements",
 }
+
+
+TABLES = (
+    TableSpec(
+        "victoria_park_calibration",
+        calibration_records,
+        index=("parameters",),
+        values=None,
+        labels=CALIBRATION_LABELS,
+        title="Victoria Park: the ute's noise and laser yaw by maximum likelihood (scans 1-2000)",
+        notes=_calibration_notes,
+    ),
+    TableSpec(
+        "victoria_park_start",
+        lambda st: [{"fit_m": d, "start_heading_deg": h, "fixes": n} for d, h, n in st.start_rows],
+        index=("fit_m",),
+        values=("start_heading_deg", "fixes"),
+        labels=START_LABELS,
+        title="Victoria Park: the start heading against the metres of GPS it is fitted to",
+        notes=_start_notes,
+    ),
+)
 
 
 def bic(fit: dict) -> float:

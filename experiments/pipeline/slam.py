@@ -130,9 +130,9 @@ def _write_run(stage: Path, seq: Sequence, cfg: SlamConfig, lg: SlamLog, command
             lg.landmark_id,
             lg.landmark_xy,
             lg.landmark_cov,
-            lg.landmark_first_scan,
-            lg.landmark_n_obs,
-            landmark_radii(lg),
+            first_scan=lg.landmark_first_scan,
+            n_obs=lg.landmark_n_obs,
+            radius_m=landmark_radii(lg),
         ),
     )
     write_atomic(stage / "config.toml", config_toml(cfg, command))

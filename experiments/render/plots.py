@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, NamedTuple
 
 import matplotlib
 
@@ -212,7 +212,7 @@ def plot_features(
     fig, axes = _subplots(1, ncols, figsize=(6.2 * ncols, 6.8), layout="constrained")
     axes = np.atleast_1d(axes)
     for ax in axes:
-        _draw(ax, points_xy, segments, circles, edges_xy, truth_xyr, lw=1.2)
+        _draw(ax, points_xy, segments, circles, edges=edges_xy, truth=truth_xyr, lw=1.2)
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
     if zoom:
@@ -698,6 +698,100 @@ def plot_gps_errors(
     return save(fig, path)
 
 
+class _SweepLayout(NamedTuple):
+    """How `plot_sweep_field` reads and places the sweep's rows: the swept fields, the one on
+    the x axis (k), each x value's position, the x shift between lines drawn side by side, and
+    per method a colour, per combination of the other swept fields a (line style, marker)."""
+
+    swept: list
+    k: int
+    pos: dict
+    dodge: float
+    color_of: dict
+    style_of: dict
+
+    def combo(self, row) -> tuple:
+        """The row's values of the swept fields other than k."""
+        return tuple(row[1 + i] for i in range(len(self.swept)) if i != self.k)
+
+    def label(self, row) -> str:
+        """The row's line: its method, and the other swept fields' values."""
+        n = len(self.swept)
+        others = ", ".join(f"{self.swept[i]}={row[1 + i]}" for i in range(n) if i != self.k)
+        return row[n + 1] + (f" ({others})" if others else "")
+
+
+def _sweep_layout(rows: list, swept: list, k: int, numeric: bool) -> _SweepLayout:
+    off = len(swept)
+    xs = list(dict.fromkeys(r[1 + k] for r in rows))
+    pos = {x: (x if numeric else i) for i, x in enumerate(xs)}
+    steps = np.diff(sorted(pos.values()))
+    dodge = 0.03 * float(steps.min()) if steps.size else 0.0  # x shift between lines
+    # a colour per method, a line style and marker per combination of the other swept fields
+    methods = list(dict.fromkeys(r[off + 1] for r in rows))
+    color_of = {m: METHOD_COLORS.get(m, f"C{i % 10}") for i, m in enumerate(methods)}
+    combos = list(dict.fromkeys(tuple(r[1 + i] for i in range(off) if i != k) for r in rows))
+    styles = [("-", "o"), ("--", "s"), (":", "^"), ("-.", "D")]
+    style_of = {c: styles[i % len(styles)] for i, c in enumerate(combos)}
+    return _SweepLayout(
+        swept=swept, k=k, pos=pos, dodge=dodge, color_of=color_of, style_of=style_of
+    )
+
+
+def _sweep_panel(ax, rows: list, metric: str, layout: _SweepLayout, references: dict) -> None:
+    """One metric's panel: its reference bands and lines, then a line per method and
+    combination of the other swept fields, with +-1 standard error."""
+    off = len(layout.swept)
+    for kind, value, label in references.get(metric, ()):
+        if kind == "band":
+            ax.axhspan(*value, color="0.85", lw=0, zorder=0, label=label)
+        else:
+            ax.axhline(value, color="k", ls="--", lw=1.0, zorder=1, label=label)
+    lines: dict = {}
+    for r in rows:
+        if r[off + 2] != metric:
+            continue
+        pts = lines.setdefault((layout.label(r), r[off + 1], layout.combo(r)), [])
+        pts.append((layout.pos[r[1 + layout.k]], r[off + 3], r[off + 4], r[off + 5]))
+    for j, ((label, method, combo), pts) in enumerate(lines.items()):
+        x, mean, std, n = (np.array(v, float) for v in zip(*sorted(pts)))
+        se = np.where(n > 1, std / np.sqrt(np.maximum(n, 1)), np.nan)
+        ls, marker = layout.style_of[combo]
+        shift = (j - (len(lines) - 1) / 2) * layout.dodge  # bars of equal means side by side
+        ax.errorbar(
+            x + shift,
+            mean,
+            yerr=se,
+            ls=ls,
+            marker=marker,
+            ms=4,
+            capsize=3,
+            lw=1.2,
+            color=layout.color_of[method],
+            label=label,
+        )
+
+
+def _sweep_legend(fig, axes, rows: list, off: int) -> None:
+    """One legend under the panels (each label once), saying what the bars are."""
+    seen: dict[str, object] = {}
+    for ax in axes.flat:
+        for h, label in zip(*ax.get_legend_handles_labels()):
+            seen.setdefault(label, h)
+    counts = sorted({int(r[off + 5]) for r in rows})
+    n_text = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+    fig.legend(
+        list(seen.values()),
+        list(seen),
+        loc="outside lower center",
+        ncol=min(len(seen), 3),
+        fontsize=8,
+        title=f"bars: \u00b11 standard error of the mean over the n = {n_text} trials of each "
+        "point (lines drawn side by side, shifted a little along x)",
+        title_fontsize=8,
+    )
+
+
 def plot_sweep_field(
     rows: list,
     swept: list,
@@ -723,52 +817,14 @@ def plot_sweep_field(
     names = list(dict.fromkeys(r[off + 2] for r in rows))
     xs = list(dict.fromkeys(r[1 + k] for r in rows))
     numeric = all(isinstance(x, int | float) and not isinstance(x, bool) for x in xs)
-    pos = {x: (x if numeric else i) for i, x in enumerate(xs)}
-    steps = np.diff(sorted(pos.values()))
-    dodge = 0.03 * float(steps.min()) if steps.size else 0.0  # x shift between lines
+    layout = _sweep_layout(rows, swept, k, numeric)
     ncols = min(len(names), 3) or 1
     nrows = max(1, math.ceil(len(names) / ncols))
     fig, axes = _subplots(
         nrows, ncols, figsize=(4.6 * ncols, 3.6 * nrows + 1.2), squeeze=False, layout="constrained"
     )
-    # a colour per method, a line style and marker per combination of the other swept fields
-    methods = list(dict.fromkeys(r[off + 1] for r in rows))
-    color_of = {m: METHOD_COLORS.get(m, f"C{i % 10}") for i, m in enumerate(methods)}
-    combos = list(dict.fromkeys(tuple(r[1 + i] for i in range(off) if i != k) for r in rows))
-    styles = [("-", "o"), ("--", "s"), (":", "^"), ("-.", "D")]
-    style_of = {c: styles[i % len(styles)] for i, c in enumerate(combos)}
     for ax, metric in zip(axes.flat, names):
-        for kind, value, label in references.get(metric, ()):
-            if kind == "band":
-                ax.axhspan(*value, color="0.85", lw=0, zorder=0, label=label)
-            else:
-                ax.axhline(value, color="k", ls="--", lw=1.0, zorder=1, label=label)
-        lines: dict = {}
-        for r in rows:
-            if r[off + 2] != metric:
-                continue
-            combo = tuple(r[1 + i] for i in range(off) if i != k)
-            others = ", ".join(f"{swept[i]}={r[1 + i]}" for i in range(off) if i != k)
-            label = r[off + 1] + (f" ({others})" if others else "")
-            pts = lines.setdefault((label, r[off + 1], combo), [])
-            pts.append((pos[r[1 + k]], r[off + 3], r[off + 4], r[off + 5]))
-        for j, ((label, method, combo), pts) in enumerate(lines.items()):
-            x, mean, std, n = (np.array(v, float) for v in zip(*sorted(pts)))
-            se = np.where(n > 1, std / np.sqrt(np.maximum(n, 1)), np.nan)
-            ls, marker = style_of[combo]
-            shift = (j - (len(lines) - 1) / 2) * dodge  # bars of equal means side by side
-            ax.errorbar(
-                x + shift,
-                mean,
-                yerr=se,
-                ls=ls,
-                marker=marker,
-                ms=4,
-                capsize=3,
-                lw=1.2,
-                color=color_of[method],
-                label=label,
-            )
+        _sweep_panel(ax, rows, metric, layout, references)
         head, ylabel = metrics.get(metric, (metric.replace("_", " "), ""))
         ax.set_title(head, fontsize=10)
         ax.set_ylabel(ylabel)
@@ -778,21 +834,6 @@ def plot_sweep_field(
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[len(names) :]:
         ax.set_visible(False)
-    seen: dict[str, object] = {}
-    for ax in axes.flat:
-        for h, label in zip(*ax.get_legend_handles_labels()):
-            seen.setdefault(label, h)
-    counts = sorted({int(r[off + 5]) for r in rows})
-    n_text = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
-    fig.legend(
-        list(seen.values()),
-        list(seen),
-        loc="outside lower center",
-        ncol=min(len(seen), 3),
-        fontsize=8,
-        title=f"bars: \u00b11 standard error of the mean over the n = {n_text} trials of each "
-        "point (lines drawn side by side, shifted a little along x)",
-        title_fontsize=8,
-    )
+    _sweep_legend(fig, axes, rows, off)
     fig.suptitle(title, fontsize=11)
     return save(fig, path)

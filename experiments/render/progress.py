@@ -70,7 +70,7 @@ class Progress:
 
     def _bar(self, desc: str, done: int, total: int) -> None:
         if self._bars is None:
-            self._bars = RichProgress(
+            columns = (  # description, bar, done/total, elapsed and remaining time
                 TextColumn("{task.description:<28}"),
                 BarColumn(),
                 MofNCompleteColumn(),
@@ -78,8 +78,8 @@ class Progress:
                 TimeElapsedColumn(),
                 TextColumn("left"),
                 TimeRemainingColumn(),
-                console=self.console,
             )
+            self._bars = RichProgress(*columns, console=self.console)
             self._bars.start()
         if desc not in self._tasks:
             self._tasks[desc] = self._bars.add_task(desc, total=total)

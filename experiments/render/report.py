@@ -281,21 +281,25 @@ def _table1_row(s: Snapshot, table: str, stat: str, label: str) -> list[str]:
     """Mean over pillars d-g of a Table 1 or 2 statistic: the paper's two columns, ours."""
 
     def mean_of(source: str, method: str) -> str:
+        if not _has(s, table, source=source, method=method):  # Table 2 was not published
+            return ""
         vals = [
             s.value(table, source=source, method=method, pillar=p, statistic=stat) for p in _PILLARS
         ]
         return f"{_mean(vals):.4f}"
 
-    published = [
-        mean_of("paper_published", m) if _has(s, table, source="paper_published", method=m) else ""
-        for m in ("paper", "bailey")
-    ]
-    ours = [mean_of("simulation", m) for m in _METHODS]
-    return [label, *published, *ours]
+    return _methods_row(label, mean_of)
 
 
 def _has(s: Snapshot, table: str, **where) -> bool:
     return any(_matches(r, where) for r in s.records(table))
+
+
+def _methods_row(label: str, cell) -> list[str]:
+    """A glance row: the label, the paper's two published columns, then ours by method;
+    cell(source, method) -> text."""
+    published = [cell("paper_published", m) for m in ("paper", "bailey")]
+    return [label, *published, *(cell("simulation", m) for m in _METHODS)]
 
 
 def _table3_row(s: Snapshot, quantity: str, label: str) -> list[str]:
@@ -305,12 +309,7 @@ def _table3_row(s: Snapshot, quantity: str, label: str) -> list[str]:
             where |= {"estimator": "ekf", "statistic": "mean"}
         return f"{s.value('table3', **where):.4f}"
 
-    return [
-        label,
-        get("paper_published", "paper"),
-        get("paper_published", "bailey"),
-        *(get("simulation", m) for m in _METHODS),
-    ]
+    return _methods_row(label, get)
 
 
 def _table4_row(s: Snapshot, label: str) -> list[str]:
@@ -326,12 +325,7 @@ def _table4_row(s: Snapshot, label: str) -> list[str]:
             raise ReportError(f"table4.csv: no false-detection rates of {source} {method}")
         return f"{_mean(vals):.3f}"
 
-    return [
-        label,
-        mean_rate("paper_published", "paper"),
-        mean_rate("paper_published", "bailey"),
-        *(mean_rate("simulation", m) for m in _METHODS),
-    ]
+    return _methods_row(label, mean_rate)
 
 
 def _nees_row(s: Snapshot, label: str) -> list[str]:

@@ -492,10 +492,7 @@ class Recorder(NullRecorder):
             k = np.asarray(s.scan, np.int64)
             self.rec.send_columns(
                 f"series/{s.name}",
-                indexes=[
-                    rr.TimeColumn("scan", sequence=k),
-                    rr.TimeColumn("time", duration=scan_t[k]),
-                ],
+                indexes=_scan_columns(k, scan_t),
                 columns=rr.Scalars.columns(scalars=np.asarray(s.values, float)),
             )
             if not s.points:
@@ -510,10 +507,7 @@ class Recorder(NullRecorder):
             return
         self.rec.send_columns(
             f"series/{name}",
-            indexes=[
-                rr.TimeColumn("scan", sequence=gap),
-                rr.TimeColumn("time", duration=scan_t[gap]),
-            ],
+            indexes=_scan_columns(gap, scan_t),
             columns=rr.Clear.columns(is_recursive=np.zeros(gap.size, bool)),
         )
 
@@ -583,3 +577,8 @@ def open_recording(
     if path is None:
         return NullRecorder()
     return Recorder(path, kind, decimate=decimate, ellipse_scale=ellipse_scale, series=list(series))
+
+
+def _scan_columns(k: np.ndarray, scan_t: np.ndarray) -> list:
+    """The timelines of scans k: `scan` (index) and `time` (the scan's time, s)."""
+    return [rr.TimeColumn("scan", sequence=k), rr.TimeColumn("time", duration=scan_t[k])]

@@ -100,6 +100,11 @@ class LandmarkScan:
     feature_ids: np.ndarray
     truth_landmark: np.ndarray
 
+    @property
+    def inputs(self) -> dict[str, np.ndarray]:
+        """The inputs of `association.associate` (z, R, z_hat, H, P), by name."""
+        return {"z": self.z, "R": self.R, "z_hat": self.z_hat, "H": self.H, "P": self.P}
+
     def feed(self, window) -> np.ndarray:
         """Give this scan to a K-scan `association.SlidingWindowAssociator` (with the estimated
         sensor pose, its relative covariance and the feature ids); returns its decision."""
@@ -202,7 +207,16 @@ def simulate_landmark_scans(
         perm = rng.permutation(z.shape[0])
         scans.append(
             LandmarkScan(
-                z[perm], R, z_hat, H, P, truth[perm], est, 2 * cfg.Q_drift, idx, truth_lm[perm]
+                z=z[perm],
+                R=R,
+                z_hat=z_hat,
+                H=H,
+                P=P,
+                truth=truth[perm],
+                pose_est=est,
+                pose_cov_rel=2 * cfg.Q_drift,
+                feature_ids=idx,
+                truth_landmark=truth_lm[perm],
             )
         )
     return scans

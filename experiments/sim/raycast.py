@@ -40,19 +40,16 @@ def _check(origin_xy: Any, angles_world_rad: Any) -> tuple[float, float, np.ndar
     return float(o[0]), float(o[1]), a
 
 
-def _circle_t(
-    ox: float,
-    oy: float,
-    dx: np.ndarray,
-    dy: np.ndarray,
-    cx: np.ndarray,
-    cy: np.ndarray,
-    r: np.ndarray,
-) -> np.ndarray:
-    """Distance along beams d = (dx, dy) to their first crossing of circles (cx, cy, r).
+def _circle_t(origin: tuple[float, float], d: tuple, circ_xyr: np.ndarray) -> np.ndarray:
+    """Distance along beams from `origin` (ox, oy) in directions d = (dx, dy) to their first
+    crossing of circles `circ_xyr` (N, 3) [cx, cy, r].
 
-    All arrays broadcast together (pairs, or (B, 1) against (L,)); inf where the beam misses.
+    The beams' arrays broadcast against the circles' (pairs, or (B, 1) against (N,)); inf where
+    the beam misses.
     """
+    ox, oy = origin
+    dx, dy = d
+    cx, cy, r = circ_xyr[:, 0], circ_xyr[:, 1], circ_xyr[:, 2]
     ocx = ox - cx
     ocy = oy - cy
     cc = ocx * ocx + ocy * ocy - r * r  # > 0 when the origin is outside the circle
@@ -68,19 +65,16 @@ def _circle_t(
 
 
 def _segment_t(
-    ox: float,
-    oy: float,
-    dx: np.ndarray,
-    dy: np.ndarray,
-    px: np.ndarray,
-    py: np.ndarray,
-    ex: np.ndarray,
-    ey: np.ndarray,
+    origin: tuple[float, float], d: tuple, seg_p: np.ndarray, seg_e: np.ndarray
 ) -> np.ndarray:
-    """Distance along beams to segments p + s e, s in [0, 1]; inf where missed. Broadcasts.
+    """Distance along beams from `origin` in directions d = (dx, dy) to segments p + s e,
+    s in [0, 1] (`seg_p`, `seg_e`: (N, 2)); inf where missed. Broadcasts as `_circle_t`.
 
     o + t d = p + s e  =>  t = (w x e) / (d x e), s = (w x d) / (d x e), w = p - o.
     """
+    ox, oy = origin
+    dx, dy = d
+    px, py, ex, ey = seg_p[:, 0], seg_p[:, 1], seg_e[:, 0], seg_e[:, 1]
     wx = px - ox
     wy = py - oy
     den = dx * ey - dy * ex
@@ -101,11 +95,7 @@ def raycast_dense(
     dx, dy = np.cos(a)[:, None], np.sin(a)[:, None]
     c, p, e = geo["circ_xyr"], geo["seg_p"], geo["seg_e"]
     t = np.concatenate(
-        [
-            _circle_t(ox, oy, dx, dy, c[:, 0], c[:, 1], c[:, 2]),
-            _segment_t(ox, oy, dx, dy, p[:, 0], p[:, 1], e[:, 0], e[:, 1]),
-        ],
-        axis=1,
+        [_circle_t((ox, oy), (dx, dy), c), _segment_t((ox, oy), (dx, dy), p, e)], axis=1
     )
     lab = np.concatenate([geo["circ_label"], geo["seg_label"], [NO_RETURN_LABEL]])
     j = np.argmin(t, axis=1) if t.shape[1] else np.zeros(a.shape[0], dtype=np.int64)

@@ -510,6 +510,58 @@ def _list(data: Mapping, key: str, source: str) -> list:
     return v
 
 
+def _circle(c: Any, w: str, source: str) -> CircleObject:
+    """One entry of "circles" (`w`: where it is, for errors)."""
+    _check_keys(c, _CIRCLE_KEYS, w, source)
+    name = _get(c, "name", w, source)
+    center = _xy_list([_get(c, "center_xy", w, source)], f"{w}.center_xy", source, 1)[0]
+    r = _number(_get(c, "radius_m", w, source), f"{w}.radius_m", source, positive=True)
+    kind = c.get("kind", "trunk")
+    if kind not in CIRCLE_KINDS:
+        raise DataError(_where(source, f"{w}.kind: must be one of {CIRCLE_KINDS}, got {kind!r}"))
+    return CircleObject(name, center, r, kind, _height(c, w, source))
+
+
+def _wall(o: Any, w: str, source: str) -> WallObject:
+    """One entry of "walls"."""
+    _check_keys(o, _WALL_KEYS, w, source)
+    name = _get(o, "name", w, source)
+    pts = _xy_list(_get(o, "points_xy", w, source), f"{w}.points_xy", source, 2)
+    kind = o.get("kind", "wall")
+    if kind not in WALL_KINDS:
+        raise DataError(_where(source, f"{w}.kind: must be one of {WALL_KINDS}, got {kind!r}"))
+    closed = o.get("closed", False)
+    if not isinstance(closed, bool):
+        raise DataError(_where(source, f"{w}.closed: must be true or false, got {closed!r}"))
+    return WallObject(name, pts, kind, closed, _height(o, w, source))
+
+
+def _bush(o: Any, w: str, source: str) -> BushObject:
+    """One entry of "bushes"."""
+    _check_keys(o, _BUSH_KEYS, w, source)
+    name = _get(o, "name", w, source)
+    pts = _xy_list(_get(o, "points_xy", w, source), f"{w}.points_xy", source, 3)
+    return BushObject(name, pts, _height(o, w, source))
+
+
+def _scan_positions(data: Mapping, source: str) -> tuple[np.ndarray, tuple]:
+    """(scan_positions (P, 3) [x, y, theta], their names (P,) or ())."""
+    sp_raw = _list(data, "scan_positions", source)
+    sp = np.zeros((len(sp_raw), 3))
+    for i, p in enumerate(sp_raw):
+        if not isinstance(p, list) or len(p) != 3:
+            raise DataError(
+                _where(source, f"scan_positions[{i}]: must be [x, y, theta], got {p!r}")
+            )
+        sp[i] = [_number(v, f"scan_positions[{i}][{j}]", source) for j, v in enumerate(p)]
+    spn = data.get("scan_position_names", [])
+    if not isinstance(spn, list) or (spn and len(spn) != len(sp_raw)):
+        raise DataError(
+            _where(source, f"scan_position_names: must be a list of {len(sp_raw)} strings")
+        )
+    return sp, tuple(spn)
+
+
 def scene_from_dict(data: Mapping, source: str = "<dict>", default_name: str = "") -> Scene:
     """Build a `Scene` from the parsed JSON schema of `datasets/scenes/README.md`.
 
@@ -524,56 +576,17 @@ def scene_from_dict(data: Mapping, source: str = "<dict>", default_name: str = "
             _where(source, "top level: needs at least one of 'circles', 'walls', 'bushes'")
         )
     try:
-        circles = []
-        for i, c in enumerate(_list(data, "circles", source)):
-            w = f"circles[{i}]"
-            _check_keys(c, _CIRCLE_KEYS, w, source)
-            name = _get(c, "name", w, source)
-            center = _xy_list([_get(c, "center_xy", w, source)], f"{w}.center_xy", source, 1)[0]
-            r = _number(_get(c, "radius_m", w, source), f"{w}.radius_m", source, positive=True)
-            kind = c.get("kind", "trunk")
-            if kind not in CIRCLE_KINDS:
-                raise DataError(
-                    _where(source, f"{w}.kind: must be one of {CIRCLE_KINDS}, got {kind!r}")
-                )
-            circles.append(CircleObject(name, center, r, kind, _height(c, w, source)))
-        walls = []
-        for i, o in enumerate(_list(data, "walls", source)):
-            w = f"walls[{i}]"
-            _check_keys(o, _WALL_KEYS, w, source)
-            name = _get(o, "name", w, source)
-            pts = _xy_list(_get(o, "points_xy", w, source), f"{w}.points_xy", source, 2)
-            kind = o.get("kind", "wall")
-            if kind not in WALL_KINDS:
-                raise DataError(
-                    _where(source, f"{w}.kind: must be one of {WALL_KINDS}, got {kind!r}")
-                )
-            closed = o.get("closed", False)
-            if not isinstance(closed, bool):
-                raise DataError(
-                    _where(source, f"{w}.closed: must be true or false, got {closed!r}")
-                )
-            walls.append(WallObject(name, pts, kind, closed, _height(o, w, source)))
-        bushes = []
-        for i, o in enumerate(_list(data, "bushes", source)):
-            w = f"bushes[{i}]"
-            _check_keys(o, _BUSH_KEYS, w, source)
-            name = _get(o, "name", w, source)
-            pts = _xy_list(_get(o, "points_xy", w, source), f"{w}.points_xy", source, 3)
-            bushes.append(BushObject(name, pts, _height(o, w, source)))
-        sp_raw = _list(data, "scan_positions", source)
-        sp = np.zeros((len(sp_raw), 3))
-        for i, p in enumerate(sp_raw):
-            if not isinstance(p, list) or len(p) != 3:
-                raise DataError(
-                    _where(source, f"scan_positions[{i}]: must be [x, y, theta], got {p!r}")
-                )
-            sp[i] = [_number(v, f"scan_positions[{i}][{j}]", source) for j, v in enumerate(p)]
-        spn = data.get("scan_position_names", [])
-        if not isinstance(spn, list) or (spn and len(spn) != len(sp_raw)):
-            raise DataError(
-                _where(source, f"scan_position_names: must be a list of {len(sp_raw)} strings")
-            )
+        circles = [
+            _circle(c, f"circles[{i}]", source)
+            for i, c in enumerate(_list(data, "circles", source))
+        ]
+        walls = [
+            _wall(o, f"walls[{i}]", source) for i, o in enumerate(_list(data, "walls", source))
+        ]
+        bushes = [
+            _bush(o, f"bushes[{i}]", source) for i, o in enumerate(_list(data, "bushes", source))
+        ]
+        sp, spn = _scan_positions(data, source)
         name = data.get("name", default_name)
         description = data.get("description", "")
         if isinstance(description, list):  # long descriptions may be a list of lines
@@ -583,7 +596,7 @@ def scene_from_dict(data: Mapping, source: str = "<dict>", default_name: str = "
             walls=tuple(walls),
             bushes=tuple(bushes),
             scan_positions=sp,
-            scan_position_names=tuple(spn),
+            scan_position_names=spn,
             name=str(name),
             description=str(description),
         )

@@ -290,12 +290,13 @@ def test_victoria_park_markdown_is_narrow_tables_each_a_pivot_of_the_csv(tmp_pat
     from support import _md_tables
 
     from experiments.io.writers import read_tidy_csv
+    from experiments.paper import products
     from experiments.paper import victoria_park as vp
 
-    vp._write(_Ctx(tmp_path), _vp_rows())
+    products.tables(_Ctx(tmp_path), [vp.TABLE], _vp_rows())
     assert assert_tidy_tables(tmp_path) == {"victoria_park.csv"}
     tables = _md_tables(tmp_path / "victoria_park.md")
-    assert len(tables) == len(vp.TABLES) >= 3
+    assert len(tables) == len(vp.PARTS) >= 3
     assert all(len(header) <= 8 for _, _, header, _ in tables), [t[2] for t in tables]
     # the CSV is the one tidy table: every column, one row per run
     rows = read_tidy_csv(tmp_path / "victoria_park.csv")
@@ -304,14 +305,15 @@ def test_victoria_park_markdown_is_narrow_tables_each_a_pivot_of_the_csv(tmp_pat
     assert math.isnan(rows[0]["published_matched"]) and rows[1]["scans"] == 7248
     md = (tmp_path / "victoria_park.md").read_text()
     assert [line for line in md.splitlines() if line.startswith("## ")] == [
-        f"## {h}" for h, _ in vp.TABLES
+        f"## {h}" for h, _ in vp.PARTS
     ]
 
 
 def test_the_tidy_check_fails_on_a_narrow_table_that_is_not_the_pivot(tmp_path):
+    from experiments.paper import products
     from experiments.paper import victoria_park as vp
 
-    vp._write(_Ctx(tmp_path), _vp_rows())
+    products.tables(_Ctx(tmp_path), [vp.TABLE], _vp_rows())
     md = tmp_path / "victoria_park.md"
     good = md.read_text()
     # a cell changed in the third table
