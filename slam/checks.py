@@ -110,7 +110,7 @@ def _check_steering(seq, cfg, steer: np.ndarray) -> None:
             f"{float(steer[i]):.6g} rad, beyond +-{MAX_STEER_RAD} rad; check the calibration"
         )
     veh = seq.vehicle
-    k = float(veh.get("encoder_offset_m", 0.0)) / float(veh["wheelbase_m"])
+    k = veh.encoder_offset_m / veh.wheelbase_m
     den = 1.0 - k * np.tan(steer)
     if np.any(den <= 0):  # v_c = v_e / (1 - (H/L) tan(alpha)) would be infinite or negative
         i = int(np.flatnonzero(den <= 0)[0])

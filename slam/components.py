@@ -54,7 +54,7 @@ def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) 
         associator=_associator(cfg, association),
         motion=Motion(
             AckermannModel.from_vehicle(seq.vehicle),
-            Odometry(seq.odo_t, seq.odo_speed, steer),
+            Odometry(seq.odometry.t_s, seq.odometry.speed_mps, steer),
             cfg.vehicle.odometry_noise,
         ),
         T_vehicle_laser=laser_pose(seq, cfg),

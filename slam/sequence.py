@@ -1,4 +1,7 @@
-"""The run `slam.run` consumes (`Sequence`): scans, odometry, GPS and truth, validated.
+"""The run `slam.run_slam` consumes (`Sequence`): scans, odometry, GPS and truth, validated.
+
+The fields are flat, as the file stores them; the sub-records `Sequence.odometry`, `.gps`,
+`.truth` and the `Vehicle` give them typed names (None where the sequence has none).
 
 Construction checks every field and raises `SlamError` (a `ValueError`) naming it, so a
 `Sequence` that exists is one the rest of the package can trust. The file format (one `.npz`,
@@ -17,7 +20,18 @@ from features.types import Scan
 from slam.checks import finite, float_array, readonly, times
 from slam.errors import SlamError
 
-__all__ = ["MIXED_LABEL", "NO_RETURN_LABEL", "OPTIONAL", "REQUIRED", "VEHICLE_MODELS", "Sequence"]
+__all__ = [
+    "MIXED_LABEL",
+    "NO_RETURN_LABEL",
+    "OPTIONAL",
+    "REQUIRED",
+    "VEHICLE_MODELS",
+    "GpsTrack",
+    "OdometryLog",
+    "Sequence",
+    "Truth",
+    "Vehicle",
+]
 
 # Vehicle models and their parameters: name -> (required keys, optional keys with defaults).
 VEHICLE_MODELS: dict[str, tuple[tuple[str, ...], dict[str, float]]] = {
@@ -130,7 +144,67 @@ def _number(v) -> float | None:
     return f if math.isfinite(f) else None
 
 
+@dataclass(frozen=True)
+class Vehicle:
+    """The car a sequence was driven with (datasets/FORMAT.md `vehicle`; the file stores it as a
+    JSON object).
+
+    model: "ackermann", a front-steered car moving about its rear-axle centre.
+    wheelbase_m: L > 0, rear axle to front axle. encoder_offset_m: H, the speed encoder's
+    lateral offset from the rear-axle centre (0: at the centre; v_c = v_e / (1 - H/L tan alpha)).
+    """
+
+    model: str
+    wheelbase_m: float
+    encoder_offset_m: float = 0.0
+
+    @classmethod
+    def of(cls, value) -> Vehicle:
+        """A `Vehicle` from itself, a dict or its JSON text, checked (`SlamError` naming the
+        key)."""
+        if isinstance(value, Vehicle):
+            return value
+        return cls(**_vehicle(value))
+
+    def to_dict(self) -> dict:
+        """The JSON object of the file format."""
+        return {"model": self.model, "wheelbase_m": self.wheelbase_m,
+                "encoder_offset_m": self.encoder_offset_m}  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class OdometryLog:
+    """A sequence's odometry samples: t_s (M,) s, speed_mps (M,) as the encoder reads it,
+    steer_rad (M,) the front-wheel angle (zero-order hold between samples)."""
+
+    t_s: np.ndarray
+    speed_mps: np.ndarray
+    steer_rad: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class GpsTrack:
+    """A sequence's GPS fixes: t_s (G,) s, xy_m (G, 2) world frame, T_vehicle_antenna (3,) the
+    antenna in the vehicle frame (None: at the laser)."""
+
+    t_s: np.ndarray
+    xy_m: np.ndarray
+    T_vehicle_antenna: np.ndarray | None
+
+
+@dataclass(frozen=True, eq=False)
+class Truth:
+    """A simulated sequence's truth: t_s (T,) s, pose_world_rear_axle (T, 3) [x, y, theta],
+    landmarks_xyr (L, 3) [x, y, r] world frame (None when not given)."""
+
+    t_s: np.ndarray
+    pose_world_rear_axle: np.ndarray
+    landmarks_xyr: np.ndarray | None
+
+
 def _vehicle(value) -> dict:
+    if isinstance(value, Vehicle):
+        value = value.to_dict()
     if isinstance(value, (str, bytes)):
         try:
             value = json.loads(value, parse_int=json_int)
@@ -268,8 +342,9 @@ class Sequence:
       scan_max_range: m; readings at or beyond it are no return (inf when absent).
       odo_t (M,) s, odo_speed (M,) m/s as measured by the encoder, odo_steer (M,) rad front wheel
         (|steer| <= 1.4 rad, |speed| <= 100 m/s); all three or none.
-      vehicle: dict, e.g. {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
-        (a JSON string is accepted and parsed; encoder_offset_m defaults to 0).
+      vehicle: a `Vehicle`; a dict such as {"model": "ackermann", "wheelbase_m": 2.83,
+        "encoder_offset_m": 0.76} or its JSON text is accepted and made one (encoder_offset_m
+        defaults to 0).
       gps_t (G,) s, gps_xy (G, 2) m world, both or neither; gps_pose (3,) antenna in the vehicle
         frame (the laser's position when absent).
       truth_t (T,) s, truth_pose (T, 3) [x, y, theta] of the rear-axle centre, world frame, both
@@ -298,7 +373,7 @@ class Sequence:
     odo_t: np.ndarray | None = None
     odo_speed: np.ndarray | None = None
     odo_steer: np.ndarray | None = None
-    vehicle: dict | None = None
+    vehicle: Vehicle | None = None
     gps_t: np.ndarray | None = None
     gps_xy: np.ndarray | None = None
     gps_pose: np.ndarray | None = None
@@ -407,14 +482,14 @@ class Sequence:
         """The vehicle description, and the encoder correction it implies stays finite."""
         put = self._put
         if self.vehicle is not None:
-            put("vehicle", _vehicle(self.vehicle))
-            h_over_l = self.vehicle.get("encoder_offset_m", 0.0) / self.vehicle["wheelbase_m"]
+            put("vehicle", Vehicle.of(self.vehicle))
+            h_over_l = self.vehicle.encoder_offset_m / self.vehicle.wheelbase_m
             if self.odo_steer is not None and h_over_l != 0.0:
                 # v_c = v_e / (1 - (H / L) tan(alpha)) needs a positive denominator
                 denom = 1.0 - h_over_l * np.tan(self.odo_steer)
                 if np.any(denom <= 1e-3):
                     k = int(np.argmin(denom))
-                    h = self.vehicle["encoder_offset_m"]
+                    h = self.vehicle.encoder_offset_m
                     raise SlamError(
                         f"Sequence.odo_steer: {float(self.odo_steer[k]):.6g} rad at sample {k} "
                         f"turns so sharply that the speed encoder (vehicle encoder_offset_m = "
@@ -467,6 +542,27 @@ class Sequence:
     @property
     def n_beams(self) -> int:
         return int(self.scan_n_beams)
+
+    @property
+    def odometry(self) -> OdometryLog | None:
+        """The odometry samples, or None."""
+        if self.odo_t is None:
+            return None
+        return OdometryLog(self.odo_t, self.odo_speed, self.odo_steer)
+
+    @property
+    def gps(self) -> GpsTrack | None:
+        """The GPS fixes, or None."""
+        if self.gps_t is None:
+            return None
+        return GpsTrack(self.gps_t, self.gps_xy, self.gps_pose)
+
+    @property
+    def truth(self) -> Truth | None:
+        """The simulated truth (poses; landmarks when given), or None without poses."""
+        if self.truth_t is None:
+            return None
+        return Truth(self.truth_t, self.truth_pose, self.truth_landmarks)
 
     @property
     def has_ranges(self) -> bool:

@@ -83,19 +83,27 @@ class AckermannModel:
             raise SlamError(f"AckermannModel.wheelbase_m: must be > 0, got {self.wheelbase_m!r}")
 
     @classmethod
-    def from_vehicle(cls, vehicle: Mapping | None) -> AckermannModel:
-        """From a sequence's `vehicle` dict ({"model": "ackermann", "wheelbase_m": ..., ...})."""
+    def from_vehicle(cls, vehicle) -> AckermannModel:
+        """From a sequence's `vehicle`: a `slam.sequence.Vehicle`, or its dict ({"model":
+        "ackermann", "wheelbase_m": ..., "encoder_offset_m": ...})."""
         if vehicle is None:
             raise SlamError("vehicle: the sequence has no vehicle model (needed for odometry)")
-        if not isinstance(vehicle, Mapping):
-            raise SlamError(f"vehicle: expected a dict, got {type(vehicle).__name__}")
-        if vehicle.get("model") != "ackermann":
-            raise SlamError(
-                f"vehicle.model: only 'ackermann' is known, got {vehicle.get('model')!r}"
-            )
+        if isinstance(vehicle, Mapping):
+            model = vehicle.get("model")
+        elif hasattr(vehicle, "wheelbase_m"):
+            model = vehicle.model
+            vehicle = {
+                "wheelbase_m": vehicle.wheelbase_m,
+                "encoder_offset_m": vehicle.encoder_offset_m,
+            }
+        else:
+            raise SlamError(f"vehicle: expected a Vehicle or a dict, got {type(vehicle).__name__}")
+        if model != "ackermann":
+            raise SlamError(f"vehicle.model: only 'ackermann' is known, got {model!r}")
         if "wheelbase_m" not in vehicle:
             raise SlamError("vehicle.wheelbase_m: missing")
-        return cls(vehicle["wheelbase_m"], vehicle.get("encoder_offset_m", 0.0))
+        geometry = (vehicle["wheelbase_m"], vehicle.get("encoder_offset_m", 0.0))
+        return cls(*geometry)
 
     def axle_speed(self, v_enc_mps: float, steer_rad: float) -> float:
         """v_c = v_e / (1 - (H / L) tan(alpha)): encoder speed to rear-axle-centre speed."""

@@ -59,7 +59,7 @@ def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
         if v is None:
             continue
         if f.name == "vehicle":
-            arrays["vehicle"] = np.array(json.dumps(v, sort_keys=True))
+            arrays["vehicle"] = np.array(json.dumps(v.to_dict(), sort_keys=True))
         elif f.name == "name":
             arrays["name"] = np.array(v)
         else:

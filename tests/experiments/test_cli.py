@@ -154,7 +154,7 @@ def test_convert_victoria_park_round_trip(tmp_path, vp_dir):
     seq = load_sequence(out)
     assert seq.scan_ranges.shape == (2000, 361)
     assert abs(seq.scan_t[0] - 21.819) < 1e-9 and abs(seq.scan_t[-1] - 448.865) < 1e-9
-    assert seq.vehicle["wheelbase_m"] == 2.83
+    assert seq.vehicle.wheelbase_m == 2.83
     np.testing.assert_allclose(seq.laser_pose, [3.78, 0.50, 0.0])
 
 

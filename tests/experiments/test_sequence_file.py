@@ -124,7 +124,7 @@ def _valid_arrays() -> dict:
     seq = Sequence(**full_kwargs())
     out = {k: np.asarray(getattr(seq, k)) for k in (*REQUIRED, "scan_ranges")}
     out["odo_t"], out["odo_speed"], out["odo_steer"] = seq.odo_t, seq.odo_speed, seq.odo_steer
-    out["vehicle"] = np.array(json.dumps(seq.vehicle))
+    out["vehicle"] = np.array(json.dumps(seq.vehicle.to_dict()))
     return out
 
 

@@ -42,7 +42,11 @@ def test_scans(vp):
     assert vp.scan_max_range == 80.0
     np.testing.assert_array_equal(vp.laser_pose, [3.78, 0.50, 0.0])
     np.testing.assert_array_equal(vp.gps_pose, [3.78, 0.50, 0.0])
-    assert vp.vehicle == {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
+    assert vp.vehicle.to_dict() == {
+        "model": "ackermann",
+        "wheelbase_m": 2.83,
+        "encoder_offset_m": 0.76,
+    }
     assert vp.truth_t is None and vp.truth_landmarks is None and vp.scan_labels is None
 
 

@@ -10,7 +10,7 @@ from support import B, N, full_kwargs
 
 from features.types import Scan
 from slam import Sequence, SlamError
-from slam.sequence import OPTIONAL, REQUIRED
+from slam.sequence import OPTIONAL, REQUIRED, GpsTrack, Truth, Vehicle
 
 
 def test_full_sequence_is_normalised():
@@ -19,7 +19,12 @@ def test_full_sequence_is_normalised():
     assert seq.scan_ranges.dtype == np.float64 and seq.laser_pose.dtype == np.float64
     assert seq.scan_labels.dtype == np.int64
     assert not seq.scan_ranges.flags.writeable  # frozen all the way down
-    assert seq.vehicle == {"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
+    assert seq.vehicle == Vehicle("ackermann", 2.83, 0.76)
+    assert seq.vehicle.to_dict() == {
+        "model": "ackermann",
+        "wheelbase_m": 2.83,
+        "encoder_offset_m": 0.76,
+    }
     np.testing.assert_array_equal(seq.laser_pose, [3.78, 0.5, 0.0])
 
 
@@ -33,7 +38,7 @@ def test_inputs_are_copied_not_shared():
 
 def test_vehicle_json_string_and_default_encoder_offset():
     seq = Sequence(**{**full_kwargs(), "vehicle": '{"model": "ackermann", "wheelbase_m": 1.2}'})
-    assert seq.vehicle == {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
+    assert seq.vehicle == Vehicle("ackermann", 1.2, 0.0)
 
 
 def test_scan_k_is_a_features_scan():
@@ -165,3 +170,23 @@ def test_malformed_run_raises_naming_the_problem(changes, words):
 def test_an_empty_optional_group_is_refused(changes, name):
     with pytest.raises(SlamError, match=f"Sequence.{name}: empty"):
         Sequence(**{**full_kwargs(), **changes})
+
+
+def test_sub_records_name_the_flat_fields():
+    seq = Sequence(**full_kwargs())
+    assert seq.odometry.t_s is seq.odo_t and seq.odometry.steer_rad is seq.odo_steer
+    assert isinstance(seq.gps, GpsTrack) and seq.gps.xy_m is seq.gps_xy
+    assert isinstance(seq.truth, Truth) and seq.truth.pose_world_rear_axle is seq.truth_pose
+    bare = {k: v for k, v in full_kwargs().items() if not k.startswith(("odo_", "gps_", "truth"))}
+    seq = Sequence(**bare)
+    assert seq.odometry is None and seq.gps is None and seq.truth is None
+
+
+def test_the_vehicle_is_a_type_read_from_a_dict_or_json():
+    v = Vehicle.of('{"model": "ackermann", "wheelbase_m": 2.0}')
+    assert v == Vehicle("ackermann", 2.0, 0.0) and Vehicle.of(v) is v
+    assert Vehicle.of(v.to_dict()) == v
+    with pytest.raises(SlamError, match="unknown or missing 'model'"):
+        Vehicle.of({"model": "tank", "wheelbase_m": 2.0})
+    with pytest.raises(SlamError, match=r"vehicle\['wheelbase_m'\]: must be > 0"):
+        Vehicle.of({"model": "ackermann", "wheelbase_m": -1.0})
