@@ -16,6 +16,8 @@ from typing import Annotated
 
 import typer
 
+from experiments.bundled import scene_names  # light: lists the package's scenes for the help
+
 app = typer.Typer(
     name="trunkslam",
     help="Tree-trunk features from 2D laser scans, data association and EKF-SLAM.",
@@ -204,7 +206,19 @@ def main(
             "--version", callback=_version, is_eager=True, help="print the version and exit"
         ),
     ] = False,
+    threads: Annotated[
+        int | None,
+        typer.Option(
+            "--threads",
+            min=1,
+            help="BLAS/OpenMP threads of this process (the filter is fastest with one; "
+            "reproduce and sweep use one per worker) [default: $OMP_NUM_THREADS, else 1]",
+        ),
+    ] = None,
 ) -> None:
+    from experiments.exec.threads import set_threads
+
+    set_threads(threads)  # first: before numpy, whose BLAS reads it when it starts
     from experiments.render.progress import CONSOLE
 
     level = logging.INFO if verbose else logging.WARNING
@@ -293,7 +307,9 @@ def convert_victoria_park(
 @app.command()
 @handle_errors
 def simulate(
-    scene: Annotated[str, typer.Argument(help="scene name in datasets/scenes, or a JSON path")],
+    scene: Annotated[
+        str, typer.Argument(help=f"a bundled scene ({', '.join(scene_names())}) or a JSON path")
+    ],
     pose: Annotated[str, typer.Option(help="x,y,theta of the sensor in the world (m, m, rad)")],
     out: Annotated[Path, typer.Option(help="sequence file to write")] = Path("scan.npz"),
     sensor: Annotated[Sensor, typer.Option(help="sensor preset")] = Sensor.pls200,
@@ -498,7 +514,8 @@ def report(
 @app.command()
 @handle_errors
 def presets() -> None:
-    """The presets `--config NAME` takes (datasets/configs/NAME.toml), one line each."""
+    """The presets `--config NAME` takes (experiments/presets/NAME.toml, shipped in the
+    package), one line each."""
     from experiments.io.config_file import presets as known
 
     for name, about in known().items():

@@ -8,15 +8,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slam.checks import check_runnable, check_types
+from slam.checks import check_fit, check_runnable, check_types
 from slam.config import SlamConfig
 from slam.errors import SlamError
 from slam.maps import View
+from slam.motion import IncrementMotion, UnicycleMotion
 from slam.sequence import Sequence
 from slam.sources import make_source
 from slam.vehicle import AckermannModel, Motion, Odometry
 
-__all__ = ["Components", "components", "laser_pose"]
+__all__ = ["Components", "components", "laser_pose", "make_motion"]
 
 
 def laser_pose(seq: Sequence, cfg: SlamConfig) -> np.ndarray:
@@ -35,7 +36,7 @@ class Components:
     cfg: SlamConfig
     source: object  # slam.sources: (k, scan) -> (Features, z, R), with .method, .model, .count
     associator: object  # association.associate's signature minus `method`, with .method
-    motion: Motion
+    motion: object  # slam.vehicle.Motion or a model of slam.motion: integrate, distance
     T_vehicle_laser: np.ndarray
     view: View
 
@@ -46,17 +47,14 @@ def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) 
     check_types(seq, cfg)  # before the source reads the sequence
     source = make_source(seq, cfg, features)
     steer = check_runnable(seq, cfg, source.count)
+    check_fit(seq, cfg)
     a0, da = float(seq.scan_angle_min), float(seq.scan_angle_increment)
     return Components(
         seq=seq,
         cfg=cfg,
         source=source,
         associator=_associator(cfg, association),
-        motion=Motion(
-            AckermannModel.from_vehicle(seq.vehicle),
-            Odometry(seq.odometry.t_s, seq.odometry.speed_mps, steer),
-            cfg.vehicle.odometry_noise,
-        ),
+        motion=make_motion(seq, cfg, steer),
         T_vehicle_laser=laser_pose(seq, cfg),
         view=View(
             fov=(a0, a0 + da * (seq.n_beams - 1)),
@@ -92,3 +90,21 @@ def _associator(cfg: SlamConfig, given=None):
 
     call.method = cfg.association.method
     return call
+
+
+def make_motion(seq: Sequence, cfg: SlamConfig, steer=None):
+    """The motion model of the sequence's vehicle, with the configuration's noise for it: an
+    "ackermann" car (`slam.vehicle.Motion`; `steer`: its calibrated steering readings), a
+    "unicycle" or a "pose-increment" robot (`slam.motion`)."""
+    odo, model = seq.odometry, seq.vehicle.model
+    if model == "unicycle":
+        return UnicycleMotion(
+            odo.t_s, odo.speed_mps, odo.yaw_rate_rad_s, cfg.vehicle.unicycle_noise
+        )
+    if model == "pose-increment":
+        return IncrementMotion(odo.t_s, odo.pose, cfg.vehicle.increment_noise)
+    return Motion(
+        AckermannModel.from_vehicle(seq.vehicle),
+        Odometry(odo.t_s, odo.speed_mps, odo.steer_rad if steer is None else steer),
+        cfg.vehicle.odometry_noise,
+    )

@@ -44,6 +44,7 @@ from slam.measurement import (
     MeasurementModel,
     NoiseModel,
 )
+from slam.motion import IncrementNoise, UnicycleNoise
 from slam.vehicle import OdometryNoise, SteeringCalibration
 
 __all__ = [
@@ -285,8 +286,13 @@ class VehicleConfig:
     """The car: its odometry and where its sensors sit (vehicle frame: rear-axle centre, x
     forward, y left).
 
-    odometry_noise: sigma of each odometry sample's speed and steering readings
-        (`slam.vehicle.OdometryNoise`, with its pose floor for slip).
+    odometry_noise: sigma of each odometry sample's speed and steering readings, for an
+        "ackermann" car (`slam.vehicle.OdometryNoise`, with its pose floor for slip).
+    unicycle_noise: the same for a "unicycle" vehicle's speed and yaw-rate samples
+        (`slam.motion.UnicycleNoise`).
+    increment_noise: the noise of a "pose-increment" vehicle's odometry increments, per metre
+        and per radian (`slam.motion.IncrementNoise`). The sequence's vehicle says which of the
+        three its odometry is.
     steering: the front-wheel angle from the steering reading (`slam.vehicle.SteeringCalibration`,
         offset + gain r + cubic r^3; the identity by default).
     laser_pose: (x_m, y_m, theta_rad) of the laser, replacing the sequence's (a calibrated
@@ -298,17 +304,23 @@ class VehicleConfig:
         the vehicle at least this far since the last scan used; the others are predicted only
         (status SKIPPED). 0 (default): every scan. A small value (the ute's 1 mm) skips the scans
         of a vehicle standing still: a scan from the same place repeats the last one's errors.
+    calibrated_for: (wheelbase_m, encoder_offset_m) of the car whose odometry these settings
+        describe (the simulated Cycab's by default); a run on a sequence whose vehicle differs
+        is warned (`slam.checks.check_fit`). None: no claim.
     """
 
     odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+    unicycle_noise: UnicycleNoise = field(default_factory=UnicycleNoise)
+    increment_noise: IncrementNoise = field(default_factory=IncrementNoise)
     steering: SteeringCalibration = field(default_factory=SteeringCalibration)
     laser_pose: tuple[float, float, float] | None = None
     gps_antenna: tuple[float, float] | None = None
     max_odometry_gap_s: float = 1.0
     min_travel_m: float = 0.0
+    calibrated_for: tuple[float, float] | None = (1.2, 0.0)
 
     def __post_init__(self) -> None:
-        for name, n in (("laser_pose", 3), ("gps_antenna", 2)):
+        for name, n in (("laser_pose", 3), ("gps_antenna", 2), ("calibrated_for", 2)):
             v = getattr(self, name)
             if v is not None and (len(v) != n or not all(math.isfinite(x) for x in v)):
                 raise SlamError(f"vehicle.{name}: expected {n} finite numbers, got {v!r}")

@@ -21,7 +21,9 @@ from slam.checks import finite, float_array, readonly, times
 from slam.errors import SlamError
 
 __all__ = [
+    "MAX_YAW_RATE_RAD_S",
     "MIXED_LABEL",
+    "ODOMETRY_KINDS",
     "NO_RETURN_LABEL",
     "OPTIONAL",
     "REQUIRED",
@@ -35,8 +37,18 @@ __all__ = [
 
 # Vehicle models and their parameters: name -> (required keys, optional keys with defaults).
 VEHICLE_MODELS: dict[str, tuple[tuple[str, ...], dict[str, float]]] = {
-    "ackermann": (("wheelbase_m",), {"encoder_offset_m": 0.0})
+    "ackermann": (("wheelbase_m",), {"encoder_offset_m": 0.0}),
+    "unicycle": ((), {}),
+    "pose-increment": ((), {}),
 }
+# The odometry of each vehicle model: the fields it needs besides odo_t (datasets/FORMAT.md).
+ODOMETRY_KINDS: dict[str, tuple[str, ...]] = {
+    "ackermann": ("odo_t", "odo_speed", "odo_steer"),  # encoder speed, front-wheel angle
+    "unicycle": ("odo_t", "odo_speed", "odo_yaw_rate"),  # speed and yaw rate (a twist)
+    "pose-increment": ("odo_t", "odo_pose"),  # the robot's own integrated odometry poses
+}
+ODOMETRY_FIELDS = ("odo_t", "odo_speed", "odo_steer", "odo_yaw_rate", "odo_pose")
+MAX_YAW_RATE_RAD_S = 20.0  # about 3 turns a second: beyond, the unit is wrong (deg/s?)
 
 REQUIRED = ("scan_t", "scan_angle_min", "scan_angle_increment", "laser_pose")
 OPTIONAL = (
@@ -52,6 +64,8 @@ OPTIONAL = (
     "odo_t",
     "odo_speed",
     "odo_steer",
+    "odo_yaw_rate",
+    "odo_pose",
     "vehicle",
     "gps_t",
     "gps_xy",
@@ -127,6 +141,25 @@ MAX_ODO_SPEED_MPS = 100.0  # |odo_speed| above this is a unit error, not a groun
 MAX_STEER_RAD = 1.4
 
 
+def _check_readings(seq) -> None:
+    """The odometry readings in physical ranges (a wrong unit is the usual cause otherwise)."""
+    limits = (
+        ("odo_steer", MAX_STEER_RAD, "front-wheel angles must be within +-{} rad (80 degrees)",
+         "degrees instead of radians?"),
+        ("odo_speed", MAX_ODO_SPEED_MPS, "must be within +-{:g} m/s (a ground vehicle)",
+         "wrong unit?"),
+        ("odo_yaw_rate", MAX_YAW_RATE_RAD_S, "must be within +-{:g} rad/s", "degrees per second?"),
+    )  # fmt: skip
+    for name, limit, rule, hint in limits:
+        a = getattr(seq, name)
+        if a is not None and np.any(np.abs(a) > limit):
+            k = int(np.argmax(np.abs(a)))
+            raise SlamError(
+                f"Sequence.{name}: {rule.format(limit)}, found {float(a[k]):.6g} at sample {k} "
+                f"({hint})"
+            )
+
+
 def json_int(text: str) -> int | float:
     """`parse_int` for json.loads: an integer too long for a float is read as inf (and then
     refused as not finite), not as a 400-digit int that overflows later."""
@@ -149,13 +182,16 @@ class Vehicle:
     """The car a sequence was driven with (datasets/FORMAT.md `vehicle`; the file stores it as a
     JSON object).
 
-    model: "ackermann", a front-steered car moving about its rear-axle centre.
-    wheelbase_m: L > 0, rear axle to front axle. encoder_offset_m: H, the speed encoder's
-    lateral offset from the rear-axle centre (0: at the centre; v_c = v_e / (1 - H/L tan alpha)).
+    model: "ackermann" (a front-steered car moving about its rear-axle centre; odometry: encoder
+    speed and steering angle), "unicycle" (odometry: speed and yaw rate, a differential-drive
+    robot's or any twist) or "pose-increment" (odometry: the robot's own integrated poses).
+    wheelbase_m: L > 0, rear axle to front axle (ackermann only). encoder_offset_m: H, the speed
+    encoder's lateral offset from the rear-axle centre (0: at the centre; v_c = v_e / (1 - H/L
+    tan alpha); ackermann only).
     """
 
     model: str
-    wheelbase_m: float
+    wheelbase_m: float | None = None
     encoder_offset_m: float = 0.0
 
     @classmethod
@@ -168,18 +204,23 @@ class Vehicle:
 
     def to_dict(self) -> dict:
         """The JSON object of the file format."""
+        if self.model != "ackermann":
+            return {"model": self.model}
         return {"model": self.model, "wheelbase_m": self.wheelbase_m,
                 "encoder_offset_m": self.encoder_offset_m}  # fmt: skip
 
 
 @dataclass(frozen=True, eq=False)
 class OdometryLog:
-    """A sequence's odometry samples: t_s (M,) s, speed_mps (M,) as the encoder reads it,
-    steer_rad (M,) the front-wheel angle (zero-order hold between samples)."""
+    """A sequence's odometry samples (zero-order hold between samples): t_s (M,) s, and as its
+    vehicle's kind has them, speed_mps (M,) as the encoder reads it, steer_rad (M,) the front
+    wheel's angle, yaw_rate_rad_s (M,), pose (M, 3) integrated odometry poses (None: absent)."""
 
     t_s: np.ndarray
-    speed_mps: np.ndarray
-    steer_rad: np.ndarray
+    speed_mps: np.ndarray | None
+    steer_rad: np.ndarray | None
+    yaw_rate_rad_s: np.ndarray | None = None
+    pose: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -340,8 +381,11 @@ class Sequence:
       scan_n_beams: B, the beams of a scan; needed without scan_ranges (the field of view is
         B beams from scan_angle_min), checked against scan_ranges otherwise.
       scan_max_range: m; readings at or beyond it are no return (inf when absent).
-      odo_t (M,) s, odo_speed (M,) m/s as measured by the encoder, odo_steer (M,) rad front wheel
-        (|steer| <= 1.4 rad, |speed| <= 100 m/s); all three or none.
+      odometry, of the vehicle's kind (`ODOMETRY_KINDS`): odo_t (M,) s with, for an
+        "ackermann" car, odo_speed (M,) m/s as measured by the encoder and odo_steer (M,) rad
+        front wheel (|steer| <= 1.4 rad, |speed| <= 100 m/s); for a "unicycle", odo_speed and
+        odo_yaw_rate (M,) rad/s counter-clockwise (|rate| <= 20 rad/s); for "pose-increment",
+        odo_pose (M, 3) [x, y, theta], the robot's integrated odometry in its own frame.
       vehicle: a `Vehicle`; a dict such as {"model": "ackermann", "wheelbase_m": 2.83,
         "encoder_offset_m": 0.76} or its JSON text is accepted and made one (encoder_offset_m
         defaults to 0).
@@ -373,6 +417,8 @@ class Sequence:
     odo_t: np.ndarray | None = None
     odo_speed: np.ndarray | None = None
     odo_steer: np.ndarray | None = None
+    odo_yaw_rate: np.ndarray | None = None
+    odo_pose: np.ndarray | None = None
     vehicle: Vehicle | None = None
     gps_t: np.ndarray | None = None
     gps_xy: np.ndarray | None = None
@@ -441,48 +487,49 @@ class Sequence:
         return ranges
 
     def _check_odometry(self) -> None:
-        """odo_t, odo_speed, odo_steer: all three or none, in physical ranges."""
-        put = self._put
-        odo = {k: getattr(self, k) for k in ("odo_t", "odo_speed", "odo_steer")}
-        present = [k for k, v in odo.items() if v is not None]
-        if present and len(present) != 3:
-            missing = sorted(set(odo) - set(present))
+        """odo_t with the readings of one odometry kind (`ODOMETRY_KINDS`), in physical ranges."""
+        given = [k for k in ODOMETRY_FIELDS if getattr(self, k) is not None]
+        if not given:
+            return
+        kinds = [m for m, need in ODOMETRY_KINDS.items() if set(need) <= set(given)]
+        if not kinds:
+            options = "; ".join(f"{m}: {', '.join(need)}" for m, need in ODOMETRY_KINDS.items())
+            missing = sorted(set(ODOMETRY_KINDS["ackermann"]) - set(given))
             raise SlamError(
-                f"Sequence.{missing[0]}: odometry needs odo_t, odo_speed and odo_steer together; "
-                f"missing {missing}"
+                f"Sequence.{missing[0] if missing else given[0]}: odometry needs odo_t together "
+                f"with the readings of one kind ({options}); given {given}"
             )
-        if present:
-            odo_t = _t("odo_t", odo["odo_t"])
-            if odo_t.size == 0:
-                raise SlamError("Sequence.odo_t: empty; leave the odometry out instead")
-            put("odo_t", odo_t)
-            for k in ("odo_speed", "odo_steer"):
-                a = _arr(k, odo[k], 1)
-                if a.shape != odo_t.shape:
-                    raise SlamError(
-                        f"Sequence.{k}: expected shape {odo_t.shape} like odo_t, got {a.shape}"
-                    )
-                _fin(k, a)
-                put(k, a)
-            if np.any(np.abs(self.odo_steer) > MAX_STEER_RAD):
-                k = int(np.argmax(np.abs(self.odo_steer)))
+        odo_t = _t("odo_t", self.odo_t)
+        if odo_t.size == 0:
+            raise SlamError("Sequence.odo_t: empty; leave the odometry out instead")
+        self._put("odo_t", odo_t)
+        for k in given[1:]:
+            width = 3 if k == "odo_pose" else None
+            a = _arr(k, getattr(self, k), 2 if width else 1, width=width)
+            expected = (odo_t.shape[0], 3) if width else odo_t.shape
+            if a.shape != expected:
                 raise SlamError(
-                    f"Sequence.odo_steer: front-wheel angles must be within +-{MAX_STEER_RAD} rad "
-                    f"(80 degrees), found {float(self.odo_steer[k]):.6g} at sample {k} (degrees "
-                    "instead of radians?)"
+                    f"Sequence.{k}: expected shape {expected} like odo_t, got {a.shape}"
                 )
-            if np.any(np.abs(self.odo_speed) > MAX_ODO_SPEED_MPS):
-                k = int(np.argmax(np.abs(self.odo_speed)))
-                raise SlamError(
-                    f"Sequence.odo_speed: must be within +-{MAX_ODO_SPEED_MPS:g} m/s (a ground "
-                    f"vehicle), found {float(self.odo_speed[k]):.4g} at sample {k} (wrong unit?)"
-                )
+            _fin(k, a)
+            self._put(k, a)
+        _check_readings(self)
 
     def _check_vehicle(self) -> None:
-        """The vehicle description, and the encoder correction it implies stays finite."""
+        """The vehicle description, that the odometry is of its kind, and that the encoder
+        correction it implies stays finite."""
         put = self._put
         if self.vehicle is not None:
             put("vehicle", Vehicle.of(self.vehicle))
+            need = ODOMETRY_KINDS[self.vehicle.model]
+            if self.odo_t is not None and any(getattr(self, k) is None for k in need):
+                raise SlamError(
+                    f"Sequence.vehicle: a {self.vehicle.model!r} vehicle's odometry is "
+                    f"{', '.join(need)}; this sequence has "
+                    f"{[k for k in ODOMETRY_FIELDS if getattr(self, k) is not None]}"
+                )
+            if self.vehicle.model != "ackermann":
+                return
             h_over_l = self.vehicle.encoder_offset_m / self.vehicle.wheelbase_m
             if self.odo_steer is not None and h_over_l != 0.0:
                 # v_c = v_e / (1 - (H / L) tan(alpha)) needs a positive denominator
@@ -548,7 +595,9 @@ class Sequence:
         """The odometry samples, or None."""
         if self.odo_t is None:
             return None
-        return OdometryLog(self.odo_t, self.odo_speed, self.odo_steer)
+        return OdometryLog(
+            self.odo_t, self.odo_speed, self.odo_steer, self.odo_yaw_rate, self.odo_pose
+        )
 
     @property
     def gps(self) -> GpsTrack | None:

@@ -32,7 +32,6 @@ import numpy as np
 
 from slam import se2
 from slam.errors import SlamError
-from slam.vehicle import AckermannModel, Odometry, integrate
 
 __all__ = [
     "GpsStart",
@@ -72,14 +71,14 @@ def fit_gps_start(
     scan_t0: float,
     gps_t: np.ndarray,
     gps_xy: np.ndarray,
+    *,
     antenna: np.ndarray,
-    model: AckermannModel,
-    odometry: Odometry,
+    motion,
     fit_m: float,
     heading_rad: float | None = None,
 ) -> GpsStart:
     """The start pose at time scan_t0 from the GPS fixes of the first `fit_m` metres of driving,
-    with the dead-reckoned track.
+    with the track dead-reckoned by `motion` (a motion model: `integrate(pose, t0, t1)`).
 
     antenna: (3,) the GPS antenna in the vehicle frame. heading_rad: a known start heading
     (only the position is fitted then). Raises SlamError when the fixes cannot fix the pose.
@@ -91,7 +90,7 @@ def fit_gps_start(
     t = float(scan_t0)
     a = []
     for k in use:
-        pose, _, _ = integrate(model, pose, odometry, t, float(gps_t[k]))
+        pose, _, _ = motion.integrate(pose, t, float(gps_t[k]))
         t = float(gps_t[k])
         a.append(se2.compose(pose, antenna)[:2])
     return _fit_track(np.array(a), np.asarray(gps_xy, dtype=np.float64)[use], fit_m, heading_rad)
@@ -255,8 +254,7 @@ def _gps_start(seq, cfg, motion, antenna: np.ndarray, first_pass):
             seq.gps_t,
             seq.gps_xy,
             antenna=antenna,
-            model=motion.model,
-            odometry=motion.odometry,
+            motion=motion,
             fit_m=start.gps_fit_m,
             heading_rad=heading,
         )

@@ -4,40 +4,43 @@ The file's tables are the sections of `slam.SlamConfig` ([features], [associatio
 [measurement], [vehicle], [start], [map_policy], [filter]); keys left out keep their defaults.
 `SlamConfig.from_dict` refuses unknown keys (suggesting the nearest, or where a key of the
 earlier flat format lives now), wrong types and impossible values, and the error names the file
-and the key. Presets: datasets/configs/*.toml (`presets`); sweep specifications live apart, in
-datasets/sweeps/, and are refused here with a message saying what they are.
+and the key. Presets: experiments/presets/*.toml, package data (`experiments.bundled`), so an
+installed wheel has them (`presets`); sweep specifications live apart, in datasets/sweeps/, and
+are refused here with a message saying what they are.
 """
 
 from __future__ import annotations
 
 import tomllib
+from importlib.resources.abc import Traversable
 from pathlib import Path
 
 import tomli_w
 
+from experiments.bundled import PRESET_SUFFIX, preset_names, presets_dir
 from experiments.errors import ConfigError, DataError
-from experiments.io.paths import REPO_ROOT, read_text_file
+from experiments.io.paths import read_text_file
 from slam import SlamConfig, SlamError
 
-__all__ = ["PRESETS_DIR", "config_toml", "load_slam_config", "preset_path", "presets"]
-
-PRESETS_DIR = REPO_ROOT / "datasets" / "configs"
+__all__ = ["config_toml", "load_slam_config", "preset_path", "presets"]
 
 
 def presets() -> dict[str, str]:
     """Preset name -> its one-line description (the first comment line of its file)."""
     out = {}
-    for p in sorted(PRESETS_DIR.glob("*.toml")):
-        first = next((ln for ln in p.read_text().splitlines() if ln.startswith("#")), "# ")
-        out[p.stem] = first.lstrip("# ").strip()
+    for name in preset_names():
+        text = (presets_dir() / f"{name}{PRESET_SUFFIX}").read_text(encoding="utf-8")
+        first = next((ln for ln in text.splitlines() if ln.startswith("#")), "# ")
+        out[name] = first.lstrip("# ").strip()
     return out
 
 
-def preset_path(name_or_path: str | Path) -> Path:
-    """A preset name (datasets/configs/NAME.toml) or a path to a TOML file."""
+def preset_path(name_or_path: str | Path) -> Path | Traversable:
+    """A preset name (experiments/presets/NAME.toml, a `Traversable` of the installed package)
+    or a path to a TOML file."""
     p = Path(name_or_path)
     if p.suffix != ".toml" and not p.exists():
-        candidate = PRESETS_DIR / f"{name_or_path}.toml"
+        candidate = presets_dir() / f"{name_or_path}{PRESET_SUFFIX}"
         if candidate.is_file():
             return candidate
         raise ConfigError(

@@ -9,6 +9,7 @@ the current directory, or failing that to the repository root (CI sets
 from __future__ import annotations
 
 import os
+from importlib.resources.abc import Traversable
 from pathlib import Path
 
 from experiments.errors import DataError, MissingDataError
@@ -65,7 +66,7 @@ def victoria_park_dir() -> Path:
     return d
 
 
-def read_text_file(path: Path, what: str) -> str:
+def read_text_file(path: Path | Traversable, what: str) -> str:
     """The UTF-8 text of `path`; `DataError` "<what> not found" or naming why it cannot be read."""
     try:
         return path.read_text(encoding="utf-8")

@@ -15,7 +15,8 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def machine() -> str:
-    """CPU model, core count and Python version, e.g. for benchmark tables."""
+    """CPU model, core count, Python version and this process's BLAS threads (once numpy is
+    loaded), e.g. for benchmark tables."""
     cpu = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -24,7 +25,18 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    out = f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    threads = _blas_threads()
+    return out if threads is None else f"{out}, {threads} BLAS thread{'s' * (threads > 1)}"
+
+
+def _blas_threads() -> int | None:
+    if "numpy" not in sys.modules:
+        return None
+    from threadpoolctl import threadpool_info
+
+    counts = [i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas"]
+    return max(counts) if counts else None
 
 
 def git_commit() -> str | None:

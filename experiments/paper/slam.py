@@ -2,7 +2,7 @@
 Figs. 7, 10, 11), plus filter consistency (NEES, NIS), and the `trunkslam slam` command.
 
 Set-up (the paper's section 3, second experiment, replicated in simulation):
-  scene      datasets/scenes/tree_park.json: eight tall trees, building walls, bushes (Fig. 6)
+  scene      experiments/scenes/tree_park.json: eight tall trees, building walls, bushes (Fig. 6)
   vehicle    a Cycab-like car (`experiments.sim.trajectory.CycabParams`): wheelbase 1.2 m, SICK
              LMS200 at the front, 20 Hz odometry with speed and steering noise, 5 Hz scans,
              DGPS 2 cm at 10 Hz; 240 scans per run around a 57 m loop
@@ -101,7 +101,7 @@ QUANTITIES3 = (("dx", "m"), ("dy", "m"), ("dtheta", "rad"))  # Table 3's rows, w
 SCAN_SETS = ((10, 40), (50, 80), (90, 120), (130, 160))  # inclusive, as the paper's Table 4
 STYLE = {"paper": "-.", "geometric": "--", "bailey": "-"}
 
-# The filter's model of the simulated Cycab (`CycabParams`; `datasets/configs/cycab.toml`): the
+# The filter's model of the simulated Cycab (`CycabParams`; `experiments/presets/cycab.toml`): the
 # odometry noise exactly as simulated (0.1 m/s and 2 deg per 20 Hz sample) and no pose floor.
 # `OdometryNoise`'s default floor (1 mm and 0.1 mrad per sqrt(s)) stands for slip and keeps the
 # covariance non-singular at rest on real data; the simulated car does not slip and stands still

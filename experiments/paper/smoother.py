@@ -119,7 +119,7 @@ def run(ctx) -> None:
             f"graph: iSAM2 fed {GRAPH_CHUNK} poses per update, then batch Levenberg-Marquardt "
             "(the file's counts checked against GTSAM's unit test: 10,608 factors, 7,120 "
             "values). Victoria Park run: published detections, IHGR, "
-            "datasets/configs/victoria_park_ute.toml; the smoother has the EKF's odometry, "
+            "the victoria_park_ute preset; the smoother has the EKF's odometry, "
             "measurements and associations and starts from its path and map; scored against "
             "GPS at the antenna as in victoria_park.md. Landmark sigma: the square root of the "
             "largest eigenvalue of each landmark's marginal covariance."

@@ -1,7 +1,7 @@
 """Experiment `victoria-park`: EKF-SLAM on the real run, scored against GPS, beside published runs.
 
 Rows (one per input, features and association), all with the preset
-datasets/configs/victoria_park_ute.toml (derived from scans 1-2000 by
+experiments/presets/victoria_park_ute.toml (derived from scans 1-2000 by
 `trunkslam reproduce victoria-park-calibration`, never from a GPS error):
 - the full run (7249 scans, 1548 s) with the published detections, associated by IHGR, JCBB, NN;
 - scans 1-2000 (the part with raw laser data) with the published detections, and with circles
@@ -347,7 +347,8 @@ def _notes(rows: list[dict]) -> str:
         "share of the scans with an update (scans predicted only, at rest, have none). "
         "Reference trees: "
         "the 2002 SLAM school's map of the 145 trees of scans 1-2000, in our frame by fitting "
-        "its laser path to ours. Configuration: datasets/configs/victoria_park_ute.toml. The "
+        "its laser path to ours. Configuration: the victoria_park_ute preset "
+        "(experiments/presets/victoria_park_ute.toml). The "
         "published rows come from other set-ups (different detectors, starts and tuning); "
         "PHD-SLAM reports a range of RMSE (from, to). The first row's run is the one recorded in "
         "victoria_park.rrd; its seconds leave out the time spent in the recording calls."

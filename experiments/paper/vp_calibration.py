@@ -2,7 +2,7 @@
 
 `trunkslam reproduce victoria-park-calibration` (needs the data; about 25 minutes on one core)
 writes victoria_park_calibration.md/.csv and victoria_park_ute.toml; the preset
-datasets/configs/victoria_park_ute.toml is that file. The procedure never looks at the GPS error
+experiments/presets/victoria_park_ute.toml is that file. The procedure never looks at the GPS error
 of a SLAM run: it maximises the likelihood of the filter's own innovations (the prediction-error
 method of system identification), on the first 2000 scans (the part with raw laser data), so
 scans 2001-7249 stay untouched by it.
@@ -123,6 +123,8 @@ BASE = SlamConfig().with_(
         },
         # the scans of a ute standing still repeat the last one's errors: not used
         "vehicle.min_travel_m": 0.001,
+        # the ute (wheelbase 2.83 m, encoder 0.76 m off the axle centre): what the fit describes
+        "vehicle.calibrated_for": [2.83, 0.76],
     }
 )
 # laser yaw (rad), ln speed sigma (m/s), ln steer sigma (rad), ln a (m), ln b (-), ln c (rad),

@@ -18,7 +18,9 @@ Truth labels (the per-beam `scan_labels` of a sequence file, datasets/FORMAT.md)
   NO_RETURN_LABEL   -1: no return (nothing hit, or beyond the sensor's maximum range)
   MIXED_LABEL       -2: a mixed return at a depth jump (see `experiments.sim.simulate`)
 
-Scene files: `datasets/scenes/<name>.json`, schema in `datasets/scenes/README.md`; `load_scene`.
+Scene files: the bundled ones are `experiments/scenes/<name>.json`, package data
+(`experiments.bundled`), so an installed wheel has them; any other file by its path. Schema in
+`datasets/scenes/README.md`; `load_scene`.
 """
 
 from __future__ import annotations
@@ -27,11 +29,13 @@ import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from experiments.bundled import SCENE_SUFFIX, scene_names, scenes_dir
 from experiments.errors import ConfigError, DataError
 from slam.sequence import MIXED_LABEL, NO_RETURN_LABEL  # datasets/FORMAT.md's values
 
@@ -53,14 +57,6 @@ __all__ = [
 
 CIRCLE_KINDS = ("pillar", "trunk")
 WALL_KINDS = ("wall", "baluster")
-
-# Repository root: experiments/sim/scene.py -> parents[2].
-_REPO_ROOT = Path(__file__).resolve().parents[2]
-
-
-def scenes_dir() -> Path:
-    """The folder of the bundled scene files, `<repo>/datasets/scenes`."""
-    return _REPO_ROOT / "datasets" / "scenes"
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -407,11 +403,11 @@ SCHEMA = "trunkslam-scene/1"
 
 
 def list_scenes() -> list[str]:
-    """Names of the bundled scenes (file stems in `datasets/scenes/`)."""
-    return sorted(p.stem for p in scenes_dir().glob("*.json"))
+    """Names of the bundled scenes (file stems in `experiments/scenes/`)."""
+    return scene_names()
 
 
-def _resolve(name_or_path: str | Path) -> Path:
+def _resolve(name_or_path: str | Path) -> Path | Traversable:
     s = str(name_or_path)
     is_path = isinstance(name_or_path, Path) or s.endswith(".json") or "/" in s or "\\" in s
     if is_path:
@@ -421,7 +417,7 @@ def _resolve(name_or_path: str | Path) -> Path:
         if not p.is_file():
             raise DataError(f"scene file not found: {p}")
         return p
-    p = scenes_dir() / f"{s}.json"
+    p = scenes_dir() / f"{s}{SCENE_SUFFIX}"
     if not p.is_file():
         raise DataError(
             f"scene {s!r} not found: no file {p}; "
@@ -431,7 +427,8 @@ def _resolve(name_or_path: str | Path) -> Path:
 
 
 def load_scene(name_or_path: str | Path) -> Scene:
-    """Load a scene by name (a file stem in `datasets/scenes/`) or by path to a `.json` file.
+    """Load a scene by name (a bundled one, `experiments/scenes/NAME.json`) or by path to a
+    `.json` file.
 
     Raises `DataError` (a `ValueError`) naming the file and the offending key.
     """
@@ -448,7 +445,7 @@ def load_scene(name_or_path: str | Path) -> Scene:
         raise DataError(f"{path}: JSON nested too deeply to be a scene") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: cannot read ({exc})") from None
-    return scene_from_dict(data, source=str(path), default_name=path.stem)
+    return scene_from_dict(data, source=str(path), default_name=Path(path.name).stem)
 
 
 def _where(source: str, key: str) -> str:

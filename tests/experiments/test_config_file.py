@@ -8,9 +8,10 @@ import tomllib
 import pytest
 from typer.testing import CliRunner
 
+from experiments.bundled import preset_names
 from experiments.cli import app
 from experiments.errors import ConfigError, DataError
-from experiments.io.config_file import PRESETS_DIR, config_toml, load_slam_config
+from experiments.io.config_file import config_toml, load_slam_config
 from slam import MapPolicy, OdometryNoise, SlamConfig, SteeringCalibration
 from slam.config import AssociationConfig, FilterConfig, MeasurementConfig, VehicleConfig
 from slam.measurement import DEFAULT_CONSTANT_NOISE, NoiseModel
@@ -112,7 +113,7 @@ def test_unreadable_files_are_data_errors(tmp_path):
 
 
 def test_presets():
-    assert {p.stem for p in PRESETS_DIR.glob("*.toml")} >= {"cycab", "victoria_park_ute"}
+    assert set(preset_names()) >= {"cycab", "victoria_park_ute"}
     from experiments.paper.slam import CYCAB_SLAM, Exp2Config
 
     assert load_slam_config("cycab") == CYCAB_SLAM == Exp2Config().slam

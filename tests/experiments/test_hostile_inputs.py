@@ -147,9 +147,9 @@ def test_vehicle_json_with_a_400_digit_number_or_nested_100000_deep(files, tmp_p
 
 
 def test_scene_files_with_huge_numbers_or_deep_nesting(tmp_path):
-    from experiments.io.paths import REPO_ROOT
+    from experiments.bundled import scenes_dir
 
-    scene = json.loads((REPO_ROOT / "datasets/scenes/test_yard.json").read_text())
+    scene = json.loads((scenes_dir() / "test_yard.json").read_text())
     scene["circles"][0]["radius_m"] = 12345
     big = tmp_path / "big.json"
     big.write_text(json.dumps(scene).replace("12345", "9" * 400))

@@ -31,8 +31,32 @@ def test_round_trip_every_field(tmp_path):
     assert back.vehicle == seq.vehicle and back.name == "unit test run"
     # The file holds plain arrays only: it loads without pickle, vehicle is a JSON string.
     with np.load(path, allow_pickle=False) as npz:
-        assert set(npz.files) == set(REQUIRED) | set(OPTIONAL)
+        # every field but the other odometry kinds' readings (a car's odometry here)
+        assert set(npz.files) == set(REQUIRED) | set(OPTIONAL) - {"odo_yaw_rate", "odo_pose"}
         assert json.loads(str(npz["vehicle"]))["wheelbase_m"] == 2.83
+
+
+@pytest.mark.parametrize(
+    ("model", "readings"),
+    [("unicycle", {"odo_yaw_rate": 0.1}), ("pose-increment", {"odo_pose": None})],
+)
+def test_round_trip_a_robots_own_odometry(model, readings, tmp_path):
+    kw = full_kwargs()
+    m = kw["odo_t"].size
+    extra = {
+        "odo_yaw_rate": np.linspace(-0.3, 0.3, m),
+        "odo_pose": np.column_stack([np.arange(m) * 0.1, np.zeros(m), np.linspace(0, 1, m)]),
+    }
+    kw |= {k: extra[k] for k in readings}
+    kw |= {"vehicle": {"model": model}, "odo_steer": None}
+    if model == "pose-increment":
+        kw["odo_speed"] = None
+    seq = Sequence(**kw)
+    back = load_sequence(save_sequence(seq, tmp_path / "robot.npz"))
+    assert_same(seq, back)
+    assert back.vehicle.model == model and back.odo_steer is None
+    for k in readings:
+        assert np.array_equal(getattr(back, k), extra[k])
 
 
 def test_round_trip_minimal_run(tmp_path):

@@ -403,8 +403,8 @@ def test_simulate_to_sequence_for_the_cli():
 # ---- scenes ----------------------------------------------------------------------------------
 
 
-def test_bundled_scenes():
-    assert {"pillar_court", "test_yard"} <= set(list_scenes())
+def test_bundled_scenes(tmp_path):
+    assert {"pillar_court", "test_yard", "tree_park"} <= set(list_scenes())
     court = load_scene("pillar_court")
     assert [c.name for c in court.circles] == list("abcdefghij")
     assert all(c.kind == "pillar" and 0.15 <= c.radius_m <= 0.4 for c in court.circles)
@@ -424,7 +424,9 @@ def test_bundled_scenes():
     # A path works as well as a name.
     from experiments.sim.scene import scenes_dir
 
-    assert load_scene(scenes_dir() / "test_yard.json").n_objects == yard.n_objects
+    mine = tmp_path / "my_yard.json"
+    mine.write_text((scenes_dir() / "test_yard.json").read_text())
+    assert load_scene(mine).n_objects == yard.n_objects
 
 
 def _write(tmp_path, data) -> str:

@@ -5,17 +5,13 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from pathlib import Path
 
 import pytest
 
+from experiments.bundled import presets_dir
 from experiments.errors import ConfigError
-from experiments.io.config_file import (
-    PRESETS_DIR,
-    config_toml,
-    load_slam_config,
-    preset_path,
-    presets,
-)
+from experiments.io.config_file import config_toml, load_slam_config, preset_path, presets
 from experiments.paper.slam import CYCAB_SLAM
 from features import ExtractorParams
 from slam import SlamConfig, SlamError
@@ -71,8 +67,8 @@ def test_presets_are_presets_and_sweeps_live_apart():
     names = presets()
     assert set(names) == {"cycab", "victoria_park_ute"}
     assert all(about for about in names.values())
-    assert not list(PRESETS_DIR.glob("sweep_*"))
-    sweep = PRESETS_DIR.parent / "sweeps" / "sweep_slam_noise.toml"
+    assert not [p for p in presets_dir().iterdir() if p.name.startswith("sweep_")]
+    sweep = Path(__file__).resolve().parents[2] / "datasets" / "sweeps" / "sweep_slam_noise.toml"
     assert sweep.is_file()
     with pytest.raises(ConfigError, match="sweep specification.*trunkslam sweep"):
         load_slam_config(sweep)
@@ -133,7 +129,7 @@ def test_with_replaces_by_dotted_path_and_checks():
 
 
 def test_a_preset_name_or_a_path(tmp_path):
-    assert preset_path("cycab") == PRESETS_DIR / "cycab.toml"
+    assert preset_path("cycab") == presets_dir() / "cycab.toml"
     with pytest.raises(ConfigError, match=r"presets: \['cycab', 'victoria_park_ute'\]"):
         preset_path("nope")
 
@@ -143,3 +139,32 @@ def test_config_pickles_for_the_workers():
 
     cfg = load_slam_config("victoria_park_ute")
     assert pickle.loads(pickle.dumps(cfg)) == cfg
+
+
+def test_a_configuration_made_for_another_car_is_warned(caplog):
+    """The built-in settings are the simulated Cycab's; on the ute (the Victoria Park preset's
+    car) they are warned about, naming both cars, and the ute's preset on the Cycab too."""
+    import dataclasses as dc
+
+    import numpy as np
+
+    from experiments.sim import CycabParams, simulate_cycab_run
+    from slam import run_slam
+
+    seq = simulate_cycab_run(np.random.default_rng(2), "tree_park", CycabParams(n_scans=15))
+    with caplog.at_level("WARNING", logger="slam.checks"):
+        run_slam(seq)
+    assert not [r for r in caplog.records if "made for a car" in r.message]
+    ute = dc.replace(
+        seq, vehicle={"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
+    )
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="slam.checks"):
+        run_slam(ute, warm_up=False)
+    (msg,) = [r.message for r in caplog.records if "made for a car" in r.message]
+    assert "wheelbase 1.2 m" in msg and "has 2.83 m (0.76 m)" in msg
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="slam.checks"):
+        run_slam(seq, load_slam_config("victoria_park_ute").with_(**{"features.method": "paper"}))
+    (msg,) = [r.message for r in caplog.records if "made for a car" in r.message]
+    assert "wheelbase 2.83 m" in msg and "has 1.2 m (0 m)" in msg

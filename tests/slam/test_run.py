@@ -25,7 +25,7 @@ from slam.config import AssociationConfig, MeasurementConfig, StartConfig, Vehic
 from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT
 from slam.mapping import Tentatives
 from slam.measurement import DEFAULT_CONSTANT_NOISE, DEFAULT_FIT_FLOOR, NoiseModel
-from slam.vehicle import AckermannModel, Odometry, integrate
+from slam.vehicle import AckermannModel, Motion, Odometry, OdometryNoise, integrate
 
 CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
 LASER = (1.55, 0.0, 0.0)
@@ -405,15 +405,19 @@ def test_gps_start_fits_heading_and_position_through_noise_and_a_jump():
         (t.size, 2)
     )
     xy[20] += [15.0, 0.0]
-    car = AckermannModel(1.2)
-    odo = Odometry(seq.odo_t, seq.odo_speed, seq.odo_steer)
-    fit = fit_gps_start(seq.scan_t[0], t, xy, np.array(LASER), car, odo, 20.0)
+    motion = Motion(
+        AckermannModel(1.2), Odometry(seq.odo_t, seq.odo_speed, seq.odo_steer), OdometryNoise()
+    )
+    ant = np.array(LASER)
+    fit = fit_gps_start(seq.scan_t[0], t, xy, antenna=ant, motion=motion, fit_m=20.0)
     err = fit.pose - seq.truth_pose[0]
     assert np.hypot(*err[:2]) < 0.1 and abs(err[2]) < math.radians(0.5)
     assert fit.n_rejected == 1 and 19 <= fit.distance_m <= 21 and 0.08 < fit.rms_m < 0.13
     sd = np.sqrt(np.diag(fit.cov))
     assert np.all(sd > 0) and sd[2] < math.radians(0.5)
-    fixed = fit_gps_start(seq.scan_t[0], t, xy, np.array(LASER), car, odo, 20.0, heading_rad=0.3)
+    fixed = fit_gps_start(
+        seq.scan_t[0], t, xy, antenna=ant, motion=motion, fit_m=20.0, heading_rad=0.3
+    )
     assert (
         fixed.pose[2] == pytest.approx(0.3, abs=1e-12)
         and np.hypot(*(fixed.pose[:2] - seq.truth_pose[0, :2])) < 0.1
