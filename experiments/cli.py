@@ -87,6 +87,11 @@ class Sensor(StrEnum):
     lms200 = "lms200"
 
 
+class RosOdometry(StrEnum):  # experiments.io.rosbag.ODOMETRY_SOURCES
+    twist = "twist"
+    pose = "pose"
+
+
 class ExperimentName(StrEnum):
     features = "features"
     table1 = "table1"
@@ -302,6 +307,54 @@ def convert_victoria_park(
         progress(f"writing {out.name}", 1, 1)
     kind = "detections only" if full else "raw scans and detections"
     typer.echo(f"{seq.n_scans} scans ({kind}, {seq.det_scan.size} detections) -> {out}")
+
+
+@convert_app.command("rosbag")
+@handle_errors
+def convert_rosbag(
+    bag: Annotated[
+        Path,
+        typer.Argument(help="a ROS 1 .bag, a ROS 2 bag folder (sqlite3 or MCAP) or an .mcap file"),
+    ],
+    scan: Annotated[str, typer.Option(help="the sensor_msgs/LaserScan topic")],
+    odom: Annotated[str, typer.Option(help="the nav_msgs/Odometry topic")],
+    gps: Annotated[
+        str | None, typer.Option(help="a sensor_msgs/NavSatFix topic [default: none, no GPS]")
+    ] = None,
+    laser_pose: Annotated[
+        str | None,
+        typer.Option(
+            help="x,y,yaw of the laser in the robot's frame (m, m, rad) [default: from /tf_static]"
+        ),
+    ] = None,
+    odometry: Annotated[
+        RosOdometry,
+        typer.Option(
+            help="twist: a unicycle's speed and yaw rate; pose: increments of the odometry's poses"
+        ),
+    ] = RosOdometry.twist,
+    out: Annotated[Path, typer.Option(help="sequence file to write")] = Path("seq.npz"),
+) -> None:
+    """A robot's ROS bag (laser scans, wheel odometry, optional GPS) as one sequence file."""
+    from experiments.io.rosbag import read_rosbag
+    from experiments.io.sequence_file import save_sequence
+    from experiments.io.writers import check_output_file
+    from experiments.render.progress import Progress
+
+    mount = None if laser_pose is None else _numbers("--laser-pose", laser_pose, 3)
+    check_output_file(out, "--out", inputs=[bag])
+    with Progress() as progress:
+        run = read_rosbag(
+            bag,
+            scan=scan,
+            odom=odom,
+            gps=gps,
+            laser_pose=mount,
+            odometry=odometry.value,
+            progress=progress,
+        )
+        save_sequence(run.sequence, out)
+    typer.echo(run.summary() + f" -> {out}")
 
 
 @app.command()

@@ -5,7 +5,7 @@
 - rooms of `experiments`: a room imports only rooms below it (`errors` and `bundled`, the
   package data's folders, at the bottom; `io`, `sim`, `eval` and `exec` never import `paper`,
   `bench`, `pipeline`, `render` or `cli`);
-- third-party packages confined to one module (gtsam, rerun, matplotlib, dask);
+- third-party packages confined to one module (gtsam, rerun, matplotlib, dask, rosbags);
 - no private name (`_x`) or private module imported from another module;
 - STYLE.md section 4b's signs of a missing name: no function over 80 lines (numba kernels
   aside) and no call with more than five positional arguments (calls of numba kernels, of a
@@ -50,6 +50,7 @@ CONFINED = {
     "matplotlib": "experiments/render/plots.py",
     "dask": "experiments/exec/cluster.py",
     "distributed": "experiments/exec/cluster.py",
+    "rosbags": "experiments/io/rosbag.py",
 }
 
 

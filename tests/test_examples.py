@@ -124,3 +124,40 @@ def test_score_against_gps(tmp_path, monkeypatch, capsys):
     # no path beats the DGPS noise: each fix carries 2D noise of RMS sqrt(2) sigma, so the RMSE
     # over 478 fixes is at least that less 4 standard errors (about 2% each)
     assert figures[0] > math.sqrt(2) * CycabParams().dgps_sigma_m * 0.9
+
+
+@pytest.mark.slow
+def test_rosbag_round_trip(tmp_path, monkeypatch, capsys):
+    """The example's errors are those of the same drive built in memory as the bag holds it
+    (a unicycle's twist, float32 ranges and angles): the bag changes nothing; and they are
+    within a run's bound of the car's Monte Carlo mean (a unicycle on the car's drive does as
+    well as the car's own model, tests/slam/test_motion.py)."""
+    from experiments.sim import simulate_cycab_run
+    from slam import Sequence, interpolate_poses, run_slam, se2
+
+    out = run_example("rosbag_round_trip.py", monkeypatch, capsys, tmp_path)
+    assert (tmp_path / "drive" / "metadata.yaml").is_file()
+    assert "120 scans, 477 odometry samples (twist); laser pose (1.55, 0, 0) from /tf_static" in out
+    drive = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=120))
+    f32 = np.float32
+    robot = Sequence(
+        scan_t=np.round(drive.scan_t * 1e9) / 1e9,
+        scan_ranges=drive.scan_ranges.astype(f32).astype(float),
+        scan_angle_min=float(f32(drive.scan_angle_min)),
+        scan_angle_increment=float(f32(drive.scan_angle_increment)),
+        scan_max_range=float(f32(drive.scan_max_range)),
+        laser_pose=drive.laser_pose,
+        odo_t=np.round(drive.odo_t * 1e9) / 1e9,
+        odo_speed=drive.odo_speed,
+        odo_yaw_rate=drive.odo_speed * np.tan(drive.odo_steer) / drive.vehicle.wheelbase_m,
+        vehicle={"model": "unicycle"},
+    )
+    log = run_slam(robot, features="paper")
+    truth = interpolate_poses(drive.scan_t, drive.truth_t, drive.truth_pose)
+    rel = np.array([se2.compose(se2.inverse(truth[0]), p) for p in truth])
+    err = (log.pose - rel)[1:]
+    err[:, 2] = se2.wrap_angle(err[:, 2])
+    err = np.abs(err)
+    printed = table3(out)
+    np.testing.assert_allclose(printed, err.mean(axis=0), atol=6e-5)  # printed to 4-5 decimals
+    assert np.all(printed < RUN_BOUND * np.array(GOLDEN_SLAM["paper"]["table3_mean"])), printed
