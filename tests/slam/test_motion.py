@@ -174,3 +174,16 @@ def test_a_vehicle_whose_odometry_is_not_its_kind_is_refused():
             odo_yaw_rate=np.full(seq.odo_t.size, 90.0),
         )
     assert math.isfinite(seq.odo_speed[0])
+
+
+def test_the_smoother_takes_a_robots_own_increments():
+    """The run log holds the increments of whatever model predicted (here a unicycle's), and
+    the GTSAM smoother re-solves the run from them: its path stays by the filter's, and its
+    chi-square per degree of freedom is that of a consistent problem (0.5-2)."""
+    from slam.smoother import problem_from_log, smooth
+
+    seq = simulate_cycab_run(np.random.default_rng(6), "tree_park", CycabParams(n_scans=80))
+    lg = run_slam(_as_robot(seq, "unicycle"), features="paper")
+    sm = smooth(problem_from_log(lg))
+    assert np.max(np.hypot(*(sm.pose[:, :2] - lg.pose[:, :2]).T)) < 0.05
+    assert 0.5 < sm.chi2_per_dof < 2.0
