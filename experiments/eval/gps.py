@@ -13,6 +13,11 @@ time, with and without a rigid alignment, GPS jumps flagged and reported, never 
 - Figures: RMSE, median and 95th percentile of the horizontal distance, as is (the absolute
   error of the run, the start included), and after the rigid 2D transform (rotation and
   translation, no scale) that best maps the estimated antenna track onto the fixes (Kabsch).
+- The fixes the odometry vouches for (`experiments.eval.vouched`, issue 27's rule, no SLAM
+  output involved): RMSE, median and p95 over them alone, so that every method is scored on
+  the same fixes and the GPS's own hops and offsets are not charged to the path.
+- The protocol of the published random-finite-set results on Victoria Park: every fix within
+  25 ms of a scan time, none dropped (RMSE only).
 """
 
 from __future__ import annotations
@@ -63,7 +68,9 @@ class GpsScore:
     matched: fixes within the run's time span; jumps: of those, flagged as jumps.
     all_*: over every matched fix; clean_*: without the jumps. *_aligned: after the rigid
     alignment fitted to the clean fixes (rotation_deg, its angle). errors: (matched,) the raw
-    distance of each matched fix; t_s its time; jump its flag.
+    distance of each matched fix; t_s its time; jump its flag. vouched, vouched_*: the matched
+    fixes the odometry vouches for and the figures over them (0 and NaN when not computed).
+    rfs_fixes, rfs_rmse: the fixes within 25 ms of a scan time and their RMSE.
     """
 
     matched: int
@@ -83,10 +90,24 @@ class GpsScore:
     t_s: np.ndarray
     errors: np.ndarray
     jump: np.ndarray
+    vouched: int = 0
+    vouched_rmse: float = math.nan
+    vouched_median: float = math.nan
+    vouched_p95: float = math.nan
+    rfs_fixes: int = 0
+    rfs_rmse: float = math.nan
 
     def to_dict(self) -> dict:
+        """The figures (not the per-fix arrays), to 0.1 mm; a figure that could not be computed
+        (no fix to compute it over) is None."""
         out = {k: v for k, v in self.__dict__.items() if not isinstance(v, np.ndarray)}
-        return {k: (round(v, 4) if isinstance(v, float) else v) for k, v in out.items()}
+        return {k: _rounded(v) for k, v in out.items()}
+
+
+def _rounded(v):
+    if isinstance(v, float):
+        return round(v, 4) if math.isfinite(v) else None
+    return v
 
 
 def _stats(e: np.ndarray) -> tuple[float, float, float]:
@@ -102,11 +123,14 @@ def score_against_gps(
     gps_xy: np.ndarray,
     antenna_pose: np.ndarray,
     max_speed_mps: float,
+    *,
+    vouched: np.ndarray | None = None,
 ) -> GpsScore:
     """Score the rear-axle poses (N, 3) at scan_t (N,) against the fixes gps_xy (G, 2) at gps_t.
 
     antenna_pose: (3,) the antenna in the vehicle frame. max_speed_mps: the vehicle's top speed
-    (fixes implying more are jumps). See the module doc.
+    (fixes implying more are jumps). vouched: (G,) bool, the fixes the odometry vouches for
+    (`experiments.eval.vouched`), or None. See the module doc.
     """
     scan_t = np.asarray(scan_t, dtype=np.float64)
     gps_t = np.asarray(gps_t, dtype=np.float64)
@@ -125,6 +149,9 @@ def score_against_gps(
         e_al = np.hypot(*(se2.rotate(theta, ant) + tr - g).T)
     a, c = _stats(e), _stats(e[clean])
     ca = _stats(e_al[clean])
+    v = None if vouched is None else np.asarray(vouched, bool)[inside]
+    vs = _stats(e[v]) if v is not None else (math.nan,) * 3
+    near = _near_a_scan(t, scan_t, RFS_TOLERANCE_S)
     return GpsScore(
         matched=int(t.size),
         jumps=int(jump.sum()),
@@ -143,7 +170,24 @@ def score_against_gps(
         t_s=t,
         errors=e,
         jump=jump,
+        vouched=int(v.sum()) if v is not None else 0,
+        vouched_rmse=vs[0],
+        vouched_median=vs[1],
+        vouched_p95=vs[2],
+        rfs_fixes=int(near.sum()),
+        rfs_rmse=_stats(e[near])[0],
     )
+
+
+RFS_TOLERANCE_S = 0.025  # the published RFS results' matching of fixes to scans
+
+
+def _near_a_scan(t: np.ndarray, scan_t: np.ndarray, tol: float) -> np.ndarray:
+    """(len(t),) bool: times within `tol` of a scan time."""
+    k = np.clip(np.searchsorted(scan_t, t), 1, scan_t.size - 1) if scan_t.size > 1 else None
+    if k is None:
+        return np.abs(t - scan_t[0]) <= tol
+    return np.minimum(np.abs(t - scan_t[k - 1]), np.abs(t - scan_t[k])) <= tol
 
 
 def top_speed(seq) -> float:
@@ -154,11 +198,20 @@ def top_speed(seq) -> float:
     return max(1.25 * float(np.max(np.abs(seq.odo_speed))), 1.0)
 
 
-def score_sequence(seq, scan_t: np.ndarray, pose: np.ndarray, antenna=None) -> GpsScore:
+def score_sequence(
+    seq, scan_t: np.ndarray, pose: np.ndarray, antenna=None, vouched=None
+) -> GpsScore:
     """`score_against_gps` for a run over `seq`: its GPS, at the antenna `antenna` (the run's
-    `SlamLog.antenna_pose`; None: the sequence's gps_pose, else its laser)."""
+    `SlamLog.antenna_pose`; None: the sequence's gps_pose, else its laser); vouched: (G,) the
+    fixes the odometry vouches for (`experiments.eval.vouched.vouched_for_sequence`) or None."""
     if antenna is None:
         antenna = seq.gps_pose if seq.gps_pose is not None else seq.laser_pose
     return score_against_gps(
-        scan_t, pose, seq.gps_t, seq.gps_xy, antenna_pose=antenna, max_speed_mps=top_speed(seq)
+        scan_t,
+        pose,
+        seq.gps_t,
+        seq.gps_xy,
+        antenna_pose=antenna,
+        max_speed_mps=top_speed(seq),
+        vouched=vouched,
     )

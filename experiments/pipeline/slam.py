@@ -11,6 +11,7 @@ from experiments.errors import DataError
 from experiments.eval.gps import score_sequence
 from experiments.eval.poses import nees, pose_errors
 from experiments.eval.series import slam_panels, slam_series
+from experiments.eval.vouched import vouched_for_sequence
 from experiments.io.config_file import config_toml
 from experiments.io.features_json import load_features_json
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
@@ -186,7 +187,8 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
         **({"window": lg.window_stats} if lg.window_stats else {}),
     }
     if seq.gps_t is not None:
-        score = score_sequence(seq, lg.scan_t, lg.pose, lg.antenna_pose)
+        vouched = vouched_for_sequence(seq, SlamConfig.from_dict(lg.config))
+        score = score_sequence(seq, lg.scan_t, lg.pose, lg.antenna_pose, vouched)
         summary["gps"] = {**score.to_dict(), "antenna_pose": lg.antenna_pose.tolist()}
     inside = (
         np.zeros(seq.n_scans, bool)

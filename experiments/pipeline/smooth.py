@@ -10,11 +10,12 @@ import numpy as np
 from experiments.errors import DataError
 from experiments.eval.gps import score_sequence
 from experiments.eval.poses import nees, pose_errors
+from experiments.eval.vouched import vouched_for_sequence
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.run_log import read_run_log
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import dumps_json, write_atomic
-from slam import interpolate_poses
+from slam import SlamConfig, interpolate_poses
 from slam.smoother import MEAS_INIT, Problem, SmootherOptions, SmootherResult, smooth
 
 __all__ = ["smooth_run", "smoother_summary"]
@@ -92,6 +93,16 @@ def _map(problem: Problem, r: SmootherResult) -> str:
     return map_csv(r.landmark_id, r.landmark_xy, r.landmark_cov, first, n_obs)
 
 
+def _vouched(seq, summary: dict):
+    """The fixes the run's odometry vouches for (experiments/eval/vouched.py), or None when the
+    run's configuration cannot be read back."""
+    try:
+        cfg = SlamConfig.from_dict(summary["config"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return vouched_for_sequence(seq, cfg)
+
+
 def _scores(run_dir: Path, problem: Problem, r: SmootherResult) -> dict:
     """Errors against the GPS and the truth of the run's input file, when it can be read."""
     try:
@@ -103,7 +114,9 @@ def _scores(run_dir: Path, problem: Problem, r: SmootherResult) -> dict:
         return {"scored": f"no: {summary['input']} is not the sequence of this run"}
     out: dict = {"scored": summary["input"]}
     if seq.gps_t is not None:
-        out["gps"] = score_sequence(seq, problem.scan_t, r.pose, _antenna(seq, problem)).to_dict()
+        out["gps"] = score_sequence(
+            seq, problem.scan_t, r.pose, _antenna(seq, problem), vouched=_vouched(seq, summary)
+        ).to_dict()
     if seq.truth_t is not None:
         inside = (seq.scan_t >= seq.truth_t[0]) & (seq.scan_t <= seq.truth_t[-1])
         inside[0] = False

@@ -112,6 +112,9 @@ def test_the_victoria_park_experiment_writes_the_config_of_each_run(tmp_path, vp
     assert s["landmarks"] == row["landmarks"]
     # summary.json rounds its errors to 0.1 mm
     assert s["gps"]["all_rmse"] == pytest.approx(row["rmse_m"], rel=0, abs=5e-5)
+    # the odometry-vouched fixes: the same rule from the run's summary and the table
+    assert s["gps"]["vouched"] == row["fixes_vouched"] > 0.8 * s["gps"]["matched"]
+    assert s["gps"]["vouched_rmse"] == pytest.approx(row["rmse_vouched_m"], rel=0, abs=5e-5)
 
 
 def test_experiment_2_writes_each_methods_filter(tmp_path):
