@@ -14,7 +14,7 @@ from association.nn import nn_assign
 from association.rounding import ROUNDING_OPTIONS, check_rounding_options
 from association.single import CostModel, ihgr_single
 
-__all__ = ["Association", "associate", "associate_detailed", "METHODS"]
+__all__ = ["Association", "associate", "associate_detailed", "check_params", "METHODS"]
 
 METHODS = ("ihgr", "jcbb", "nn")
 _COST_KEYS = tuple(f.name for f in fields(CostModel))
@@ -89,6 +89,23 @@ def _check_method(method: str, params: dict) -> None:
         raise AssociationError(
             f"{sorted(unknown)}: not parameters of method {method!r} (allowed: {allowed})"
         )
+
+
+def check_params(method: str, params: dict) -> None:
+    """The keyword parameters `params` of `associate(..., method=method, **params)` checked as
+    the solve would take them, before any solve: names of the method, and values of the right
+    type and range (the `CostModel`'s densities, the rounding options, jcbb's node budget);
+    `AssociationError` naming the parameter otherwise."""
+    if not isinstance(params, dict) or not all(isinstance(k, str) for k in params):
+        raise AssociationError(f"params: expected a table of named parameters, got {params!r}")
+    _check_method(method, params)
+    if method == "ihgr":
+        CostModel(**{k: params[k] for k in _COST_KEYS if k in params})
+        _rounding_options(params)
+    elif method == "jcbb" and "max_nodes" in params:
+        n = params["max_nodes"]
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= 2**31:
+            raise AssociationError(f"max_nodes: must be a whole number in 1..2**31, got {n!r}")
 
 
 def _solve(prep: Prepared, method: str, gate_prob: float, params: dict):

@@ -54,8 +54,10 @@ class CostModel:
     def __post_init__(self) -> None:
         for name in ("p_detect", "clutter_density", "birth_density"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
-                raise AssociationError(f"CostModel.{name}: must be a finite number, got {v!r}")
+            ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            if not ok or abs(v) > 1e300 or not math.isfinite(v):  # abs first: 10**400 overflows
+                shown = repr(v) if len(repr(v)) < 60 else repr(v)[:57] + "..."
+                raise AssociationError(f"CostModel.{name}: must be a finite number, got {shown}")
             object.__setattr__(self, name, float(v))
         if not 0.0 < self.p_detect < 1.0:
             raise AssociationError(f"CostModel.p_detect: must be in (0, 1), got {self.p_detect!r}")

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import functools
 import logging
+import os
+import signal
 import sys
 from enum import StrEnum
 from pathlib import Path
@@ -123,9 +125,28 @@ def handle_errors(fn):
             return fn(*args, **kwargs)
         except project_errors() as exc:
             typer.echo(f"error: {exc}", err=True)
+            _exit_if_stuck(1)
             raise typer.Exit(1) from None
+        except KeyboardInterrupt as exc:  # Ctrl-C, or a stop signal (experiments.exec.signals)
+            signum = getattr(exc, "signum", None)
+            if signum is None:
+                raise  # Ctrl-C: typer's exit code 130
+            name = signal.Signals(signum).name
+            typer.echo(f"error: stopped by {name}; earlier outputs left as they were", err=True)
+            raise typer.Exit(128 + signum) from None
 
     return wrapper
+
+
+def _exit_if_stuck(code: int) -> None:
+    """End the process now when a recording's writer was stopped by a write error: rerun
+    would wait for it forever at exit (`experiments.render.viz.writer_stopped`). Every file
+    has been cleaned up by then (the `with` blocks have exited)."""
+    viz = sys.modules.get("experiments.render.viz")
+    if viz is not None and viz.writer_stopped():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
 
 
 def _numbers(option: str, text: str, n: int) -> list[float]:
@@ -157,10 +178,10 @@ def _bench_out(value: Path | None) -> Path | None:
     """`--out` of a benchmark, checked before the benchmark runs."""
     if value is not None:
         from experiments.errors import DataError
-        from experiments.io.writers import check_output_file
+        from experiments.io.outputs import check_outputs
 
         try:
-            check_output_file(value, "--out")
+            check_outputs("bench", files={"--out": value})
         except DataError as exc:
             raise typer.BadParameter(str(exc)) from None
     return value
@@ -196,6 +217,7 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def main(
+    ctx: typer.Context,
     verbose: Annotated[
         bool,
         typer.Option(
@@ -221,9 +243,12 @@ def main(
         ),
     ] = None,
 ) -> None:
+    from experiments.exec.signals import interrupt_on_stop_signals
     from experiments.exec.threads import set_threads
 
     set_threads(threads)  # first: before numpy, whose BLAS reads it when it starts
+    # SIGTERM and SIGHUP clean up as Ctrl-C does; the handlers go when the command ends
+    ctx.call_on_close(interrupt_on_stop_signals())
     from experiments.render.progress import CONSOLE
 
     level = logging.INFO if verbose else logging.WARNING
@@ -292,14 +317,14 @@ def convert_victoria_park(
     ] = None,
 ) -> None:
     """Victoria Park (odometry, GPS, raw scans and/or published detections) as one sequence file."""
+    from experiments.io.outputs import check_outputs
     from experiments.io.paths import victoria_park_dir
     from experiments.io.sequence_file import save_sequence
-    from experiments.io.victoria_park import VP_FILES, load_victoria_park
-    from experiments.io.writers import check_output_file
+    from experiments.io.victoria_park import load_victoria_park
     from experiments.render.progress import Progress
 
     root = data if data is not None else victoria_park_dir()
-    check_output_file(out, "--out", inputs=[root / f for f in VP_FILES.values()])
+    check_outputs("convert", inputs=[root], files={"--out": out})  # every file of the data
     with Progress() as progress:
         seq = load_victoria_park(root, full=full, progress=progress)
         progress(f"writing {out.name}", 0, 1)
@@ -336,13 +361,13 @@ def convert_rosbag(
     out: Annotated[Path, typer.Option(help="sequence file to write")] = Path("seq.npz"),
 ) -> None:
     """A robot's ROS bag (laser scans, wheel odometry, optional GPS) as one sequence file."""
+    from experiments.io.outputs import check_outputs
     from experiments.io.rosbag import read_rosbag
     from experiments.io.sequence_file import save_sequence
-    from experiments.io.writers import check_output_file
     from experiments.render.progress import Progress
 
     mount = None if laser_pose is None else _numbers("--laser-pose", laser_pose, 3)
-    check_output_file(out, "--out", inputs=[bag])
+    check_outputs("convert", inputs=[bag], files={"--out": out})
     with Progress() as progress:
         run = read_rosbag(
             bag,
@@ -373,11 +398,11 @@ def simulate(
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
 ) -> None:
     """Simulate one scan of a scene from a pose and write it as a sequence file."""
+    from experiments.io.outputs import check_outputs
     from experiments.io.sequence_file import save_sequence
-    from experiments.io.writers import check_output_file
     from experiments.sim import simulate_to_sequence
 
-    check_output_file(out, "--out", inputs=[Path(scene)])
+    check_outputs("simulate", inputs=[Path(scene)], files={"--out": out})
     seq = simulate_to_sequence(
         scene,
         [_numbers("--pose", pose, 3)],
@@ -402,11 +427,11 @@ def simulate_drive(
     DGPS and truth, as one sequence file."""
     import numpy as np
 
+    from experiments.io.outputs import check_outputs
     from experiments.io.sequence_file import save_sequence
-    from experiments.io.writers import check_output_file
     from experiments.sim import CycabParams, simulate_cycab_run
 
-    check_output_file(out, "--out", inputs=[Path(scene)])
+    check_outputs("simulate-drive", inputs=[Path(scene)], files={"--out": out})
     seq = simulate_cycab_run(np.random.default_rng(seed), scene, CycabParams(n_scans=scans))
     save_sequence(seq, out)
     typer.echo(f"{seq.n_scans} scans of {scene} ({seq.scan_t[-1]:.1f} s) -> {out}")
@@ -554,8 +579,10 @@ def report(
 ) -> None:
     """Copy result tables and figures into the documentation's snapshot (docs/results/) and
     rewrite the README's results-at-a-glance table from it."""
+    from experiments.io.outputs import check_outputs
     from experiments.render.report import Snapshot, clear_snapshot, copy_results, update_readme
 
+    check_outputs("report", inputs=results, into={"--docs": docs})
     clear_snapshot(docs)
     written = copy_results(results, docs)
     typer.echo(f"{len(written)} files -> {docs}/")
@@ -683,28 +710,39 @@ def slam_cmd(
         return
     if input is None:
         raise typer.BadParameter("a sequence file is needed", param_hint="INPUT")
-    with Progress() as progress:
-        s = run_slam_file(
-            input,
-            cfg,
-            out,
-            rerun_path=rerun,
-            progress=lambda done, total: (
-                progress("slam", done, total) if done % 10 == 0 or done == total else None
-            ),
-            ellipse_scale=ellipse_scale,
-        )
-    gps = s.get("gps")
-    err = f", {gps['all_rmse']:.2f} m RMS from GPS" if gps else ""
-    typer.echo(
-        f"{s['n_scans']} scans, {s['landmarks']} landmarks{err}, {s['seconds']:.1f} s -> {out}/"
-    )
-    if smooth:
-        from experiments.pipeline.smooth import smooth_run
-
+    config_file = None if config is None else Path(config)  # an input (a preset's name: none)
+    with _held(out, smooth):
         with Progress() as progress:
-            summary = smooth_run(out, progress=_smoother_progress(progress))
-        _echo_smoothed(summary)
+            s = run_slam_file(
+                input,
+                cfg,
+                out,
+                rerun_path=rerun,
+                progress=lambda done, total: (
+                    progress("slam", done, total) if done % 10 == 0 or done == total else None
+                ),
+                ellipse_scale=ellipse_scale,
+                inputs=(config_file,),
+            )
+        err = _gps_words(s.get("gps"))
+        done = f"{s['n_scans']} scans, {s['landmarks']} landmarks{err}, {s['seconds']:.1f} s"
+        typer.echo(f"{done} -> {out}/")
+        if smooth:
+            from experiments.pipeline.smooth import smooth_run
+
+            with Progress() as progress:
+                summary = smooth_run(out, progress=_smoother_progress(progress))
+            _echo_smoothed(summary)
+
+
+def _held(out: Path, smooth: bool):
+    """slam --smooth: the --out folder held from the run to the end of its smoothing, so that
+    no other command comes in between (`experiments.io.outputs.lock_folder`)."""
+    import contextlib
+
+    from experiments.io.outputs import lock_folder
+
+    return lock_folder(out, "--out") if smooth else contextlib.nullcontext()
 
 
 def _slam_overrides(cfg, *, features, features_file, association, window, initial_heading):
@@ -729,11 +767,20 @@ def _slam_overrides(cfg, *, features, features_file, association, window, initia
     return cfg.with_(**changes) if changes else cfg
 
 
+def _gps_words(gps: dict | None) -> str:
+    """ ", 0.03 m RMS from GPS", or what the summary says when it has no such figure."""
+    if not gps:
+        return ""
+    if gps.get("all_rmse") is None:
+        return ", not scored against GPS (no fix within the run; see not_computed in summary.json)"
+    return f", {gps['all_rmse']:.2f} m RMS from GPS"
+
+
 def _echo_smoothed(s: dict) -> None:
-    gps = s.get("gps")
-    err = f", {gps['all_rmse']:.2f} m RMS from GPS" if gps else ""
+    err = _gps_words(s.get("gps"))
+    chi2 = "n/a" if s.get("chi2_per_dof") is None else f"{s['chi2_per_dof']:.3f}"
     typer.echo(
-        f"smoothed ({s['solver']}): chi2/dof {s['chi2_per_dof']:.3f} after {s['iterations']} "
+        f"smoothed ({s['solver']}): chi2/dof {chi2} after {s['iterations']} "
         f"iterations{err}, {s['seconds']:.1f} s + {s['seconds_marginals']:.1f} s covariances "
         f"-> {s['run_dir']}/"
     )
@@ -818,7 +865,9 @@ def export_reference_cmd(
 @bench_app.command("extract")
 @handle_errors
 def bench_extract(
-    repeats: Annotated[int, typer.Option(min=1, help="passes over the 2000 scans")] = 3,
+    repeats: Annotated[
+        int, typer.Option(min=1, max=100, help="passes over the 2000 scans (at most 100)")
+    ] = 3,
     data: Annotated[
         Path | None,
         typer.Option(help="victoria_park folder [default: $TRUNKSLAM_DATA/victoria_park]"),
@@ -838,7 +887,9 @@ def bench_extract(
 @bench_app.command("association")
 @handle_errors
 def bench_association(
-    repeats: Annotated[int, typer.Option(min=1, help="scans timed per method")] = 200,
+    repeats: Annotated[
+        int, typer.Option(min=1, max=100_000, help="scans timed per method (at most 100,000)")
+    ] = 200,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
     out: BenchOut = None,
 ) -> None:
@@ -941,7 +992,9 @@ def bench_reproduce(
 @bench_app.command("raycast")
 @handle_errors
 def bench_raycast(
-    repeats: Annotated[int, typer.Option(min=1, help="calls timed per pass")] = 300,
+    repeats: Annotated[
+        int, typer.Option(min=1, max=100_000, help="calls timed per pass (at most 100,000)")
+    ] = 300,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
     out: BenchOut = None,
 ) -> None:

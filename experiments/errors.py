@@ -20,6 +20,19 @@ class MissingDataError(DataError):
     are skipped with a note. A file that is there but corrupt is a plain `DataError`."""
 
 
+class WriteError(OSError):
+    """An output that could not be written (a full disk, a file-size limit, a lost permission):
+    "cannot write PATH: REASON", naming the output as the user gave it. An OSError, not a
+    `TrunkslamError`: `trunkslam reproduce` stops the whole run on it, as on any write error,
+    rather than failing one experiment."""
+
+    def __init__(self, path, exc: OSError) -> None:
+        super().__init__(exc.errno, exc.strerror or str(exc), str(path))
+
+    def __str__(self) -> str:
+        return f"cannot write {self.filename}: {self.strerror}"
+
+
 class ExperimentFailed(TrunkslamError):
     """One or more experiments of a `trunkslam reproduce` run failed; the message names them."""
 

@@ -182,6 +182,13 @@ class AssociationConfig:
             )
         for name in ("view_margin_m", "view_margin_rad"):
             _finite("association", name, getattr(self, name))
+        from association.api import check_params
+        from association.errors import AssociationError
+
+        try:  # checked here, not at the first scan: a wrong parameter is named with its file
+            check_params("ihgr" if self.method == "ihgr-window" else self.method, self.params)
+        except AssociationError as exc:
+            raise SlamError(f"association.params: {exc}") from None
 
     @property
     def windowed(self) -> bool:
@@ -491,7 +498,7 @@ def _unknown_key(cls, key: str, names: set, path: str) -> SlamError:
 def config_from_dict(cls, data: Mapping, path: str = ""):
     """`cls` (a dataclass) from a plain nested dict, strictly; see the module doc."""
     if not isinstance(data, Mapping):
-        raise SlamError(f"{path or cls.__name__}: expected a table of settings, got {data!r}")
+        raise SlamError(f"{path or cls.__name__}: expected a table of settings, got {_shown(data)}")
     if cls is SlamConfig and SWEEP_KEYS & set(data):
         raise SlamError(
             f"{', '.join(sorted(SWEEP_KEYS & set(data)))}: this is a sweep specification (a "
@@ -512,6 +519,15 @@ def config_from_dict(cls, data: Mapping, path: str = ""):
         raise SlamError(f"{path or cls.__name__}: {exc}") from None
 
 
+_MAX_INT = 2**63 - 1  # TOML's integers are 64-bit
+
+
+def _shown(v) -> str:
+    """A value as an error message shows it (long ones cut)."""
+    text = repr(v)
+    return text if len(text) <= 60 else f"{text[:57]}..."
+
+
 def _convert(tp, value, path: str):
     origin = typing.get_origin(tp)
     args = typing.get_args(tp)
@@ -522,11 +538,17 @@ def _convert(tp, value, path: str):
         return _convert(inner, value, path)
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise SlamError(f"{path}: expected a number, got {value!r}")
+            raise SlamError(f"{path}: expected a number, got {_shown(value)}")
+        if isinstance(value, int) and abs(value) > _MAX_INT:
+            raise SlamError(f"{path}: expected a number, got one too large ({_shown(value)})")
+        if math.isnan(value):
+            raise SlamError(f"{path}: expected a number, got nan")
         return float(value)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise SlamError(f"{path}: expected a whole number, got {value!r}")
+            raise SlamError(f"{path}: expected a whole number, got {_shown(value)}")
+        if abs(value) > _MAX_INT:
+            raise SlamError(f"{path}: a whole number beyond 64 bits ({_shown(value)})")
         return value
     if tp is bool:
         if not isinstance(value, bool):
@@ -534,23 +556,25 @@ def _convert(tp, value, path: str):
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise SlamError(f"{path}: expected a string, got {value!r}")
+            raise SlamError(f"{path}: expected a string, got {_shown(value)}")
         return value
-    if tp is dict:  # free-form parameters (checked by whoever takes them)
+    if tp is dict:  # free-form parameters (checked by the section that takes them)
         if not isinstance(value, Mapping):
-            raise SlamError(f"{path}: expected a table, got {value!r}")
+            raise SlamError(f"{path}: expected a table, got {_shown(value)}")
         return dict(value)
     if origin is tuple:
         if not isinstance(value, (list, tuple)) or len(value) != len(args):
-            raise SlamError(f"{path}: expected a list of {len(args)} numbers, got {value!r}")
+            raise SlamError(f"{path}: expected a list of {len(args)} numbers, got {_shown(value)}")
         return tuple(_convert(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
     if origin in (Mapping, dict) and args:
         if not isinstance(value, Mapping):
-            raise SlamError(f"{path}: expected a table, got {value!r}")
+            raise SlamError(f"{path}: expected a table, got {_shown(value)}")
         return {str(k): _convert(args[1], v, f"{path}.{k}") for k, v in value.items()}
     if isinstance(tp, type) and issubclass(tp, tuple) and hasattr(tp, "_fields"):  # NamedTuple
         if not isinstance(value, Mapping):
-            raise SlamError(f"{path}: expected a table with {list(tp._fields)}, got {value!r}")
+            raise SlamError(
+                f"{path}: expected a table with {list(tp._fields)}, got {_shown(value)}"
+            )
         missing = [k for k in tp._fields if k not in value]
         unknown = sorted(set(value) - set(tp._fields))
         if missing or unknown:

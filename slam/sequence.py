@@ -21,6 +21,11 @@ from slam.checks import finite, float_array, readonly, times
 from slam.errors import SlamError
 
 __all__ = [
+    "MAX_ANGLE_RAD",
+    "MAX_BEAMS",
+    "MAX_COORDINATE_M",
+    "MAX_TIME_S",
+    "MAX_VARIANCE",
     "MAX_YAW_RATE_RAD_S",
     "MIXED_LABEL",
     "ODOMETRY_KINDS",
@@ -49,6 +54,14 @@ ODOMETRY_KINDS: dict[str, tuple[str, ...]] = {
 }
 ODOMETRY_FIELDS = ("odo_t", "odo_speed", "odo_steer", "odo_yaw_rate", "odo_pose")
 MAX_YAW_RATE_RAD_S = 20.0  # about 3 turns a second: beyond, the unit is wrong (deg/s?)
+# Limits on values, each stated in datasets/FORMAT.md: beyond them a value is a wrong unit or a
+# corrupt file, and the arithmetic of the run (squares of positions, sines of angles) loses
+# every digit or overflows.
+MAX_BEAMS = 100_000  # beams of a scan (2D lasers have up to a few thousand)
+MAX_COORDINATE_M = 1e8  # |x|, |y|, ranges, radii: 100,000 km (UTM northings are below 1e7 m)
+MAX_ANGLE_RAD = 1e4  # |theta| of a pose, bearings (an unwrapped heading of 1,600 turns)
+MAX_TIME_S = 1e12  # |t|: 31,700 years in seconds (nanosecond stamps, 1.7e18, are refused)
+MAX_VARIANCE = 1e16  # a variance (m^2, rad^2): a sigma of 1e8
 
 REQUIRED = ("scan_t", "scan_angle_min", "scan_angle_increment", "laser_pose")
 OPTIONAL = (
@@ -86,11 +99,31 @@ def _arr(name: str, value, ndim: int, width: int | None = None) -> np.ndarray:
 
 
 def _t(name: str, value) -> np.ndarray:
-    return times(f"Sequence.{name}", value)
+    t = times(f"Sequence.{name}", value)
+    _bounded(name, t, MAX_TIME_S, "s (seconds; nanoseconds?)")
+    return t
 
 
 def _fin(name: str, a: np.ndarray) -> None:
     finite(f"Sequence.{name}", a)
+
+
+def _bounded(name: str, a: np.ndarray, bound: float, unit: str) -> None:
+    """Every finite value of `a` within +-bound (`SlamError` naming the first one beyond)."""
+    with np.errstate(invalid="ignore"):
+        bad = np.abs(a) > bound
+    if np.any(bad):
+        i = np.unravel_index(int(np.argmax(bad)), a.shape)
+        where = f"[{', '.join(str(int(j)) for j in i)}]" if a.ndim else ""
+        raise SlamError(
+            f"Sequence.{name}{where}: {float(a[i]):.6g} is beyond the limit of +-{bound:g} {unit}"
+        )
+
+
+def _poses(name: str, a: np.ndarray) -> None:
+    """Positions and headings of an (..., 3) array [x, y, theta] within the limits."""
+    _bounded(name, a[..., :2], MAX_COORDINATE_M, "m")
+    _bounded(name, a[..., 2:], MAX_ANGLE_RAD, "rad")
 
 
 def _timed_pair(t_name: str, t, v_name: str, v, width: int) -> list[tuple[str, np.ndarray]]:
@@ -111,6 +144,10 @@ def _timed_pair(t_name: str, t, v_name: str, v, width: int) -> list[tuple[str, n
             f"got {vals.shape}"
         )
     _fin(v_name, vals)
+    if width == 3:
+        _poses(v_name, vals)
+    else:
+        _bounded(v_name, vals, MAX_COORDINATE_M, "m")
     return [(t_name, t_arr), (v_name, vals)]
 
 
@@ -132,6 +169,7 @@ def _pose(name: str, value) -> np.ndarray:
     if p.shape != (3,):
         raise SlamError(f"Sequence.{name}: expected shape (3,) [x, y, theta], got {p.shape}")
     _fin(name, p)
+    _poses(name, p)
     return p
 
 
@@ -256,9 +294,10 @@ def _vehicle(value) -> dict:
     if not isinstance(value, dict):
         raise SlamError(f"Sequence.vehicle: expected a dict (JSON object), got {value!r}")
     model = value.get("model")
-    if model not in VEHICLE_MODELS:
+    if not isinstance(model, str) or model not in VEHICLE_MODELS:
+        shown = model if isinstance(model, (str, type(None))) else type(model).__name__
         raise SlamError(
-            f"Sequence.vehicle: unknown or missing 'model' {model!r}; "
+            f"Sequence.vehicle: unknown or missing 'model' {shown!r}; "
             f"known: {sorted(VEHICLE_MODELS)}"
         )
     required, optional = VEHICLE_MODELS[model]
@@ -333,15 +372,17 @@ def _detections(seq, n_scans: int) -> dict:
     _fin("det_bearing", out["det_bearing"])
     if D and out["det_range"].min() <= 0:
         raise SlamError("Sequence.det_range: ranges must be > 0 m")
-    if np.any(out["det_radius"] < 0):
-        raise SlamError("Sequence.det_radius: radii must be >= 0 m (NaN when unknown)")
+    _bounded("det_range", out["det_range"], MAX_COORDINATE_M, "m")
+    _bounded("det_bearing", out["det_bearing"], MAX_ANGLE_RAD, "rad")
+    if np.any(out["det_radius"] < 0) or np.any(np.isinf(out["det_radius"])):
+        raise SlamError("Sequence.det_radius: radii must be finite and >= 0 m (NaN when unknown)")
+    _bounded("det_radius", out["det_radius"], MAX_COORDINATE_M, "m")
     if seq.det_cov is not None:
-        cov = _arr("det_cov", np.asarray(seq.det_cov).reshape(-1, 4), 2, width=4).reshape(-1, 2, 2)
-        if cov.shape[0] != D:
-            raise SlamError(
-                f"Sequence.det_cov: expected shape ({D}, 2, 2), got {np.shape(seq.det_cov)}"
-            )
+        cov = _arr("det_cov", seq.det_cov, 3)
+        if cov.shape != (D, 2, 2):
+            raise SlamError(f"Sequence.det_cov: expected shape ({D}, 2, 2), got {cov.shape}")
         _fin("det_cov", cov)
+        _bounded("det_cov", cov, MAX_VARIANCE, "(m^2, rad^2)")
         a, b, c = cov[:, 0, 0], cov[:, 0, 1], cov[:, 1, 1]
         if (
             np.any(np.abs(b - cov[:, 1, 0]) > 1e-9 * (a + c))
@@ -464,12 +505,22 @@ class Sequence:
                 )
             put("scan_ranges", ranges)
         n_beams = _beam_count(self.scan_n_beams, ranges)
+        if n_beams > MAX_BEAMS:
+            raise SlamError(
+                f"Sequence.scan_ranges: {n_beams} beams a scan, more than the limit of "
+                f"{MAX_BEAMS} (slam.sequence.MAX_BEAMS; datasets/FORMAT.md)"
+            )
         put("scan_n_beams", n_beams)
         amin = _scalar("scan_angle_min", self.scan_angle_min)
         inc = _scalar("scan_angle_increment", self.scan_angle_increment)
         if inc <= 0:
             raise SlamError(f"Sequence.scan_angle_increment: must be > 0 rad, got {inc!r}")
-        if (n_beams - 1) * inc >= 2 * math.pi:
+        if abs(amin) > 2 * math.pi:
+            raise SlamError(
+                f"Sequence.scan_angle_min: must be within +-2 pi rad, got {amin!r} (degrees "
+                "instead of radians?)"
+            )
+        if max(n_beams - 1, 1) * inc >= 2 * math.pi:
             raise SlamError(
                 f"Sequence.scan_angle_increment: {n_beams} beams of {inc!r} rad span "
                 f"{(n_beams - 1) * inc:.4g} rad, 360 degrees or more (degrees instead of radians?)"
@@ -512,6 +563,8 @@ class Sequence:
                     f"Sequence.{k}: expected shape {expected} like odo_t, got {a.shape}"
                 )
             _fin(k, a)
+            if k == "odo_pose":
+                _poses(k, a)
             self._put(k, a)
         _check_readings(self)
 
@@ -556,6 +609,7 @@ class Sequence:
         if self.truth_landmarks is not None:
             lm = _arr("truth_landmarks", self.truth_landmarks, 2, width=3)
             _fin("truth_landmarks", lm)
+            _bounded("truth_landmarks", lm, MAX_COORDINATE_M, "m")
             if np.any(lm[:, 2] <= 0):
                 i = int(np.flatnonzero(lm[:, 2] <= 0)[0])
                 raise SlamError(

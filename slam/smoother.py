@@ -135,6 +135,7 @@ class Problem:
             ("init_landmark", (n_lm, 2), np.float64),
         ):
             _shape(self, name, shape, dtype)
+        _check_values(self)
         if np.unique(self.landmark_id).size != n_lm:
             raise SlamError("Problem.landmark_id: an id appears twice")
         if m and not (0 <= self.meas_scan.min() and self.meas_scan.max() < n):
@@ -172,11 +173,23 @@ class Problem:
 
 
 def _shape(obj, name: str, shape: tuple, dtype) -> tuple[int, ...]:
-    """Check and coerce obj.name to `dtype` with `shape` (None: any length); finite floats."""
+    """Check and coerce obj.name to `dtype` with `shape` (None: any length); finite floats.
+    Only real numbers are taken (integers for the integer fields): booleans, complex numbers,
+    dates, strings and objects are refused, not cast."""
     v = getattr(obj, name)
+    kinds = "fiu" if dtype is np.float64 else "iuf"
     try:
-        a = np.asarray(v, dtype=dtype)
+        given = np.asarray(v)
+        if given.dtype.kind not in kinds:
+            raise SlamError(
+                f"Problem.{name}: expected {'numbers' if kinds == 'fiu' else 'integers'}, got "
+                f"dtype {given.dtype}"
+            )
+        with np.errstate(invalid="ignore", over="ignore"):
+            a = given.astype(dtype)
     except (TypeError, ValueError, OverflowError) as e:
+        if isinstance(e, SlamError):
+            raise
         raise SlamError(f"Problem.{name}: expected numbers, got {type(v).__name__}") from e
     if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
         want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
@@ -187,6 +200,38 @@ def _shape(obj, name: str, shape: tuple, dtype) -> tuple[int, ...]:
         raise SlamError(f"Problem.{name}: expected integers")
     object.__setattr__(obj, name, a)
     return a.shape
+
+
+# |landmark id| (gtsam keys hold 56 bits of index); the value limits are the sequence file's
+MAX_LANDMARK_ID = 2**53
+
+
+def _check_values(p: Problem) -> None:
+    """Times strictly increasing, every value within the sequence file's limits (beyond them a
+    value is a corrupt file: its squares overflow in the solve), integers whole and in range."""
+    from slam.checks import times
+    from slam.sequence import MAX_ANGLE_RAD, MAX_COORDINATE_M, MAX_TIME_S, MAX_VARIANCE
+
+    times("Problem.scan_t", p.scan_t)
+    limits = [("scan_t", p.scan_t, MAX_TIME_S, "s"), ("meas_R", p.meas_R, MAX_VARIANCE, ""),
+              ("prior_cov", p.prior_cov, MAX_VARIANCE, ""), ("odo_cov", p.odo_cov, MAX_VARIANCE,
+              ""), ("init_landmark", p.init_landmark, MAX_COORDINATE_M, "m"),
+              ("meas_z", p.meas_z[:, :1], MAX_COORDINATE_M, "m"),
+              ("meas_z", p.meas_z[:, 1:], MAX_ANGLE_RAD, "rad")]  # fmt: skip
+    for name in ("prior_pose", "odo_delta", "laser_pose", "init_pose"):
+        a = getattr(p, name)
+        limits += [(name, a[..., :2], MAX_COORDINATE_M, "m"), (name, a[..., 2:], MAX_ANGLE_RAD,
+                   "rad")]  # fmt: skip
+    for name in ("meas_landmark", "landmark_id"):
+        limits.append((name, getattr(p, name), MAX_LANDMARK_ID, ""))
+    for name, a, bound, unit in limits:
+        if a.size and np.abs(a).max() > bound:
+            raise SlamError(
+                f"Problem.{name}: {float(np.abs(a).max()):.6g} is beyond the limit of "
+                f"+-{bound:g} {unit}".rstrip()
+            )
+    if p.landmark_id.size and p.landmark_id.min() < 0:
+        raise SlamError("Problem.landmark_id: ids must be >= 0")
 
 
 def _positive_definite(name: str, covs: np.ndarray, first: int = 0, semi: bool = False) -> None:

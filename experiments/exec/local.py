@@ -7,12 +7,24 @@ Workers do not fight over the cores:
 - numba's on-disk cache (`@njit(cache=True)`): this process compiles (or loads) every kernel
   before the workers start (`warm_kernels`), so the workers load it instead of each compiling
   the same kernels at once, and each worker loads it once, when it starts.
+
+Workers die with their parent: a killed main process (`kill -9`, the OOM killer) leaves no
+worker computing for nobody. Each worker asks the kernel for SIGKILL when its parent ends
+(Linux `prctl(PR_SET_PDEATHSIG)`), and a watchdog thread in it polls its parent (`os.getppid`
+changes when the parent is gone) as the portable fallback. A run that ends by an exception or
+an interruption (Ctrl-C, SIGTERM: `experiments.exec.signals`) stops its workers at once
+instead of waiting for their trials.
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import logging
 import os
+import signal
+import sys
+import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from multiprocessing import get_context
@@ -50,7 +62,34 @@ def warm_kernels() -> None:
         extract_features(scan, m)
 
 
-def _init_worker() -> None:
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+WATCHDOG_PERIOD_S = 0.5
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """End this process when the process `parent_pid` (its parent) ends: the kernel sends it
+    SIGKILL (Linux, `prctl(PR_SET_PDEATHSIG)`), and a daemon thread checks every
+    WATCHDOG_PERIOD_S that the parent is still its parent (elsewhere, or should the kernel's
+    signal not come). A parent already gone: ends now."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)
+            libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the request was made
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            threading.Event().wait(WATCHDOG_PERIOD_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
+
+
+def _init_worker(parent_pid: int) -> None:
+    die_with_parent(parent_pid)
     os.environ.update(ONE_THREAD)  # for anything the worker starts in turn
     warm_kernels()
 
@@ -83,7 +122,10 @@ class ProcessExecutor(Executor):
             warm_kernels()  # the cache the workers load; compiled here once if empty
             with _environ(ONE_THREAD):  # inherited by the workers, started in this block
                 self._pool = ProcessPoolExecutor(
-                    self.workers, mp_context=get_context("spawn"), initializer=_init_worker
+                    self.workers,
+                    mp_context=get_context("spawn"),
+                    initializer=_init_worker,
+                    initargs=(os.getpid(),),
                 )
                 for f in [self._pool.submit(os.getpid) for _ in range(self.workers)]:
                     f.result()
@@ -119,3 +161,18 @@ class ProcessExecutor(Executor):
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
+
+    def stop(self) -> None:
+        """Stop the workers now (their running trials are dropped), then close."""
+        if self._pool is not None:
+            for p in list(getattr(self._pool, "_processes", {}).values()):  # no public handle
+                p.terminate()
+        self.close()
+
+    def __exit__(self, exc_type, *exc) -> None:
+        """An exception or an interruption (Ctrl-C, SIGTERM) stops the workers at once; a run
+        that ended waits for them to finish."""
+        if exc_type is None:
+            self.close()
+        else:
+            self.stop()

@@ -16,22 +16,42 @@ Format (datasets/FORMAT.md, "Run log"): one compressed `.npz` with `format` =
 
 from __future__ import annotations
 
-import zipfile
-import zlib
 from pathlib import Path
 
 import numpy as np
 
 from experiments.errors import DataError
+from experiments.io.npz import Var, read_npz
 from experiments.io.writers import write_atomic
 from slam import SlamError, SlamLog
 from slam.smoother import MEAS_TENTATIVE, Problem, problem_from_log
 
-__all__ = ["RUN_LOG_FORMAT", "RUN_LOG_NAME", "read_run_log", "write_run_log"]
+__all__ = ["RUN_LOG_FORMAT", "RUN_LOG_NAME", "SCHEMA", "read_run_log", "write_run_log"]
 
 RUN_LOG_FORMAT = "trunkslam.run_log/1"
 RUN_LOG_NAME = "run_log.npz"
-_STRINGS = ("format", "features", "association")
+# The format's schema: each variable's kind and dimensions (N scans, M measurements, L
+# landmarks), checked before any value is read; the values are `slam.smoother.Problem`'s.
+SCHEMA: dict[str, Var] = {
+    "format": Var("str", required=True),
+    "features": Var("str"),
+    "association": Var("str"),
+    "scan_t": Var("float", ("N",), required=True),
+    "prior_pose": Var("float", (3,), required=True),
+    "prior_cov": Var("float", (3, 3), required=True),
+    "odo_delta": Var("float", ("N", 3), required=True),
+    "odo_cov": Var("float", ("N", 3, 3), required=True),
+    "laser_pose": Var("float", (3,), required=True),
+    "meas_scan": Var("int", ("M",), required=True),
+    "meas_landmark": Var("int", ("M",), required=True),
+    "meas_z": Var("float", ("M", 2), required=True),
+    "meas_R": Var("float", ("M", 2, 2), required=True),
+    "meas_kind": Var("int", ("M",), required=True),
+    "init_pose": Var("float", ("N", 3), required=True),
+    "landmark_id": Var("int", ("L",), required=True),
+    "init_landmark": Var("float", ("L", 2), required=True),
+}
+_NAMES = ("features", "association")  # the run's methods, for the smoother's summary
 
 
 def write_run_log(path: Path | str, log: SlamLog) -> Path:
@@ -49,37 +69,30 @@ def write_run_log(path: Path | str, log: SlamLog) -> Path:
 def read_run_log(path: Path | str, measurements: str = "ekf") -> tuple[Problem, dict]:
     """(Problem, {"features": ..., "association": ...}) from a run log, or a `DataError`
     naming the file and what is wrong. measurements: "ekf" (kinds 0 and 1, what the filter
-    used) or "all" (also kind 2)."""
+    used) or "all" (also kind 2). The file is checked against `SCHEMA` (`experiments.io.npz`)
+    before any value is read, then its values by `Problem`."""
     if measurements not in ("ekf", "all"):
         raise DataError(f"measurements: expected 'ekf' or 'all', got {measurements!r}")
     path = Path(path)
     if path.is_dir():
         path = path / RUN_LOG_NAME
-    if not path.is_file():
+    if not path.is_file() and not path.is_symlink():
         raise DataError(
             f"{path}: no run log (written by `trunkslam slam` since trunkslam 0.1; re-run it)"
         )
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            data = {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
-        raise DataError(f"{path}: not a readable run log ({exc})") from None
-    fmt = data.get("format")
-    if fmt is None or fmt.dtype.kind != "U" or str(fmt) != RUN_LOG_FORMAT:
-        raise DataError(f"{path}: not a run log (format {RUN_LOG_FORMAT!r} expected)")
-    fields = Problem.__dataclass_fields__
-    missing = [k for k in fields if k not in data]
-    if missing:
-        raise DataError(f"{path}: missing variable(s) {missing}")
-    names = {k: str(data[k]) for k in _STRINGS[1:] if k in data}
-    arrays = {k: data[k] for k in fields}
-    if measurements == "ekf" and arrays["meas_kind"].ndim == 1:
+    data = read_npz(path, SCHEMA, "run log", signature=("format", RUN_LOG_FORMAT))
+    names = {}
+    for k in _NAMES:
+        if k in data:
+            names[k] = str(data[k])
+            if not names[k].strip():
+                raise DataError(f"{path}: {k}: an empty method name")
+    arrays = {k: data[k] for k in Problem.__dataclass_fields__}
+    if np.any(np.diff(arrays["meas_scan"]) < 0):
+        raise DataError(f"{path}: meas_scan: must be sorted by scan, as trunkslam slam writes it")
+    if measurements == "ekf":
         keep = arrays["meas_kind"] != MEAS_TENTATIVE
         for k in ("meas_scan", "meas_landmark", "meas_z", "meas_R", "meas_kind"):
-            if arrays[k].shape[:1] != keep.shape:
-                raise DataError(
-                    f"{path}: {k} has {arrays[k].shape[:1]} rows, meas_kind {keep.shape}"
-                )
             arrays[k] = arrays[k][keep]
     try:
         return Problem(**arrays), names

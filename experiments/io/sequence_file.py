@@ -9,38 +9,55 @@ from __future__ import annotations
 
 import json
 import logging
-import lzma
-import math
 import os
-import zipfile
-import zlib
 from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from experiments.errors import DataError
+from experiments.io.npz import Var, read_npz
 from experiments.io.writers import write_atomic
 from slam import Sequence, SlamError
 from slam.sequence import OPTIONAL, REQUIRED
 
-__all__ = ["load_sequence", "save_sequence"]
+__all__ = ["SCHEMA", "load_sequence", "save_sequence"]
 
 log = logging.getLogger(__name__)
 
-# what reading a damaged archive raises: zipfile, zlib and the other decompressors a flipped
-# compression-method byte selects (NotImplementedError for an unknown method, lzma, bz2's OSError)
-_ZIP_ERRORS = (
-    OSError,
-    ValueError,
-    EOFError,
-    NotImplementedError,
-    zipfile.BadZipFile,
-    zlib.error,
-    lzma.LZMAError,
-)
-_SCALARS = ("scan_angle_min", "scan_angle_increment", "scan_max_range", "scan_n_beams")
-_STRINGS = ("vehicle", "name", "det_method")
+# The format's schema (datasets/FORMAT.md): each variable's kind and dimensions, checked before
+# any value is read; N scans of B beams, D detections, M odometry samples, G GPS fixes, T truth
+# poses, L landmarks. The values (finite, in range, sorted) are `slam.Sequence`'s to check.
+SCHEMA: dict[str, Var] = {
+    "scan_t": Var("float", ("N",), required=True),
+    "scan_angle_min": Var("float", (), required=True),
+    "scan_angle_increment": Var("float", (), required=True),
+    "laser_pose": Var("float", (3,), required=True),
+    "scan_ranges": Var("float", ("N", "B")),
+    "scan_n_beams": Var("float", ()),
+    "scan_max_range": Var("float", ()),
+    "det_scan": Var("int", ("D",)),
+    "det_range": Var("float", ("D",)),
+    "det_bearing": Var("float", ("D",)),
+    "det_radius": Var("float", ("D",)),
+    "det_cov": Var("float", ("D", 2, 2)),
+    "det_method": Var("str"),
+    "odo_t": Var("float", ("M",)),
+    "odo_speed": Var("float", ("M",)),
+    "odo_steer": Var("float", ("M",)),
+    "odo_yaw_rate": Var("float", ("M",)),
+    "odo_pose": Var("float", ("M", 3)),
+    "vehicle": Var("str"),
+    "gps_t": Var("float", ("G",)),
+    "gps_xy": Var("float", ("G", 2)),
+    "gps_pose": Var("float", (3,)),
+    "truth_t": Var("float", ("T",)),
+    "truth_pose": Var("float", ("T", 3)),
+    "truth_landmarks": Var("float", ("L", 3)),
+    "scan_labels": Var("int", ("N", "B")),
+    "name": Var("str"),
+}
+assert set(SCHEMA) == set(REQUIRED) | set(OPTIONAL)
 
 
 def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
@@ -67,32 +84,6 @@ def save_sequence(seq: Sequence, path: str | os.PathLike) -> Path:
     return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays))
 
 
-def _check_declared_size(npz, k: str, path: Path) -> None:
-    """The header of variable k declares no more data than its archive member holds, so a
-    corrupt or hostile header (shape (2**33,)) is an error naming the variable, not an attempt
-    to allocate tens of gigabytes."""
-    try:
-        info = npz.zip.getinfo(f"{k}.npy")
-        with npz.zip.open(info) as fh:
-            version = np.lib.format.read_magic(fh)
-            if version == (1, 0):
-                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
-            else:
-                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
-            header = fh.tell()
-    except (KeyError, *_ZIP_ERRORS) as exc:
-        raise DataError(f"{path}: variable {k!r} is corrupt or unreadable ({exc})") from None
-    if dtype.hasobject:
-        return  # pickled objects: np.load refuses them (allow_pickle=False), which says so
-    need = math.prod(shape) * dtype.itemsize
-    have = info.file_size - header
-    if need != have:
-        raise DataError(
-            f"{path}: variable {k!r} is corrupt: its header declares shape {shape} of {dtype} "
-            f"({need} bytes) but it holds {have} bytes"
-        )
-
-
 def load_sequence(path: str | os.PathLike) -> Sequence:
     """Read a sequence file written by `save_sequence` (format: datasets/FORMAT.md).
 
@@ -100,61 +91,10 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
     a required variable missing, wrong shapes, unsorted times, inconsistent variables. Optional
     variables that are absent become None; unknown variables are ignored with a logged warning.
     """
-    path = Path(path)
-    if not path.exists():
-        raise DataError(f"sequence file not found: {path}")
-    if not path.is_file():
-        raise DataError(f"sequence file {path} is not a file")
-    try:
-        with open(path, "rb") as fh:
-            magic = fh.read(6)
-    except OSError as exc:
-        raise DataError(f"{path}: cannot be read ({exc})") from None
-    if magic.startswith(b"\x93NUMPY"):
-        raise DataError(f"{path}: is a single .npy array, not an .npz sequence file")
-    if not magic.startswith((b"PK\x03\x04", b"PK\x05\x06")):  # zip: member, or empty
-        raise DataError(f"{path}: not a readable .npz sequence file (not a zip archive)")
-    try:
-        npz = np.load(path, allow_pickle=False)
-    except _ZIP_ERRORS as exc:
-        raise DataError(f"{path}: not a readable .npz sequence file ({exc})") from None
+    arrays = read_npz(path, SCHEMA, "sequence file", across=False, logger=log)
     values: dict[str, object] = {}
-    with npz:
-        keys = set(npz.files)
-        missing = [k for k in REQUIRED if k not in keys]
-        if missing:
-            raise DataError(
-                f"{path}: missing required variable(s) {missing} (has: {sorted(keys)}); "
-                "see datasets/FORMAT.md"
-            )
-        unknown = sorted(keys - set(REQUIRED) - set(OPTIONAL))
-        if unknown:
-            log.warning("%s: ignoring unknown variable(s) %s", path, unknown)
-        for k in (*REQUIRED, *OPTIONAL):
-            if k not in keys:
-                continue
-            _check_declared_size(npz, k, path)
-            try:
-                a = npz[k]
-            except _ZIP_ERRORS as exc:
-                raise DataError(
-                    f"{path}: variable {k!r} is corrupt or unreadable ({exc})"
-                ) from None
-            if k in _STRINGS:
-                if a.dtype.kind != "U" or a.ndim != 0:
-                    raise DataError(
-                        f"{path}: variable {k!r} must be a string, got dtype {a.dtype} "
-                        f"shape {a.shape}"
-                    )
-                values[k] = str(a)
-            elif k in _SCALARS:
-                if a.size != 1:
-                    raise DataError(
-                        f"{path}: variable {k!r} must be one number, got shape {a.shape}"
-                    )
-                values[k] = a
-            else:
-                values[k] = a
+    for k, a in arrays.items():
+        values[k] = str(a) if SCHEMA[k].kind == "str" else a
     try:
         return Sequence(**values)
     except SlamError as exc:

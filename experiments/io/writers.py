@@ -6,8 +6,10 @@ old complete result or the new complete one, never a mix:
 - `write_atomic`: one file, through a temporary file in the same folder and a rename;
 - `atomic_folder`: a set of files (a `trunkslam reproduce` or `trunkslam slam` output folder),
   written into a temporary folder beside the target and swapped into place only when complete.
-`check_output_file` and `check_output_folder` refuse an output path that is one of the inputs,
-or that is not a regular file or folder (a symlink, a FIFO, a device), before any work is done.
+What a command may write where (its outputs against its inputs, result folders and their
+manifests, the folder lock) is `experiments.io.outputs`' part. A write error (a full disk)
+is a `WriteError` naming the output; inside an `atomic_folder`, named by its place in the
+target folder.
 """
 
 from __future__ import annotations
@@ -25,23 +27,22 @@ import shutil
 import signal
 import stat
 import tempfile
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
 
-from experiments.errors import DataError
+from experiments.errors import DataError, WriteError
 from features.types import Features
 
 __all__ = [
     "FEATURES_SCHEMA",
     "atomic_folder",
-    "check_output_file",
-    "check_output_folder",
     "dumps_json",
     "csv_value",
     "features_to_dict",
+    "file_kind",
     "format_cell",
     "json_types",
     "markdown_table",
@@ -49,6 +50,7 @@ __all__ = [
     "pivot",
     "pivot_cells",
     "read_tidy_csv",
+    "refuse_non_regular",
     "tidy_csv",
     "tidy_markdown",
     "tidy_table",
@@ -126,8 +128,11 @@ def write_atomic(path: Path | str, data: str | bytes | Callable[[BinaryIO], obje
     folder = path.parent
     if not folder.is_dir():
         raise DataError(f"cannot write {path}: folder {folder} does not exist")
-    _refuse_non_regular(path, "output")
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
+    refuse_non_regular(path, "output")
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise WriteError(path, exc) from None
     try:
         with os.fdopen(fd, "wb") as fh:
             if callable(data):
@@ -138,6 +143,11 @@ def write_atomic(path: Path | str, data: str | bytes | Callable[[BinaryIO], obje
             os.fsync(fh.fileno())
         os.chmod(tmp, 0o644)  # mkstemp makes files owner-only
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, WriteError):
+            raise
+        raise WriteError(path, exc) from None
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
@@ -148,12 +158,17 @@ def write_atomic(path: Path | str, data: str | bytes | Callable[[BinaryIO], obje
 def interruption_point(name: str) -> None:
     """Fault injection for the interruption tests: when the environment variable
     `TRUNKSLAM_INTERRUPT_AT` names this point, the process sends itself SIGINT here (a real
-    Ctrl-C at a known moment instead of a race with a timer). No effect otherwise."""
+    Ctrl-C at a known moment instead of a race with a timer), or the signal named by
+    `TRUNKSLAM_INTERRUPT_SIGNAL` (SIGTERM, SIGHUP). No effect otherwise."""
     if os.environ.get("TRUNKSLAM_INTERRUPT_AT") == name:
-        signal.raise_signal(signal.SIGINT)
+        sig = os.environ.get("TRUNKSLAM_INTERRUPT_SIGNAL", "SIGINT")
+        signal.raise_signal(getattr(signal, sig, signal.SIGINT))
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a path's `st_mode` (from `os.lstat`) says it is, in words ("a symbolic link")."""
+    if stat.S_ISREG(mode):
+        return "a regular file"
     if stat.S_ISLNK(mode):
         return "a symbolic link"
     if stat.S_ISDIR(mode):
@@ -164,95 +179,29 @@ def _kind(mode: int) -> str:
         return "a device"
     if stat.S_ISSOCK(mode):
         return "a socket"
-    return "not a regular file"
+    return "an unknown kind of file"
 
 
-def _refuse_non_regular(path: Path, option: str) -> None:
+def refuse_non_regular(path: Path, option: str, *, folder: bool = False) -> None:
+    """`DataError` naming `option` and `path` when it exists and is not a regular file (a
+    symlink, folder, FIFO, device: renaming over it would replace it); folder: when it exists
+    and is not a folder (an output folder's check)."""
     try:
         mode = os.lstat(path).st_mode
     except FileNotFoundError:
         return
     except OSError as exc:
         raise DataError(f"{option} {path}: cannot be checked ({exc})") from None
-    if not stat.S_ISREG(mode):
+    if folder and not stat.S_ISDIR(mode):
         raise DataError(
-            f"{option} {path}: exists and is {_kind(mode)}, not a regular file; refusing to "
+            f"{option} {path}: exists and is {file_kind(mode)}, not a folder; refusing to "
+            "replace it"
+        )
+    if not folder and not stat.S_ISREG(mode):
+        raise DataError(
+            f"{option} {path}: exists and is {file_kind(mode)}, not a regular file; refusing to "
             "replace it (choose another path)"
         )
-
-
-def _same_path(a: Path, b: Path) -> bool:
-    """True when a and b name the same file (same resolved path, or the same inode)."""
-    try:
-        if a.resolve() == b.resolve():
-            return True
-        return a.exists() and b.exists() and os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
-def _inside(path: Path, folder: Path) -> bool:
-    try:
-        return path.resolve().is_relative_to(folder.resolve())
-    except OSError:
-        return False
-
-
-def check_output_file(
-    path: Path | str, option: str, inputs: Iterable[Path | str | None] = ()
-) -> Path:
-    """Check an output file path before any work: its folder exists, it is not one of `inputs`
-    (the files the command reads), and it is absent or a regular file. `DataError` naming the
-    option and the path otherwise."""
-    path = Path(path)
-    for inp in inputs:
-        if inp is not None and _same_path(path, Path(inp)):
-            raise DataError(
-                f"{option} {path}: is an input of this command; refusing to overwrite it"
-            )
-    _refuse_non_regular(path, option)
-    if not path.parent.is_dir():
-        raise DataError(f"{option} {path}: folder {path.parent} does not exist")
-    return path
-
-
-def check_output_folder(
-    path: Path | str, option: str, markers: Sequence[str], inputs: Iterable[Path | str | None] = ()
-) -> Path:
-    """Check an output folder before any work. It is replaced as a whole (`atomic_folder`), so
-    it must be absent, an empty folder, or a folder this command wrote before (holding one of
-    `markers`, e.g. manifest.json); not a symlink, a file, a FIFO; and no input may be inside.
-    `DataError` naming the option and the path otherwise."""
-    path = Path(path)
-    for inp in inputs:
-        if inp is not None and _same_path(path, Path(inp)):
-            raise DataError(f"{option} {path}: is an input of this command; refusing to replace it")
-        if inp is not None and _inside(Path(inp), path):
-            raise DataError(
-                f"{option} {path}: holds the input {inp}; refusing to replace it (choose another "
-                "folder)"
-            )
-    try:
-        mode = os.lstat(path).st_mode
-    except FileNotFoundError:
-        return path
-    except OSError as exc:
-        raise DataError(f"{option} {path}: cannot be checked ({exc})") from None
-    if not stat.S_ISDIR(mode):
-        raise DataError(
-            f"{option} {path}: exists and is {_kind(mode)}, not a folder; refusing to replace it"
-        )
-    try:
-        entries = {p.name for p in path.iterdir()}
-    except OSError as exc:
-        raise DataError(f"{option} {path}: cannot be read ({exc})") from None
-    if entries and not entries & set(markers):
-        raise DataError(
-            f"{option} {path}: exists and is not an earlier output of this command (no "
-            f"{' or '.join(markers)} in it); it would be replaced as a whole, so choose another "
-            "folder or empty it"
-        )
-    return path
 
 
 _RENAME_EXCHANGE = 2  # linux/fs.h
@@ -317,12 +266,24 @@ def atomic_folder(target: Path | str) -> Iterator[Path]:
         os.chmod(staging, 0o755)  # mkdtemp makes folders owner-only
         _fsync_dir(staging)
         _swap_into_place(staging, target)
-    except BaseException:
+    except BaseException as exc:
         # interrupted inside mkdtemp: the folder may exist without its name having come back
         for p in [staging] if staging is not None else parent.glob(prefix + "*"):
             shutil.rmtree(p, ignore_errors=True)
+        if isinstance(exc, OSError):
+            raise _named_in(target, staging, exc) from None
         raise
     _fsync_dir(parent)
+
+
+def _named_in(target: Path, staging: Path | None, exc: OSError) -> OSError:
+    """A write error in the temporary folder, named by the file's place in `target` (the path
+    the user gave), or by `target` itself."""
+    name = Path(exc.filename) if isinstance(exc.filename, str) else None
+    if staging is None or name is None or not name.is_relative_to(staging):
+        return exc  # not a file of the set (an input, say): as it was
+    rel = name.relative_to(staging)
+    return WriteError(target if rel == Path(".") else target / rel, exc)
 
 
 def _swap_into_place(staging: Path, target: Path) -> None:

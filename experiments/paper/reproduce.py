@@ -26,17 +26,17 @@ from collections.abc import Callable
 from datetime import UTC, datetime
 from pathlib import Path
 
-from experiments.errors import ExperimentFailed, input_errors
+from experiments.errors import DataError, ExperimentFailed, input_errors
 from experiments.exec import Batch, Executor, SerialExecutor
+from experiments.io.outputs import MANIFEST, check_output_folder, check_outputs, lock_folder
+from experiments.io.paths import victoria_park_dir
 from experiments.io.provenance import git_commit, machine, versions
-from experiments.io.writers import atomic_folder, check_output_folder, dumps_json, write_atomic
+from experiments.io.writers import atomic_folder, dumps_json, write_atomic
 from experiments.paper.runner import DEFAULT_EXPERIMENTS, RunContext, get_experiment
 
 __all__ = ["MANIFEST", "run_experiments"]
 
 log = logging.getLogger(__name__)
-
-MANIFEST = "manifest.json"
 
 
 def _files(folder: Path) -> set[str]:
@@ -145,6 +145,7 @@ class _Ledger:
         """manifest.json: what ran, how, with which parameters, and every file of the set."""
         ctx = self.ctx
         return {
+            "command": "trunkslam reproduce",
             "experiments": names,
             "quick": ctx.quick,
             "seed": ctx.seed,
@@ -170,8 +171,10 @@ def run_experiments(
 ) -> list[Path]:
     """Run the named experiments (all when empty) into out_dir, replacing what was there as one
     set (see the module doc); returns the files written. out_dir must be absent, empty or an
-    earlier result set (it has a manifest.json). The experiments' trials run on `executor`
-    (`experiments.exec`; default: this process); the results do not depend on it. Raises
+    earlier result set every file of which its manifest.json lists; it is held
+    (`experiments.io.outputs.lock_folder`) while the experiments run. The experiments' trials
+    run on `executor` (`experiments.exec`; default: this process); the results do not depend
+    on it. Raises
     `ExperimentFailed` after the run when an experiment failed (a trial that raised fails its
     experiment, named with its seed)."""
     executor = executor or SerialExecutor()
@@ -180,8 +183,25 @@ def run_experiments(
     for n in names:  # unknown names fail before any work
         groups.setdefault(get_experiment(n), []).append(n)
     out_dir = Path(out_dir)
-    check_output_folder(out_dir, "--out", markers=(MANIFEST,))
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    check_outputs("reproduce", inputs=[_data_folder()], folders={"--out": out_dir})
+    with lock_folder(out_dir, "--out"):
+        check_output_folder(out_dir, "--out", "reproduce")  # again, now that it is held
+        return _run_held(
+            groups, names, out_dir, (quick, seed), progress=progress, executor=executor
+        )
+
+
+def _data_folder() -> Path | None:
+    """The Victoria Park folder the experiments read, when there is one (an input)."""
+    try:
+        return victoria_park_dir()
+    except DataError:
+        return None
+
+
+def _run_held(groups: dict, names: list[str], out_dir: Path, run, *, progress, executor) -> list:
+    """`run_experiments` with out_dir held; run: (quick, seed)."""
+    quick, seed = run
     # errors that fail one experiment; OSError (a full disk, ...) and bugs stop the whole run
     failures = tuple(e for e in input_errors() if e is not OSError)
     with atomic_folder(out_dir) as stage:

@@ -26,6 +26,7 @@ their seeds) last.
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import itertools
 import logging
@@ -38,15 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.errors import ConfigError, ExperimentFailed
+from experiments.errors import ConfigError, DataError, ExperimentFailed
 from experiments.exec import Executor, TrialsFailed, make_executor, spawn_seeds
-from experiments.io.writers import (
-    atomic_folder,
-    check_output_folder,
-    dumps_json,
-    json_types,
-    write_atomic,
-)
+from experiments.io.outputs import check_output_folder, check_outputs, lock_folder, write_manifest
+from experiments.io.paths import read_text_file
+from experiments.io.writers import atomic_folder, dumps_json, json_types, write_atomic
 from experiments.paper.runner import experiment_seed
 
 __all__ = ["STUDIES", "Study", "load_sweep", "run_sweep_file", "study_defaults"]
@@ -63,7 +60,36 @@ def _association_config(point: dict):
     from experiments.sim.landmarks import LandmarkSimConfig
     from slam.config import config_from_dict
 
-    return config_from_dict(LandmarkSimConfig, point["sim"]), float(point["gate_prob"])
+    gate = _number(point, "gate_prob")
+    if not 0.0 < gate < 1.0:
+        raise ConfigError(f"gate_prob: must be in (0, 1), got {gate!r}")
+    return config_from_dict(LandmarkSimConfig, point["sim"], "sim"), gate
+
+
+def _number(point: dict, key: str) -> float:
+    """point[key], a finite real number (not a string, a boolean or a huge integer)."""
+    v = point[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not abs(v) < 1e300:
+        raise ConfigError(f"{key}: expected a finite number, got {_shown(v)}")
+    if math.isnan(v):
+        raise ConfigError(f"{key}: expected a finite number, got nan")
+    return float(v)
+
+
+def _shown(v) -> str:
+    text = repr(v)
+    return text if len(text) <= 60 else f"{text[:57]}..."
+
+
+def _methods(point: dict, allowed) -> tuple[str, ...]:
+    m = point["methods"]
+    if (
+        not isinstance(m, list)
+        or not m
+        or any(not isinstance(x, str) or x not in allowed for x in m)
+    ):
+        raise ConfigError(f"methods: expected some of {', '.join(allowed)}, got {_shown(m)}")
+    return tuple(m)
 
 
 def association_trial(point: dict, seed) -> dict:
@@ -87,25 +113,56 @@ def association_trial(point: dict, seed) -> dict:
 
 
 def _slam_config(point: dict):
-    from experiments.paper.slam import Exp2Config
+    """Experiment 2's configuration of a point, with everything its trial builds before it runs
+    checked: the scene and its route, the car and its sensor, each method's filter settings."""
+    from experiments.paper.slam import Exp2Config, run_config
     from experiments.sim.trajectory import CycabParams
     from slam import SlamConfig
-    from slam.config import config_from_dict
+    from slam.config import ASSOCIATION_METHODS, config_from_dict
 
-    methods = tuple(point["methods"])
-    if not methods or any(m not in ("paper", "geometric", "bailey") for m in methods):
-        raise ConfigError(f"methods: expected some of paper, geometric, bailey, got {methods}")
-    return Exp2Config(
+    methods = _methods(point, ("paper", "geometric", "bailey"))
+    for key in ("scene", "association"):
+        if not isinstance(point[key], str):
+            raise ConfigError(f"{key}: expected a string, got {_shown(point[key])}")
+    if point["association"] not in ASSOCIATION_METHODS:
+        raise ConfigError(
+            f"association: expected one of {', '.join(ASSOCIATION_METHODS)}, got "
+            f"{_shown(point['association'])}"
+        )
+    false_match = _number(point, "false_match_m")
+    if not false_match > 0:
+        raise ConfigError(f"false_match_m: must be > 0, got {false_match!r}")
+    _route(point["scene"])
+    cfg = Exp2Config(
         n_runs=1,
         methods=methods,
-        scene=str(point["scene"]),
+        scene=point["scene"],
         cycab=config_from_dict(CycabParams, point["cycab"], "cycab"),
-        association=str(point["association"]),
-        slam=SlamConfig.from_dict(point["slam"]),
-        false_match_m=float(point["false_match_m"]),
+        association=point["association"],
+        slam=config_from_dict(SlamConfig, point["slam"], "slam"),
+        false_match_m=false_match,
         sensitivity=False,
         smoother=False,
     )
+    for m in methods:  # the filter of each method: its extractor and the association
+        try:
+            run_config(cfg, m)
+        except ValueError as exc:
+            raise ConfigError(f"slam (with features.method = {m!r}): {exc}") from None
+    return cfg
+
+
+@functools.cache
+def _route(scene: str) -> None:
+    """The scene exists and has a route to drive (its scan positions); once per scene."""
+    from experiments.sim.scene import load_scene
+
+    try:
+        sc = load_scene(scene)
+    except ValueError as exc:
+        raise ConfigError(f"scene: {exc}") from None
+    if sc.scan_positions.shape[0] < 2:
+        raise ConfigError(f"scene: {scene!r} has no route (fewer than 2 scan_positions)")
 
 
 def slam_trial(point: dict, seed) -> dict:
@@ -133,16 +190,15 @@ def slam_trial(point: dict, seed) -> dict:
 
 def _circles_config(point: dict) -> tuple[tuple, dict]:
     from experiments.paper.circles import METHODS
+    from experiments.sim.simulate import sensor_preset
 
-    methods = tuple(point["methods"])
-    if not methods or any(m not in METHODS for m in methods):
-        raise ConfigError(f"methods: expected some of {', '.join(METHODS)}, got {methods}")
-    try:
-        kw = {k: float(point[k]) for k in ("range_m", "radius_m", "noise_m")}
-    except (TypeError, ValueError):
-        raise ConfigError("range_m, radius_m and noise_m must be numbers") from None
+    methods = _methods(point, METHODS)
+    kw = {k: _number(point, k) for k in ("range_m", "radius_m", "noise_m")}
     if not all(0 < v < 1e6 for v in kw.values()):
         raise ConfigError(f"range_m, radius_m and noise_m must be positive, got {kw}")
+    if kw["radius_m"] >= kw["range_m"]:
+        raise ConfigError(f"radius_m: {kw['radius_m']:g} m, the pillar would hold the laser")
+    sensor_preset("pls200", range_sigma_m=kw["noise_m"])  # the sensor the trial simulates
     return methods, kw
 
 
@@ -259,7 +315,8 @@ def _flatten(d: dict, prefix: str = "") -> dict:
 
 
 def _set(config: dict, dotted: str, value, where: str) -> None:
-    """config[a][b][c] = value for "a.b.c"; the path must exist in the defaults."""
+    """config[a][b][c] = value for "a.b.c"; the path must exist in the defaults, and the value
+    be of the default's kind (a number for a number, a list for a list, ...)."""
     *parents, leaf = dotted.split(".")
     node = config
     for i, p in enumerate(parents):
@@ -269,7 +326,34 @@ def _set(config: dict, dotted: str, value, where: str) -> None:
     if leaf not in node:
         known = ", ".join(sorted(node))
         raise ConfigError(f"{where}: {dotted!r} is not a field (known here: {known})")
+    _check_kind(node[leaf], value, f"{where}: {dotted}")
     node[leaf] = value
+
+
+def _check_kind(default, value, where: str) -> None:
+    """`value` of the kind of the field's default (its own checks come with the study's)."""
+    if default is None:
+        ok = isinstance(value, (int, float, str, list)) and not isinstance(value, bool)
+        want = "a value"
+    elif isinstance(default, bool):
+        ok, want = isinstance(value, bool), "true or false"
+    elif isinstance(default, (int, float)):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        want = "a number"
+    elif isinstance(default, str):
+        ok, want = isinstance(value, str), "a string"
+    elif isinstance(default, (list, tuple)):
+        ok, want = isinstance(value, list), "a list"
+    else:  # a table
+        ok, want = isinstance(value, dict), "a table"
+    if not ok:
+        raise ConfigError(f"{where}: expected {want}, got {_shown(value)}")
+
+
+# The most trials (points x trials) a sweep file may ask for: at the slam study's 2-3 s a trial
+# on one core, 100,000 trials are about 3 days on a 2-core machine.
+MAX_SWEEP_TRIALS = 100_000
+_TOP = {"study", "trials", "seed", "base", "grid", "points", "executor"}
 
 
 @dataclass(frozen=True)
@@ -289,62 +373,69 @@ class SweepSpec:
 
 
 def load_sweep(path: Path | str) -> SweepSpec:
-    """Read and check a sweep file; errors name the file and the key."""
+    """Read and check a sweep file: its structure, then every point's resolved configuration
+    as its trials will build it (scene, car, sensor, filter), before any trial runs. Errors
+    (`ConfigError`) name the file, the key and the point."""
     path = Path(path)
+    if not path.exists() and not path.is_symlink():
+        raise ConfigError(f"{path}: no such sweep file")
     try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such sweep file") from None
+        data = tomllib.loads(read_text_file(path, "sweep file"))
+    except DataError as exc:
+        raise ConfigError(str(exc)) from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: not valid TOML: {exc}") from None
-    known = {"study", "trials", "seed", "base", "grid", "points", "executor"}
-    extra = sorted(set(data) - known)
-    if extra:
-        raise ConfigError(f"{path}: unknown key {extra[0]!r} (known: {', '.join(sorted(known))})")
-    if "study" not in data:
-        raise ConfigError(f"{path}: 'study' is missing (one of {', '.join(STUDIES)})")
+    except RecursionError:
+        raise ConfigError(f"{path}: nested too deeply to be a sweep file") from None
     try:
-        study = _study(data["study"])
+        return _parse_sweep(data, path)
     except ConfigError as exc:
         raise ConfigError(f"{path}: {exc}") from None
+
+
+def _parse_sweep(data: dict, path: Path) -> SweepSpec:
+    """The checked `SweepSpec` of a parsed sweep file (errors without the file's name)."""
+    extra = sorted(set(data) - _TOP)
+    if extra:
+        raise ConfigError(f"{extra[0]}: unknown key (known: {', '.join(sorted(_TOP))})")
+    if "study" not in data:
+        raise ConfigError(f"study: missing (one of {', '.join(STUDIES)})")
+    if not isinstance(data["study"], str):
+        raise ConfigError(f"study: expected a string, got {_shown(data['study'])}")
+    study = _study(data["study"])
     trials, seed = data.get("trials", 10), data.get("seed", 0)
-    if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
-        raise ConfigError(f"{path}: trials must be a whole number >= 1, got {trials!r}")
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise ConfigError(f"{path}: seed must be a whole number >= 0, got {seed!r}")
+    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
+        raise ConfigError(f"trials must be a whole number >= 1, got {_shown(trials)}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ConfigError(f"seed must be a whole number >= 0, got {_shown(seed)}")
+    for key in ("base", "grid", "executor"):
+        if key in data and not isinstance(data[key], dict):
+            raise ConfigError(f"{key}: expected a table, got {_shown(data[key])}")
     if ("grid" in data) == ("points" in data):
         which = "both" if "grid" in data else "neither"
-        raise ConfigError(f"{path}: give either [grid] or [[points]], not {which}")
-    if "grid" in data:
-        grid = _flatten(data["grid"])
-        for k, v in grid.items():
-            if not isinstance(v, list) or not v:
-                raise ConfigError(f"{path}: grid.{k} must be a non-empty list of values")
-        swept = list(grid)
-        values = [list(c) for c in itertools.product(*grid.values())]
-    else:
-        pts = [_flatten(p) for p in data["points"]]
-        swept = list(dict.fromkeys(k for p in pts for k in p))
-        for j, p in enumerate(pts):
-            if set(p) != set(swept):
-                raise ConfigError(f"{path}: points[{j}] sets {sorted(p)}, the others {swept}")
-        values = [[p[k] for k in swept] for p in pts]
+        raise ConfigError(f"give either [grid] or [[points]], not {which}")
+    swept, values, where = _points(data)
+    n = len(values) * trials
+    if n > MAX_SWEEP_TRIALS:
+        raise ConfigError(
+            f"trials: {len(values)} points x {trials} trials = {n} trials, more than the "
+            f"limit of {MAX_SWEEP_TRIALS} (experiments.paper.sweep.MAX_SWEEP_TRIALS)"
+        )
+    executor = _executor(data.get("executor", {}))
     base = study.defaults()
     for k, v in _flatten(data.get("base", {})).items():
-        _set(base, k, v, f"{path}: base")
+        _set(base, k, v, "base")
     points = []
     for j, vals in enumerate(values):
         point = _copy(base)
         for k, v in zip(swept, vals):
-            _set(point, k, v, f"{path}: {'grid' if 'grid' in data else f'points[{j}]'}")
+            _set(point, k, v, where(j))
         try:
             study.check(point)
-        except (TypeError, ValueError) as exc:  # ConfigError, SlamError: name the point
-            raise ConfigError(f"{path}: point {dict(zip(swept, vals))}: {exc}") from None
+        except (TypeError, ValueError) as exc:  # ConfigError, SlamError, DataError: the point
+            shown = ", ".join(f"{k} = {_shown(v)}" for k, v in zip(swept, vals))
+            raise ConfigError(f"point {j} ({shown}): {exc}") from None
         points.append(point)
-    ex = data.get("executor", {})
-    if set(ex) - {"workers", "dask"}:
-        raise ConfigError(f"{path}: [executor] takes workers and dask, got {sorted(ex)}")
     return SweepSpec(
         study=data["study"],
         trials=trials,
@@ -352,9 +443,48 @@ def load_sweep(path: Path | str) -> SweepSpec:
         points=points,
         swept=swept,
         values=values,
-        executor=ex,
+        executor=executor,
         source=data,
     )
+
+
+def _points(data: dict):
+    """(swept fields, each point's values of them, where(j): the key of point j)."""
+    if "grid" in data:
+        grid = _flatten(data["grid"])
+        if not grid:
+            raise ConfigError("grid: empty; give at least one field with its values")
+        for k, v in grid.items():
+            if not isinstance(v, list) or not v:
+                raise ConfigError(f"grid.{k} must be a non-empty list of values")
+        values = [list(c) for c in itertools.product(*grid.values())]
+        if len(values) > MAX_SWEEP_TRIALS:
+            raise ConfigError(f"grid: {len(values)} points, more than {MAX_SWEEP_TRIALS}")
+        return list(grid), values, lambda j: "grid"
+    raw = data["points"]
+    if not isinstance(raw, list) or not raw or not all(isinstance(p, dict) for p in raw):
+        raise ConfigError("points: expected a non-empty list of tables ([[points]])")
+    pts = [_flatten(p) for p in raw]
+    swept = list(dict.fromkeys(k for p in pts for k in p))
+    if not swept:
+        raise ConfigError("points: every point is empty; give each the fields it sets")
+    for j, p in enumerate(pts):
+        if set(p) != set(swept):
+            raise ConfigError(f"points[{j}] sets {sorted(p)}, the others {swept}")
+    return swept, [[p[k] for k in swept] for p in pts], lambda j: f"points[{j}]"
+
+
+def _executor(ex: dict) -> dict:
+    """The [executor] table: workers (a whole number >= 1) or dask (a scheduler address)."""
+    if set(ex) - {"workers", "dask"}:
+        raise ConfigError(f"executor: takes workers and dask, got {sorted(ex)}")
+    w = ex.get("workers")
+    if w is not None and (isinstance(w, bool) or not isinstance(w, int) or not 1 <= w <= 4096):
+        raise ConfigError(f"executor.workers: must be a whole number in 1..4096, got {_shown(w)}")
+    d = ex.get("dask")
+    if d is not None and (not isinstance(d, str) or not d.strip()):
+        raise ConfigError(f"executor.dask: expected a scheduler address, got {_shown(d)}")
+    return ex
 
 
 def _copy(d):
@@ -439,7 +569,7 @@ def run_sweep(
     from experiments.render import plots
 
     out_dir = Path(out_dir)
-    check_output_folder(out_dir, "--out", markers=(SUMMARY,))
+    check_output_folder(out_dir, "--out", "sweep")
     study = _study(spec.study)
     seeds = spawn_seeds(experiment_seed(spec.seed, f"sweep:{spec.study}"), spec.trials)
     jobs = [p for p in spec.points for _ in range(spec.trials)]
@@ -490,6 +620,7 @@ def run_sweep(
             ],
         }
         written.append(write_atomic(stage / SUMMARY, dumps_json(json_types(summary))))
+        write_manifest(stage, "sweep")  # last: the set is complete
     return [out_dir / p.name for p in written], failures
 
 
@@ -503,10 +634,11 @@ def run_sweep_file(
     """`trunkslam sweep`: read the file, run it on --workers / --dask (else its [executor],
     else every local core), write the set. Raises ExperimentFailed (after writing) when trials
     failed, naming them with their seeds."""
+    check_outputs("sweep", inputs=[path], folders={"--out": out_dir})
     spec = load_sweep(path)
     if workers is None and dask is None:
         workers, dask = spec.executor.get("workers"), spec.executor.get("dask")
-    with make_executor(workers, dask) as executor:
+    with lock_folder(out_dir, "--out"), make_executor(workers, dask) as executor:
         written, failures = run_sweep(spec, out_dir, executor, progress)
     if failures:
         shown = "; ".join(str(f) for f in failures[:3])

@@ -7,14 +7,9 @@ from dataclasses import asdict
 from pathlib import Path
 
 from experiments.errors import ConfigError
+from experiments.io.outputs import check_outputs
 from experiments.io.sequence_file import load_sequence
-from experiments.io.writers import (
-    FEATURES_SCHEMA,
-    check_output_file,
-    dumps_json,
-    features_to_dict,
-    write_atomic,
-)
+from experiments.io.writers import FEATURES_SCHEMA, dumps_json, features_to_dict, write_atomic
 from experiments.render.viz import open_recording
 from features import ExtractorParams, extract_features
 from features.bailey import BaileyParams
@@ -47,9 +42,7 @@ def run_extract(
         resolved = asdict(BaileyParams())
     else:
         resolved = ExtractorParams.from_kwargs(**params).to_dict()
-    check_output_file(out, "--out", inputs=[input_path])
-    if rerun_path is not None:
-        check_output_file(rerun_path, "--rerun", inputs=[input_path, out])
+    check_outputs("extract", inputs=[input_path], files={"--out": out, "--rerun": rerun_path})
     seq = load_sequence(input_path)
     scans = []
     with open_recording(

@@ -43,9 +43,10 @@ import numpy as np
 
 from experiments.errors import DataError
 from experiments.eval.gps import fixes_in_run, flag_jumps, top_speed
+from experiments.io.outputs import check_output_folder, check_outputs, lock_folder, write_manifest
 from experiments.io.results import trajectory_tum
 from experiments.io.sequence_file import load_sequence
-from experiments.io.writers import atomic_folder, check_output_folder, write_atomic
+from experiments.io.writers import atomic_folder, write_atomic
 
 __all__ = ["ReferenceExport", "evo_t_max_diff", "export_reference"]
 
@@ -73,9 +74,17 @@ def evo_t_max_diff(scan_t: np.ndarray) -> float:
 
 def export_reference(input_path: Path | str, out_dir: Path | str) -> ReferenceExport:
     """Write the reference TUM files of the sequence file `input_path` into out_dir, as one set
-    (`experiments.io.writers.atomic_folder`: out_dir is replaced as a whole, and must be absent,
-    empty or an earlier export holding gps.tum or truth.tum)."""
-    out = check_output_folder(out_dir, "--out", ("gps.tum", "truth.tum"), inputs=[input_path])
+    (`experiments.io.writers.atomic_folder`, with its manifest.json: out_dir is replaced as a
+    whole, and must be absent, empty or an earlier export every file of which its manifest
+    lists; it is held, `lock_folder`, while the command runs)."""
+    out = Path(out_dir)
+    check_outputs("export-reference", inputs=[input_path], folders={"--out": out})
+    with lock_folder(out, "--out"):
+        check_output_folder(out, "--out", "export-reference")  # again, now that it is held
+        return _export(input_path, out)
+
+
+def _export(input_path: Path | str, out: Path) -> ReferenceExport:
     seq = load_sequence(input_path)
     inside = None if seq.gps_t is None else fixes_in_run(seq.gps_t, seq.scan_t)
     if (inside is None or not inside.any()) and seq.truth_t is None:
@@ -83,7 +92,6 @@ def export_reference(input_path: Path | str, out_dir: Path | str) -> ReferenceEx
             f"{input_path}: the sequence has neither GPS inside its scans' time span nor truth "
             "to export"
         )
-    out.parent.mkdir(parents=True, exist_ok=True)
     names = []
     with atomic_folder(out) as stage:
         if inside is not None and inside.any():
@@ -96,6 +104,7 @@ def export_reference(input_path: Path | str, out_dir: Path | str) -> ReferenceEx
         if seq.truth_t is not None:
             write_atomic(stage / "truth.tum", trajectory_tum(seq.truth_t, seq.truth_pose))
             names.append("truth.tum")
+        write_manifest(stage, "export-reference")  # last: the set is complete
     n_fixes = 0 if inside is None else int(inside.sum())
     files = [out / n for n in names]
     return ReferenceExport(files, n_fixes, seq.n_scans, evo_t_max_diff(seq.scan_t))

@@ -9,22 +9,17 @@ import numpy as np
 
 from experiments.errors import DataError
 from experiments.eval.gps import score_sequence
+from experiments.eval.missing import null_scores
 from experiments.eval.poses import nees, pose_errors
 from experiments.eval.series import slam_panels, slam_series
 from experiments.eval.vouched import vouched_for_sequence
 from experiments.io.config_file import config_toml
 from experiments.io.features_json import load_features_json
+from experiments.io.outputs import check_output_folder, check_outputs, lock_folder, write_manifest
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.run_log import RUN_LOG_NAME, write_run_log
 from experiments.io.sequence_file import load_sequence
-from experiments.io.writers import (
-    atomic_folder,
-    check_output_file,
-    check_output_folder,
-    dumps_json,
-    json_types,
-    write_atomic,
-)
+from experiments.io.writers import atomic_folder, dumps_json, json_types, write_atomic
 from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, run_slam, se2
 
@@ -39,6 +34,7 @@ def run_slam_file(
     rerun_path: Path | str | None = None,
     progress=None,
     ellipse_scale: float = 10.0,
+    inputs: tuple = (),
 ) -> dict:
     """Run EKF-SLAM over the sequence file `input_path` as `config` says (default
     `SlamConfig()`; `features.file`, when set, is a features JSON from `trunkslam extract` whose
@@ -58,40 +54,61 @@ def run_slam_file(
     summary.json     input, methods, start, counts, timings (mean, median, p95, max per phase),
                      errors against GPS (`experiments.eval.gps`) when the sequence has GPS, and
                      against the truth (Table-3 errors, mean NEES) when it has truth
+    manifest.json    every file of the set (`experiments.io.outputs.write_manifest`)
     Returns the summary. rerun_path: also write a recording (`experiments.render.viz`, kind
     "slam"; simulated truth trees and path when the sequence has them), its covariance
     ellipses drawn `ellipse_scale` times their 95% size.
 
     The files are written as one set (`experiments.io.writers.atomic_folder`): into a temporary
-    folder beside out_dir, summary.json last, then swapped for out_dir as a whole; an
-    interruption or a write error leaves the previous out_dir as it was. out_dir must be absent,
-    empty or an earlier `trunkslam slam` output (it has a summary.json), and must not hold the
-    inputs. The recording (rerun_path) is written to a temporary name and renamed; inside
-    out_dir it becomes part of the set.
+    folder beside out_dir, summary.json and manifest.json last, then swapped for out_dir as a
+    whole; an interruption or a write error leaves the previous out_dir as it was. out_dir must
+    be absent, empty or an earlier `trunkslam slam` output every file of which its manifest
+    lists, and must not hold the inputs (the sequence, the features file, `inputs`: the
+    --config file); it is held (`lock_folder`) from the checks to the swap. The recording
+    (rerun_path) is written to a temporary name and renamed; inside out_dir it becomes part of
+    the set.
     """
     cfg = config or SlamConfig()
     features_file = cfg.features.file
-    out = check_output_folder(out_dir, "--out", (SUMMARY,), inputs=[input_path, features_file])
-    rerun_in_out = _recording_place(rerun_path, out, [input_path, features_file])
+    out = Path(out_dir)
+    check_outputs(
+        "slam",
+        inputs=[input_path, features_file, *inputs],
+        files={"--rerun": rerun_path},
+        folders={"--out": out},
+    )
+    rerun_in_out = _recording_place(rerun_path, out)
+    with lock_folder(out, "--out"):
+        check_output_folder(out, "--out", "slam")  # again: now no other command changes it
+        rerun = (rerun_path, rerun_in_out)
+        view = (progress, ellipse_scale)
+        return _run_into(out, (input_path, features_file), cfg, rerun, view)
+
+
+def _run_into(out: Path, inputs, cfg: SlamConfig, rerun, view) -> dict:
+    """The run and its files (`run_slam_file`'s body, out held); inputs: (sequence, features
+    file), rerun: (path, its place inside out or None), view: (progress, ellipse scale)."""
+    input_path, features_file = inputs
+    rerun_path, rerun_in_out = rerun
     seq = load_sequence(input_path)
     given = None
     if features_file is not None:
         given = load_features_json(features_file, seq.n_scans, seq.n_beams)
-    out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_folder(out) as stage:
         rec_path = rerun_path if rerun_in_out is None else stage / rerun_in_out
         t0 = time.perf_counter()
-        lg = _run_recorded(seq, cfg, given, rec_path, (progress, ellipse_scale))
+        lg = _run_recorded(seq, cfg, given, rec_path, view)
         seconds = time.perf_counter() - t0
         _write_run(stage, seq, cfg, lg, f"trunkslam slam {input_path}")
         summary = summarise(lg, seq, seconds)
         summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
-        write_atomic(stage / SUMMARY, dumps_json(summary))  # last: the set is complete
+        write_atomic(stage / SUMMARY, dumps_json(summary))
+        write_manifest(stage, "slam")  # last: the set is complete
     return summary
 
 
-def _recording_place(rerun_path, out: Path, inputs) -> Path | None:
-    """Where a --rerun path lies inside the --out folder (None: outside it, checked as a file)."""
+def _recording_place(rerun_path, out: Path) -> Path | None:
+    """Where a --rerun path lies inside the --out folder (None: outside it)."""
     if rerun_path is None:
         return None
     rerun_path = Path(rerun_path)
@@ -100,7 +117,6 @@ def _recording_place(rerun_path, out: Path, inputs) -> Path | None:
         if inside == Path("."):
             raise DataError(f"--rerun {rerun_path}: is the --out folder")
         return inside
-    check_output_file(rerun_path, "--rerun", inputs=inputs)
     return None
 
 
@@ -209,4 +225,16 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
             "nees_mean": float(np.mean(n)) if n.size else None,
             "scans_scored": int(inside.sum()),
         }
-    return summary
+    return null_scores(summary, reasons=missing_reasons(seq, summary))
+
+
+def missing_reasons(seq: Sequence, summary: dict) -> dict[str, str]:
+    """Why a score of `summary` could not be computed, by section (`null_scores`)."""
+    out = {"truth": "too few scans inside the truth's time span to compute it"}
+    gps = summary.get("gps") or {}
+    span = f"{seq.scan_t[0]:.3f}-{seq.scan_t[-1]:.3f} s"
+    if not gps.get("matched"):
+        out["gps"] = f"no GPS fix within the run's time span ({span}); all are outside it"
+    else:
+        out["gps"] = f"too few GPS fixes within the run ({gps['matched']}) to compute it"
+    return out

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 
 from experiments.errors import DataError
 from experiments.eval.gps import score_sequence
+from experiments.eval.missing import null_scores
 from experiments.eval.poses import nees, pose_errors
 from experiments.eval.vouched import vouched_for_sequence
+from experiments.io.outputs import add_to_manifest, lock_folder
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
-from experiments.io.run_log import read_run_log
+from experiments.io.run_log import RUN_LOG_NAME, read_run_log
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import dumps_json, write_atomic
 from slam import SlamConfig, interpolate_poses
@@ -44,8 +47,36 @@ def smooth_run(
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise DataError(f"{run_dir}: not a folder (expected the output folder of trunkslam slam)")
+    with lock_folder(run_dir, "RUN_DIR"):
+        return _smooth_held(run_dir, options, measurements, progress)
+
+
+# the files the smoother writes beside the run, smoother.json last
+SMOOTHED = (
+    "trajectory_smoothed.tum",
+    "trajectory_smoothed.csv",
+    "map_smoothed.csv",
+    "smoother.json",
+)
+
+
+def _smooth_held(run_dir: Path, options, measurements: str, progress) -> dict:
+    """`smooth_run` with the run folder held (`lock_folder`, so that no other trunkslam command
+    replaces the run between reading its log and writing beside it). The files are listed in
+    the run's manifest first, and smoother.json, removed first, is written last: present, it
+    says the smoothed files beside it are of one smoothing. Before writing, the run is checked
+    to be still the one read (the folder and its run log unchanged), in case something other
+    than trunkslam replaced it."""
+    read = _identity(run_dir)
     problem, names = read_run_log(run_dir, measurements)
     result = smooth(problem, options, progress)
+    if _identity(run_dir) != read:
+        raise DataError(
+            f"{run_dir}: the run was replaced while it was being smoothed (its folder or "
+            "run_log.npz changed); nothing written, smooth it again"
+        )
+    add_to_manifest(run_dir, SMOOTHED)
+    (run_dir / "smoother.json").unlink(missing_ok=True)
     write_atomic(run_dir / "trajectory_smoothed.tum", trajectory_tum(problem.scan_t, result.pose))
     write_atomic(
         run_dir / "trajectory_smoothed.csv",
@@ -59,8 +90,23 @@ def smooth_run(
         **smoother_summary(problem, result),
         **_scores(run_dir, problem, result),
     }
+    summary = null_scores(summary, ("gps", "truth"), {
+        "chi2_per_dof": "no degree of freedom (as many unknowns as residuals)",
+        "initial_chi2_per_dof": "no degree of freedom (as many unknowns as residuals)",
+        "gps": "no or too few GPS fixes within the run to compute it",
+    })  # fmt: skip
     write_atomic(run_dir / "smoother.json", dumps_json(summary))
     return summary
+
+
+def _identity(run_dir: Path) -> tuple:
+    """What changes when the run is replaced: the folder (a swap makes a new one) and its log."""
+    folder = os.stat(run_dir)
+    try:
+        log = os.stat(run_dir / RUN_LOG_NAME)
+    except FileNotFoundError:
+        return (folder.st_dev, folder.st_ino, None)
+    return (folder.st_dev, folder.st_ino, log.st_ino, log.st_size, log.st_mtime_ns)
 
 
 def smoother_summary(problem: Problem, r: SmootherResult) -> dict:

@@ -36,24 +36,62 @@ SLAM runs (slam.run_slam's visualiser interface):
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import shutil
 import tempfile
+import time
 from pathlib import Path
 
+try:
+    import resource
+except ImportError:  # pragma: no cover  (not POSIX)
+    resource = None
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from experiments.errors import DataError
-from experiments.io.writers import check_output_file, interruption_point
+from experiments.errors import DataError, WriteError
+from experiments.io.outputs import check_output_file
+from experiments.io.writers import interruption_point
 from experiments.render.shapes import circle_polyline, ellipse_polyline
 from features.types import Features, Scan
 from slam import se2
 
-__all__ = ["KINDS", "MemoryRecorder", "NullRecorder", "Recorder", "blueprint", "open_recording"]
+__all__ = [
+    "KINDS",
+    "RECORDING_MIN_FREE_BYTES",
+    "MemoryRecorder",
+    "NullRecorder",
+    "Recorder",
+    "blueprint",
+    "open_recording",
+    "writer_stopped",
+]
 
 KINDS = ("slam", "features", "circles")
+# A recording is not started on a file system with less free space than this (a tree-park
+# drive's recording is 10-20 kB a scan, a decimated Victoria Park run's a few MB; the margin is
+# for the rest of the command's outputs), and is stopped at the next scan once less than
+# RECORDING_STOP_FREE_BYTES is left. The flush at the end waits at most FLUSH_TIMEOUT_S.
+RECORDING_MIN_FREE_BYTES = 16 * 1024 * 1024
+RECORDING_STOP_FREE_BYTES = 1024 * 1024
+FLUSH_TIMEOUT_S = 120.0
+FLUSH_STEP_S = 1.0
+_FULL_BYTES = 1024 * 1024  # a write error with less free than this: the disk is full
+# Recordings whose file writer a write error stopped (rerun 0.41): disconnecting one, which
+# rerun also does when it is garbage-collected and at exit, waits forever. They are kept here,
+# and a command that made one ends at once (`writer_stopped`).
+_STOPPED: list = []
+
+
+def writer_stopped() -> bool:
+    """True when a recording of this process was stopped by a write error: its rerun stream
+    cannot be shut down (it would wait forever), so the process must end with `os._exit`
+    once its error is shown and its files are cleaned up (the CLI does)."""
+    return bool(_STOPPED)
+
+
 # The hues of the PNG figures (`experiments.render.plots.SEGMENT_COLORS`, `METHOD_COLORS`),
 # lighter where the dark background needs it; no colour is used for two kinds of feature.
 KIND_COLORS = np.array(  # segment class (`Features.segment_kind`): clutter, line, circle
@@ -216,7 +254,16 @@ class Recorder(NullRecorder):
 
     The recording goes to a temporary file beside `path` (`.NAME.XXXX.rrd.tmp`) and is renamed
     to `path` by `close()`: an interrupted run never leaves a truncated recording at `path`.
-    `abort()` (or leaving a `with` block by an exception) deletes the temporary file."""
+    `abort()` (or leaving a `with` block by an exception) deletes the temporary file.
+
+    A full disk: a recording is not started on a file system with less than
+    `RECORDING_MIN_FREE_BYTES` free, and is stopped at the next scan once less than
+    `RECORDING_STOP_FREE_BYTES` is left; rerun's file writer (a thread of its own) stops at a
+    write error, which shows when the recording is flushed. Each is a `WriteError` naming
+    `path` and the reason (no space left, the process's file-size limit), with the temporary
+    file deleted."""
+
+    min_free_bytes = RECORDING_MIN_FREE_BYTES
 
     def __init__(
         self,
@@ -244,12 +291,16 @@ class Recorder(NullRecorder):
         self._truth_path: list[np.ndarray] = []
         self.path.parent.mkdir(parents=True, exist_ok=True)
         check_output_file(self.path, "recording")
+        self._check_space(
+            self.min_free_bytes,
+            f"a recording is started with at least {self.min_free_bytes / 2**20:.0f} MiB free",
+        )
         try:
             fd, tmp = tempfile.mkstemp(
                 dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".rrd.tmp"
             )
         except OSError as exc:
-            raise DataError(f"recording {self.path}: cannot be written ({exc.strerror})") from None
+            raise WriteError(self.path, exc) from None
         os.close(fd)
         self._tmp = Path(tmp)
         try:
@@ -266,12 +317,73 @@ class Recorder(NullRecorder):
             self._tmp.unlink(missing_ok=True)
             raise
 
+    def _check_space(self, least: int, rule: str) -> None:
+        """`WriteError` (no space left) when the recording's file system has less than `least`
+        bytes free."""
+        if least <= 0:
+            return
+        try:
+            free = shutil.disk_usage(self.path.parent).free
+        except OSError:
+            return
+        if free < least:
+            reason = f"No space left on device (only {free / 2**20:.1f} MiB free; {rule})"
+            raise WriteError(self.path, OSError(errno.ENOSPC, reason))
+
+    def _failed(self) -> OSError | None:
+        """Why rerun's file writer has stopped, when it surely has (it does not say, and a
+        flush then waits for it in vain): the disk is full, or the file reached this process's
+        file-size limit. None otherwise."""
+        try:
+            if shutil.disk_usage(self.path.parent).free < _FULL_BYTES:
+                return OSError(errno.ENOSPC, "No space left on device")
+            limit = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+            if limit != resource.RLIM_INFINITY and self._tmp.stat().st_size >= limit:
+                return OSError(
+                    errno.EFBIG, f"File too large (this process's file-size limit, {limit} bytes)"
+                )
+        except (OSError, AttributeError):
+            pass
+        return None
+
+    def _why(self, exc: Exception) -> OSError:
+        """Why the flush failed: `_failed`'s reason, or rerun's words."""
+        return self._failed() or OSError(errno.EIO, f"the recording could not be written ({exc})")
+
+    def _flush(self) -> None:
+        """Flush the recording, a second at a time: rerun's file writer, stopped by a write
+        error meanwhile, never answers a flush, so between the waits `_failed` looks for the
+        reason (a `WriteError`). RuntimeError when rerun reports an error, or after
+        FLUSH_TIMEOUT_S without one."""
+        deadline = time.monotonic() + FLUSH_TIMEOUT_S
+        while True:
+            start = time.monotonic()
+            try:
+                self.rec.flush(timeout_sec=FLUSH_STEP_S)
+                return
+            except RuntimeError:
+                why = self._failed()
+                if why is not None:
+                    raise WriteError(self.path, why) from None
+                now = time.monotonic()
+                if now - start < FLUSH_STEP_S / 2 or now > deadline:  # an error, not a wait
+                    raise
+
     def _skip(self) -> bool:
         return self._k % self.decimate != 0
 
     def set_scan(self, k: int, stamp_s: float | None = None) -> None:
         """Timeline `scan` = k; with the scan's time, also timeline `time` (seconds)."""
         self._k = int(k)
+        if self._tmp is not None:  # a disk filling up stops the run now, not at its end
+            try:
+                self._check_space(RECORDING_STOP_FREE_BYTES, "the recording was stopped")
+                why = self._failed()
+                if why is not None:
+                    raise WriteError(self.path, why)
+            except WriteError:
+                self.abort()
+                raise
         interruption_point("recording-scan")  # the interruption tests' Ctrl-C, mid-recording
         self.rec.set_time("scan", sequence=int(k))
         if stamp_s is not None:
@@ -512,15 +624,35 @@ class Recorder(NullRecorder):
         )
 
     def close(self) -> None:
-        """Finish the file (its footer, which readers use to list its stores) and put it at
-        `path` (atomically: a rename)."""
+        """Finish the file (its footer, which readers use to list its stores), flush it to
+        disk and put it at `path` (atomically: a rename). A write error: `WriteError` naming
+        `path`, nothing left."""
         if self._tmp is None:
             return
+        why = self._failed()
+        if why is not None:  # no flush: it would wait FLUSH_TIMEOUT_S for a stopped writer
+            self.abort()
+            raise WriteError(self.path, why)
         try:
-            self.rec.flush()
+            self._flush()
             self.rec.disconnect()  # closes the file sink
+            fd = os.open(self._tmp, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
             os.chmod(self._tmp, 0o644)
             os.replace(self._tmp, self.path)
+        except WriteError:
+            self.abort()
+            raise
+        except RuntimeError as exc:  # rerun's file writer stopped, or the flush timed out
+            why = self._why(exc)
+            self.abort()
+            raise WriteError(self.path, why) from None
+        except OSError as exc:
+            self.abort()
+            raise WriteError(self.path, exc) from None
         except BaseException:
             self.abort()
             raise
@@ -530,8 +662,11 @@ class Recorder(NullRecorder):
         """Drop the recording: the temporary file is deleted, `path` is left as it was."""
         if self._tmp is None:
             return
-        with contextlib.suppress(Exception):
-            self.rec.disconnect()
+        if self._failed() is None:
+            with contextlib.suppress(Exception):
+                self.rec.disconnect()
+        else:  # a stopped file writer never answers a disconnect, nor rerun's own at exit
+            _STOPPED.append(self.rec)
         self._tmp.unlink(missing_ok=True)
         self._tmp = None
 
@@ -541,7 +676,10 @@ class MemoryRecorder(Recorder):
     chosen path: a recording made where it is not written (a trial on a worker process, perhaps
     on another machine; the main process writes the bytes). It records into a private temporary
     folder, removed when the recorder is closed or aborted; the bytes are those of the file a
-    `Recorder` would have written."""
+    `Recorder` would have written. (No free-space minimum: the bytes are written, and checked,
+    where they are kept.)"""
+
+    min_free_bytes = 0
 
     def __init__(self, kind: str = "slam", **kwargs) -> None:
         self._dir = Path(tempfile.mkdtemp(prefix="trunkslam-rrd-"))

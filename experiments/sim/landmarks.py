@@ -35,6 +35,21 @@ __all__ = [
 ]
 
 
+# The ranges of `LandmarkSimConfig`'s fields (others: >= 0), and the landmarks a scenario may
+# hold: beyond them the simulation is a unit error or would not fit in memory.
+_SIM_RANGES = {
+    "unmapped_fraction": (0.0, 1.0),
+    "p_detect": (0.0, 1.0),
+    "max_range_m": (1e-3, 1e4),
+    "n_scans": (1, 10_000),
+    "sigma_heading_rad": (0.0, math.pi),
+    "sigma_bearing_rad": (0.0, math.pi),
+    "drift_heading_rad": (0.0, math.pi),
+    "clutter_per_scan": (0.0, 10_000.0),
+}
+MAX_SIM_LANDMARKS = 1_000_000
+
+
 @dataclass(frozen=True)
 class LandmarkSimConfig:
     """One simulated scenario (a short sequence of scans over a landmark field).
@@ -67,6 +82,30 @@ class LandmarkSimConfig:
     drift_xy_m: float = 0.02
     drift_heading_rad: float = math.radians(0.2)
     min_separation_m: float = 1.5
+
+    def __post_init__(self) -> None:
+        from experiments.errors import ConfigError
+
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            whole = f.name == "n_scans"
+            ok = isinstance(v, int) if whole else isinstance(v, (int, float))
+            if isinstance(v, bool) or not ok or not abs(v) < 1e300 or not math.isfinite(v):
+                kind = "a whole number" if whole else "a finite number"
+                raise ConfigError(f"LandmarkSimConfig.{f.name}: must be {kind}, got {v!r}")
+            low, high = _SIM_RANGES.get(f.name, (0.0, math.inf))
+            if not low <= v <= high:
+                raise ConfigError(
+                    f"LandmarkSimConfig.{f.name}: must be in [{low:g}, {high:g}], got {v!r}"
+                )
+        half = self.max_range_m + 5.0 + self.n_scans * self.step_m
+        expected = self.density_per_100m2 * (2 * half) ** 2 / 100.0
+        if expected > MAX_SIM_LANDMARKS:
+            raise ConfigError(
+                f"LandmarkSimConfig.density_per_100m2: {self.density_per_100m2:g} over the "
+                f"{2 * half:.0f} m square the scans cover is {expected:.3g} landmarks, more than "
+                f"the limit of {MAX_SIM_LANDMARKS}"
+            )
 
     @property
     def R(self) -> np.ndarray:

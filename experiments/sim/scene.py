@@ -490,6 +490,21 @@ def _xy_list(v: Any, where: str, source: str, min_points: int) -> np.ndarray:
     return out
 
 
+def _text(obj: Mapping, key: str, where: str, source: str, lines: bool = False) -> str | None:
+    """A free-text key (a string; with `lines`, or a list of strings, one per line); None when
+    absent."""
+    if key not in obj:
+        return None
+    v = obj[key]
+    if lines and isinstance(v, list) and all(isinstance(s, str) for s in v):
+        return "\n".join(v)
+    if not isinstance(v, str):
+        need = "a string or a list of strings" if lines else "a string"
+        shown = type(v).__name__ if isinstance(v, (list, dict)) else repr(v)[:40]
+        raise DataError(_where(source, f"{where}{key}: must be {need}, got {shown}"))
+    return v
+
+
 def _check_keys(obj: Any, allowed: set[str], where: str, source: str) -> None:
     if not isinstance(obj, dict):
         raise DataError(_where(source, f"{where}: must be a JSON object, got {type(obj).__name__}"))
@@ -510,6 +525,7 @@ def _list(data: Mapping, key: str, source: str) -> list:
 def _circle(c: Any, w: str, source: str) -> CircleObject:
     """One entry of "circles" (`w`: where it is, for errors)."""
     _check_keys(c, _CIRCLE_KEYS, w, source)
+    _text(c, "note", f"{w}.", source)
     name = _get(c, "name", w, source)
     center = _xy_list([_get(c, "center_xy", w, source)], f"{w}.center_xy", source, 1)[0]
     r = _number(_get(c, "radius_m", w, source), f"{w}.radius_m", source, positive=True)
@@ -522,6 +538,7 @@ def _circle(c: Any, w: str, source: str) -> CircleObject:
 def _wall(o: Any, w: str, source: str) -> WallObject:
     """One entry of "walls"."""
     _check_keys(o, _WALL_KEYS, w, source)
+    _text(o, "note", f"{w}.", source)
     name = _get(o, "name", w, source)
     pts = _xy_list(_get(o, "points_xy", w, source), f"{w}.points_xy", source, 2)
     kind = o.get("kind", "wall")
@@ -536,6 +553,7 @@ def _wall(o: Any, w: str, source: str) -> WallObject:
 def _bush(o: Any, w: str, source: str) -> BushObject:
     """One entry of "bushes"."""
     _check_keys(o, _BUSH_KEYS, w, source)
+    _text(o, "note", f"{w}.", source)
     name = _get(o, "name", w, source)
     pts = _xy_list(_get(o, "points_xy", w, source), f"{w}.points_xy", source, 3)
     return BushObject(name, pts, _height(o, w, source))
@@ -584,10 +602,11 @@ def scene_from_dict(data: Mapping, source: str = "<dict>", default_name: str = "
             _bush(o, f"bushes[{i}]", source) for i, o in enumerate(_list(data, "bushes", source))
         ]
         sp, spn = _scan_positions(data, source)
-        name = data.get("name", default_name)
-        description = data.get("description", "")
-        if isinstance(description, list):  # long descriptions may be a list of lines
-            description = "\n".join(str(s) for s in description)
+        name = _text(data, "name", "", source) or default_name
+        # long descriptions and notes may be a list of lines
+        description = _text(data, "description", "", source, lines=True) or ""
+        _text(data, "notes", "", source, lines=True)
+        _text(data, "frame", "", source)
         return Scene(
             circles=tuple(circles),
             walls=tuple(walls),

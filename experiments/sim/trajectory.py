@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from slam import Sequence
 from slam.vehicle import arc_step
 
 __all__ = [
+    "MAX_SCANS",
     "MONTE_CARLO_PATH",
     "CycabParams",
     "Drive",
@@ -58,6 +59,10 @@ __all__ = [
 # Bailey's circles on seeds 1000-1003: 0.195 m, rounded to 0.2 m), and a start uniform over one
 # scan spacing along the route (1.2 m/s at 5 Hz: 0.24 m), so no scan position is favoured.
 MONTE_CARLO_PATH = {"route_offset_sigma_m": 0.2, "start_along_m": 0.24}
+# Limits of a simulated drive (`trunkslam simulate-drive --scans`, a sweep's cycab.n_scans):
+# 100,000 scans are 5.6 hours of driving at 5 Hz and about 0.7 GB of scans and labels.
+MAX_SCANS = 100_000
+MAX_SCAN_EVERY = 100  # odometry samples per scan (at 20 Hz: a scan every 5 s)
 
 
 @dataclass(frozen=True)
@@ -106,6 +111,13 @@ class CycabParams:
     start_along_m: float = 0.0
 
     def __post_init__(self) -> None:
+        floats = [f.name for f in fields(self) if f.type in ("float", "float | None")]
+        for name in floats:
+            v = getattr(self, name)
+            if v is None and name == "quantisation_m":
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not abs(v) < 1e300:
+                raise ConfigError(f"CycabParams.{name}: must be a finite number, got {v!r}")
         for name in (
             "wheelbase_m",
             "speed_mps",
@@ -130,18 +142,42 @@ class CycabParams:
         ):
             if not getattr(self, name) >= 0:
                 raise ConfigError(f"CycabParams.{name}: must be >= 0, got {getattr(self, name)!r}")
-        if not (isinstance(self.scan_every, int) and self.scan_every >= 1):
-            raise ConfigError(
-                f"CycabParams.scan_every: must be an integer >= 1, got {self.scan_every!r}"
+        whole = {"scan_every": MAX_SCAN_EVERY, "n_scans": MAX_SCANS}
+        for name, limit in whole.items():
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= limit:
+                raise ConfigError(
+                    f"CycabParams.{name}: must be a whole number in 1..{limit}, got {v!r}"
+                    + (" (experiments.sim.trajectory.MAX_SCANS)" if name == "n_scans" else "")
+                )
+        pose = self.laser_pose
+        if (
+            not isinstance(pose, (tuple, list))
+            or len(pose) != 3
+            or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in pose
             )
-        if not (isinstance(self.n_scans, int) and self.n_scans >= 1):
-            raise ConfigError(f"CycabParams.n_scans: must be an integer >= 1, got {self.n_scans!r}")
-        if len(self.laser_pose) != 3:
-            raise ConfigError("CycabParams.laser_pose: expected (x, y, theta)")
+        ):
+            raise ConfigError(f"CycabParams.laser_pose: expected 3 finite numbers, got {pose!r}")
         if self.quantisation_m is not None and not self.quantisation_m >= 0:
             raise ConfigError(
                 f"CycabParams.quantisation_m: must be >= 0, got {self.quantisation_m!r}"
             )
+        if not isinstance(self.sensor, str):
+            raise ConfigError(f"CycabParams.sensor: expected a sensor name, got {self.sensor!r}")
+        try:  # the sensor the run will simulate, with this car's noise: checked now
+            self.sensor_model()
+        except ConfigError as exc:
+            raise ConfigError(f"CycabParams.sensor: {exc}") from None
+
+    def sensor_model(self):
+        """The simulated laser: the `sensor` preset with this car's range noise, mixed-return
+        probability and quantisation."""
+        quant = {} if self.quantisation_m is None else {"quantisation_m": self.quantisation_m}
+        return sensor_preset(
+            self.sensor, range_sigma_m=self.range_sigma_m, mixed_prob=self.mixed_prob, **quant
+        )
 
     @property
     def vehicle(self) -> dict:
@@ -276,10 +312,7 @@ def simulate_cycab_run(
     steer = d.steer_rad + p.steer_sigma_rad * rng_odo.standard_normal(n_samples)
     steer = np.clip(steer, -math.pi / 2, math.pi / 2)
     # scans
-    quant = {} if p.quantisation_m is None else {"quantisation_m": p.quantisation_m}
-    sensor = sensor_preset(
-        p.sensor, range_sigma_m=p.range_sigma_m, mixed_prob=p.mixed_prob, **quant
-    )
+    sensor = p.sensor_model()
     scan_idx = np.arange(p.n_scans) * p.scan_every
     ranges = np.empty((p.n_scans, sensor.n_beams))
     labels = np.empty((p.n_scans, sensor.n_beams), dtype=np.int64)
@@ -290,9 +323,12 @@ def simulate_cycab_run(
     # DGPS at its own rate and clock
     t_end = float(d.t_s[-1])
     gps_t = np.arange(p.dgps_offset_s, t_end, 1.0 / p.dgps_rate_hz)
-    true_pose = _pose_at(d, p, gps_t)
-    antenna = np.array([laser_world_pose(q, p.laser_pose)[:2] for q in true_pose])
-    gps_xy = antenna + p.dgps_sigma_m * rng_gps.standard_normal(antenna.shape)
+    gps = {}  # a drive shorter than the first fix (one scan) has no GPS
+    if gps_t.size:
+        true_pose = _pose_at(d, p, gps_t)
+        antenna = np.array([laser_world_pose(q, p.laser_pose)[:2] for q in true_pose])
+        gps_xy = antenna + p.dgps_sigma_m * rng_gps.standard_normal(antenna.shape)
+        gps = {"gps_t": gps_t, "gps_xy": gps_xy, "gps_pose": np.array(p.laser_pose)}
     return Sequence(
         scan_t=d.t_s[scan_idx],
         scan_ranges=ranges,
@@ -304,9 +340,7 @@ def simulate_cycab_run(
         odo_speed=speed,
         odo_steer=steer,
         vehicle=p.vehicle,
-        gps_t=gps_t,
-        gps_xy=gps_xy,
-        gps_pose=np.array(p.laser_pose, dtype=np.float64),
+        **gps,
         truth_t=d.t_s,
         truth_pose=d.pose,
         truth_landmarks=sc.truth_landmarks,

@@ -20,12 +20,8 @@ from typer.testing import CliRunner
 
 from experiments.cli import app
 from experiments.errors import DataError
-from experiments.io.writers import (
-    atomic_folder,
-    check_output_file,
-    check_output_folder,
-    write_atomic,
-)
+from experiments.io.outputs import check_output_folder, check_outputs
+from experiments.io.writers import atomic_folder, write_atomic
 from tests.support import read_recording
 
 runner = CliRunner()
@@ -134,12 +130,12 @@ def test_output_checks_refuse_inputs_and_non_regular_paths(tmp_path):
     ]
     for path, words in cases:
         with pytest.raises(DataError, match=words) as info:
-            check_output_file(path, "--out", inputs=[inp])
+            check_outputs("extract", inputs=[inp], files={"--out": path})
         assert "--out" in str(info.value)
     hard = tmp_path / "hard.npz"
     os.link(inp, hard)  # another name of the same file
     with pytest.raises(DataError, match="is an input"):
-        check_output_file(hard, "--out", inputs=[inp])
+        check_outputs("extract", inputs=[inp], files={"--out": hard})
     with pytest.raises(DataError, match="symbolic link"):
         write_atomic(link, "x")
     assert not (tmp_path / "elsewhere.json").exists()
@@ -147,24 +143,25 @@ def test_output_checks_refuse_inputs_and_non_regular_paths(tmp_path):
 
     ours = tmp_path / "ours"
     ours.mkdir()
-    (ours / "manifest.json").write_text("{}")
-    check_output_folder(ours, "--out", ["manifest.json"])  # an earlier result set: fine
-    check_output_folder(tmp_path / "new", "--out", ["manifest.json"])  # absent: fine
+    (ours / "t.csv").write_text("1")
+    (ours / "manifest.json").write_text('{"command": "trunkslam sweep", "outputs": ["t.csv"]}')
+    check_output_folder(ours, "--out", "sweep")  # an earlier result set: fine
+    check_output_folder(tmp_path / "new", "--out", "sweep")  # absent: fine
     foreign = tmp_path / "home"
     foreign.mkdir()
     (foreign / "thesis.tex").write_text("years of work")
-    with pytest.raises(DataError, match="not an earlier output"):
-        check_output_folder(foreign, "--out", ["manifest.json"])
+    with pytest.raises(DataError, match="no manifest.json"):
+        check_output_folder(foreign, "--out", "sweep")
     with pytest.raises(DataError, match="holds the input"):
-        check_output_folder(tmp_path, "--out", ["manifest.json"], inputs=[inp])
+        check_outputs("sweep", inputs=[inp], folders={"--out": tmp_path})
     with pytest.raises(DataError, match="not a folder"):
-        check_output_folder(inp, "--out", ["manifest.json"])
+        check_output_folder(inp, "--out", "sweep")
 
 
 def test_reproduce_refuses_a_folder_that_is_not_a_result_set(tmp_path):
     (tmp_path / "notes.txt").write_text("mine")
     res = runner.invoke(app, ["reproduce", "noise-calibration", "--quick", "--out", str(tmp_path)])
-    assert res.exit_code == 1 and "not an earlier output" in res.output
+    assert res.exit_code == 1 and "no manifest.json" in res.output
     assert (tmp_path / "notes.txt").read_text() == "mine"
 
 
@@ -223,7 +220,7 @@ def test_slam_under_a_full_disk_keeps_the_old_outputs(drive, tmp_path, monkeypat
     assert res.exit_code == 0, res.output
     old = snapshot(out)
     assert {"trajectory.tum", "summary.json", "map.csv", "run.rrd"} <= set(old)
-    for n in (1, 3, 6):  # trajectory.tum, trajectory.csv, summary.json (the last)
+    for n in (1, 4, 9):  # the recording, trajectory.csv, manifest.json (the last)
         _fail_fsync_at(monkeypatch, n)
         res = runner.invoke(
             app,

@@ -269,13 +269,13 @@ def test_smooth_without_or_with_a_corrupt_run_log_is_a_clear_error(tmp_path):
     assert res.exit_code == 1 and "no run log" in res.output
     (tmp_path / "run_log.npz").write_bytes(b"PK\x03\x04 not really a zip")
     res = runner.invoke(app, ["smooth", str(tmp_path)])
-    assert res.exit_code == 1 and "not a readable run log" in res.output
+    assert res.exit_code == 1 and "not a readable .npz run log" in res.output
     np.savez(tmp_path / "run_log.npz", format=np.array("something else"))
     res = runner.invoke(app, ["smooth", str(tmp_path)])
     assert res.exit_code == 1 and "not a run log" in res.output
     np.savez(tmp_path / "run_log.npz", format=np.array("trunkslam.run_log/1"), scan_t=np.ones(3))
     res = runner.invoke(app, ["smooth", str(tmp_path)])
-    assert res.exit_code == 1 and "missing variable(s)" in res.output
+    assert res.exit_code == 1 and "missing required variable(s)" in res.output
     res = runner.invoke(app, ["smooth", str(tmp_path), "--robust", "tukey"])
     assert res.exit_code == 2
 

@@ -361,14 +361,27 @@ def test_sweep_file_errors_name_the_key(tmp_path, text, message):
     assert message in str(info.value) and str(path) in str(info.value)
 
 
-def test_sweep_keeps_the_other_trials_when_one_fails(tmp_path):
-    """A point whose configuration breaks only inside the trial: its trials are reported with
-    their seeds in sweep.json, the other point's rows are written, the command fails."""
+def test_sweep_keeps_the_other_trials_when_one_fails(tmp_path, monkeypatch):
+    """A point whose trials fail (a failure no check before the trials can foresee: here the
+    simulation itself raising on one scene; a wrong scene name is refused before any trial,
+    tests/experiments/test_hostile_files.py): its trials are reported with their seeds in
+    sweep.json, the other point's rows are written, the command fails."""
+    import experiments.paper.slam as exp2
+    from experiments.errors import DataError
+
+    simulate = exp2.simulate_cycab_run
+
+    def breaks_on_the_yard(rng, scene, params):
+        if scene == "test_yard":
+            raise DataError("the simulated drive broke")
+        return simulate(rng, scene, params)
+
+    monkeypatch.setattr(exp2, "simulate_cycab_run", breaks_on_the_yard)  # workers=1: in process
     path = tmp_path / "s.toml"
     path.write_text(
         'study = "slam"\ntrials = 2\n[base]\nmethods = ["bailey"]\n"cycab.n_scans" = 15\n'
-        '[[points]]\nscene = "tree_park"\n[[points]]\nscene = "no_such_scene"\n'
-    )  # the scene is read by the trial: the second point fails there
+        '[[points]]\nscene = "tree_park"\n[[points]]\nscene = "test_yard"\n'
+    )  # the second point fails in its trials
     with pytest.raises(ExperimentFailed, match=r"trial\(s\) of the sweep failed"):
         run_sweep_file(path, tmp_path / "out", workers=1)
     summary = json.loads((tmp_path / "out" / "sweep.json").read_text())

@@ -139,8 +139,10 @@ def test_window_settings_are_checked():
     with pytest.raises(SlamError, match="association.window_scans"):
         SlamConfig.from_dict({"association": {"window_scans": 2.5}})
     assert SlamConfig.from_dict({"association": {"window_scans": 4}}).association.window_scans == 4
-    bad = SlamConfig(association=AssociationConfig(params={"max_nodes": 10}))
-    with pytest.raises(SlamError, match="max_nodes"):
-        run_slam(seq, features=feats, association="ihgr-window", config=bad)
+    with pytest.raises(SlamError, match="association.params: .*max_nodes"):  # at once
+        AssociationConfig(params={"max_nodes": 10})
+    jcbb = SlamConfig(association=AssociationConfig(method="jcbb", params={"max_nodes": 10}))
+    with pytest.raises(SlamError, match="max_nodes"):  # the method given to run_slam: checked
+        run_slam(seq, features=feats, association="ihgr-window", config=jcbb)
     with pytest.raises(SlamError, match="ihgr-window"):
         run_slam(seq, features=feats, association="window")
