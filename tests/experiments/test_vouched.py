@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from experiments.eval.vouched import VouchRule, vouched_fixes
 from slam import se2
@@ -75,3 +76,18 @@ def test_a_stationary_vehicle_is_judged_by_translation_alone():
     expected[50] = False
     assert np.array_equal(keep, expected)
     assert VouchRule.min_span_m == 2.0 and math.isclose(VouchRule.tol_m, 1.0)
+
+
+@pytest.mark.slow
+def test_the_association_loop_table_and_the_victoria_park_table_agree(vp_dir):
+    """The in-the-loop table's Victoria Park IHGR row and the Victoria Park table's run of the
+    same scans (1-1500: the --quick head) are one run: equal GPS RMSE, over all fixes and over
+    the vouched ones, and the vouched one is a real figure."""
+    from experiments.paper import association_loop as al
+    from experiments.paper import victoria_park as vp
+
+    loop = al.victoria_park_trial((1500, al.LOOP_METHODS[0]))
+    row, _ = vp.vp_trial(("x", "full", "detections", "ihgr", True, False))
+    assert loop["gps_rmse_m"] == pytest.approx(row["rmse_m"], rel=1e-12)
+    assert loop["gps_vouched_rmse_m"] == pytest.approx(row["rmse_vouched_m"], rel=1e-12)
+    assert 0.3 < loop["gps_vouched_rmse_m"] < loop["gps_rmse_m"]
