@@ -1,0 +1,77 @@
+"""How good a map is, against a reference map and against the run's own detections.
+
+- `reference_in_our_frame`: a reference map (the 2002 SLAM school's 145 trees of Victoria Park
+  scans 1-2000) mapped into the run's frame by the rigid fit of the reference laser path to the
+  run's laser path over the scans both have.
+- `map_recall`: share of the reference trees with a landmark within `tol_m` (1 m).
+- `map_precision`: share of the landmarks that joined the map in the reference's span of scans
+  with a reference tree within `tol_m`; landmarks that joined later are outside what the
+  reference covers and are not judged.
+- `false_detection_rate`: the paper's Table 4 figure on real data, where no detection carries a
+  truth label: the share of the circles the filter considered (within its range, in scans it
+  used) that no landmark of the final map explains, i.e. whose track (the landmark or tentative
+  it was paired with or started) is not a landmark at the end of the run. Ambiguous circles
+  (gated to several, assigned to none) count as unexplained.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from slam import se2
+from slam.log import OUT_OF_RANGE, SKIPPED
+from slam.start import procrustes_2d
+
+__all__ = ["false_detection_rate", "map_precision", "map_recall", "reference_in_our_frame"]
+
+
+def reference_in_our_frame(
+    laser_xy: np.ndarray, ground: np.ndarray, trees: np.ndarray
+) -> np.ndarray:
+    """(T, 2) the reference `trees` (T, >= 2) in the run's frame. laser_xy (N, 2): the run's
+    laser positions; ground (M, >= 2): the reference's laser path, scan for scan; fitted over
+    the first min(N, M) scans."""
+    n = min(ground.shape[0], laser_xy.shape[0])
+    if n < 2:
+        raise ValueError(f"reference_in_our_frame: {n} common scans, at least 2 needed")
+    theta, t = procrustes_2d(ground[:n, :2], laser_xy[:n])
+    return se2.rotate(theta, trees[:, :2]) + t
+
+
+def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(len(a),) distance from each point of a to the nearest of b (inf when b is empty)."""
+    if b.shape[0] == 0:
+        return np.full(a.shape[0], np.inf)
+    return np.hypot(a[:, None, 0] - b[None, :, 0], a[:, None, 1] - b[None, :, 1]).min(axis=1)
+
+
+def map_recall(landmark_xy: np.ndarray, trees_xy: np.ndarray, tol_m: float = 1.0) -> float:
+    """Share of the trees with a landmark within tol_m."""
+    return float(np.mean(_nearest(trees_xy, landmark_xy) <= tol_m))
+
+
+def map_precision(
+    landmark_xy: np.ndarray,
+    first_scan: np.ndarray,
+    trees_xy: np.ndarray,
+    n_scans: int,
+    tol_m: float = 1.0,
+) -> float:
+    """Share of the landmarks that joined the map before scan `n_scans` (the reference's span)
+    with a tree within tol_m; NaN when no landmark joined in that span."""
+    judged = np.asarray(first_scan) < n_scans
+    if not judged.any():
+        return float("nan")
+    return float(np.mean(_nearest(landmark_xy[judged], trees_xy) <= tol_m))
+
+
+def false_detection_rate(
+    meas_status: np.ndarray, meas_track: np.ndarray, landmark_id: np.ndarray
+) -> float:
+    """Share of the considered circles (status not out of range, not in a skipped scan) whose
+    track is not a landmark of the final map; NaN when no circle was considered."""
+    considered = (meas_status != OUT_OF_RANGE) & (meas_status != SKIPPED)
+    if not considered.any():
+        return float("nan")
+    explained = np.isin(meas_track[considered], landmark_id) & (meas_track[considered] >= 0)
+    return float(1.0 - np.mean(explained))
