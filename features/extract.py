@@ -89,6 +89,10 @@ class ExtractorParams:
     short_trunks: bool = False
     short_trunk_radius_m: float = 0.2  # prior radius of a trunk (Victoria Park: median 0.21 m)
     short_trunk_radius_sigma_m: float = 0.1  # its spread
+    # No other return of the scan within this distance of a short trunk's centre (0: no test).
+    # Default 2 r_max_m (the largest object modelled, 1 m radius): a return nearer than that
+    # may be part of the same object, so the segment is not known to be a whole thin object.
+    short_trunk_clearance_m: float = 2.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -120,7 +124,14 @@ class ExtractorParams:
         for name in ("short_trunk_radius_m", "short_trunk_radius_sigma_m"):
             if getattr(self, name) <= 0:
                 raise FeaturesError(f"{name}: must be > 0, got {getattr(self, name)!r}")
-        for name in ("q_m2", "roughness_m", "r_min_m", "edge_min_jump_m", "tol"):
+        for name in (
+            "q_m2",
+            "roughness_m",
+            "r_min_m",
+            "edge_min_jump_m",
+            "tol",
+            "short_trunk_clearance_m",
+        ):
             if getattr(self, name) < 0:
                 raise FeaturesError(f"{name}: must be >= 0, got {getattr(self, name)!r}")
         if not 0 < self.class_prob < 1:
@@ -516,17 +527,22 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     A segment qualifies when it is not already a line or circle, its neighbours on both sides
     are no-returns or farther by more than edge_min_jump_m (an occluding, isolated object), its
     chord is under 2 r_max_m, and its end ranges differ by less than a third of its width (a
-    convex face, Bailey's test). Its radius combines the width estimate w / 2, w = (span + one
-    beam) x mean range, with the prior N(short_trunk_radius_m, sigma^2) (variance of the width
-    estimate: half a beam of range-width on each side, (r gamma / 2)^2 / 3); the centre lies that
-    radius behind the segment's mean range, on its mean bearing. Covariance of (x0, y0, r): the
-    mean range's noise sigma_r^2 / m plus the radius variance along the beam, a uniform one-beam
-    bearing error across it, and the radius variance.
+    convex face, Bailey's test), and no other return of the scan lies within
+    short_trunk_clearance_m of its centre (a whole thin object, not a fragment of a larger
+    one: the nearest other surface is farther than the largest object modelled). Its radius
+    combines the width estimate w / 2, w = (span + one beam) x mean range, with the prior
+    N(short_trunk_radius_m, sigma^2) (variance of the width estimate: half a beam of
+    range-width on each side, (r gamma / 2)^2 / 3); the centre lies that radius behind the
+    segment's mean range, on its mean bearing. Covariance of (x0, y0, r): the mean range's
+    noise sigma_r^2 / m plus the radius variance along the beam, a uniform one-beam bearing
+    error across it, and the radius variance.
     bounds (S, 2), kind (S,): the kernel's segments, in the kernel beam order of `beams`.
     Returns (params (k, 3), cov (k, 3, 3), beams (k, 2), segment indices (k,)).
     """
     ranges, angle_min, gamma = beams.ranges, beams.angle_min, beams.gamma
     n = ranges.shape[0]
+    bearing = angle_min + gamma * np.arange(n)
+    xy = np.column_stack([ranges * np.cos(bearing), ranges * np.sin(bearing)])  # NaN: none
     out_p, out_c, out_b, out_k = [], [], [], []
     r0, s0 = p.short_trunk_radius_m, p.short_trunk_radius_sigma_m
     for k, (a, b) in enumerate(bounds):
@@ -552,6 +568,8 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
         th = 0.5 * (th_a + th_b)
         rng = rm + r
         c, s = math.cos(th), math.sin(th)
+        if _crowded(xy, (a, b), (rng * c, rng * s), p.short_trunk_clearance_m):
+            continue
         var_rng = p.sigma_r_m**2 / m + var_r
         var_th = gamma * gamma / 12.0
         J = np.array([[c, -rng * s], [s, rng * c]])
@@ -569,6 +587,16 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
         np.array(out_b, np.int64).reshape(-1, 2),
         np.array(out_k, np.int64),
     )
+
+
+def _crowded(xy: np.ndarray, run: tuple[int, int], centre, clearance: float) -> bool:
+    """A return of the scan outside beams run = (a, b) lies within `clearance` of `centre`."""
+    if clearance <= 0:
+        return False
+    a, b = run
+    d2 = (xy[:, 0] - centre[0]) ** 2 + (xy[:, 1] - centre[1]) ** 2  # NaN for no return
+    d2[a : b + 1] = np.inf
+    return bool(np.any(d2 < clearance * clearance))
 
 
 def _farther(neighbour: float, own: float, p: ExtractorParams) -> bool:

@@ -56,10 +56,12 @@ def map_precision(
     trees_xy: np.ndarray,
     n_scans: int,
     tol_m: float = 1.0,
+    start: int = 0,
 ) -> float:
-    """Share of the landmarks that joined the map before scan `n_scans` (the reference's span)
-    with a tree within tol_m; NaN when no landmark joined in that span."""
-    judged = np.asarray(first_scan) < n_scans
+    """Share of the landmarks that joined the map in scans start .. n_scans - 1 (within the
+    reference's span) with a tree within tol_m; NaN when no landmark joined in those scans."""
+    first_scan = np.asarray(first_scan)
+    judged = (first_scan >= start) & (first_scan < n_scans)
     if not judged.any():
         return float("nan")
     return float(np.mean(_nearest(landmark_xy[judged], trees_xy) <= tol_m))

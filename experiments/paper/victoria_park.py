@@ -103,13 +103,26 @@ def reference_match(lg: SlamLog, laser_pose, ground: np.ndarray, trees: np.ndarr
     false_detection_rate (circles no landmark of the final map explains)."""
     ours = np.array([se2.compose(p, laser_pose)[:2] for p in lg.pose])
     tw = reference_in_our_frame(ours, ground, trees)
-    return {
+    n = min(ground.shape[0], lg.n_scans)
+    out = {
         "reference_trees_1m": map_recall(lg.landmark_xy, tw),
-        "precision_1m": map_precision(
-            lg.landmark_xy, lg.landmark_first_scan, tw, min(ground.shape[0], lg.n_scans)
-        ),
+        "precision_1m": map_precision(lg.landmark_xy, lg.landmark_first_scan, tw, n),
         "false_detection_rate": false_detection_rate(lg.meas_status, lg.meas_track, lg.landmark_id),
     }
+    for a, b in HALVES:  # the generalisation check: each half of the reference's span alone
+        out[f"precision_{a + 1}_{b}"] = map_precision(
+            lg.landmark_xy, lg.landmark_first_scan, tw, min(b, n), start=a
+        )
+        m = (lg.meas_scan >= a) & (lg.meas_scan < b)
+        out[f"false_detection_rate_{a + 1}_{b}"] = false_detection_rate(
+            lg.meas_status[m], lg.meas_track[m], lg.landmark_id
+        )
+    return out
+
+
+# the halves of scans 1-2000 reported apart: a setting derived on the first half alone is
+# judged on the second, which it never saw
+HALVES = ((0, 1000), (1000, 2000))
 
 
 def _published_matched(seq, feats) -> float:
@@ -332,6 +345,10 @@ COLUMNS = [
     ("reference_trees_1m", "reference trees within 1 m"),
     ("precision_1m", "landmarks within 1 m of a reference tree"),
     ("false_detection_rate", "false detection rate"),
+    ("precision_1_1000", "precision, landmarks of scans 1-1000"),
+    ("precision_1001_2000", "precision, landmarks of scans 1001-2000"),
+    ("false_detection_rate_1_1000", "false detection rate, scans 1-1000"),
+    ("false_detection_rate_1001_2000", "false detection rate, scans 1001-2000"),
     ("nis_inside", "NIS inside 95% bounds"),
     ("circles_per_scan", "circles per scan"),
     ("published_matched", "published detections matched"),
@@ -368,6 +385,15 @@ PARTS = (
     (
         "Map and consistency",
         ("landmarks", "reference_trees_1m", "precision_1m", "false_detection_rate", "nis_inside"),
+    ),
+    (
+        "Map quality on each half of scans 1-2000",
+        (
+            "precision_1_1000",
+            "precision_1001_2000",
+            "false_detection_rate_1_1000",
+            "false_detection_rate_1001_2000",
+        ),
     ),
     (
         "Extraction and run time",

@@ -30,6 +30,8 @@ def test_recall_and_precision_count_landmarks_within_the_tolerance():
     assert map_precision(landmarks, first, TREES, 2000) == 0.5
     assert map_precision(landmarks, first, TREES, 3000) == 0.4
     assert math.isnan(map_precision(landmarks, first + 5000, TREES, 2000))
+    # a span of scans alone: those that joined in scans 10-1999 (the 1.2 m one, a tree, a bush)
+    assert map_precision(landmarks, first, TREES, 2000, start=10) == pytest.approx(1 / 3)
     assert map_recall(np.zeros((0, 2)), TREES) == 0.0
 
 
