@@ -748,7 +748,10 @@ def audit(formats=FORMATS, show: int = 0) -> dict[str, dict[str, int]]:
 
 
 if __name__ == "__main__":
-    sys.path.insert(0, str(Path(__file__).parent))
+    # the project before tests/ (whose slam/ and features/ test folders would shadow ours),
+    # tests/ for its support module
+    here = Path(__file__).resolve().parent
+    sys.path[:] = [str(here.parent), str(here)] + [p for p in sys.path if p not in ("", str(here))]
     shown = int(sys.argv[1]) if len(sys.argv) > 1 else 0
     total = audit(show=shown)
     print(json.dumps(total, indent=1))
