@@ -27,7 +27,7 @@ from collections.abc import Mapping
 
 from experiments.errors import DataError
 
-__all__ = ["AnyTable", "ListOf", "Number", "String", "Table", "parse_json"]
+__all__ = ["AnyTable", "ListOf", "Number", "String", "Table", "check", "parse_json"]
 
 
 class NotJson(str):
