@@ -51,7 +51,7 @@ from features.fitting import (
     fit_line_tls,
 )
 from features.segmentation import END_NO_RETURN, END_SCAN, max_growth_ratio, segment_kernel
-from features.types import KIND_CIRCLE, KIND_CLUTTER, Features, Scan
+from features.types import KIND_CIRCLE, Features, Scan
 
 __all__ = ["ExtractorParams", "extract_features", "METHODS"]
 
@@ -521,10 +521,18 @@ def _extract_kernel(beams, settings):
     )
 
 
+# the mean depth of a circle's face behind its nearest point, in radii, for hits spread
+# uniformly across its width (E[sqrt(r^2 - y^2)] = pi r / 4), and that depth's variance in r^2
+_DEPTH = math.pi / 4.0
+_DEPTH_VAR = 2.0 / 3.0 - math.pi**2 / 16.0
+
+
 def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     """Circles for trunks too narrow to fit (1 to min_circle_points - 1 beams).
 
-    A segment qualifies when it is not already a line or circle, its neighbours on both sides
+    A segment qualifies when it is not already a circle (a line of fewer than
+    min_circle_points beams qualifies: no circle was tested on so few beams, and a thin pole's
+    3 beams fit a line within the noise), its neighbours on both sides
     are no-returns or farther by more than edge_min_jump_m (an occluding, isolated object), its
     chord is under 2 r_max_m, and its end ranges differ by less than a third of its width (a
     convex face, Bailey's test), and no other return of the scan lies within
@@ -532,10 +540,11 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     one: the nearest other surface is farther than the largest object modelled). Its radius
     combines the width estimate w / 2, w = (span + one beam) x mean range, with the prior
     N(short_trunk_radius_m, sigma^2) (variance of the width estimate: half a beam of
-    range-width on each side, (r gamma / 2)^2 / 3); the centre lies that radius behind the
-    segment's mean range, on its mean bearing. Covariance of (x0, y0, r): the mean range's
-    noise sigma_r^2 / m plus the radius variance along the beam, a uniform one-beam bearing
-    error across it, and the radius variance.
+    range-width on each side, (r gamma / 2)^2 / 3). The centre lies pi r / 4 behind the
+    segment's mean range (the mean depth of a circle's face over hits spread across its width),
+    on its mean bearing. Covariance of (x0, y0, r): along the beam, the mean range's noise
+    sigma_r^2 / m, the radius variance and the face depth's spread (2/3 - pi^2/16) r^2 / m;
+    across it, a uniform one-beam bearing error; and the radius variance.
     bounds (S, 2), kind (S,): the kernel's segments, in the kernel beam order of `beams`.
     Returns (params (k, 3), cov (k, 3, 3), beams (k, 2), segment indices (k,)).
     """
@@ -547,8 +556,8 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     r0, s0 = p.short_trunk_radius_m, p.short_trunk_radius_sigma_m
     for k, (a, b) in enumerate(bounds):
         m = b - a + 1
-        if kind[k] != KIND_CLUTTER or m >= p.min_circle_points:
-            continue
+        if kind[k] == KIND_CIRCLE or m >= p.min_circle_points:  # (a line of so few beams
+            continue  # was never tested against a circle: a thin pole's 3 beams fit a line)
         left = ranges[a - 1] if a > 0 else np.nan
         right = ranges[b + 1] if b + 1 < n else np.nan
         if not (_farther(left, ranges[a], p) and _farther(right, ranges[b], p)):
@@ -566,16 +575,19 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
         r = (0.5 * width / var_w + r0 / s0**2) / w_r
         var_r = 1.0 / w_r
         th = 0.5 * (th_a + th_b)
-        rng = rm + r
+        # the beams hit the face across its whole width: a hit at lateral offset y lies
+        # sqrt(r^2 - y^2) in front of the centre, pi r / 4 on average over y uniform on
+        # (-r, r), with variance (2/3 - pi^2/16) r^2 (over m beams: / m)
+        rng = rm + _DEPTH * r
         c, s = math.cos(th), math.sin(th)
         if _crowded(xy, (a, b), (rng * c, rng * s), p.short_trunk_clearance_m):
             continue
-        var_rng = p.sigma_r_m**2 / m + var_r
+        var_rng = p.sigma_r_m**2 / m + _DEPTH**2 * var_r + _DEPTH_VAR * r * r / m
         var_th = gamma * gamma / 12.0
         J = np.array([[c, -rng * s], [s, rng * c]])
         cov = np.zeros((3, 3))
         cov[:2, :2] = J @ np.diag([var_rng, var_th]) @ J.T
-        cov[:2, 2] = cov[2, :2] = np.array([c, s]) * var_r  # the centre moves back with r
+        cov[:2, 2] = cov[2, :2] = np.array([c, s]) * _DEPTH * var_r  # moves back with r
         cov[2, 2] = var_r
         out_p.append([rng * c, rng * s, r])
         out_c.append(cov)
@@ -612,7 +624,16 @@ def _with_short_trunks(found: _Found, beams: _Beams, p: ExtractorParams) -> _Fou
         return found
     kind = found.segment_kind.copy()
     kind[segments] = KIND_CIRCLE
+    # a short line that became a trunk is no longer a line
+    was_line = {tuple(b) for b in found.segment_beams[segments].tolist()}
+    keep = np.array([tuple(b) not in was_line for b in found.line_beams.tolist()], dtype=bool)
+    keep = keep.reshape(found.line_beams.shape[0])
     return found._replace(
+        line_params=found.line_params[keep],
+        line_cov=found.line_cov[keep],
+        line_endpoints=found.line_endpoints[keep],
+        line_beams=found.line_beams[keep],
+        line_rms_m=found.line_rms_m[keep],
         circle_params=np.concatenate([found.circle_params, params]),
         circle_cov=np.concatenate([found.circle_cov, cov]),
         circle_beams=np.concatenate([found.circle_beams, runs]),
