@@ -554,10 +554,15 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     xy = np.column_stack([ranges * np.cos(bearing), ranges * np.sin(bearing)])  # NaN: none
     out_p, out_c, out_b, out_k = [], [], [], []
     r0, s0 = p.short_trunk_radius_m, p.short_trunk_radius_sigma_m
-    for k, (a, b) in enumerate(bounds):
+    bounds = np.asarray(bounds).reshape(-1, 2)
+    # not a circle and too few beams to fit one (a line of so few beams was never tested
+    # against a circle: a thin pole's 3 beams fit a line)
+    short = (np.asarray(kind) != KIND_CIRCLE) & (
+        bounds[:, 1] - bounds[:, 0] + 1 < p.min_circle_points
+    )
+    for k in np.flatnonzero(short).tolist():
+        a, b = int(bounds[k, 0]), int(bounds[k, 1])
         m = b - a + 1
-        if kind[k] == KIND_CIRCLE or m >= p.min_circle_points:  # (a line of so few beams
-            continue  # was never tested against a circle: a thin pole's 3 beams fit a line)
         left = ranges[a - 1] if a > 0 else np.nan
         right = ranges[b + 1] if b + 1 < n else np.nan
         if not (_farther(left, ranges[a], p) and _farther(right, ranges[b], p)):
