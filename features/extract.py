@@ -548,32 +548,67 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     bounds (S, 2), kind (S,): the kernel's segments, in the kernel beam order of `beams`.
     Returns (params (k, 3), cov (k, 3, 3), beams (k, 2), segment indices (k,)).
     """
-    ranges, angle_min, gamma = beams.ranges, beams.angle_min, beams.gamma
-    n = ranges.shape[0]
-    bearing = angle_min + gamma * np.arange(n)
-    xy = np.column_stack([ranges * np.cos(bearing), ranges * np.sin(bearing)])  # NaN: none
-    out_p, out_c, out_b, out_k = [], [], [], []
-    r0, s0 = p.short_trunk_radius_m, p.short_trunk_radius_sigma_m
-    bounds = np.asarray(bounds).reshape(-1, 2)
-    # not a circle and too few beams to fit one (a line of so few beams was never tested
-    # against a circle: a thin pole's 3 beams fit a line)
-    short = (np.asarray(kind) != KIND_CIRCLE) & (
-        bounds[:, 1] - bounds[:, 0] + 1 < p.min_circle_points
+    bounds = np.ascontiguousarray(bounds, dtype=np.int64).reshape(-1, 2)
+    prm = np.array(
+        [
+            p.min_circle_points,
+            p.edge_min_jump_m,
+            p.r_max_m,
+            p.short_trunk_radius_m,
+            p.short_trunk_radius_sigma_m,
+            p.short_trunk_clearance_m,
+            p.sigma_r_m,
+        ],
+        dtype=np.float64,
     )
-    for k in np.flatnonzero(short).tolist():
-        a, b = int(bounds[k, 0]), int(bounds[k, 1])
+    params, cov, runs, segments, k = _short_trunk_kernel(
+        np.ascontiguousarray(beams.ranges, dtype=np.float64),
+        float(beams.angle_min),
+        float(beams.gamma),
+        bounds,
+        np.ascontiguousarray(kind, dtype=np.int64),
+        prm,
+    )
+    return params[:k], cov[:k], runs[:k], segments[:k]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _short_trunk_kernel(ranges, angle_min, gamma, bounds, kind, prm):
+    """`_short_trunks`' work (see its doc): (params (S, 3), cov (S, 3, 3), beams (S, 2),
+    segments (S,), how many of the S rows are filled). prm: [min_circle_points,
+    edge_min_jump_m, r_max_m, short_trunk_radius_m, short_trunk_radius_sigma_m,
+    short_trunk_clearance_m, sigma_r_m]."""
+    n = ranges.shape[0]
+    S = bounds.shape[0]
+    min_pts, jump, r_max, r0, s0, clearance, sigma_r = prm
+    out_p = np.zeros((S, 3))
+    out_c = np.zeros((S, 3, 3))
+    out_b = np.zeros((S, 2), np.int64)
+    out_k = np.zeros(S, np.int64)
+    cnt = 0
+    for k in range(S):
+        a, b = bounds[k, 0], bounds[k, 1]
         m = b - a + 1
+        # not a circle and too few beams to fit one (a line of so few beams was never
+        # tested against a circle: a thin pole's 3 beams fit a line)
+        if kind[k] == KIND_CIRCLE or m >= min_pts:
+            continue
         left = ranges[a - 1] if a > 0 else np.nan
         right = ranges[b + 1] if b + 1 < n else np.nan
-        if not (_farther(left, ranges[a], p) and _farther(right, ranges[b], p)):
+        # each end cut off: no return beside it, or the neighbour behind a depth jump
+        if not (left != left or left - ranges[a] > jump):
             continue
-        seg = ranges[a : b + 1]
-        rm = float(np.mean(seg))
+        if not (right != right or right - ranges[b] > jump):
+            continue
+        rm = 0.0
+        for i in range(a, b + 1):
+            rm += ranges[i]
+        rm /= m
         th_a, th_b = angle_min + gamma * a, angle_min + gamma * b
         dx = ranges[b] * math.cos(th_b) - ranges[a] * math.cos(th_a)
         chord = math.hypot(dx, ranges[b] * math.sin(th_b) - ranges[a] * math.sin(th_a))
         width = (th_b - th_a + gamma) * rm
-        if chord >= 2 * p.r_max_m or abs(ranges[b] - ranges[a]) >= width / 3.0:
+        if chord >= 2 * r_max or abs(ranges[b] - ranges[a]) >= width / 3.0:
             continue
         var_w = (rm * gamma / 2.0) ** 2 / 3.0 / 4.0  # of the half width
         w_r = 1.0 / var_w + 1.0 / s0**2
@@ -585,40 +620,35 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
         # (-r, r), with variance (2/3 - pi^2/16) r^2 (over m beams: / m)
         rng = rm + _DEPTH * r
         c, s = math.cos(th), math.sin(th)
-        if _crowded(xy, (a, b), (rng * c, rng * s), p.short_trunk_clearance_m):
+        cx, cy = rng * c, rng * s
+        crowded = False
+        if clearance > 0:  # another return of the scan within the clearance of the centre
+            c2 = clearance * clearance
+            for i in range(n):
+                if a <= i <= b or ranges[i] != ranges[i]:
+                    continue
+                bi = angle_min + gamma * i
+                ex, ey = ranges[i] * math.cos(bi) - cx, ranges[i] * math.sin(bi) - cy
+                if ex * ex + ey * ey < c2:
+                    crowded = True
+                    break
+        if crowded:
             continue
-        var_rng = p.sigma_r_m**2 / m + _DEPTH**2 * var_r + _DEPTH_VAR * r * r / m
+        var_rng = sigma_r**2 / m + _DEPTH**2 * var_r + _DEPTH_VAR * r * r / m
         var_th = gamma * gamma / 12.0
-        J = np.array([[c, -rng * s], [s, rng * c]])
-        cov = np.zeros((3, 3))
-        cov[:2, :2] = J @ np.diag([var_rng, var_th]) @ J.T
-        cov[:2, 2] = cov[2, :2] = np.array([c, s]) * _DEPTH * var_r  # moves back with r
-        cov[2, 2] = var_r
-        out_p.append([rng * c, rng * s, r])
-        out_c.append(cov)
-        out_b.append([a, b])
-        out_k.append(k)
-    return (
-        np.array(out_p).reshape(-1, 3),
-        np.array(out_c).reshape(-1, 3, 3),
-        np.array(out_b, np.int64).reshape(-1, 2),
-        np.array(out_k, np.int64),
-    )
-
-
-def _crowded(xy: np.ndarray, run: tuple[int, int], centre, clearance: float) -> bool:
-    """A return of the scan outside beams run = (a, b) lies within `clearance` of `centre`."""
-    if clearance <= 0:
-        return False
-    a, b = run
-    d2 = (xy[:, 0] - centre[0]) ** 2 + (xy[:, 1] - centre[1]) ** 2  # NaN for no return
-    d2[a : b + 1] = np.inf
-    return bool(np.any(d2 < clearance * clearance))
-
-
-def _farther(neighbour: float, own: float, p: ExtractorParams) -> bool:
-    """A segment end is cut off: no return beside it, or the neighbour is behind a depth jump."""
-    return not (neighbour == neighbour) or neighbour - own > p.edge_min_jump_m
+        # J diag(var_rng, var_th) J^T, J = [[c, -rng s], [s, rng c]]
+        out_c[cnt, 0, 0] = c * c * var_rng + rng * rng * s * s * var_th
+        out_c[cnt, 0, 1] = c * s * var_rng - rng * rng * s * c * var_th
+        out_c[cnt, 1, 0] = out_c[cnt, 0, 1]
+        out_c[cnt, 1, 1] = s * s * var_rng + rng * rng * c * c * var_th
+        out_c[cnt, 0, 2] = out_c[cnt, 2, 0] = c * _DEPTH * var_r  # moves back with r
+        out_c[cnt, 1, 2] = out_c[cnt, 2, 1] = s * _DEPTH * var_r
+        out_c[cnt, 2, 2] = var_r
+        out_p[cnt, 0], out_p[cnt, 1], out_p[cnt, 2] = cx, cy, r
+        out_b[cnt, 0], out_b[cnt, 1] = a, b
+        out_k[cnt] = k
+        cnt += 1
+    return out_p, out_c, out_b, out_k, cnt
 
 
 def _with_short_trunks(found: _Found, beams: _Beams, p: ExtractorParams) -> _Found:
