@@ -282,11 +282,25 @@ def extract(
     rerun: Annotated[
         Path | None, typer.Option(help="also write a rerun recording (.rrd) [default: none]")
     ] = None,
+    config: Annotated[
+        str | None,
+        typer.Option(
+            "--config",
+            help="the extractor's parameters from a configuration's [features] section: a "
+            "TOML file or a preset of `trunkslam presets` (--method still chooses the "
+            "extractor) [default: the extractor's defaults]",
+        ),
+    ] = None,
 ) -> None:
     """Extract circles, lines, edges and clutter from every scan of a sequence file."""
     from experiments.pipeline.extract import run_extract
     from experiments.render.progress import Progress
 
+    features = None
+    if config is not None:
+        from experiments.io.config_file import load_slam_config
+
+        features = load_slam_config(config).features
     with Progress() as progress:
         s = run_extract(
             input,
@@ -296,6 +310,8 @@ def extract(
             line_test=None if line_test is None else line_test.value,
             rerun_path=rerun,
             progress=progress,
+            features=features,
+            config_file=None if config is None else Path(config),
         )
     typer.echo(f"{s['scans']} scans -> {out} ({s['circles']} circles)")
 

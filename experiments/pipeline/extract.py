@@ -17,6 +17,16 @@ from features.bailey import BaileyParams
 __all__ = ["run_extract"]
 
 
+def _base_params(method: str, features) -> dict:
+    """The keyword arguments of `extract_features` a configuration's [features] section gives
+    `method` ({} without one: the extractor's defaults)."""
+    if features is None:
+        return {}
+    from dataclasses import replace
+
+    return replace(features, method=method, file=None).extractor_kwargs()
+
+
 def run_extract(
     input_path: Path | str,
     out: Path | str,
@@ -25,24 +35,35 @@ def run_extract(
     line_test: str | None = None,
     rerun_path: Path | str | None = None,
     progress: Callable[[str, int, int], None] | None = None,
+    *,
+    features=None,
+    config_file: Path | str | None = None,
 ) -> dict:
     """Extract features from every scan of `input_path` and write the features JSON to `out`
     (format: docs/formats.md); optionally a rerun recording. Returns a summary: scans,
     circles, the output path. Both outputs are written atomically (temporary file, rename);
-    an output path that is the input, or not a regular file, is refused before any work."""
+    an output path that is the input, or not a regular file, is refused before any work.
+    features: a `slam.config.FeaturesConfig` whose extractor parameters ([features.extractor],
+    or [features.bailey] for bailey) the extraction takes (its method is not used: `method`
+    is); sigma_r_m and line_test then replace one parameter each. config_file: the file it was
+    read from (an input, never an output)."""
     out = Path(out)
-    params: dict = {}
+    params = _base_params(method, features)
     if line_test is not None:
         params["line_test"] = line_test
     if sigma_r_m is not None:
         params["sigma_r_m"] = sigma_r_m
     if method == "bailey":
-        if params:
+        if line_test is not None or sigma_r_m is not None:
             raise ConfigError("--sigma-r and --line-test do not apply to --method bailey")
-        resolved = asdict(BaileyParams())
+        # the detector's constants, then (from a configuration) its noise model
+        resolved = asdict(params.get("params") or BaileyParams())
+        resolved.update({k: v for k, v in params.items() if k != "params"})
     else:
         resolved = ExtractorParams.from_kwargs(**params).to_dict()
-    check_outputs("extract", inputs=[input_path], files={"--out": out, "--rerun": rerun_path})
+    check_outputs(
+        "extract", inputs=[input_path, config_file], files={"--out": out, "--rerun": rerun_path}
+    )
     seq = load_sequence(input_path)
     scans = []
     with open_recording(

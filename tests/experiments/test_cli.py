@@ -302,3 +302,42 @@ def test_run_log_round_trip_and_inconsistent_content(tmp_path):
     np.savez(tmp_path / "run_log.npz", **data)
     with pytest.raises(DataError, match="meas_landmark"):
         read_run_log(tmp_path)
+
+
+def test_extract_with_a_configuration_takes_its_extractor_parameters(tmp_path):
+    """`extract --config victoria_park_ute --method geometric` extracts as a run of that preset
+    does (short trunks on), records those parameters, and --sigma-r still replaces one; a
+    config file is an input (never an output), and a bad one is an error naming it."""
+    from experiments.io.config_file import load_slam_config
+    from features import extract_features
+
+    scene = tmp_path / "pole.json"  # a 0.1 m pole 15 m away: 2 beams, a short trunk
+    scene.write_text(
+        json.dumps({"circles": [{"name": "p", "center_xy": [15, 0], "radius_m": 0.1}]})
+    )
+    run = tmp_path / "run.npz"
+    res = runner.invoke(app, ["simulate", str(scene), "--pose", "0,0,0", "--out", str(run)])
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "f.json"
+    args = ["extract", str(run), "--method", "geometric", "--config", "victoria_park_ute"]
+    res = runner.invoke(app, [*args, "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["params"]["short_trunks"] is True and doc["params"]["short_trunk_clearance_m"] == 2
+    kw = load_slam_config("victoria_park_ute").features.extractor_kwargs()
+    seq = load_sequence(run)
+    want = [extract_features(seq.scan(k), "geometric", **kw) for k in range(seq.n_scans)]
+    assert [len(s["circles"]) for s in doc["scans"]] == [f.n_circles for f in want]
+    assert sum(f.n_circles for f in want) > sum(
+        extract_features(seq.scan(k), "geometric").n_circles for k in range(seq.n_scans)
+    )  # the preset's short trunks are really used
+    res = runner.invoke(app, [*args, "--sigma-r", "0.03", "--out", str(out)])
+    assert res.exit_code == 0 and json.loads(out.read_text())["params"]["sigma_r_m"] == 0.03
+    cfg = tmp_path / "my.toml"
+    cfg.write_text('[features.extractor]\nshort_trunks = "yes"\n')
+    res = runner.invoke(app, ["extract", str(run), "--config", str(cfg), "--out", str(out)])
+    assert res.exit_code == 1 and "short_trunks" in res.output and str(cfg) in res.output
+    cfg.write_text("[features.extractor]\nshort_trunks = true\n")
+    res = runner.invoke(app, ["extract", str(run), "--config", str(cfg), "--out", str(cfg)])
+    assert res.exit_code == 1 and "input" in res.output
+    assert cfg.read_text() == "[features.extractor]\nshort_trunks = true\n"
