@@ -120,7 +120,7 @@ def unicycle_step(pose: np.ndarray, v: float, omega: float, dt: float):
     x, y, th = (float(p) for p in pose)
     d = v * dt
     h = 0.5 * omega * dt
-    s, ds = _sinc(h)
+    s, ds = se2.sinc_and_derivative(h)
     c_, s_ = math.cos(th + h), math.sin(th + h)
     pose1 = np.array([x + d * c_ * s, y + d * s_ * s, th + 2.0 * h])
     F = np.array([[1.0, 0.0, -d * s_ * s], [0.0, 1.0, d * c_ * s], [0.0, 0.0, 1.0]])
@@ -129,13 +129,6 @@ def unicycle_step(pose: np.ndarray, v: float, omega: float, dt: float):
     )
     J_u = np.array([[dt, 0.0], [0.0, 0.5 * dt]])  # (d, h) from (v, omega)
     return pose1, F, J_dh @ J_u
-
-
-def _sinc(h: float) -> tuple[float, float]:
-    if abs(h) < 1e-4:
-        h2 = h * h
-        return 1.0 - h2 / 6.0 + h2 * h2 / 120.0, -h / 3.0 + h * h2 / 30.0
-    return math.sin(h) / h, (h * math.cos(h) - math.sin(h)) / (h * h)
 
 
 @njit(cache=True)
@@ -151,13 +144,7 @@ def _unicycle_kernel(pose, dts, vs, ws, sigmas):
         dt, v, w = dts[i], vs[i], ws[i]
         d = v * dt
         h = 0.5 * w * dt
-        if abs(h) < 1e-4:
-            h2 = h * h
-            s = 1.0 - h2 / 6.0 + h2 * h2 / 120.0
-            ds = -h / 3.0 + h * h2 / 30.0
-        else:
-            s = math.sin(h) / h
-            ds = (h * math.cos(h) - math.sin(h)) / (h * h)
+        s, ds = se2.sinc_and_derivative(h)
         c_ = math.cos(th + h)
         s_ = math.sin(th + h)
         Fk[0, 2] = -d * s_ * s

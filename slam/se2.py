@@ -30,10 +30,22 @@ __all__ = [
     "observe",
     "rotate",
     "sensor_position",
+    "sinc_and_derivative",
     "to_frame",
     "transform_points",
     "wrap_angle",
 ]
+
+
+@njit(cache=True, inline="always")
+def sinc_and_derivative(h: float) -> tuple[float, float]:
+    """sin(h)/h and its derivative (h cos h - sin h)/h^2, by series near 0: the factors of an
+    arc step of half-angle h (`slam.vehicle`, `slam.motion`; callable from Python and from
+    numba kernels)."""
+    if abs(h) < 1e-4:
+        h2 = h * h
+        return 1.0 - h2 / 6.0 + h2 * h2 / 120.0, -h / 3.0 + h * h2 / 30.0
+    return math.sin(h) / h, (h * math.cos(h) - math.sin(h)) / (h * h)
 
 
 def wrap_angle(a):

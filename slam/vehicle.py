@@ -35,7 +35,7 @@ from numba import njit
 
 from slam.checks import finite, float_array, times
 from slam.errors import SlamError
-from slam.se2 import wrap_angle
+from slam.se2 import sinc_and_derivative, wrap_angle
 
 __all__ = [
     "AckermannModel",
@@ -48,15 +48,6 @@ __all__ = [
     "integrate",
     "wrap_angle",
 ]
-
-
-def _sinc_and_derivative(h: float) -> tuple[float, float]:
-    """sin(h)/h and its derivative (h cos h - sin h)/h^2, by series near 0."""
-    if abs(h) < 1e-4:
-        h2 = h * h
-        return 1.0 - h2 / 6.0 + h2 * h2 / 120.0, -h / 3.0 + h * h2 / 30.0
-    s, c = math.sin(h), math.cos(h)
-    return s / h, (h * c - s) / (h * h)
 
 
 @dataclass(frozen=True)
@@ -124,7 +115,7 @@ def arc_step(
     x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
     d = v_axle_mps * dt_s
     h = 0.5 * d * math.tan(steer_rad) / wheelbase_m
-    s, _ = _sinc_and_derivative(h)
+    s, _ = sinc_and_derivative(h)
     return np.array([x + d * math.cos(th + h) * s, y + d * math.sin(th + h) * s, th + 2.0 * h])
 
 
@@ -143,7 +134,7 @@ def arc_step_jacobians(
     sec2 = 1.0 + t * t
     d = v * dt_s
     h = 0.5 * d * t / L
-    s, ds = _sinc_and_derivative(h)
+    s, ds = sinc_and_derivative(h)
     c_, s_ = math.cos(th + h), math.sin(th + h)
     pose1 = np.array([x + d * c_ * s, y + d * s_ * s, th + 2.0 * h])
     F = np.array([[1.0, 0.0, -d * s_ * s], [0.0, 1.0, d * c_ * s], [0.0, 0.0, 1.0]])
@@ -392,13 +383,7 @@ def _integrate_kernel(pose, dts, vs, alphas, L, H, sv0, sa0, sv1, sa1, var_xy, v
         sa = sa0 + sa1 * v * v * abs(t) / L
         var_v = sv * sv
         var_a = sa * sa
-        if abs(h) < 1e-4:
-            h2 = h * h
-            s = 1.0 - h2 / 6.0 + h2 * h2 / 120.0
-            ds = -h / 3.0 + h * h2 / 30.0
-        else:
-            s = math.sin(h) / h
-            ds = (h * math.cos(h) - math.sin(h)) / (h * h)
+        s, ds = sinc_and_derivative(h)
         c_ = math.cos(th + h)
         s_ = math.sin(th + h)
         Fk[0, 2] = -d * s_ * s
