@@ -529,10 +529,16 @@ def _circle(c: Any, w: str, source: str) -> CircleObject:
     name = _get(c, "name", w, source)
     center = _xy_list([_get(c, "center_xy", w, source)], f"{w}.center_xy", source, 1)[0]
     r = _number(_get(c, "radius_m", w, source), f"{w}.radius_m", source, positive=True)
-    kind = c.get("kind", "trunk")
-    if kind not in CIRCLE_KINDS:
-        raise DataError(_where(source, f"{w}.kind: must be one of {CIRCLE_KINDS}, got {kind!r}"))
+    kind = _kind(c, CIRCLE_KINDS, "trunk", w, source)
     return CircleObject(name, center, r, kind, _height(c, w, source))
+
+
+def _kind(o: Mapping, kinds: tuple[str, ...], default: str, w: str, source: str) -> str:
+    """The entry's "kind", one of `kinds` (absent: `default`)."""
+    kind = o.get("kind", default)
+    if kind not in kinds:
+        raise DataError(_where(source, f"{w}.kind: must be one of {kinds}, got {kind!r}"))
+    return kind
 
 
 def _wall(o: Any, w: str, source: str) -> WallObject:
@@ -541,9 +547,7 @@ def _wall(o: Any, w: str, source: str) -> WallObject:
     _text(o, "note", f"{w}.", source)
     name = _get(o, "name", w, source)
     pts = _xy_list(_get(o, "points_xy", w, source), f"{w}.points_xy", source, 2)
-    kind = o.get("kind", "wall")
-    if kind not in WALL_KINDS:
-        raise DataError(_where(source, f"{w}.kind: must be one of {WALL_KINDS}, got {kind!r}"))
+    kind = _kind(o, WALL_KINDS, "wall", w, source)
     closed = o.get("closed", False)
     if not isinstance(closed, bool):
         raise DataError(_where(source, f"{w}.closed: must be true or false, got {closed!r}"))
