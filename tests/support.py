@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -239,3 +241,32 @@ def two_landmarks_with_cross_term(cross: float):
     z_hat = np.array([[5.0, 0.1], [5.2, 0.12]])
     z = np.array([[5.1, 0.11], [5.15, 0.115]])
     return z, z_hat, H, P
+
+
+# ---- result folders ------------------------------------------------------------------------
+
+
+def snapshot(folder: Path) -> dict[str, str]:
+    """{relative path: sha256} of every file under folder (hidden ones too)."""
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+def leftovers(folder: Path) -> list[str]:
+    """Temporary folders, files or locks of `folder` left beside it or in it."""
+    beside = [p.name for p in folder.parent.glob(f".{folder.name}.*")]
+    inside = [p.name for p in folder.glob(".*")] if folder.is_dir() else []
+    return beside + inside
+
+
+def invoke(*args) -> None:
+    """`trunkslam ARGS` in this process (typer's runner); it must succeed."""
+    from typer.testing import CliRunner
+
+    from experiments.cli import app
+
+    res = CliRunner().invoke(app, [str(a) for a in args])
+    assert res.exit_code == 0, res.output

@@ -16,33 +16,17 @@ import time
 from pathlib import Path
 
 import pytest
+from subprocesses import TRUNKSLAM
 from typer.testing import CliRunner
 
 from experiments.cli import app
 from experiments.errors import DataError
 from experiments.io.outputs import check_output_folder, check_outputs
 from experiments.io.writers import atomic_folder, write_atomic
-from tests.support import read_recording
+from tests.support import leftovers, read_recording, snapshot
 
 runner = CliRunner()
-TRUNKSLAM = [sys.executable, "-m", "experiments.cli"]
 FAST = ["noise-calibration"]  # the quickest experiment: two tables in about 3 s
-
-
-def snapshot(folder: Path) -> dict[str, str]:
-    """{relative path: sha256} of every file under folder (hidden ones too)."""
-    return {
-        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
-        for p in sorted(folder.rglob("*"))
-        if p.is_file()
-    }
-
-
-def leftovers(folder: Path) -> list[str]:
-    """Temporary folders or files of `folder` left beside it or in it."""
-    beside = [p.name for p in folder.parent.glob(f".{folder.name}.*")]
-    inside = [p.name for p in folder.glob(".*")] if folder.is_dir() else []
-    return beside + inside
 
 
 def assert_complete_reproduce_set(folder: Path, seed: int) -> None:

@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import resource
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import pytest
 from subprocesses import TRUNKSLAM, error_line, trunkslam
+from support import invoke, snapshot
 from typer.testing import CliRunner
 
 from experiments.bundled import presets_dir, scenes_dir
@@ -35,20 +35,6 @@ from experiments.io.outputs import MANIFEST, check_output_folder, check_outputs
 runner = CliRunner()
 SWEEP = 'study = "association"\ntrials = 1\nseed = 1\n[base]\n"sim.n_scans" = 4\n'
 SWEEP += "[grid]\ngate_prob = [0.9]\n"
-
-
-def snapshot(folder: Path) -> dict[str, str]:
-    """{relative path: sha256} of every file under folder (hidden ones too)."""
-    return {
-        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
-        for p in sorted(folder.rglob("*"))
-        if p.is_file()
-    }
-
-
-def invoke(*args) -> None:
-    res = runner.invoke(app, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
 
 
 @pytest.fixture(scope="module")

@@ -25,29 +25,11 @@ from pathlib import Path
 
 import pytest
 from subprocesses import default_signals, error_line, marked_env, marked_processes, start, trunkslam
-from typer.testing import CliRunner
+from support import invoke, leftovers, snapshot
 
-from experiments.cli import app
 from experiments.io.outputs import MANIFEST, lock_folder
 
-runner = CliRunner()
 TESTS = Path(__file__).resolve().parents[1]
-
-
-def snapshot(folder: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
-
-
-def leftovers(folder: Path) -> list[str]:
-    """Temporary folders, files or locks of `folder` beside it or in it."""
-    beside = [p.name for p in folder.parent.glob(f".{folder.name}.*")]
-    inside = [p.name for p in folder.glob(".*")] if folder.is_dir() else []
-    return beside + inside
-
-
-def invoke(*args) -> None:
-    res = runner.invoke(app, [str(a) for a in args])
-    assert res.exit_code == 0, res.output
 
 
 @pytest.fixture(scope="module")
