@@ -8,6 +8,8 @@ and the one check the loop makes on every scan (`check_noise`). Errors are `Slam
 from __future__ import annotations
 
 import logging
+import math
+from dataclasses import fields
 
 import numpy as np
 
@@ -20,9 +22,19 @@ __all__ = [
     "check_types",
     "finite",
     "float_array",
+    "nonnegative_fields",
     "readonly",
     "times",
 ]
+
+
+def nonnegative_fields(owner: str, obj) -> None:
+    """Every field of the dataclass `obj` a finite real number >= 0 (noise sigmas); a
+    `SlamError` naming `owner`.field otherwise."""
+    for f in fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
+            raise SlamError(f"{owner}.{f.name}: must be a finite number >= 0, got {v!r}")
 
 
 def readonly(a: np.ndarray) -> np.ndarray:

@@ -25,13 +25,13 @@ the unicycle's integration loop is a numba kernel with a numpy twin as its test 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
 
 from slam import se2
-from slam.checks import finite, float_array, times
+from slam.checks import finite, float_array, nonnegative_fields, times
 from slam.errors import SlamError
 
 __all__ = [
@@ -42,13 +42,6 @@ __all__ = [
     "increment_jacobians",
     "unicycle_step",
 ]
-
-
-def _check_sigmas(owner: str, obj) -> None:
-    for f in fields(obj):
-        v = getattr(obj, f.name)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
-            raise SlamError(f"{owner}.{f.name}: must be a finite number >= 0, got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -73,7 +66,7 @@ class UnicycleNoise:
     floor_theta_rad_per_sqrt_s: float = 0.0001
 
     def __post_init__(self) -> None:
-        _check_sigmas("vehicle.unicycle_noise", self)
+        nonnegative_fields("vehicle.unicycle_noise", self)
 
 
 @dataclass(frozen=True)
@@ -96,7 +89,7 @@ class IncrementNoise:
     floor_theta_rad_per_sqrt_s: float = 0.0001
 
     def __post_init__(self) -> None:
-        _check_sigmas("vehicle.increment_noise", self)
+        nonnegative_fields("vehicle.increment_noise", self)
 
 
 def _pieces(t: np.ndarray, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from slam.checks import finite, float_array, times
+from slam.checks import finite, float_array, nonnegative_fields, times
 from slam.errors import SlamError
 from slam.se2 import sinc_and_derivative, wrap_angle
 
@@ -180,17 +180,7 @@ class OdometryNoise:
     steer_sigma_per_lateral_mps2: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in (
-            "speed_sigma_mps",
-            "steer_sigma_rad",
-            "floor_xy_m_per_sqrt_s",
-            "floor_theta_rad_per_sqrt_s",
-            "speed_sigma_per_speed",
-            "steer_sigma_per_lateral_mps2",
-        ):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
-                raise SlamError(f"OdometryNoise.{name}: must be a finite number >= 0, got {v!r}")
+        nonnegative_fields("OdometryNoise", self)
 
     def Q_u(self, v_enc_mps: float, v_axle_mps: float, steer_rad: float, L: float) -> np.ndarray:
         """(2, 2) covariance of one sample's (v_e, alpha) readings."""
