@@ -233,11 +233,11 @@ def victoria_park_trial(job: tuple, seed=None) -> dict:
     """One method (`job` = (scans or None, (label, association, K))) on the Victoria Park run:
     its row. Deterministic (the seed is unused)."""
     from experiments.eval.gps import score_sequence
+    from experiments.eval.map_quality import reference_in_our_frame
     from experiments.eval.vouched import vouched_for_sequence
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
     from experiments.paper.victoria_park import PRESET, head
-    from slam.start import procrustes_2d
 
     n_scans, (label, assoc, K) = job
     full = load_victoria_park(full=True)
@@ -250,8 +250,7 @@ def victoria_park_trial(job: tuple, seed=None) -> dict:
     sc = score_sequence(full, lg.scan_t, lg.pose, lg.antenna_pose, vouched)
     n = min(ground.shape[0], lg.n_scans)
     ours = np.array([se2.compose(p, lg.laser_pose)[:2] for p in lg.pose[:n]])
-    theta, t = procrustes_2d(ground[:n, :2], ours)
-    tw = se2.rotate(theta, ref_trees[:, :2]) + t
+    tw = reference_in_our_frame(ours, ground, ref_trees)
     dup, missed = duplicates_and_missed(lg.landmark_xy, tw, None, TOL_M)
     return {
         "data": f"Victoria Park, {lg.n_scans} scans, published detections",

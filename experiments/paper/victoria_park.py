@@ -101,9 +101,9 @@ def reference_match(lg: SlamLog, laser_pose, ground: np.ndarray, trees: np.ndarr
     reference_trees_1m (recall: reference trees with a landmark within 1 m), precision_1m
     (landmarks that joined in scans 1-2000 with a reference tree within 1 m) and
     false_detection_rate (circles no landmark of the final map explains)."""
-    ours = np.array([se2.compose(p, laser_pose)[:2] for p in lg.pose])
-    tw = reference_in_our_frame(ours, ground, trees)
     n = min(ground.shape[0], lg.n_scans)
+    ours = np.array([se2.compose(p, laser_pose)[:2] for p in lg.pose[:n]])
+    tw = reference_in_our_frame(ours, ground, trees)
     out = {
         "reference_trees_1m": map_recall(lg.landmark_xy, tw),
         "precision_1m": map_precision(lg.landmark_xy, lg.landmark_first_scan, tw, n),
