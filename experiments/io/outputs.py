@@ -212,9 +212,14 @@ def _check_unless_held(out: _Output, command: str) -> None:
                 raise
 
 
+def _lock_file(real: Path) -> Path:
+    """The lock file of the result folder at the resolved path `real`: `.NAME.lock` beside it."""
+    return real.parent / f".{real.name}.lock"
+
+
 def _refuse_if_held(real: Path, folder: Path, option: str) -> None:
     """The "in use" `DataError` of `lock_folder` when another process holds `folder` now."""
-    lock = real.parent / f".{real.name}.lock"
+    lock = _lock_file(real)
     if fcntl is None or str(lock) in _held:
         return
     try:
@@ -412,7 +417,7 @@ def lock_folder(folder: Path | str, option: str = "--out") -> Iterator[None]:
         yield
         return
     real.parent.mkdir(parents=True, exist_ok=True)
-    lock = real.parent / f".{real.name}.lock"
+    lock = _lock_file(real)
     key = str(lock)
     if key in _held:
         _held[key][1] += 1
