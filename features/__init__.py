@@ -4,7 +4,7 @@ Stands alone: imports nothing else of trunkslam.
 """
 
 from features.errors import FeaturesError
-from features.extract import METHODS, ExtractorParams, extract_features
+from features.extract import METHODS, PAPER_FAITHFUL, ExtractorParams, extract_features
 from features.types import Circle, Edge, Features, Line, Scan, Segment
 
 __all__ = [
@@ -15,6 +15,7 @@ __all__ = [
     "Edge",
     "Features",
     "ExtractorParams",
+    "PAPER_FAITHFUL",
     "extract_features",
     "METHODS",
     "FeaturesError",

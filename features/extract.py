@@ -53,7 +53,7 @@ from features.fitting import (
 from features.segmentation import END_NO_RETURN, END_SCAN, max_growth_ratio, segment_kernel
 from features.types import KIND_CIRCLE, Features, Scan
 
-__all__ = ["ExtractorParams", "extract_features", "METHODS"]
+__all__ = ["ExtractorParams", "PAPER_FAITHFUL", "extract_features", "METHODS"]
 
 METHODS = ("paper", "geometric", "kasa", "taubin", "bailey")
 PARAM_LIMIT = 1e9  # no extractor parameter is larger in size (metres, counts, thresholds)
@@ -83,12 +83,12 @@ class ExtractorParams:
     lambda0: float = 0.01  # paper's modified Gauss-Newton (section 2.2)
     max_iter: int = 100
     tol: float = 1e-10  # relative change of E(p) that stops the iteration
-    # Short trunks (off by default: the paper's extractor needs min_circle_points beams). On:
-    # an isolated segment of 1 to min_circle_points - 1 beams whose chord is under 2 r_max_m
-    # and whose end ranges agree within its width becomes a circle (`_short_trunks`).
-    short_trunks: bool = False
-    short_trunk_radius_m: float = 0.2  # prior radius of a trunk (Victoria Park: median 0.21 m)
-    short_trunk_radius_sigma_m: float = 0.1  # its spread
+    # Short trunks (on by default; the paper's extractor, `PAPER_FAITHFUL`, has them off and
+    # needs min_circle_points beams): an isolated segment of 1 to min_circle_points - 1 beams
+    # whose chord is under 2 r_max_m and whose end ranges agree within its width becomes a
+    # circle (`_short_trunks`); its radius is the width the beams allow, with the radius
+    # limits [r_min_m, r_max_m] as the only prior.
+    short_trunks: bool = True
     # No other return of the scan within this distance of a short trunk's centre (0: no test).
     # Default 2 r_max_m (the largest object modelled, 1 m radius): a return nearer than that
     # may be part of the same object, so the segment is not known to be a whole thin object.
@@ -119,9 +119,6 @@ class ExtractorParams:
                 object.__setattr__(self, f.name, float(v))
         positive = ("sigma_r_m", "gate", "lrt_threshold", "r_max_m", "lambda0", "max_iter")
         for name in positive:
-            if getattr(self, name) <= 0:
-                raise FeaturesError(f"{name}: must be > 0, got {getattr(self, name)!r}")
-        for name in ("short_trunk_radius_m", "short_trunk_radius_sigma_m"):
             if getattr(self, name) <= 0:
                 raise FeaturesError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         for name in (
@@ -155,6 +152,12 @@ class ExtractorParams:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+# The paper's extractor as published: no short trunks (a circle needs min_circle_points beams).
+# The simulated experiments that reproduce the paper's tables run it; the default adds short
+# trunks, which real trunks need (most span 1-3 beams of a 0.5 deg laser).
+PAPER_FAITHFUL = ExtractorParams(short_trunks=False)
 
 
 @lru_cache(maxsize=64)
@@ -537,10 +540,12 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     chord is under 2 r_max_m, and its end ranges differ by less than a third of its width (a
     convex face, Bailey's test), and no other return of the scan lies within
     short_trunk_clearance_m of its centre (a whole thin object, not a fragment of a larger
-    one: the nearest other surface is farther than the largest object modelled). Its radius
-    combines the width estimate w / 2, w = (span + one beam) x mean range, with the prior
-    N(short_trunk_radius_m, sigma^2) (variance of the width estimate: half a beam of
-    range-width on each side, (r gamma / 2)^2 / 3). The centre lies pi r / 4 behind the
+    one: the nearest other surface is farther than the largest object modelled); a segment at
+    the border of a scan that is not a full circle is not known to end there. Its radius
+    combines the width estimate w / 2, w = (span + one beam) x mean range (each edge is
+    somewhere in half a beam of range-width, uniformly: variance of w / 2 is
+    2 (rho gamma / 2)^2 / 3 / 4), with the radius limits as a prior: the moments of the uniform
+    distribution on [r_min_m, r_max_m] (no site's trunk sizes). The centre lies pi r / 4 behind the
     segment's mean range (the mean depth of a circle's face over hits spread across its width),
     on its mean bearing. Covariance of (x0, y0, r): along the beam, the mean range's noise
     sigma_r^2 / m, the radius variance and the face depth's spread (2/3 - pi^2/16) r^2 / m;
@@ -553,11 +558,11 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
         [
             p.min_circle_points,
             p.edge_min_jump_m,
+            p.r_min_m,
             p.r_max_m,
-            p.short_trunk_radius_m,
-            p.short_trunk_radius_sigma_m,
             p.short_trunk_clearance_m,
             p.sigma_r_m,
+            float(beams.cyclic),
         ],
         dtype=np.float64,
     )
@@ -576,11 +581,11 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
 def _short_trunk_kernel(ranges, angle_min, gamma, bounds, kind, prm):
     """`_short_trunks`' work (see its doc): (params (S, 3), cov (S, 3, 3), beams (S, 2),
     segments (S,), how many of the S rows are filled). prm: [min_circle_points,
-    edge_min_jump_m, r_max_m, short_trunk_radius_m, short_trunk_radius_sigma_m,
-    short_trunk_clearance_m, sigma_r_m]."""
+    edge_min_jump_m, r_min_m, r_max_m, short_trunk_clearance_m, sigma_r_m, cyclic]."""
     n = ranges.shape[0]
     S = bounds.shape[0]
-    min_pts, jump, r_max, r0, s0, clearance, sigma_r = prm
+    min_pts, jump, r_min, r_max, clearance, sigma_r, cyclic = prm
+    r0, var0 = 0.5 * (r_min + r_max), (r_max - r_min) ** 2 / 12.0  # uniform on the limits
     out_p = np.zeros((S, 3))
     out_c = np.zeros((S, 3, 3))
     out_b = np.zeros((S, 2), np.int64)
@@ -593,8 +598,12 @@ def _short_trunk_kernel(ranges, angle_min, gamma, bounds, kind, prm):
         # tested against a circle: a thin pole's 3 beams fit a line)
         if kind[k] == KIND_CIRCLE or m >= min_pts:
             continue
-        left = ranges[a - 1] if a > 0 else np.nan
-        right = ranges[b + 1] if b + 1 < n else np.nan
+        # a segment at the border of a scan that is not a full circle may go on outside it:
+        # not known to be a whole object (a 360 deg scan's first beam neighbours its last)
+        if cyclic == 0.0 and (a == 0 or b == n - 1):
+            continue
+        left = ranges[(a - 1) % n]
+        right = ranges[(b + 1) % n]
         # each end cut off: no return beside it, or the neighbour behind a depth jump
         if not (left != left or left - ranges[a] > jump):
             continue
@@ -610,10 +619,10 @@ def _short_trunk_kernel(ranges, angle_min, gamma, bounds, kind, prm):
         width = (th_b - th_a + gamma) * rm
         if chord >= 2 * r_max or abs(ranges[b] - ranges[a]) >= width / 3.0:
             continue
-        var_w = (rm * gamma / 2.0) ** 2 / 3.0 / 4.0  # of the half width
-        w_r = 1.0 / var_w + 1.0 / s0**2
-        r = (0.5 * width / var_w + r0 / s0**2) / w_r
-        var_r = 1.0 / w_r
+        var_w = 2.0 * (rm * gamma / 2.0) ** 2 / 3.0 / 4.0  # of the half width: two edges
+        # the two combined by their variances (this form stays finite when var_w underflows)
+        r = (0.5 * width * var0 + r0 * var_w) / (var0 + var_w)
+        var_r = var_w * var0 / (var0 + var_w)
         th = 0.5 * (th_a + th_b)
         # the beams hit the face across its whole width: a hit at lateral offset y lies
         # sqrt(r^2 - y^2) in front of the centre, pi r / 4 on average over y uniform on

@@ -457,6 +457,13 @@ MOVED = {
     "initial_heading_sigma_rad": "start.heading_sigma_rad",
     "first_estimates_jacobians": "filter.first_estimates_jacobians",
 }
+# Settings that were removed, and why (for the error message).
+RETIRED = {
+    "short_trunk_radius_m": "removed: a short trunk's radius prior is now the extractor's radius "
+    "limits, uniform on [r_min_m, r_max_m] (no site's trunk sizes)",
+    "short_trunk_radius_sigma_m": "removed: a short trunk's radius prior is now the extractor's "
+    "radius limits, uniform on [r_min_m, r_max_m] (no site's trunk sizes)",
+}
 SWEEP_KEYS = {"study", "trials", "grid", "points", "base", "executor"}
 
 
@@ -488,6 +495,8 @@ def _unknown_key(cls, key: str, names: set, path: str) -> SlamError:
     close = difflib.get_close_matches(key, sorted(names), n=1, cutoff=0.6)
     if cls is SlamConfig and key in MOVED:
         hint = f"; this setting is now {MOVED[key]} (configurations have sections)"
+    elif key in RETIRED:
+        hint = f"; {RETIRED[key]}"
     else:
         hint = f"; did you mean {close[0]!r}?" if close else ""
     return SlamError(

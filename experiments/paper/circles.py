@@ -71,7 +71,7 @@ def _extract_all(scan, sigma, methods):
     return {
         m: extract_features(scan, m)
         if m == "bailey"
-        else extract_features(scan, m, sigma_r_m=sigma)
+        else extract_features(scan, m, sigma_r_m=sigma, short_trunks=False)  # paper-faithful
         for m in methods
     }
 

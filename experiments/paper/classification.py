@@ -47,7 +47,7 @@ def _extract(scene, rng, sigma_m, method="geometric", line_test="lrt", **params)
         method,
         sigma_r_m=sensor.effective_sigma_m,
         line_test=line_test,
-        **params,
+        **({"short_trunks": False} | params),  # paper-faithful unless asked
     )
     return f, labels
 

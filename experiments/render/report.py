@@ -347,6 +347,11 @@ def _vp_rows(s: Snapshot, label: str) -> list[list[str]]:
         r = runs.get(key)
         return "" if r is None else f"{r['rmse_m']:.2f} m"
 
+    def ours(show) -> list[str]:  # our three extractors on the raw scans
+        keys = (f"scans 1-2000, our {m} extractor on the raw scans, ihgr" for m in _METHODS)
+        return ["" if runs.get(k) is None else show(runs[k]) for k in keys]
+
+    raw = label + " scans 1-2000, our extractors on the raw scans:"
     full = runs.get("full run, published detections, ihgr")
     return [
         [
@@ -356,6 +361,24 @@ def _vp_rows(s: Snapshot, label: str) -> list[list[str]]:
             rmse("scans 1-2000, our paper extractor on the raw scans, ihgr"),
             rmse("scans 1-2000, our geometric extractor on the raw scans, ihgr"),
             rmse("scans 1-2000, published detections, ihgr"),
+        ],
+        [
+            raw + " map precision / recall (landmarks on, and trees of, the 2002 map, 1 m)",
+            "",
+            "",
+            *ours(lambda r: f"{r['precision_1m']:.2f} / {r['reference_trees_1m']:.2f}"),
+        ],
+        [
+            raw + " false-detection rate (circles no final landmark explains)",
+            "",
+            "",
+            *ours(lambda r: f"{r['false_detection_rate']:.3f}"),
+        ],
+        [
+            raw + " RMSE on the odometry-vouched GPS fixes",
+            "",
+            "",
+            *ours(lambda r: f"{r['rmse_vouched_m']:.3f} m"),
         ],
         [
             label + " full run, published detections: RMSE, landmarks",

@@ -305,8 +305,8 @@ def test_run_log_round_trip_and_inconsistent_content(tmp_path):
 
 
 def test_extract_with_a_configuration_takes_its_extractor_parameters(tmp_path):
-    """`extract --config victoria_park_ute --method geometric` extracts as a run of that preset
-    does (short trunks on), records those parameters, and --sigma-r still replaces one; a
+    """`extract --config cycab --method geometric` extracts as a run of that preset does
+    (paper-faithful: no short trunks), records those parameters, and --sigma-r still replaces one; a
     config file is an input (never an output), and a bad one is an error naming it."""
     from experiments.io.config_file import load_slam_config
     from features import extract_features
@@ -319,18 +319,19 @@ def test_extract_with_a_configuration_takes_its_extractor_parameters(tmp_path):
     res = runner.invoke(app, ["simulate", str(scene), "--pose", "0,0,0", "--out", str(run)])
     assert res.exit_code == 0, res.output
     out = tmp_path / "f.json"
-    args = ["extract", str(run), "--method", "geometric", "--config", "victoria_park_ute"]
+    # the cycab preset's extractor is the paper-faithful one: no short trunks
+    args = ["extract", str(run), "--method", "geometric", "--config", "cycab"]
     res = runner.invoke(app, [*args, "--out", str(out)])
     assert res.exit_code == 0, res.output
     doc = json.loads(out.read_text())
-    assert doc["params"]["short_trunks"] is True and doc["params"]["short_trunk_clearance_m"] == 2
-    kw = load_slam_config("victoria_park_ute").features.extractor_kwargs()
+    assert doc["params"]["short_trunks"] is False and doc["params"]["short_trunk_clearance_m"] == 2
+    kw = load_slam_config("cycab").features.extractor_kwargs()
     seq = load_sequence(run)
     want = [extract_features(seq.scan(k), "geometric", **kw) for k in range(seq.n_scans)]
     assert [len(s["circles"]) for s in doc["scans"]] == [f.n_circles for f in want]
-    assert sum(f.n_circles for f in want) > sum(
+    assert sum(f.n_circles for f in want) < sum(
         extract_features(seq.scan(k), "geometric").n_circles for k in range(seq.n_scans)
-    )  # the preset's short trunks are really used
+    )  # the preset's setting is really used: the default finds the pole
     res = runner.invoke(app, [*args, "--sigma-r", "0.03", "--out", str(out)])
     assert res.exit_code == 0 and json.loads(out.read_text())["params"]["sigma_r_m"] == 0.03
     cfg = tmp_path / "my.toml"

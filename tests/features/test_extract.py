@@ -400,10 +400,12 @@ def test_360_scan_keeps_a_trunk_on_the_seam_whole(bearing_deg):
     assert n_edges == (2 if abs(bearing_deg) > 150 else 0)
 
 
-def test_short_trunks_become_circles_only_when_asked():
-    """A 0.2 m trunk 18 m away spans 2-3 beams of a 0.5 deg scanner: too few to fit. With
-    short_trunks it becomes a circle within a few centimetres of the truth, with a covariance
-    that covers the error; a wall beside it does not."""
+def test_short_trunks_are_circles_by_default_and_not_in_the_paper_faithful_extractor():
+    """A 0.2 m trunk 18 m away spans 2-3 beams of a 0.5 deg scanner: too few to fit. By default
+    (short_trunks) it becomes a circle within a few centimetres of the truth, its radius from
+    the beams' width alone, with a covariance that covers the error; a wall beside it does not.
+    The paper-faithful extractor (`features.PAPER_FAITHFUL`) finds no circle."""
+    from features import PAPER_FAITHFUL
     from experiments.sim import scene_from_dict, sensor_preset, simulate_scan
 
     scene = scene_from_dict(
@@ -419,8 +421,8 @@ def test_short_trunks_become_circles_only_when_asked():
         ranges, labels = simulate_scan(scene, (0.0, 0.0, 0.0), sensor, rng)
         scan = sensor.scan(ranges)
         assert 2 <= np.sum(labels == 0) <= 3
-        assert extract_features(scan, "geometric").n_circles == 0
-        f = extract_features(scan, "geometric", short_trunks=True)
+        assert extract_features(scan, "geometric", **PAPER_FAITHFUL.to_dict()).n_circles == 0
+        f = extract_features(scan, "geometric")
         assert f.n_circles == 1  # the trunk, not the wall
         c, cov = f.circle_params[0], f.circle_cov[0]
         assert np.all(np.linalg.eigvalsh(cov) > 0)
@@ -430,8 +432,8 @@ def test_short_trunks_become_circles_only_when_asked():
     errs, sigmas = np.abs(np.array(errs)), np.array(sigmas)
     assert np.max(errs) < 0.1
     assert np.mean(errs <= 3 * sigmas) > 0.95  # the covariance is honest
-    with pytest.raises(ValueError, match="short_trunk_radius_m"):
-        extract_features(scan, "paper", short_trunks=True, short_trunk_radius_m=0.0)
+    with pytest.raises(ValueError, match="unknown extractor parameter.*short_trunk_radius_m"):
+        extract_features(scan, "paper", short_trunk_radius_m=0.2)  # retired: no site's sizes
     with pytest.raises(ValueError, match="short_trunks"):
         extract_features(scan, "paper", short_trunks=1)
 

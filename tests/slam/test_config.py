@@ -97,7 +97,11 @@ def test_a_key_of_the_flat_format_says_where_it_lives_now(old):
     ("data", "message"),
     [
         ({"features": {"extractor": {"r_min_m": -0.1}}}, "features.extractor: r_min_m"),
-        ({"features": {"extractor": {"short_trunk_radius_m": -1.0}}}, "short_trunk_radius_m"),
+        ({"features": {"extractor": {"short_trunk_clearance_m": -1.0}}}, "short_trunk_clearance_m"),
+        (
+            {"features": {"extractor": {"short_trunk_radius_m": 0.2}}},
+            r"short_trunk_radius_m.*removed",
+        ),
         ({"features": {"extractor": {"sigma_r_m": "big"}}}, r"features\.extractor\.sigma_r_m"),
         ({"features": {"method": "hough"}}, r"features\.method: expected one of"),
         ({"features": {"bailey": {"detector": {"max_chord_m": math.nan}}}}, "max_chord_m"),
@@ -119,11 +123,11 @@ def test_bad_values_name_the_key(data, message):
 
 def test_with_replaces_by_dotted_path_and_checks():
     cfg = SlamConfig().with_(
-        **{"association.method": "nn", "features.extractor.short_trunks": True}
+        **{"association.method": "nn", "features.extractor.short_trunks": False}
     )
     assert cfg.association == AssociationConfig(method="nn")
-    assert cfg.features.extractor.short_trunks is True
-    assert cfg.features == FeaturesConfig(extractor=ExtractorParams(short_trunks=True))
+    assert cfg.features.extractor.short_trunks is False
+    assert cfg.features == FeaturesConfig(extractor=ExtractorParams(short_trunks=False))
     with pytest.raises(SlamError, match="association.method"):
         SlamConfig().with_(**{"association.method": "hough"})
 
