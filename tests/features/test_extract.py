@@ -405,8 +405,8 @@ def test_short_trunks_are_circles_by_default_and_not_in_the_paper_faithful_extra
     (short_trunks) it becomes a circle within a few centimetres of the truth, its radius from
     the beams' width alone, with a covariance that covers the error; a wall beside it does not.
     The paper-faithful extractor (`features.PAPER_FAITHFUL`) finds no circle."""
-    from features import PAPER_FAITHFUL
     from experiments.sim import scene_from_dict, sensor_preset, simulate_scan
+    from features import PAPER_FAITHFUL
 
     scene = scene_from_dict(
         {
