@@ -51,7 +51,7 @@ from features.fitting import (
     fit_line_tls,
 )
 from features.segmentation import END_NO_RETURN, END_SCAN, max_growth_ratio, segment_kernel
-from features.types import KIND_CIRCLE, Features, Scan
+from features.types import Features, Scan
 
 __all__ = ["ExtractorParams", "PAPER_FAITHFUL", "extract_features", "METHODS"]
 
@@ -214,6 +214,8 @@ class _Settings(NamedTuple):
     lambda0: float
     max_iter: int
     tol: float
+    short_trunks: bool
+    clearance: float  # m, short_trunk_clearance_m
 
 
 class _Found(NamedTuple):
@@ -410,6 +412,20 @@ def _edge_point(beams, e, step, sigma_r, out):
     cov[1, 1] = s * s * vr + rr * rr * c * c * var_th
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _segment_edges(beams, a, b, cfg, out, ne):
+    """The occluding edges at either end of segment a..b appended to out = (edge_xy, edge_cov,
+    edge_beam) from row ne; returns the new row count."""
+    edge_xy, edge_cov, edge_beam = out
+    for step in (-1, 1):
+        e = a if step == -1 else b
+        if _is_edge(beams, e, step, cfg.edge_jump):
+            _edge_point(beams, e, step, cfg.sigma_r, (edge_xy[ne], edge_cov[ne]))
+            edge_beam[ne] = e
+            ne += 1
+    return ne
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _extract_kernel(beams, settings):
     """Steps 1-4 of the module doc on one scan. beams: a `_Beams`, settings: a `_Settings`, both
@@ -451,6 +467,19 @@ def _extract_kernel(beams, settings):
         b = bounds[k, 1]
         m = b - a + 1
         nv = _mean_innovation(innov, svar, a, b, seg_innov[k])
+        if (
+            cfg.short_trunks
+            and m < cfg.min_circle_points
+            and _short_trunk(beams, a, b, cfg, circ[nc], circ_cov[nc])
+        ):
+            kind[k] = 2
+            circ_beams[nc, 0] = a
+            circ_beams[nc, 1] = b
+            circ_rms[nc] = np.nan  # no fit
+            nc += 1
+            if m >= cfg.min_points:
+                ne = _segment_edges(beams, a, b, cfg, (edge_xy, edge_cov, edge_beam), ne)
+            continue
         if m < cfg.min_points:
             continue
         x, y, rmin = _points(beams, a, b, buf)
@@ -499,12 +528,7 @@ def _extract_kernel(beams, settings):
             line_beams[nl, 1] = b
             line_rms[nl] = math.sqrt(ssr_l / m)
             nl += 1
-        for step in (-1, 1):  # occluding edges at either end of the segment
-            e = a if step == -1 else b
-            if _is_edge(beams, e, step, cfg.edge_jump):
-                _edge_point(beams, e, step, cfg.sigma_r, (edge_xy[ne], edge_cov[ne]))
-                edge_beam[ne] = e
-                ne += 1
+        ne = _segment_edges(beams, a, b, cfg, (edge_xy, edge_cov, edge_beam), ne)
     return (
         bounds,
         kind,
@@ -530,12 +554,13 @@ _DEPTH = math.pi / 4.0
 _DEPTH_VAR = 2.0 / 3.0 - math.pi**2 / 16.0
 
 
-def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
-    """Circles for trunks too narrow to fit (1 to min_circle_points - 1 beams).
+@njit(cache=True, nogil=True, error_model="numpy")
+def _short_trunk(beams, a, b, cfg, out_p, out_c):
+    """Whether segment a..b of kernel beams (1 to min_circle_points - 1 beams: too few to fit)
+    is a short trunk, its circle (x0, y0, r) written to out_p (3,) and covariance to out_c (3, 3).
 
-    A segment qualifies when it is not already a circle (a line of fewer than
-    min_circle_points beams qualifies: no circle was tested on so few beams, and a thin pole's
-    3 beams fit a line within the noise), its neighbours on both sides
+    A segment qualifies, a line included (no circle is tested on so few beams, and a thin
+    pole's 3 beams fit a line within the noise), when its neighbours on both sides
     are no-returns or farther by more than edge_min_jump_m (an occluding, isolated object), its
     chord is under 2 r_max_m, and its end ranges differ by less than a third of its width (a
     convex face, Bailey's test), and no other return of the scan lies within
@@ -549,141 +574,91 @@ def _short_trunks(beams: _Beams, bounds, kind, p: ExtractorParams):
     segment's mean range (the mean depth of a circle's face over hits spread across its width),
     on its mean bearing. Covariance of (x0, y0, r): along the beam, the mean range's noise
     sigma_r^2 / m, the radius variance and the face depth's spread (2/3 - pi^2/16) r^2 / m;
-    across it, a uniform one-beam bearing error; and the radius variance.
-    bounds (S, 2), kind (S,): the kernel's segments, in the kernel beam order of `beams`.
-    Returns (params (k, 3), cov (k, 3, 3), beams (k, 2), segment indices (k,)).
+    across it, a uniform one-beam bearing error; and the radius variance. (The caller's
+    segments of fewer than min_circle_points beams are never circles of the fit.)
     """
-    bounds = np.ascontiguousarray(bounds, dtype=np.int64).reshape(-1, 2)
-    prm = np.array(
-        [
-            p.min_circle_points,
-            p.edge_min_jump_m,
-            p.r_min_m,
-            p.r_max_m,
-            p.short_trunk_clearance_m,
-            p.sigma_r_m,
-            float(beams.cyclic),
-        ],
-        dtype=np.float64,
-    )
-    params, cov, runs, segments, k = _short_trunk_kernel(
-        np.ascontiguousarray(beams.ranges, dtype=np.float64),
-        float(beams.angle_min),
-        float(beams.gamma),
-        bounds,
-        np.ascontiguousarray(kind, dtype=np.int64),
-        prm,
-    )
-    return params[:k], cov[:k], runs[:k], segments[:k]
+    ranges, gamma = beams.ranges, beams.gamma
+    n = ranges.shape[0]
+    m = b - a + 1
+    r_min, r_max = cfg.r_min, cfg.r_max
+    # a segment at the border of a scan that is not a full circle may go on outside it:
+    # not known to be a whole object (a 360 deg scan's first beam neighbours its last)
+    if not beams.cyclic and (a == 0 or b == n - 1):
+        return False
+    # each end cut off: no return beside it, or the neighbour behind a depth jump
+    left, right = ranges[(a - 1) % n], ranges[(b + 1) % n]
+    if not (left != left or left - ranges[a] > cfg.edge_jump):
+        return False
+    if not (right != right or right - ranges[b] > cfg.edge_jump):
+        return False
+    rm = 0.0
+    for i in range(a, b + 1):
+        rm += ranges[i]
+    rm /= m
+    th_a, th_b = beams.angle_min + gamma * a, beams.angle_min + gamma * b
+    dx = ranges[b] * math.cos(th_b) - ranges[a] * math.cos(th_a)
+    chord = math.hypot(dx, ranges[b] * math.sin(th_b) - ranges[a] * math.sin(th_a))
+    width = (th_b - th_a + gamma) * rm
+    if chord >= 2 * r_max or abs(ranges[b] - ranges[a]) >= width / 3.0:
+        return False
+    r0, var0 = 0.5 * (r_min + r_max), (r_max - r_min) ** 2 / 12.0  # uniform on the limits
+    var_w = 2.0 * (rm * gamma / 2.0) ** 2 / 3.0 / 4.0  # of the half width: two edges
+    # the two combined by their variances (this form stays finite when var_w underflows)
+    r = (0.5 * width * var0 + r0 * var_w) / (var0 + var_w)
+    var_r = var_w * var0 / (var0 + var_w)
+    th = 0.5 * (th_a + th_b)
+    # the beams hit the face across its whole width: a hit at lateral offset y lies
+    # sqrt(r^2 - y^2) in front of the centre, pi r / 4 on average over y uniform on
+    # (-r, r), with variance (2/3 - pi^2/16) r^2 (over m beams: / m)
+    rng = rm + _DEPTH * r
+    c, s = math.cos(th), math.sin(th)
+    cx, cy = rng * c, rng * s
+    if cfg.clearance > 0 and _crowded(
+        ranges, beams.angle_min, gamma, a, b, cx, cy, cfg.clearance, beams.cyclic
+    ):
+        return False
+    var_rng = cfg.sigma_r**2 / m + _DEPTH**2 * var_r + _DEPTH_VAR * r * r / m
+    var_th = gamma * gamma / 12.0
+    # J diag(var_rng, var_th) J^T, J = [[c, -rng s], [s, rng c]]
+    out_c[0, 0] = c * c * var_rng + rng * rng * s * s * var_th
+    out_c[0, 1] = out_c[1, 0] = c * s * var_rng - rng * rng * s * c * var_th
+    out_c[1, 1] = s * s * var_rng + rng * rng * c * c * var_th
+    out_c[0, 2] = out_c[2, 0] = c * _DEPTH * var_r  # moves back with r
+    out_c[1, 2] = out_c[2, 1] = s * _DEPTH * var_r
+    out_c[2, 2] = var_r
+    out_p[0], out_p[1], out_p[2] = cx, cy, r
+    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _short_trunk_kernel(ranges, angle_min, gamma, bounds, kind, prm):
-    """`_short_trunks`' work (see its doc): (params (S, 3), cov (S, 3, 3), beams (S, 2),
-    segments (S,), how many of the S rows are filled). prm: [min_circle_points,
-    edge_min_jump_m, r_min_m, r_max_m, short_trunk_clearance_m, sigma_r_m, cyclic]."""
+def _crowded(ranges, angle_min, gamma, a, b, cx, cy, clearance, cyclic):
+    """Whether a return of the scan outside beams a..b lies within `clearance` of (cx, cy).
+    Only the beams whose bearing is within asin(clearance / |c|) of the centre's can (all of
+    them when the centre is nearer than the clearance); a 360 deg scan wraps around."""
     n = ranges.shape[0]
-    S = bounds.shape[0]
-    min_pts, jump, r_min, r_max, clearance, sigma_r, cyclic = prm
-    r0, var0 = 0.5 * (r_min + r_max), (r_max - r_min) ** 2 / 12.0  # uniform on the limits
-    out_p = np.zeros((S, 3))
-    out_c = np.zeros((S, 3, 3))
-    out_b = np.zeros((S, 2), np.int64)
-    out_k = np.zeros(S, np.int64)
-    cnt = 0
-    for k in range(S):
-        a, b = bounds[k, 0], bounds[k, 1]
-        m = b - a + 1
-        # not a circle and too few beams to fit one (a line of so few beams was never
-        # tested against a circle: a thin pole's 3 beams fit a line)
-        if kind[k] == KIND_CIRCLE or m >= min_pts:
+    dist = math.hypot(cx, cy)
+    lo, hi = 0, n - 1
+    if dist > clearance:
+        half = math.asin(clearance / dist) / gamma  # in beams
+        middle = angle_min + 0.5 * gamma * (n - 1)  # the scan's middle bearing
+        d = math.atan2(cy, cx) - middle
+        d -= 2.0 * math.pi * math.floor((d + math.pi) / (2.0 * math.pi))  # in [-pi, pi)
+        mid = 0.5 * (n - 1) + d / gamma  # the centre's beam (fractional)
+        lo, hi = int(math.floor(mid - half)) - 1, int(math.ceil(mid + half)) + 1
+        if not cyclic:
+            lo, hi = max(lo, 0), min(hi, n - 1)
+        elif hi - lo + 1 >= n:
+            lo, hi = 0, n - 1
+    c2 = clearance * clearance
+    for j in range(lo, hi + 1):
+        i = j % n
+        if a <= i <= b or ranges[i] != ranges[i]:
             continue
-        # a segment at the border of a scan that is not a full circle may go on outside it:
-        # not known to be a whole object (a 360 deg scan's first beam neighbours its last)
-        if cyclic == 0.0 and (a == 0 or b == n - 1):
-            continue
-        left = ranges[(a - 1) % n]
-        right = ranges[(b + 1) % n]
-        # each end cut off: no return beside it, or the neighbour behind a depth jump
-        if not (left != left or left - ranges[a] > jump):
-            continue
-        if not (right != right or right - ranges[b] > jump):
-            continue
-        rm = 0.0
-        for i in range(a, b + 1):
-            rm += ranges[i]
-        rm /= m
-        th_a, th_b = angle_min + gamma * a, angle_min + gamma * b
-        dx = ranges[b] * math.cos(th_b) - ranges[a] * math.cos(th_a)
-        chord = math.hypot(dx, ranges[b] * math.sin(th_b) - ranges[a] * math.sin(th_a))
-        width = (th_b - th_a + gamma) * rm
-        if chord >= 2 * r_max or abs(ranges[b] - ranges[a]) >= width / 3.0:
-            continue
-        var_w = 2.0 * (rm * gamma / 2.0) ** 2 / 3.0 / 4.0  # of the half width: two edges
-        # the two combined by their variances (this form stays finite when var_w underflows)
-        r = (0.5 * width * var0 + r0 * var_w) / (var0 + var_w)
-        var_r = var_w * var0 / (var0 + var_w)
-        th = 0.5 * (th_a + th_b)
-        # the beams hit the face across its whole width: a hit at lateral offset y lies
-        # sqrt(r^2 - y^2) in front of the centre, pi r / 4 on average over y uniform on
-        # (-r, r), with variance (2/3 - pi^2/16) r^2 (over m beams: / m)
-        rng = rm + _DEPTH * r
-        c, s = math.cos(th), math.sin(th)
-        cx, cy = rng * c, rng * s
-        crowded = False
-        if clearance > 0:  # another return of the scan within the clearance of the centre
-            c2 = clearance * clearance
-            for i in range(n):
-                if a <= i <= b or ranges[i] != ranges[i]:
-                    continue
-                bi = angle_min + gamma * i
-                ex, ey = ranges[i] * math.cos(bi) - cx, ranges[i] * math.sin(bi) - cy
-                if ex * ex + ey * ey < c2:
-                    crowded = True
-                    break
-        if crowded:
-            continue
-        var_rng = sigma_r**2 / m + _DEPTH**2 * var_r + _DEPTH_VAR * r * r / m
-        var_th = gamma * gamma / 12.0
-        # J diag(var_rng, var_th) J^T, J = [[c, -rng s], [s, rng c]]
-        out_c[cnt, 0, 0] = c * c * var_rng + rng * rng * s * s * var_th
-        out_c[cnt, 0, 1] = c * s * var_rng - rng * rng * s * c * var_th
-        out_c[cnt, 1, 0] = out_c[cnt, 0, 1]
-        out_c[cnt, 1, 1] = s * s * var_rng + rng * rng * c * c * var_th
-        out_c[cnt, 0, 2] = out_c[cnt, 2, 0] = c * _DEPTH * var_r  # moves back with r
-        out_c[cnt, 1, 2] = out_c[cnt, 2, 1] = s * _DEPTH * var_r
-        out_c[cnt, 2, 2] = var_r
-        out_p[cnt, 0], out_p[cnt, 1], out_p[cnt, 2] = cx, cy, r
-        out_b[cnt, 0], out_b[cnt, 1] = a, b
-        out_k[cnt] = k
-        cnt += 1
-    return out_p, out_c, out_b, out_k, cnt
-
-
-def _with_short_trunks(found: _Found, beams: _Beams, p: ExtractorParams) -> _Found:
-    """`found` with the short trunks' circles (`_short_trunks`) appended (circle_rms_m NaN: no
-    fit) and their segments' kind set to circle."""
-    params, cov, runs, segments = _short_trunks(beams, found.segment_beams, found.segment_kind, p)
-    if not params.shape[0]:
-        return found
-    kind = found.segment_kind.copy()
-    kind[segments] = KIND_CIRCLE
-    # a short line that became a trunk is no longer a line
-    was_line = {tuple(b) for b in found.segment_beams[segments].tolist()}
-    keep = np.array([tuple(b) not in was_line for b in found.line_beams.tolist()], dtype=bool)
-    keep = keep.reshape(found.line_beams.shape[0])
-    return found._replace(
-        line_params=found.line_params[keep],
-        line_cov=found.line_cov[keep],
-        line_endpoints=found.line_endpoints[keep],
-        line_beams=found.line_beams[keep],
-        line_rms_m=found.line_rms_m[keep],
-        circle_params=np.concatenate([found.circle_params, params]),
-        circle_cov=np.concatenate([found.circle_cov, cov]),
-        circle_beams=np.concatenate([found.circle_beams, runs]),
-        circle_rms_m=np.concatenate([found.circle_rms_m, np.full(params.shape[0], np.nan)]),
-        segment_kind=kind,
-    )
+        bi = angle_min + gamma * i
+        ex, ey = ranges[i] * math.cos(bi) - cx, ranges[i] * math.sin(bi) - cy
+        if ex * ex + ey * ey < c2:
+            return True
+    return False
 
 
 def _resolve(params: dict, method: str, scan: Scan) -> tuple[ExtractorParams, tuple]:
@@ -747,6 +722,8 @@ def _settings(p: ExtractorParams, method: str, gamma: float, n_beams: int) -> tu
         lambda0=p.lambda0,
         max_iter=p.max_iter,
         tol=p.tol,
+        short_trunks=p.short_trunks,
+        clearance=p.short_trunk_clearance_m,
     )
     return tuple(settings)
 
@@ -825,8 +802,6 @@ def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
     p, settings = _resolve(params, method, scan)
     beams = _kernel_beams(scan)
     found = _Found._make(_extract_kernel(tuple(beams), settings))
-    if p.short_trunks:
-        found = _with_short_trunks(found, beams, p)
     if beams.shift:
         found = _in_scan_order(found, beams)
     return _features(scan, method, found)

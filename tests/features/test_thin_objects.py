@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.stats import chi2
 
 from features import extract_features
@@ -95,3 +97,46 @@ def test_wall_ends_box_corners_and_bushes_are_not_circles(rates):
     names = {1: "wall", 2: "parked-car box", 3: "bush"}
     for obj, made in circles_on.items():  # measured 0.02, 0.00, 0.04
         assert np.mean(made) <= 0.05, (names[obj], np.mean(made))
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    cyclic=st.booleans(),
+    clearance=st.floats(0.1, 30.0),
+    centre_r=st.floats(0.0, 60.0),
+    centre_bearing=st.floats(-4.0, 4.0),
+)
+def test_the_clear_space_test_reads_only_the_beams_that_can_be_near(
+    seed, cyclic, clearance, centre_r, centre_bearing
+):
+    """`_crowded` reads only the beams whose bearing is within asin(clearance / range) of the
+    centre's: it must answer as the scan over every beam does, for a scan that wraps around
+    (360 deg) or not, a centre nearer than the clearance, and a centre outside the view."""
+    from features.extract import _crowded
+
+    rng = np.random.default_rng(seed)
+    n = 720 if cyclic else 361
+    gamma = 2 * np.pi / n if cyclic else np.radians(0.5)
+    angle_min = rng.uniform(-np.pi, np.pi) if cyclic else -np.pi / 2
+    ranges = np.full(n, np.nan)  # a sparse scan: a few returns, one planted at the clearance
+    ranges[rng.integers(0, n, 3)] = rng.uniform(0.5, 60.0, 3)
+    a = int(rng.integers(0, n - 3))
+    b = a + int(rng.integers(0, 3))
+    ranges[a : b + 1] = centre_r
+    cx, cy = centre_r * np.cos(centre_bearing), centre_r * np.sin(centre_bearing)
+    phi = rng.uniform(-np.pi, np.pi)
+    p = np.array([cx, cy]) + clearance * rng.uniform(0.97, 1.03) * np.array(
+        [np.cos(phi), np.sin(phi)]
+    )
+    k = int(np.round((np.arctan2(p[1], p[0]) - angle_min) / gamma))
+    k = k % n if cyclic else k
+    if 0 <= k < n and not a <= k <= b:
+        ranges[k] = np.hypot(*p)
+    bearings = angle_min + gamma * np.arange(n)
+    xy = ranges[:, None] * np.c_[np.cos(bearings), np.sin(bearings)]
+    near = np.hypot(xy[:, 0] - cx, xy[:, 1] - cy) < clearance
+    near[a : b + 1] = False
+    want = bool(np.any(near[~np.isnan(ranges)]))
+    got = _crowded(ranges, angle_min, gamma, a, b, cx, cy, clearance, float(cyclic))
+    assert got == want
