@@ -107,6 +107,7 @@ class ExperimentName(StrEnum):
     noise_calibration = "noise-calibration"
     victoria_park_calibration = "victoria-park-calibration"
     victoria_park_pruning = "victoria-park-pruning"
+    loop_closure = "loop-closure"
 
 
 def project_errors() -> tuple[type[BaseException], ...]:
@@ -509,6 +510,9 @@ def reproduce(
 
     - victoria-park-pruning: the map policy's pruning settings from scans 1-2000 (seconds; only
     when named)
+
+    - loop-closure: simulated loops in a park and an orchard, loop closure off and on
+    (minutes; only when named)
     """
     from experiments.exec import make_executor
     from experiments.paper.reproduce import run_experiments

@@ -15,6 +15,7 @@ a result (`config.toml`), it reproduces the run to the bit.
                     min_travel_m
     [start]         initial_pose_sigma, initial_heading_rad, GPS start fit
     [map_policy]    `slam.mapping.MapPolicy`
+    [closure]       `slam.closure.ClosureConfig` (loop closure; off by default)
     [filter]        first_estimates_jacobians
 
 `SlamConfig.from_dict(d)` refuses unknown keys (with a "did you mean" and, for the keys of the
@@ -35,6 +36,7 @@ from dataclasses import dataclass, field, fields, is_dataclass
 
 from features import ExtractorParams
 from features.bailey import BaileyParams
+from slam.closure import ClosureConfig
 from slam.errors import SlamError
 from slam.mapping import MapPolicy
 from slam.measurement import (
@@ -398,6 +400,7 @@ class SlamConfig:
     start: StartConfig = field(default_factory=StartConfig)
     map_policy: MapPolicy = field(default_factory=MapPolicy)
     filter: FilterConfig = field(default_factory=FilterConfig)
+    closure: ClosureConfig = field(default_factory=ClosureConfig)
 
     def __post_init__(self) -> None:
         for f in fields(self):

@@ -302,6 +302,51 @@ class Filter(_Estimate):
         self.landmark_ids = np.concatenate([self.landmark_ids, np.array([landmark_id], np.int64)])
         self.first_xy = np.concatenate([self.first_xy, m[None, :]])
 
+    def same_landmarks_nis(self, keep_ids, drop_ids) -> float:
+        """The joint compatibility of "landmark keep_ids[j] is landmark drop_ids[j]" for all j:
+        d^T S^-1 d with d the stacked differences of their positions and S their covariance
+        (chi-square with 2 x pairs degrees of freedom when the pairs are the same trees)."""
+        d, HP, S, _, _ = self._pair_constraint(keep_ids, drop_ids, 0.0)
+        L = np.linalg.cholesky(S)
+        v = np.linalg.solve(L, d)
+        return float(v @ v)
+
+    def merge_landmarks(self, keep_ids, drop_ids, sigma_m: float = 1e-3) -> float:
+        """Landmark drop_ids[j] is landmark keep_ids[j]: one batch update with the measurement
+        "their positions differ by 0" (noise sigma_m each axis, a hard constraint that keeps S
+        invertible), then each drop_ids[j] is marginalised out (`remove_landmarks`). Returns
+        the constraint's NIS (`same_landmarks_nis`, with the noise)."""
+        d, HP, S, _, _ = self._pair_constraint(keep_ids, drop_ids, sigma_m)
+        L = np.linalg.cholesky(S)
+        W = np.linalg.solve(L, HP).T  # (dim, q): P H^T L^-T
+        v = np.linalg.solve(L, -d)  # L^-1 (0 - d)
+        self.x += W @ v
+        self.x[2] = float(wrap_angle(self.x[2]))
+        P = self.P
+        P -= W @ W.T
+        P[:] = 0.5 * (P + P.T)
+        self.remove_landmarks(drop_ids)
+        return float(v @ v)
+
+    def _pair_constraint(self, keep_ids, drop_ids, sigma_m: float):
+        """(d (q,), H P (q, dim), S (q, q), keep columns, drop columns) of the constraint
+        x_keep - x_drop = 0 over the pairs (q = 2 x pairs)."""
+        keep = np.asarray(keep_ids, dtype=np.int64).reshape(-1)
+        drop = np.asarray(drop_ids, dtype=np.int64).reshape(-1)
+        if keep.size != drop.size or not keep.size:
+            raise SlamError("merge_landmarks: keep_ids and drop_ids must pair up, at least one")
+        ids = np.concatenate([keep, drop])
+        if np.unique(ids).size != ids.size:
+            raise SlamError("merge_landmarks: a landmark appears twice among the pairs")
+        pk = np.array([self.index_of(int(i)) for i in keep], np.int64)
+        pd = np.array([self.index_of(int(i)) for i in drop], np.int64)
+        ck = ((3 + 2 * pk)[:, None] + np.arange(2)).reshape(-1)
+        cd = ((3 + 2 * pd)[:, None] + np.arange(2)).reshape(-1)
+        P = self.P
+        HP = P[ck] - P[cd]
+        S = HP[:, ck] - HP[:, cd] + sigma_m**2 * np.eye(ck.size)
+        return self.x[ck] - self.x[cd], HP, 0.5 * (S + S.T), ck, cd
+
     def remove_landmarks(self, landmark_ids) -> None:
         """Remove these landmarks from the state: their rows and columns of x and P go
         (marginalisation, exact for a Gaussian); the others keep their order."""

@@ -70,6 +70,10 @@ class SlamLog:
     config: the resolved configuration (plain types).
     window_stats: association "ihgr-window" only: K, steps, fractional first LPs, steps the
         rounding changed (more than one LP solve), LP solves, track hypotheses built.
+    closures: with `[closure] enabled`, every constellation match tried
+        (`slam.closure.ClosureEvent.to_dict()`), accepted or not; a merged landmark's
+        measurements carry the id of the landmark it was merged into; meas_track_unmerged
+        then holds the tracks as they were before any merge (None when nothing was merged).
     """
 
     scan_t: np.ndarray
@@ -116,6 +120,8 @@ class SlamLog:
     association_method: str
     config: dict
     window_stats: dict | None = None
+    closures: list | None = None
+    meas_track_unmerged: np.ndarray | None = None
     antenna_pose: np.ndarray | None = None
 
     @property
@@ -168,6 +174,7 @@ class LogBuilder:
         self.antenna_pose = np.zeros(3)
         self.n_obs: dict[int, int] = {}
         self.first_scan: dict[int, int] = {}
+        self.alias: dict[int, int] = {}  # a landmark merged into another: its id -> the other's
         self._meas_row0 = np.zeros(n, np.int64)  # first measurement row of each scan
 
     def started(self, pose: np.ndarray, cov: np.ndarray, laser_pose, antenna_pose) -> None:
@@ -225,6 +232,28 @@ class LogBuilder:
             self.timing[key][k] = b - a
         self.timing["total"][k] = times[-1] - times[0]
 
+    def merged(self, drop: int, keep: int) -> None:
+        """Landmark `drop` was found to be landmark `keep` (a loop closure): its sightings and
+        measurements count as `keep`'s, in this log and in the smoother's problem."""
+        self.alias[drop] = keep
+        self.n_obs[keep] = self.n_obs.get(keep, 0) + self.n_obs.pop(drop, 0)
+        self.first_scan[keep] = min(
+            self.first_scan.get(keep, 1 << 62), self.first_scan.pop(drop, 1 << 62)
+        )
+
+    def _resolved(self, ids: list) -> np.ndarray:
+        """Landmark ids with every merged one replaced by the one it was merged into."""
+        out = np.array(ids, np.int64)
+        if self.alias:
+            root = {}
+            for a in self.alias:
+                b = self.alias[a]
+                while b in self.alias:
+                    b = self.alias[b]
+                root[a] = b
+            out = np.array([root.get(int(v), int(v)) for v in out.tolist()], np.int64)
+        return out
+
     def retrack(self, k: int, feature: int, track: int) -> None:
         """Give measurement `feature` of the already logged scan k the track id `track` (a
         window's new landmark: its earlier sightings)."""
@@ -239,6 +268,7 @@ class LogBuilder:
         association_method: str,
         config: dict,
         window_stats: dict | None = None,
+        closures: list | None = None,
     ) -> SlamLog:
         ids = state.landmark_ids
         obs, meas = self.obs, self.meas
@@ -255,7 +285,7 @@ class LogBuilder:
             landmark_n_obs=np.array([self.n_obs.get(int(i), 0) for i in ids], np.int64),
             obs_scan=np.array(obs["scan"], np.int64),
             obs_feature=np.array(obs["feature"], np.int64),
-            obs_landmark=np.array(obs["landmark"], np.int64),
+            obs_landmark=self._resolved(obs["landmark"]),
             obs_z=np.array(obs["z"]).reshape(-1, 2),
             obs_innov=np.array(obs["innov"]).reshape(-1, 2),
             obs_innov_cov=np.array(obs["S"]).reshape(-1, 2, 2),
@@ -263,8 +293,8 @@ class LogBuilder:
             meas_feature=np.array(meas["feature"], np.int64),
             meas_z=np.array(meas["z"]).reshape(-1, 2),
             meas_R=np.array(meas["R"]).reshape(-1, 2, 2),
-            meas_status=np.array(meas["status"], np.int64),
-            meas_track=np.array(meas["track"], np.int64),
+            meas_status=self._resolved(meas["status"]),
+            meas_track=self._resolved(meas["track"]),
             meas_radius_m=np.array(meas["radius"], np.float64),
             scan_nis=self.nis,
             scan_nis_dof=self.nis_dof,
@@ -285,4 +315,6 @@ class LogBuilder:
             config=config,
             window_stats=window_stats,
             antenna_pose=self.antenna_pose,
+            closures=closures,
+            meas_track_unmerged=np.array(meas["track"], np.int64) if self.alias else None,
         )

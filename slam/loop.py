@@ -10,7 +10,8 @@
 4. update: all measurements paired with landmarks at once (Joseph form, `slam.ekf.Filter`).
 A scan after which the odometry has moved the vehicle less than `vehicle.min_travel_m` since
 the last scan used is predicted only: its measurements are logged with status SKIPPED.
-Pruning (`slam.maps.Pruner`) follows map management when the map policy asks for it.
+Pruning (`slam.maps.Pruner`) follows map management when the map policy asks for it, and
+loop closure (`slam.closure.LoopCloser`) when `[closure] enabled`.
 
 The components are built once from the configuration (`Slam.__init__`); the start pose comes
 from `slam.start.initial_pose` and the run's checks from `slam.checks`. Before the timed loop
@@ -31,6 +32,7 @@ import numpy as np
 
 from slam import se2
 from slam.checks import check_noise
+from slam.closure import LoopCloser
 from slam.components import Components, components
 from slam.config import SlamConfig
 from slam.ekf import Filter, initial_state
@@ -77,6 +79,19 @@ class Slam:
         self.maps = make_map_manager(c.cfg, self.laser, self.view, self.book, c.associator)
         policy = c.cfg.map_policy
         self.prune = Pruner(policy, self.view, self.laser) if policy.prunes else None
+        closure = c.cfg.closure
+        self.closer = (
+            LoopCloser(
+                closure,
+                self.view,
+                self.laser,
+                self.book.scan_t,
+                self.book,
+                c.cfg.association.new_feature_gate_prob,
+            )
+            if closure.enabled
+            else None
+        )
         self.travel_m = 0.0  # odometry distance since the last scan used
         self.Q_skipped = None  # prediction noise of the scans skipped since then
         self.n_used = self.n_pending = 0
@@ -94,7 +109,8 @@ class Slam:
             clock.skip(3)
             self._log(meas, np.full(meas.z.shape[0], -1, np.int64), (math.nan, 0), clock)
             return meas
-        a = self.maps.associate(self.state, meas, self._drift(Q))
+        hidden = None if self.closer is None else self.closer.hidden(self.state, k)
+        a = self.maps.associate(self.state, meas, self._drift(Q), hidden)
         clock.lap()
         nis_used = self.update(meas, a)
         clock.lap()
@@ -102,6 +118,8 @@ class Slam:
         self.n_pending = self.maps.manage(self.state, meas, a, track)
         if self.prune is not None:
             self.prune(self.state, meas.status)
+        if self.closer is not None:
+            self.closer(self.state, meas.k, meas.status)
         clock.lap()
         self._log(meas, track, nis_used, clock)
         return meas
@@ -233,6 +251,7 @@ def run_slam(
         association_method=c.associator.method,
         config=cfg.to_dict(),
         window_stats=loop.maps.stats(),
+        closures=None if loop.closer is None else [e.to_dict() for e in loop.closer.events],
     )
 
 

@@ -124,7 +124,9 @@ class TentativeMap:
     def stats(self) -> None:
         return None
 
-    def associate(self, state: Filter, meas: Measurements, drift: np.ndarray) -> Association:
+    def associate(
+        self, state: Filter, meas: Measurements, drift: np.ndarray, hidden=None
+    ) -> Association:
         """The usable measurements against the landmarks and tentatives that can be in view.
 
         Each candidate's innovation covariance comes from its 5 x 5 block [pose, point]
@@ -136,7 +138,7 @@ class TentativeMap:
         ctx, tent, acfg = self.ctx, self.tent, self.ctx.cfg.association
         z_lm, H_lm = se2.observe(state.pose, state.landmarks_xy, ctx.laser)
         z_t, H_t = se2.observe(state.pose, tent.xy, ctx.laser)
-        lm_idx = np.flatnonzero(ctx.view.contains(z_lm))
+        lm_idx = np.flatnonzero(ctx.view.contains(z_lm) & _shown(hidden, z_lm.shape[0]))
         t_idx = np.flatnonzero(ctx.view.contains(z_t))
         n_l, n = lm_idx.size, lm_idx.size + t_idx.size
         m = meas.z.shape[0]
@@ -235,14 +237,16 @@ class WindowMap:
         the rounding changed (more than one LP solve), LP solves, track hypotheses built."""
         return {"K": self.assoc.K, **self.counts}
 
-    def associate(self, state: Filter, meas: Measurements, drift: np.ndarray) -> Association:
+    def associate(
+        self, state: Filter, meas: Measurements, drift: np.ndarray, hidden=None
+    ) -> Association:
         """Every landmark in view is offered (a track is not built where it could be a mapped
         landmark, so the window must see them all), on the sub-state [pose, those landmarks];
         the laser's world pose goes with the odometry drift over the window as its relative
         covariance. drift: this scan's prediction noise (3, 3), world frame."""
         ctx, K = self.ctx, self.assoc.K
         z_lm, H_lm = se2.observe(state.pose, state.landmarks_xy, ctx.laser)
-        lm_idx = np.flatnonzero(ctx.view.contains(z_lm))
+        lm_idx = np.flatnonzero(ctx.view.contains(z_lm) & _shown(hidden, z_lm.shape[0]))
         n, m = lm_idx.size, meas.z.shape[0]
         ambiguous = np.zeros(m, bool)
         use = np.flatnonzero(meas.status != OUT_OF_RANGE)
@@ -375,6 +379,12 @@ class Pruner:
             state.remove_landmarks(drop)
             for lid in drop:
                 del self.count[lid]
+
+
+def _shown(hidden, n: int) -> np.ndarray:
+    """The landmarks (n,) a scan's association may pair: all but `hidden` (a mask or None;
+    the loop closure's landmarks that the per-scan gate cannot tell apart)."""
+    return np.ones(n, bool) if hidden is None else ~np.asarray(hidden, bool)
 
 
 def make_map_manager(cfg: SlamConfig, laser, view: View, book: LogBuilder, associator):

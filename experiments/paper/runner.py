@@ -137,6 +137,12 @@ EXPERIMENTS: dict[str, Experiment] = {
         about="the map policy's pruning settings from scans 1-2000 (seconds; only when named)",
         default=False,
     ),
+    "loop-closure": Experiment(
+        "experiments.paper.loop_closure:run",
+        about="simulated loops in a park and an orchard, loop closure off and on (minutes; "
+        "only when named)",
+        default=False,
+    ),
 }
 DEFAULT_EXPERIMENTS = tuple(name for name, e in EXPERIMENTS.items() if e.default)
 

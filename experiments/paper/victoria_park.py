@@ -162,10 +162,12 @@ class _Timed:
 
 def run_config(features: str, association: str) -> SlamConfig:
     """The configuration of a run of the table: the preset with its features' and association's
-    methods replaced (the preset's extractor parameters, `short_trunks` included, hold for
-    every extractor)."""
+    methods replaced (the preset's extractor parameters hold for every extractor);
+    association "METHOD+closure" also turns loop closure on (`slam.closure`)."""
+    method, _, extra = association.partition("+")
     cfg = load_slam_config(PRESET)
-    return cfg.with_(**{"features.method": features, "association.method": association})
+    cfg = cfg.with_(**{"features.method": features, "association.method": method})
+    return cfg.with_(**{"closure.enabled": True}) if extra == "closure" else cfg
 
 
 def _one(label, seq, cfg, ref, given=None, visualiser=None):
@@ -205,10 +207,28 @@ def _one(label, seq, cfg, ref, given=None, visualiser=None):
         "circles_per_scan": float(lg.n_features.mean()),
         "seconds": seconds,
         "ms_per_scan": 1e3 * float(np.mean(lg.timing_s["total"])),
+        **_closure_figures(lg),
     }
     if given is not None:
         row["published_matched"] = _published_matched(seq, given)
     return row, lg, sc
+
+
+def _closure_figures(lg) -> dict:
+    """Loop closure's figures of a run (`slam.closure`; NaN when it was off): constellation
+    matches tried, refused as not jointly compatible, accepted, and landmarks merged."""
+    ev = lg.closures
+    if ev is None:
+        return dict.fromkeys(
+            ("closure_matches", "closure_refused_jc", "closures_accepted", "landmarks_merged"),
+            math.nan,
+        )
+    return {
+        "closure_matches": len(ev),
+        "closure_refused_jc": sum(e["outcome"] == "not jointly compatible" for e in ev),
+        "closures_accepted": sum(e["outcome"] == "accepted" for e in ev),
+        "landmarks_merged": sum(len(e["merged"]) for e in ev),
+    }
 
 
 def _vouched(seq, cfg) -> np.ndarray:
@@ -280,6 +300,9 @@ def run(ctx) -> None:
         scans_raw=raw.n_scans,
     )
     jobs = [(f"full run, published detections, {a}", "full", "detections", a) for a in METHODS]
+    jobs.append(
+        ("full run, published detections, ihgr, loop closure", "full", "detections", "ihgr+closure")
+    )
     jobs.append(("scans 1-2000, published detections, ihgr", "raw", "detections", "ihgr"))
     jobs += [
         (f"scans 1-2000, our {m} extractor on the raw scans, ihgr", "raw", m, "ihgr")
@@ -297,7 +320,7 @@ def run(ctx) -> None:
         products.write(ctx, got[0][1])
         for label, which, features, assoc in jobs:  # each run's configuration beside its row
             part = "full" if which == "full" else "scans_1_2000"
-            name = f"victoria_park_config_{part}_{features}_{assoc}.toml"
+            name = f"victoria_park_config_{part}_{features}_{assoc.replace('+', '_')}.toml"
             data = "vp_full.npz (--full)" if which == "full" else "vp.npz"
             header = f"{label}\ntrunkslam slam {data} --config {name}"
             write_atomic(ctx.path(name), config_toml(run_config(features, assoc), header))
@@ -354,6 +377,10 @@ COLUMNS = [
     ("published_matched", "published detections matched"),
     ("seconds", "seconds"),
     ("ms_per_scan", "ms per scan"),
+    ("closure_matches", "constellation matches tried"),
+    ("closure_refused_jc", "refused: not jointly compatible"),
+    ("closures_accepted", "closures accepted"),
+    ("landmarks_merged", "landmarks merged"),
 ]
 
 
@@ -398,6 +425,10 @@ PARTS = (
     (
         "Extraction and run time",
         ("circles_per_scan", "published_matched", "seconds", "ms_per_scan"),
+    ),
+    (
+        "Loop closure (runs with [closure] enabled)",
+        ("closure_matches", "closure_refused_jc", "closures_accepted", "landmarks_merged"),
     ),
 )
 

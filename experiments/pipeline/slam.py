@@ -201,6 +201,7 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
         "timing": timing,
         "config": json_types(lg.config),
         **({"window": lg.window_stats} if lg.window_stats else {}),
+        **({"closures": _closures(lg.closures)} if lg.closures is not None else {}),
     }
     if seq.gps_t is not None:
         vouched = vouched_for_sequence(seq, SlamConfig.from_dict(lg.config))
@@ -226,6 +227,20 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
             "scans_scored": int(inside.sum()),
         }
     return null_scores(summary, reasons=missing_reasons(seq, summary))
+
+
+def _closures(events: list[dict]) -> dict:
+    """The summary's loop closure part: matches tried by outcome, landmarks merged, and the
+    accepted closures (scan, time, pairs, NIS, transform)."""
+    out = {"tried": len(events)}
+    for outcome in ("accepted", "not jointly compatible", "no margin", "too few"):
+        out[outcome.replace(" ", "_")] = sum(e["outcome"] == outcome for e in events)
+    out["landmarks_merged"] = sum(len(e["merged"]) for e in events)
+    keys = ("scan", "t_s", "best", "second", "nis", "nis_bound", "rotation_deg", "shift_m")
+    out["accepted_closures"] = [
+        {k: e[k] for k in keys} for e in events if e["outcome"] == "accepted"
+    ]
+    return out
 
 
 def missing_reasons(seq: Sequence, summary: dict) -> dict[str, str]:

@@ -206,6 +206,29 @@ def test_simulate_drive_then_slam(tmp_path):
         assert s["landmarks"] >= 3 and max(s["truth"]["mean_abs_error"].values()) < 0.05
 
 
+def test_slam_with_loop_closure_reports_its_matches(tmp_path):
+    """[closure] in a configuration file turns loop closure on: the summary counts the
+    constellation matches by outcome. A lap and a half of the tree park maps every tree on
+    the first lap and re-finds them with the per-scan gate, so nothing is recent when the car
+    is back: no match is tried, nothing merged, and the run stays on its truth."""
+    run = tmp_path / "run.npz"
+    res = runner.invoke(app, ["simulate-drive", "--scans", "360", "--seed", "2", "--out", str(run)])
+    assert res.exit_code == 0, res.output
+    cfg = tmp_path / "closure.toml"
+    cfg.write_text("[closure]\nenabled = true\nold_s = 20.0\nrecent_s = 10.0\nmin_pairs = 3\n")
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["slam", str(run), "--config", str(cfg), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    s = json.loads((out / "summary.json").read_text())
+    c = s["closures"]
+    parts = ("accepted", "not_jointly_compatible", "no_margin", "too_few")
+    assert c["tried"] == sum(c[k] for k in parts) == 0 and c["landmarks_merged"] == 0
+    assert len(c["accepted_closures"]) == c["accepted"] and s["config"]["closure"]["enabled"]
+    assert max(s["truth"]["mean_abs_error"].values()) < 0.05
+    res = runner.invoke(app, ["slam", str(run), "--out", str(out)])
+    assert "closures" not in json.loads((out / "summary.json").read_text())
+
+
 def test_slam_with_the_ihgr_window(tmp_path):
     run = tmp_path / "run.npz"
     res = runner.invoke(app, ["simulate-drive", "--scans", "40", "--seed", "2", "--out", str(run)])

@@ -1,0 +1,365 @@
+"""Loop closure: recognise mapped territory after an excursion and merge the trees mapped twice.
+
+The signature of a missed loop closure in EKF-SLAM: the vehicle is back among landmarks it
+mapped long ago, their predictions lie in view, yet the per-scan association does not pair
+them (the drift has grown past its gate), and new landmarks are mapped beside them. The
+`LoopCloser` watches for it after each scan and, when it is there, matches the two maps:
+
+1. Revisit detection (`LoopCloser.__call__`): every `every_scans` scans, the *old* landmarks
+   (not seen for `old_s` seconds) whose predictions lie in the laser's view, and the *recent*
+   ones (joined the map in the last `recent_s` seconds) within the laser's range. Both must
+   number at least `min_pairs`.
+2. Constellation match (`_hypotheses`): every pair of recent landmarks at least `min_sep_m`
+   apart and every pair of old ones at the same distance (within `match_m`) propose a rigid
+   transform (rotation at most `max_rotation_deg`, moving the recent landmarks' centroid at most
+   `max_offset_m`); a hypothesis scores the recent landmarks it puts within `match_m` of an old
+   one. Trees in a park look alike, so the best hypothesis must explain `min_pairs` landmarks
+   and `margin` more than the best hypothesis that differs from it (moves the centroid
+   elsewhere by more than `match_m`).
+3. Joint compatibility (`Filter.same_landmarks_nis`): the filter's own covariance must allow
+   all the matched pairs to be the same trees at once (chi-square at `jc_prob`, 2 x pairs
+   degrees of freedom).
+4. Applying it (`Filter.merge_landmarks`): one update with "each pair differs by 0", then the
+   recent duplicate is marginalised out; the log relabels its measurements with the old
+   landmark's id (`LogBuilder.merged`), so the smoother sees the closed loop as well. Then,
+   the pose corrected, the other recent landmarks mapped a second time are swept up
+   (`LoopCloser._sweep`): each with a single old landmark near it, individually and jointly
+   compatible, is merged too.
+
+Every check that reaches step 2 is recorded as a `ClosureEvent` (accepted or why not).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+from numba import njit
+from scipy.spatial import cKDTree
+from scipy.stats import chi2
+
+from slam import se2
+from slam.ekf import landmark_columns
+from slam.errors import SlamError
+
+__all__ = ["ClosureConfig", "ClosureEvent", "LoopCloser"]
+
+
+@dataclass(frozen=True)
+class ClosureConfig:
+    """The `[closure]` section (see the module doc for what each setting does)."""
+
+    enabled: bool = False
+    every_scans: int = 5
+    recent_s: float = 30.0
+    old_s: float = 60.0
+    min_pairs: int = 6
+    margin: int = 3
+    match_m: float = 0.5
+    min_sep_m: float = 3.0
+    max_offset_m: float = 15.0
+    max_rotation_deg: float = 15.0
+    jc_prob: float = 0.999
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.enabled, bool):
+            raise SlamError(f"closure.enabled: must be true or false, got {self.enabled!r}")
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.name == "enabled":
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise SlamError(f"closure.{f.name}: must be a finite number, got {v!r}")
+            if f.type == "int" and (v != int(v) or v < 1):
+                raise SlamError(f"closure.{f.name}: must be a whole number >= 1, got {v!r}")
+            if v <= 0 and f.name != "margin":
+                raise SlamError(f"closure.{f.name}: must be > 0, got {v!r}")
+        if not 0.0 < self.jc_prob < 1.0:
+            raise SlamError(f"closure.jc_prob: must be in (0, 1), got {self.jc_prob!r}")
+        if self.min_pairs < 3:
+            raise SlamError(f"closure.min_pairs: must be >= 3, got {self.min_pairs!r}")
+
+
+@dataclass(frozen=True)
+class ClosureEvent:
+    """One constellation match: scan index, time, recent and old landmarks offered, the best
+    and second-best hypotheses' landmark counts, the joint NIS and its bound, the transform
+    (rotation deg, centroid shift m), and the outcome ("accepted", "too few", "no margin",
+    "not jointly compatible")."""
+
+    scan: int
+    t_s: float
+    n_recent: int
+    n_old: int
+    best: int
+    second: int
+    nis: float
+    nis_bound: float
+    rotation_deg: float
+    shift_m: float
+    outcome: str
+    merged: list = field(default_factory=list)  # [(kept old id, dropped recent id)]
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class LoopCloser:
+    """After each scan's map management: `closer(state, k, status)` (see the module doc)."""
+
+    def __init__(
+        self, cfg: ClosureConfig, view, laser, scan_t: np.ndarray, book, gate_prob
+    ) -> None:
+        self.cfg, self.view, self.laser, self.scan_t, self.book = cfg, view, laser, scan_t, book
+        self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
+        self.last_seen: dict[int, float] = {}  # landmark id -> time of its last update
+        self.events: list[ClosureEvent] = []
+
+    def __call__(self, state, k: int, status: np.ndarray) -> ClosureEvent | None:
+        t = float(self.scan_t[k])
+        ids = state.landmark_ids
+        for lid in status[status >= 0]:
+            self.last_seen[int(lid)] = t
+        for lid in ids:  # a landmark that joined this scan: seen now
+            self.last_seen.setdefault(int(lid), t)
+        if k % self.cfg.every_scans or ids.size < 2 * self.cfg.min_pairs:
+            return None
+        recent, old = self._candidates(state, t)
+        if recent.size < self.cfg.min_pairs or old.size < self.cfg.min_pairs:
+            return None
+        event = self._match(state, k, recent, old)
+        self.events.append(event)
+        return event
+
+    def hidden(self, state, k: int) -> np.ndarray | None:
+        """Revisit detection (module doc, step 0): the landmarks the scan's association must
+        not pair, a mask over the state's landmarks (None: none). An old landmark in view is
+        hidden when its gate at the new-feature level (radius sqrt(chi2_2) x the largest
+        metric sd of its predicted measurement, range and range x bearing) reaches half the
+        distance to its nearest neighbour in the map: a measurement of the neighbour could
+        then fall in its gate, and the per-scan association cannot tell them apart. Those are
+        left to the constellation match, which pairs many at once."""
+        t = float(self.scan_t[k])
+        ids = state.landmark_ids
+        if ids.size < 2:
+            return None
+        seen = np.array([self.last_seen.get(int(i), t) for i in ids])
+        z_hat, H5 = se2.observe(state.pose, state.landmarks_xy, self.laser)
+        cand = np.flatnonzero((seen < t - self.cfg.old_s) & self.view.contains(z_hat))
+        if not cand.size:
+            return None
+        C5 = state.cov(landmark_columns(cand))
+        S = np.einsum("nij,njk,nlk->nil", H5[cand], C5, H5[cand])
+        sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[cand, 0] ** 2 * S[:, 1, 1]))
+        xy = state.landmarks_xy
+        d_nn = cKDTree(xy).query(xy, k=2)[0][:, 1]
+        spacing = float(np.percentile(d_nn, 10))  # between close landmarks of this map
+        out = np.zeros(ids.size, bool)
+        out[cand] = self.gate_radius * sd >= 0.5 * np.minimum(d_nn[cand], spacing)
+        return out if out.any() else None
+
+    def _candidates(self, state, t: float, in_view: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(positions of recent landmarks within range, of old landmarks in view; with
+        in_view False, every recent and old landmark)."""
+        cfg, ids = self.cfg, state.landmark_ids
+        joined = np.array([self.book.first_scan.get(int(i), -1) for i in ids])
+        t_joined = np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
+        seen = np.array([self.last_seen[int(i)] for i in ids])
+        z_hat, _ = se2.observe(state.pose, state.landmarks_xy, self.laser)
+        in_range = z_hat[:, 0] <= self.view.max_range
+        if not in_view:
+            in_range = np.ones(ids.size, bool)
+        in_fov = self.view.contains(z_hat, margins=False) if in_view else in_range
+        recent = np.flatnonzero((t_joined >= t - cfg.recent_s) & in_range)
+        old = np.flatnonzero((seen < t - cfg.old_s) & in_fov)
+        return recent, old
+
+    def _match(self, state, k: int, recent: np.ndarray, old: np.ndarray) -> ClosureEvent:
+        cfg = self.cfg
+        xy = state.landmarks_xy
+        best, second, rot, shift, pairs = _hypotheses(
+            np.ascontiguousarray(xy[recent]),
+            np.ascontiguousarray(xy[old]),
+            np.array(
+                [cfg.match_m, cfg.min_sep_m, math.radians(cfg.max_rotation_deg), cfg.max_offset_m]
+            ),
+        )
+        common = dict(
+            scan=k,
+            t_s=float(self.scan_t[k]),
+            n_recent=int(recent.size),
+            n_old=int(old.size),
+            best=int(best),
+            second=int(second),
+            rotation_deg=math.degrees(rot),
+            shift_m=float(shift),
+        )
+        if best < cfg.min_pairs:
+            return ClosureEvent(**common, nis=math.nan, nis_bound=math.nan, outcome="too few")
+        if best - second < cfg.margin:
+            return ClosureEvent(**common, nis=math.nan, nis_bound=math.nan, outcome="no margin")
+        keep = state.landmark_ids[old[pairs[:, 1]]].copy()
+        drop = state.landmark_ids[recent[pairs[:, 0]]].copy()
+        nis = state.same_landmarks_nis(keep, drop)
+        bound = float(chi2.ppf(cfg.jc_prob, 2 * keep.size))
+        if not nis <= bound:
+            return ClosureEvent(
+                **common, nis=nis, nis_bound=bound, outcome="not jointly compatible"
+            )
+        merged = self._merge(state, keep, drop, common["t_s"])
+        merged += self._sweep(state, common["t_s"])
+        return ClosureEvent(**common, nis=nis, nis_bound=bound, outcome="accepted", merged=merged)
+
+    def _merge(self, state, keep, drop, t: float) -> list[tuple[int, int]]:
+        state.merge_landmarks(keep, drop)
+        merged = [(int(a), int(b)) for a, b in zip(keep, drop)]
+        for a, b in merged:
+            self.book.merged(drop=b, keep=a)
+            self.last_seen[a] = t
+        return merged
+
+    def _sweep(self, state, t: float) -> list[tuple[int, int]]:
+        """After a closure, the other trees mapped twice (module doc, step 4): each recent
+        landmark with exactly one old landmark within 2 x match_m, closer than match_m and
+        individually compatible with it (2 dof at jc_prob), merged in one batch if the batch
+        is jointly compatible too."""
+        recent, old = self._candidates(state, t, in_view=False)
+        if not (recent.size and old.size):
+            return []
+        xy, ids = state.landmarks_xy, state.landmark_ids
+        d = np.hypot(*(xy[recent][:, None, :] - xy[old][None, :, :]).transpose(2, 0, 1))
+        gate = float(chi2.ppf(self.cfg.jc_prob, 2))
+        keep, drop = [], []
+        for i in range(recent.size):
+            near = np.flatnonzero(d[i] < 2.0 * self.cfg.match_m)
+            if near.size != 1 or d[i, near[0]] >= self.cfg.match_m:
+                continue
+            a, b = int(ids[old[near[0]]]), int(ids[recent[i]])
+            if a in keep or state.same_landmarks_nis([a], [b]) > gate:
+                continue
+            keep.append(a)
+            drop.append(b)
+        if not keep:
+            return []
+        if state.same_landmarks_nis(keep, drop) > chi2.ppf(self.cfg.jc_prob, 2 * len(keep)):
+            return []
+        return self._merge(state, keep, drop, t)
+
+
+@njit(cache=True, nogil=True)
+def _hypotheses(recent, old, prm):
+    """The constellation match of the module doc, step 2. recent (n, 2), old (m, 2); prm:
+    [match_m, min_sep_m, max_rotation_rad, max_offset_m]. Returns (best count, second-best
+    count, the best rotation (rad), its centroid shift (m), pairs (best, 2): [recent index,
+    old index], each landmark at most once, nearest first)."""
+    match, min_sep, max_rot, max_off = prm
+    n, m = recent.shape[0], old.shape[0]
+    cx, cy = recent[:, 0].mean(), recent[:, 1].mean()
+    # every hypothesis's count and where it puts the recent centroid
+    cap = 4096
+    counts = np.zeros(cap, np.int64)
+    where = np.zeros((cap, 2))
+    params = np.zeros((cap, 3))
+    h = 0
+    for i in range(n):
+        for j in range(n):
+            if i == j:
+                continue
+            dx, dy = recent[j, 0] - recent[i, 0], recent[j, 1] - recent[i, 1]
+            d = math.hypot(dx, dy)
+            if d < min_sep:
+                continue
+            ang_r = math.atan2(dy, dx)
+            for a in range(m):
+                for b in range(m):
+                    if a == b:
+                        continue
+                    ex, ey = old[b, 0] - old[a, 0], old[b, 1] - old[a, 1]
+                    if abs(math.hypot(ex, ey) - d) > match:
+                        continue
+                    phi = math.atan2(ey, ex) - ang_r
+                    phi = math.atan2(math.sin(phi), math.cos(phi))
+                    if abs(phi) > max_rot:
+                        continue
+                    c, s = math.cos(phi), math.sin(phi)
+                    tx = old[a, 0] - (c * recent[i, 0] - s * recent[i, 1])
+                    ty = old[a, 1] - (s * recent[i, 0] + c * recent[i, 1])
+                    px, py = c * cx - s * cy + tx, s * cx + c * cy + ty
+                    if math.hypot(px - cx, py - cy) > max_off:
+                        continue
+                    if h == cap:  # grow
+                        counts = np.concatenate((counts, np.zeros(cap, np.int64)))
+                        where = np.concatenate((where, np.zeros((cap, 2))))
+                        params = np.concatenate((params, np.zeros((cap, 3))))
+                        cap *= 2
+                    counts[h] = _inliers(recent, old, c, s, tx, ty, match)
+                    where[h, 0], where[h, 1] = px, py
+                    params[h, 0], params[h, 1], params[h, 2] = phi, tx, ty
+                    h += 1
+    if h == 0:
+        return 0, 0, 0.0, 0.0, np.zeros((0, 2), np.int64)
+    kbest = np.argmax(counts[:h])
+    second = 0
+    for q in range(h):
+        far = math.hypot(where[q, 0] - where[kbest, 0], where[q, 1] - where[kbest, 1]) > match
+        if far and counts[q] > second:
+            second = counts[q]
+    phi, tx, ty = params[kbest, 0], params[kbest, 1], params[kbest, 2]
+    pairs = _pairs(recent, old, math.cos(phi), math.sin(phi), tx, ty, match)
+    shift = math.hypot(where[kbest, 0] - cx, where[kbest, 1] - cy)
+    return counts[kbest], second, phi, shift, pairs
+
+
+@njit(cache=True, nogil=True)
+def _inliers(recent, old, c, s, tx, ty, match):
+    """How many recent landmarks the transform puts within `match` of an old one."""
+    cnt = 0
+    m2 = match * match
+    for i in range(recent.shape[0]):
+        px = c * recent[i, 0] - s * recent[i, 1] + tx
+        py = s * recent[i, 0] + c * recent[i, 1] + ty
+        for a in range(old.shape[0]):
+            ex, ey = old[a, 0] - px, old[a, 1] - py
+            if ex * ex + ey * ey < m2:
+                cnt += 1
+                break
+    return cnt
+
+
+@njit(cache=True, nogil=True)
+def _pairs(recent, old, c, s, tx, ty, match):
+    """One-to-one pairs [recent, old] within `match` under the transform, nearest first; a
+    recent landmark with two old ones within 2 x match is left out (which one is unclear)."""
+    n, m = recent.shape[0], old.shape[0]
+    cand_d = []
+    cand_i = []
+    cand_a = []
+    for i in range(n):
+        px = c * recent[i, 0] - s * recent[i, 1] + tx
+        py = s * recent[i, 0] + c * recent[i, 1] + ty
+        best, best_a, near = math.inf, -1, 0
+        for a in range(m):
+            dd = math.hypot(old[a, 0] - px, old[a, 1] - py)
+            if dd < 2.0 * match:
+                near += 1
+            if dd < best:
+                best, best_a = dd, a
+        if best < match and near == 1:
+            cand_d.append(best)
+            cand_i.append(i)
+            cand_a.append(best_a)
+    order = np.argsort(np.array(cand_d)) if len(cand_d) else np.zeros(0, np.int64)
+    used_r = np.zeros(n, np.bool_)
+    used_o = np.zeros(m, np.bool_)
+    out = np.zeros((len(cand_d), 2), np.int64)
+    k = 0
+    for q in order:
+        i, a = cand_i[q], cand_a[q]
+        if used_r[i] or used_o[a]:
+            continue
+        used_r[i] = True
+        used_o[a] = True
+        out[k, 0], out[k, 1] = i, a
+        k += 1
+    return out[:k]

@@ -1,0 +1,53 @@
+"""Loop closure on simulated loops with known truth (`experiments.paper.loop_closure`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from experiments.paper.loop_closure import NOISE_SCALE, _identities, loop_config
+from experiments.sim.loops import loop_drive, loop_scene
+from features import extract_features
+from slam import run_slam
+
+
+def _run(seed: int, kind: str, closure: bool):
+    seq = loop_drive(seed, kind, NOISE_SCALE)
+    cfg = loop_config(closure)
+    kw = cfg.features.extractor_kwargs()
+    feats = [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
+    return seq, feats, run_slam(seq, cfg, features=feats)
+
+
+def test_a_closed_loop_recovers_the_map_of_the_stand():
+    """Park drive 5: without closure the return maps the stand a second time (35 trees
+    twice); with it, one closure merges the duplicates onto their own trees, no tree is
+    mapped twice, and every landmark lies within its 99.9% ellipse of its tree."""
+    seq, feats, off = _run(5, "park", False)
+    ident_off = _identities(off, seq, feats)
+    final_off = [ident_off[int(i)] for i in off.landmark_id if int(i) in ident_off]
+    assert len(final_off) - len(set(final_off)) >= 20
+    seq, feats, on = _run(5, "park", True)
+    accepted = [e for e in on.closures if e["outcome"] == "accepted"]
+    assert accepted and all(e["best"] >= 6 and e["best"] - e["second"] >= 3 for e in accepted)
+    ident = _identities(on, seq, feats)
+    assert all(ident[a] == ident[b] for e in accepted for a, b in e["merged"])
+    final = [ident[int(i)] for i in on.landmark_id]
+    assert len(final) == len(set(final))  # no tree twice
+    trees = seq.truth_landmarks[np.array(final), :2]
+    d = on.landmark_xy - trees
+    m2 = np.einsum("ni,nij,nj->n", d, np.linalg.inv(on.landmark_cov), d)
+    assert np.all(m2 <= chi2.ppf(0.999, 2))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_look_alike_orchard_gives_no_false_closure(seed):
+    """Rows of identical trees one spacing apart: whatever the closure accepts pairs each
+    landmark with its own tree (the experiment runs 100 drives)."""
+    assert loop_scene("orchard", 0).truth_landmarks.shape[0] == 60
+    seq, feats, on = _run(seed, "orchard", True)
+    ident = _identities(on, seq, feats)
+    for e in on.closures:
+        if e["outcome"] == "accepted":
+            assert all(ident.get(a) == ident.get(b) for a, b in e["merged"])

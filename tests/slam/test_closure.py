@@ -1,0 +1,170 @@
+"""Loop closure (`slam.closure`): the merge update, the constellation match, the decision
+(too few, no margin, not jointly compatible, accepted) and the log's relabelling."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from slam import SlamConfig, se2
+from slam.closure import ClosureConfig, LoopCloser, _hypotheses
+from slam.ekf import Filter, initial_state
+from slam.errors import SlamError
+from slam.log import LogBuilder
+from slam.maps import View
+
+LASER = np.array([0.0, 0.0, 0.0])
+R_TINY = np.diag([1e-4, 1e-8])
+
+
+def _stand(rng, n: int, spacing: float = 3.0) -> np.ndarray:
+    """n points in a 40 m x 30 m block at least `spacing` apart."""
+    pts: list[np.ndarray] = []
+    while len(pts) < n:
+        p = rng.uniform([0.0, -15.0], [40.0, 15.0])
+        if all(np.hypot(*(p - q)) >= spacing for q in pts):
+            pts.append(p)
+    return np.array(pts)
+
+
+def _add(f: Filter, true_pose, pts, first_id: int) -> list[int]:
+    """Landmarks from exact measurements of pts taken at true_pose, initialised from the
+    filter's pose estimate (so they carry its error)."""
+    z, _ = se2.observe(np.asarray(true_pose, float), pts, LASER)
+    ids = []
+    for j, zj in enumerate(z):
+        f.add_landmark(zj, R_TINY, LASER, first_id + j)
+        ids.append(first_id + j)
+    return ids
+
+
+def test_merging_two_estimates_of_one_landmark_is_their_information_fusion():
+    """Two uncorrelated estimates a, b (covariances A, B) of one point: the merge keeps
+    (A^-1 + B^-1)^-1 (A^-1 a + B^-1 b) with covariance (A^-1 + B^-1)^-1, drops b, and its NIS
+    is (a - b)^T (A + B)^-1 (a - b)."""
+    f = Filter(initial_state(np.zeros(3), np.diag([1e-12, 1e-12, 1e-14])))
+    f.add_landmark(np.array([10.0, 0.1]), np.diag([0.3**2, 0.02**2]), LASER, 7)
+    f.add_landmark(np.array([10.4, 0.12]), np.diag([0.1**2, 0.05**2]), LASER, 9)
+    a, b = f.landmarks_xy.copy()
+    A, B = f.landmark_covs
+    want_nis = float((a - b) @ np.linalg.solve(A + B, a - b))
+    assert f.same_landmarks_nis([7], [9]) == pytest.approx(want_nis, rel=1e-9)
+    nis = f.merge_landmarks([7], [9], sigma_m=1e-6)
+    info = np.linalg.inv(A) + np.linalg.inv(B)
+    want = np.linalg.solve(info, np.linalg.solve(A, a) + np.linalg.solve(B, b))
+    assert nis == pytest.approx(want_nis, rel=1e-6)
+    assert f.landmark_ids.tolist() == [7]
+    np.testing.assert_allclose(f.landmarks_xy[0], want, atol=1e-6)
+    np.testing.assert_allclose(f.landmark_covs[0], np.linalg.inv(info), atol=1e-9)
+    with pytest.raises(SlamError, match="pair up"):
+        f.merge_landmarks([7], [])
+    with pytest.raises(SlamError, match="twice"):
+        f.merge_landmarks([7], [7])
+
+
+def test_the_constellation_match_finds_a_moved_copy_and_its_pairs():
+    """10 of 25 trees seen again 4 m and 5 deg off: the best hypothesis explains all 10 with
+    the right pairs and the inverse motion; no other placement explains more than 3."""
+    rng = np.random.default_rng(3)
+    old = _stand(rng, 25)
+    pick = rng.choice(25, 10, replace=False)
+    th = math.radians(5.0)
+    Rm = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    recent = old[pick] @ Rm.T + [4.0, -1.0] + rng.normal(0, 0.03, (10, 2))
+    best, second, rot, shift, pairs = _hypotheses(recent, old, np.array([0.5, 3.0, 0.3, 15.0]))
+    assert best == 10 and second <= 3
+    assert math.degrees(rot) == pytest.approx(-5.0, abs=0.5)
+    assert sorted(map(tuple, pairs.tolist())) == sorted((i, int(pick[i])) for i in range(10))
+    assert shift == pytest.approx(np.hypot(*(recent.mean(0) - old[pick].mean(0))), abs=0.3)
+
+
+def _closer(state, cfg: ClosureConfig) -> LoopCloser:
+    book = LogBuilder(np.arange(1000) * 0.2)
+    for lid in state.landmark_ids:
+        book.first_scan[int(lid)] = 0
+    view = View(fov=(-math.pi, math.pi), max_range=80.0)
+    return LoopCloser(cfg, view, LASER, book.scan_t, book, 0.9999)
+
+
+def _revisit(pts_old, pts_recent, drift, pose_sd=(1.5, 1.5, 0.03)):
+    """A filter that mapped pts_old from an exact pose, then drifted by `drift` (its pose
+    covariance grown to pose_sd) and mapped pts_recent from the drifted estimate."""
+    f = Filter(initial_state(np.zeros(3), np.diag([1e-6, 1e-6, 1e-8])))
+    old_ids = _add(f, np.zeros(3), pts_old, 0)
+    est = np.asarray(drift, float)
+    F = np.eye(3)
+    f.predict(est, F, np.diag(np.square(pose_sd)))
+    recent_ids = _add(f, np.zeros(3), pts_recent, 100)
+    return f, old_ids, recent_ids
+
+
+def test_a_return_with_drift_is_closed_and_the_pose_corrected():
+    """The trees of the stand mapped again 2.5 m and 2 deg off: the closure is accepted, each
+    recent landmark is merged into its own tree, and the pose comes back to the truth."""
+    rng = np.random.default_rng(11)
+    pts = _stand(rng, 20)
+    f, old_ids, recent_ids = _revisit(pts, pts[:12], (2.0, -1.5, math.radians(2.0)))
+    closer = _closer(f, ClosureConfig(enabled=True))
+    ev = closer._match(f, 50, np.arange(20, 32), np.arange(20))
+    assert ev.outcome == "accepted" and ev.best == 12 and ev.nis <= ev.nis_bound
+    assert sorted(ev.merged) == [(old_ids[j], recent_ids[j]) for j in range(12)]
+    assert f.n_landmarks == 20
+    np.testing.assert_allclose(f.pose, 0.0, atol=0.05)
+    assert closer.book.alias == {recent_ids[j]: old_ids[j] for j in range(12)}
+
+
+def test_too_few_and_no_margin_are_refused():
+    """Four landmarks are too few (min_pairs 6); in an orchard grid every shift by one spacing
+    explains almost as many, so the best has no margin and nothing is merged."""
+    rng = np.random.default_rng(5)
+    pts = _stand(rng, 20)
+    f, _, _ = _revisit(pts, pts[:4], (2.0, -1.5, 0.0))
+    ev = _closer(f, ClosureConfig(enabled=True))._match(f, 50, np.arange(20, 24), np.arange(20))
+    assert ev.outcome == "too few" and f.n_landmarks == 24
+    grid = np.array([[x, y] for x in np.arange(4.0, 44.0, 4.0) for y in (-9.0, -3.0, 3.0, 9.0)])
+    f, _, _ = _revisit(grid, grid[10:30], (1.0, 0.5, 0.0))
+    n = grid.shape[0]
+    ev = _closer(f, ClosureConfig(enabled=True))._match(
+        f, 50, np.arange(n, n + 20), np.arange(n)
+    )
+    assert ev.outcome == "no margin" and ev.best - ev.second < 3
+    assert f.n_landmarks == n + 20
+
+
+def test_a_closure_the_filter_cannot_explain_is_refused():
+    """The same stand 2.5 m off, but the filter believes its pose to 5 cm: the pairs are not
+    jointly compatible, and nothing is merged."""
+    rng = np.random.default_rng(11)
+    pts = _stand(rng, 20)
+    f, _, _ = _revisit(pts, pts[:12], (2.0, -1.5, 0.0), pose_sd=(0.05, 0.05, 0.001))
+    ev = _closer(f, ClosureConfig(enabled=True))._match(f, 50, np.arange(20, 32), np.arange(20))
+    assert ev.outcome == "not jointly compatible" and ev.nis > ev.nis_bound
+    assert f.n_landmarks == 32
+
+
+def test_the_log_counts_a_merged_landmarks_measurements_as_the_kept_ones():
+    book = LogBuilder(np.arange(3) * 0.2)
+    book.n_obs.update({1: 5, 2: 3, 5: 2})
+    book.first_scan.update({1: 1, 2: 2, 5: 0})
+    book.merged(drop=2, keep=1)
+    assert book.n_obs == {1: 8, 5: 2} and book.first_scan == {1: 1, 5: 0}
+    book.merged(drop=1, keep=5)  # a later closure: 2 -> 1 -> 5
+    assert book.n_obs == {5: 10} and book.first_scan == {5: 0}
+    assert book._resolved([2, 1, 5, -1, 4]).tolist() == [5, 5, 5, -1, 4]
+
+
+@pytest.mark.parametrize(
+    ("data", "message"),
+    [
+        ({"closure": {"min_pairs": 2}}, r"closure\.min_pairs"),
+        ({"closure": {"jc_prob": 1.0}}, r"closure\.jc_prob"),
+        ({"closure": {"match_m": -1.0}}, r"closure\.match_m"),
+        ({"closure": {"enabled": "yes"}}, r"closure\.enabled"),
+        ({"closure": {"every": 3}}, r"closure\.every.*did you mean 'every_scans'"),
+    ],
+)
+def test_bad_closure_settings_name_the_key(data, message):
+    with pytest.raises(SlamError, match=message):
+        SlamConfig.from_dict(data)
