@@ -165,7 +165,7 @@ class LoopCloser:
         cfg, ids = self.cfg, state.landmark_ids
         joined = np.array([self.book.first_scan.get(int(i), -1) for i in ids])
         t_joined = np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
-        seen = np.array([self.last_seen[int(i)] for i in ids])
+        seen = np.array([self.last_seen.get(int(i), t) for i in ids])
         z_hat, _ = se2.observe(state.pose, state.landmarks_xy, self.laser)
         in_range = z_hat[:, 0] <= self.view.max_range
         if not in_view:
@@ -199,6 +199,8 @@ class LoopCloser:
             return ClosureEvent(**common, nis=math.nan, nis_bound=math.nan, outcome="too few")
         if best - second < cfg.margin:
             return ClosureEvent(**common, nis=math.nan, nis_bound=math.nan, outcome="no margin")
+        if pairs.shape[0] < cfg.min_pairs:  # too few left once the unclear pairs are out
+            return ClosureEvent(**common, nis=math.nan, nis_bound=math.nan, outcome="too few")
         keep = state.landmark_ids[old[pairs[:, 1]]].copy()
         drop = state.landmark_ids[recent[pairs[:, 0]]].copy()
         nis = state.same_landmarks_nis(keep, drop)

@@ -126,11 +126,22 @@ def test_too_few_and_no_margin_are_refused():
     grid = np.array([[x, y] for x in np.arange(4.0, 44.0, 4.0) for y in (-9.0, -3.0, 3.0, 9.0)])
     f, _, _ = _revisit(grid, grid[10:30], (1.0, 0.5, 0.0))
     n = grid.shape[0]
-    ev = _closer(f, ClosureConfig(enabled=True))._match(
-        f, 50, np.arange(n, n + 20), np.arange(n)
-    )
+    ev = _closer(f, ClosureConfig(enabled=True))._match(f, 50, np.arange(n, n + 20), np.arange(n))
     assert ev.outcome == "no margin" and ev.best - ev.second < 3
     assert f.n_landmarks == n + 20
+
+
+def test_pairs_with_two_old_landmarks_near_are_left_out():
+    """Every old tree mapped twice 0.7 m apart: each recent landmark lands within match_m of
+    one and within 2 x match_m of both, so which one it is stays unclear; with the unclear
+    pairs left out too few remain, and nothing is merged."""
+    rng = np.random.default_rng(11)
+    pts = _stand(rng, 12, spacing=4.0)
+    twice = np.vstack([pts, pts + [0.7, 0.0]])
+    f, _, _ = _revisit(twice, pts[:10] + [0.1, 0.0], (2.0, -1.5, 0.0))
+    ev = _closer(f, ClosureConfig(enabled=True))._match(f, 50, np.arange(24, 34), np.arange(24))
+    assert ev.best >= 6 and ev.outcome in ("too few", "no margin")
+    assert f.n_landmarks == 34
 
 
 def test_a_closure_the_filter_cannot_explain_is_refused():
