@@ -5,17 +5,21 @@ mapped long ago, their predictions lie in view, yet the per-scan association doe
 them (the drift has grown past its gate), and new landmarks are mapped beside them. The
 `LoopCloser` watches for it after each scan and, when it is there, matches the two maps:
 
-1. Revisit detection (`LoopCloser.__call__`): every `every_scans` scans, the *old* landmarks
-   (not seen for `old_s` seconds) whose predictions lie in the laser's view, and the *recent*
-   ones (joined the map in the last `recent_s` seconds) within the laser's range. Both must
-   number at least `min_pairs`.
-2. Constellation match (`_hypotheses`): every pair of recent landmarks at least `min_sep_m`
-   apart and every pair of old ones at the same distance (within `match_m`) propose a rigid
-   transform (rotation at most `max_rotation_deg`, moving the recent landmarks' centroid at most
-   `max_offset_m`); a hypothesis scores the recent landmarks it puts within `match_m` of an old
-   one. Trees in a park look alike, so the best hypothesis must explain `min_pairs` landmarks
-   and `margin` more than the best hypothesis that differs from it (moves the centroid
-   elsewhere by more than `match_m`).
+1. Revisit detection (`LoopCloser.hidden`, before each scan's association): an *old*
+   landmark (not seen for `old_s` seconds) whose prediction lies in view is hidden from the
+   scan's association when its gate reaches half the distance to its nearest neighbour in the
+   map. The trees of the way back are then mapped anew, as *recent* landmarks (joined the map
+   in the last `recent_s` seconds).
+2. Constellation match (`LoopCloser.__call__`, `_hypotheses`): every `every_scans` scans while
+   at least `min_pairs` old landmarks are hidden (the per-scan association pairs the rest),
+   the recent landmarks within the laser's range against the old ones in view, at least
+   `min_pairs` of each. Every pair of the `BASIS` most-seen recent landmarks at least
+   `min_sep_m` apart and every pair of old ones at the same distance (within `match_m`)
+   propose a rigid transform (rotation at most `max_rotation_deg`, moving the recent
+   landmarks' centroid at most `max_offset_m`); a hypothesis scores the recent landmarks it
+   puts within `match_m` of an old one. Trees in a park look alike, so the best hypothesis
+   must explain `min_pairs` landmarks and `margin` more than the best hypothesis that differs
+   from it (moves the centroid elsewhere by more than `match_m`).
 3. Joint compatibility (`Filter.same_landmarks_nis`): the filter's own covariance must allow
    all the matched pairs to be the same trees at once (chi-square at `jc_prob`, 2 x pairs
    degrees of freedom).
@@ -43,7 +47,11 @@ from slam import se2
 from slam.ekf import landmark_columns
 from slam.errors import SlamError
 
-__all__ = ["ClosureConfig", "ClosureEvent", "LoopCloser"]
+__all__ = ["BASIS", "ClosureConfig", "ClosureEvent", "LoopCloser"]
+
+# Recent landmarks whose pairs propose transforms (the most-seen first): 10 give 90 ordered
+# pairs; one right pair is enough, and the cost grows with the square of this.
+BASIS = 10
 
 
 @dataclass(frozen=True)
@@ -115,6 +123,7 @@ class LoopCloser:
         self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
         self.last_seen: dict[int, float] = {}  # landmark id -> time of its last update
         self.events: list[ClosureEvent] = []
+        self.n_hidden = 0  # old landmarks hidden from the last scan's association
 
     def __call__(self, state, k: int, status: np.ndarray) -> ClosureEvent | None:
         t = float(self.scan_t[k])
@@ -123,8 +132,8 @@ class LoopCloser:
             self.last_seen[int(lid)] = t
         for lid in ids:  # a landmark that joined this scan: seen now
             self.last_seen.setdefault(int(lid), t)
-        if k % self.cfg.every_scans or ids.size < 2 * self.cfg.min_pairs:
-            return None
+        if k % self.cfg.every_scans or self.n_hidden < self.cfg.min_pairs:
+            return None  # the per-scan association can still pair what is in view
         recent, old = self._candidates(state, t)
         if recent.size < self.cfg.min_pairs or old.size < self.cfg.min_pairs:
             return None
@@ -133,7 +142,7 @@ class LoopCloser:
         return event
 
     def hidden(self, state, k: int) -> np.ndarray | None:
-        """Revisit detection (module doc, step 0): the landmarks the scan's association must
+        """Revisit detection (module doc, step 1): the landmarks the scan's association must
         not pair, a mask over the state's landmarks (None: none). An old landmark in view is
         hidden when its gate at the new-feature level (radius sqrt(chi2_2) x the largest
         metric sd of its predicted measurement, range and range x bearing) reaches half the
@@ -142,21 +151,23 @@ class LoopCloser:
         left to the constellation match, which pairs many at once."""
         t = float(self.scan_t[k])
         ids = state.landmark_ids
+        self.n_hidden = 0
         if ids.size < 2:
             return None
         seen = np.array([self.last_seen.get(int(i), t) for i in ids])
         z_hat, H5 = se2.observe(state.pose, state.landmarks_xy, self.laser)
         cand = np.flatnonzero((seen < t - self.cfg.old_s) & self.view.contains(z_hat))
+        self.n_hidden = 0
         if not cand.size:
             return None
         C5 = state.cov(landmark_columns(cand))
         S = np.einsum("nij,njk,nlk->nil", H5[cand], C5, H5[cand])
         sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[cand, 0] ** 2 * S[:, 1, 1]))
         xy = state.landmarks_xy
-        d_nn = cKDTree(xy).query(xy, k=2)[0][:, 1]
-        spacing = float(np.percentile(d_nn, 10))  # between close landmarks of this map
+        d_nn = cKDTree(xy).query(xy[cand], k=2)[0][:, 1]
         out = np.zeros(ids.size, bool)
-        out[cand] = self.gate_radius * sd >= 0.5 * np.minimum(d_nn[cand], spacing)
+        out[cand] = self.gate_radius * sd >= 0.5 * d_nn
+        self.n_hidden = int(out.sum())
         return out if out.any() else None
 
     def _candidates(self, state, t: float, in_view: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -178,11 +189,20 @@ class LoopCloser:
     def _match(self, state, k: int, recent: np.ndarray, old: np.ndarray) -> ClosureEvent:
         cfg = self.cfg
         xy = state.landmarks_xy
+        # the most-seen recent landmarks first: they propose the hypotheses (BASIS of them)
+        seen = np.array([self.book.n_obs.get(int(i), 0) for i in state.landmark_ids[recent]])
+        recent = recent[np.argsort(-seen, kind="stable")]
         best, second, rot, shift, pairs = _hypotheses(
             np.ascontiguousarray(xy[recent]),
             np.ascontiguousarray(xy[old]),
             np.array(
-                [cfg.match_m, cfg.min_sep_m, math.radians(cfg.max_rotation_deg), cfg.max_offset_m]
+                [
+                    cfg.match_m,
+                    cfg.min_sep_m,
+                    math.radians(cfg.max_rotation_deg),
+                    cfg.max_offset_m,
+                    BASIS,
+                ]
             ),
         )
         common = dict(
@@ -252,11 +272,13 @@ class LoopCloser:
 @njit(cache=True, nogil=True)
 def _hypotheses(recent, old, prm):
     """The constellation match of the module doc, step 2. recent (n, 2), old (m, 2); prm:
-    [match_m, min_sep_m, max_rotation_rad, max_offset_m]. Returns (best count, second-best
-    count, the best rotation (rad), its centroid shift (m), pairs (best, 2): [recent index,
-    old index], each landmark at most once, nearest first)."""
-    match, min_sep, max_rot, max_off = prm
+    [match_m, min_sep_m, max_rotation_rad, max_offset_m, basis]: pairs of the first `basis`
+    recent landmarks propose the transforms, every recent one scores them. Returns (best
+    count, second-best count, the best rotation (rad), its centroid shift (m), pairs (k, 2):
+    [recent index, old index], each landmark at most once, nearest first)."""
+    match, min_sep, max_rot, max_off, basis = prm
     n, m = recent.shape[0], old.shape[0]
+    nb = min(n, int(basis))
     cx, cy = recent[:, 0].mean(), recent[:, 1].mean()
     # every hypothesis's count and where it puts the recent centroid
     cap = 4096
@@ -264,8 +286,8 @@ def _hypotheses(recent, old, prm):
     where = np.zeros((cap, 2))
     params = np.zeros((cap, 3))
     h = 0
-    for i in range(n):
-        for j in range(n):
+    for i in range(nb):
+        for j in range(nb):
             if i == j:
                 continue
             dx, dy = recent[j, 0] - recent[i, 0], recent[j, 1] - recent[i, 1]

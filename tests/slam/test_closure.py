@@ -73,7 +73,7 @@ def test_the_constellation_match_finds_a_moved_copy_and_its_pairs():
     th = math.radians(5.0)
     Rm = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
     recent = old[pick] @ Rm.T + [4.0, -1.0] + rng.normal(0, 0.03, (10, 2))
-    best, second, rot, shift, pairs = _hypotheses(recent, old, np.array([0.5, 3.0, 0.3, 15.0]))
+    best, second, rot, shift, pairs = _hypotheses(recent, old, np.array([0.5, 3.0, 0.3, 15.0, 10]))
     assert best == 10 and second <= 3
     assert math.degrees(rot) == pytest.approx(-5.0, abs=0.5)
     assert sorted(map(tuple, pairs.tolist())) == sorted((i, int(pick[i])) for i in range(10))
