@@ -34,7 +34,8 @@ __all__ = ["RUNS", "loop_config", "loop_trial", "run"]
 
 log = logging.getLogger(__name__)
 
-RUNS = {"park": 40, "orchard": 100}  # --quick: 4 and 10
+RUNS = {"park": 40, "orchard": 100}
+QUICK_RUNS = 2  # of each kind, with --quick
 NOISE_SCALE = 0.5  # of the Cycab's odometry noise: returns drift 0-8 m (module doc)
 HOME_X_M = -15.0  # the stand starts here on the way back (`loop_scene`'s route)
 
@@ -192,9 +193,7 @@ TABLE = TableSpec(
 
 def run(ctx) -> None:
     """The registered experiment `loop-closure` (only when named)."""
-    jobs = [
-        (kind, i) for kind, n in RUNS.items() for i in range(max(n // 10, 4) if ctx.quick else n)
-    ]
+    jobs = [(kind, i) for kind, n in RUNS.items() for i in range(QUICK_RUNS if ctx.quick else n)]
     batch = ctx.submit(loop_trial, jobs, desc="loop-closure runs", chunksize=1)
 
     def finish(rows: list) -> None:

@@ -51,3 +51,25 @@ def test_a_look_alike_orchard_gives_no_false_closure(seed):
     for e in on.closures:
         if e["outcome"] == "accepted":
             assert all(ident.get(a) == ident.get(b) for a, b in e["merged"])
+
+
+def test_the_experiment_writes_its_table(tmp_path):
+    """`trunkslam reproduce loop-closure --quick`: two drives of each kind, a row per scene
+    and closure setting, the run count in the manifest."""
+    import csv
+    import json
+
+    from typer.testing import CliRunner
+
+    from experiments.cli import app
+
+    out = tmp_path / "r"
+    res = CliRunner().invoke(app, ["reproduce", "loop-closure", "--quick", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    rows = list(csv.DictReader((out / "loop_closure.csv").open()))
+    assert [(r["scene"], r["closure"]) for r in rows] == [
+        ("park", "off"), ("park", "on"), ("orchard", "off"), ("orchard", "on")
+    ]  # fmt: skip
+    assert all(r["runs"] == "2" for r in rows)
+    assert all(int(r["false_closures"]) == 0 for r in rows)
+    assert json.loads((out / "manifest.json").read_text())["config"]["loop-closure"]["runs"] == 4
