@@ -56,7 +56,18 @@ BASIS = 10
 
 @dataclass(frozen=True)
 class ClosureConfig:
-    """The `[closure]` section (see the module doc for what each setting does)."""
+    """The `[closure]` section (see the module doc for what each setting does).
+
+    Where the defaults come from (none from Victoria Park): recent_s 30 and old_s 60 s: a
+    landmark seen in the last 30 s is part of the local map, one unseen for a minute has been
+    left behind (at 1-3 m/s, 60-180 m away); min_pairs 6 with margin 3 and match_m 0.5 m were
+    set by hand in the simulated park (experiment `loop-closure`, drives 0-11): at 1.0 m,
+    random hypotheses in a stand of trees 3 m apart explained 5-6 landmarks, at 0.5 m 3-4, and
+    landmarks of one local map agree to a few centimetres; min_sep_m 3 m: the trees' spacing
+    there; max_offset_m 15 m and max_rotation_deg 15 deg: larger than any drift of the
+    simulated returns (0-8 m); jc_prob 0.999 as the association gates. every_scans 5: a match
+    a second at 5 Hz. They are a first version, checked in the simulator only.
+    """
 
     enabled: bool = False
     every_scans: int = 5
@@ -116,10 +127,11 @@ class ClosureEvent:
 class LoopCloser:
     """After each scan's map management: `closer(state, k, status)` (see the module doc)."""
 
-    def __init__(
-        self, cfg: ClosureConfig, view, laser, scan_t: np.ndarray, book, gate_prob
-    ) -> None:
-        self.cfg, self.view, self.laser, self.scan_t, self.book = cfg, view, laser, scan_t, book
+    def __init__(self, cfg: ClosureConfig, view, laser, book, *, gate_prob: float) -> None:
+        """book: the run's `LogBuilder` (scan times, first scans, sightings; merges go to it);
+        gate_prob: the new-feature gate's probability (revisit detection's gate)."""
+        self.cfg, self.view, self.laser, self.book = cfg, view, laser, book
+        self.scan_t = book.scan_t
         self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
         self.last_seen: dict[int, float] = {}  # landmark id -> time of its last update
         self.events: list[ClosureEvent] = []
@@ -157,7 +169,6 @@ class LoopCloser:
         seen = np.array([self.last_seen.get(int(i), t) for i in ids])
         z_hat, H5 = se2.observe(state.pose, state.landmarks_xy, self.laser)
         cand = np.flatnonzero((seen < t - self.cfg.old_s) & self.view.contains(z_hat))
-        self.n_hidden = 0
         if not cand.size:
             return None
         C5 = state.cov(landmark_columns(cand))

@@ -85,9 +85,8 @@ class Slam:
                 closure,
                 self.view,
                 self.laser,
-                self.book.scan_t,
                 self.book,
-                c.cfg.association.new_feature_gate_prob,
+                gate_prob=c.cfg.association.new_feature_gate_prob,
             )
             if closure.enabled
             else None

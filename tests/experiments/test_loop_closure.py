@@ -73,3 +73,24 @@ def test_the_experiment_writes_its_table(tmp_path):
     assert all(r["runs"] == "2" for r in rows)
     assert all(int(r["false_closures"]) == 0 for r in rows)
     assert json.loads((out / "manifest.json").read_text())["config"]["loop-closure"]["runs"] == 4
+
+
+def test_the_smoother_sees_the_closed_loop():
+    """The run log of the closed park drive 5 relabels the merged landmarks' measurements, so
+    the smoother's graph has one landmark per tree of the final map, with the sightings of
+    both passes: it ends on the truth, as close as the filter."""
+    from slam import interpolate_poses
+    from slam.smoother import problem_from_log, smooth
+
+    seq, feats, on = _run(5, "park", True)
+    p = problem_from_log(on)
+    assert set(p.meas_landmark.tolist()) == set(on.landmark_id.tolist())
+    merged = {b for e in on.closures if e["outcome"] == "accepted" for _, b in e["merged"]}
+    assert merged and not merged & set(p.meas_landmark.tolist())
+    first = {int(i): int(s) for i, s in zip(on.landmark_id, on.landmark_first_scan)}
+    late = [lid for lid, s in zip(p.meas_landmark, p.meas_scan) if s > 900]
+    assert any(first[lid] < 300 for lid in late)  # old trees seen again on the way back
+    res = smooth(p)
+    truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    err = np.hypot(*(res.pose[-1, :2] - truth[-1, :2]))
+    assert err < max(0.5, 1.5 * np.hypot(*(on.pose[-1, :2] - truth[-1, :2])))

@@ -200,7 +200,7 @@ def test_quick_victoria_park_table_is_tidy(quick_victoria_park):
     assert assert_tidy_tables(quick_victoria_park) == {"victoria_park.csv"}
     rows = read_tidy_csv(quick_victoria_park / "victoria_park.csv")
     ours = [r for r in rows if r["source"] == "ours"]
-    assert len(ours) == 7 and all(r["scans"] in (150, 100) for r in ours)
+    assert len(ours) == 8 and all(r["scans"] in (150, 100) for r in ours)
     pub = {r["run"]: r for r in rows if r["source"] == "published"}
     assert set(pub) == set(PUBLISHED)
     assert (pub["PHD-SLAM"]["rmse_low_m"], pub["PHD-SLAM"]["rmse_high_m"]) == (2.5, 4.4)

@@ -103,7 +103,9 @@ def test_the_victoria_park_experiment_writes_the_config_of_each_run(tmp_path, vp
     run_experiments(["victoria-park"], out_dir=out, quick=True)
     name = "victoria_park_config_scans_1_2000_geometric_ihgr.toml"
     assert (out / name).is_file()
-    assert len(list(out.glob("victoria_park_config_*.toml"))) == 7
+    assert len(list(out.glob("victoria_park_config_*.toml"))) == 8
+    closure = load_slam_config(out / "victoria_park_config_full_detections_ihgr_closure.toml")
+    assert closure.closure.enabled and closure.association.method == "ihgr"
     row, _ = vp_trial(
         ("x", "raw", "geometric", "ihgr", False, False)
     )  # the full-size row (quick runs a head of the data)

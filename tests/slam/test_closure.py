@@ -85,7 +85,7 @@ def _closer(state, cfg: ClosureConfig) -> LoopCloser:
     for lid in state.landmark_ids:
         book.first_scan[int(lid)] = 0
     view = View(fov=(-math.pi, math.pi), max_range=80.0)
-    return LoopCloser(cfg, view, LASER, book.scan_t, book, 0.9999)
+    return LoopCloser(cfg, view, LASER, book, gate_prob=0.9999)
 
 
 def _revisit(pts_old, pts_recent, drift, pose_sd=(1.5, 1.5, 0.03)):

@@ -44,6 +44,7 @@ def test_defaults_round_trip_and_every_section_is_written():
         "start",
         "map_policy",
         "filter",
+        "closure",
     }
     assert SlamConfig.from_dict(tomllib.loads(_toml(cfg))) == cfg
     # the extractor's every parameter is in the file, so the file is the whole truth
