@@ -24,6 +24,7 @@ class NullVisualiser:
     def log_tentatives(self, xy) -> None: ...
     def log_associations(self, from_xy, to_xy) -> None: ...
     def log_truth(self, pose) -> None: ...
+    def log_closure(self, event: dict) -> None: ...
 
 
 def show_scan(vis, loop, meas) -> None:
@@ -37,7 +38,8 @@ def show_scan(vis, loop, meas) -> None:
     vis.log_vehicle(T_world_vehicle, state.pose_cov)
     vis.log_landmarks(state.landmarks_xy, state.landmark_covs, state.landmark_ids)
     vis.log_tentatives(loop.maps.tentative_xy)
-    used = np.flatnonzero(meas.status >= 0)
+    # (a landmark a loop closure merged away in this scan is no longer in the state)
+    used = np.flatnonzero((meas.status >= 0) & np.isin(meas.status, state.landmark_ids))
     if used.size:
         ang = T_world_laser[2] + meas.z[used, 1]
         frm = T_world_laser[:2] + meas.z[used, 0:1] * np.stack([np.cos(ang), np.sin(ang)], 1)
@@ -47,3 +49,7 @@ def show_scan(vis, loop, meas) -> None:
         vis.log_associations(np.zeros((0, 2)), np.zeros((0, 2)))
     if seq.truth_t is not None:
         vis.log_truth(se2.interpolate_poses(seq.scan_t[k], seq.truth_t, seq.truth_pose)[0])
+    closer = loop.closer
+    if closer is not None and closer.events and closer.events[-1].scan == k:
+        if closer.events[-1].outcome != "too few":  # a match worth a mark on the timeline
+            vis.log_closure(closer.events[-1].to_dict())

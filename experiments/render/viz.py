@@ -232,6 +232,7 @@ class NullRecorder:
     def log_tentatives(self, xy) -> None: ...
     def log_associations(self, from_xy, to_xy) -> None: ...
     def log_truth(self, pose) -> None: ...
+    def log_closure(self, event: dict) -> None: ...
     def log_scalars(self, name: str, values: dict[str, float]) -> None: ...
     def log_series(self, scan_t, series) -> None: ...
     def close(self) -> None: ...
@@ -549,6 +550,22 @@ class Recorder(NullRecorder):
                 radii=rr.Radius.ui_points(1.0),
             ),
         )
+
+    def log_closure(self, event: dict) -> None:
+        """A loop-closure match (`slam.closure.ClosureEvent.to_dict()`) as a line of the text
+        log `events/closures` at this scan, whatever the decimation: accepted ones at level
+        INFO with the landmarks merged, refused ones at DEBUG with the reason."""
+        e = event
+        text = (
+            f"loop closure {e['outcome']}: {e['best']} landmarks (next best {e['second']}), "
+            f"shift {e['shift_m']:.2f} m, rotation {e['rotation_deg']:.2f} deg"
+        )
+        if e["nis"] == e["nis"]:
+            text += f", joint NIS {e['nis']:.1f} (bound {e['nis_bound']:.1f})"
+        if e["merged"]:
+            text += f"; {len(e['merged'])} landmarks merged"
+        level = rr.TextLogLevel.INFO if e["outcome"] == "accepted" else rr.TextLogLevel.DEBUG
+        self.rec.log("events/closures", rr.TextLog(text, level=level))
 
     def log_truth(self, pose) -> None:
         """True pose (arrow) and path so far."""

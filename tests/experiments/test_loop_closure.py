@@ -94,3 +94,29 @@ def test_the_smoother_sees_the_closed_loop():
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
     err = np.hypot(*(res.pose[-1, :2] - truth[-1, :2]))
     assert err < max(0.5, 1.5 * np.hypot(*(on.pose[-1, :2] - truth[-1, :2])))
+
+
+def test_the_run_shows_its_closures():
+    """A visualiser of the run gets each match worth marking (`log_closure`) at its scan:
+    here the accepted closure of park drive 5."""
+    from slam.visual import NullVisualiser
+
+    class Marks(NullVisualiser):
+        def __init__(self):
+            self.scan, self.marks = -1, []
+
+        def set_scan(self, k, stamp_s=None):
+            self.scan = k
+
+        def log_closure(self, event):
+            self.marks.append((self.scan, event))
+
+    seq = loop_drive(5, "park", NOISE_SCALE)
+    cfg = loop_config(True)
+    kw = cfg.features.extractor_kwargs()
+    feats = [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
+    vis = Marks()
+    lg = run_slam(seq, cfg, features=feats, visualiser=vis)
+    shown = [e for e in lg.closures if e["outcome"] != "too few"]
+    assert [(s, e["scan"]) for s, e in vis.marks] == [(e["scan"], e["scan"]) for e in shown]
+    assert any(e["outcome"] == "accepted" for _, e in vis.marks)

@@ -157,3 +157,24 @@ def test_time_per_scan_panel_has_no_first_scan_spike():
     assert ms.shape == (40,) and np.all(ms > 0)
     limit = max(10 * np.median(ms), ms[4:].max())
     assert np.all(ms[:4] <= limit), (ms[:4], np.median(ms), ms[4:].max())
+
+
+def test_a_loop_closure_is_marked_on_the_timeline(tmp_path):
+    """`log_closure` writes the match to the text log `events/closures` at its scan, even on
+    a scan the decimation skips."""
+    path = tmp_path / "c.rrd"
+    with Recorder(path, kind="slam", decimate=10) as rec:
+        rec.set_scan(7, 1.4)
+        rec.log_closure(
+            {
+                "outcome": "accepted",
+                "best": 9,
+                "second": 3,
+                "shift_m": 2.5,
+                "rotation_deg": 1.0,
+                "nis": 12.0,
+                "nis_bound": 37.7,
+                "merged": [(1, 40), (2, 41)],
+            }
+        )
+    assert "events/closures" in read_recording(path)["entities"]
