@@ -26,11 +26,12 @@ from scipy.stats import chi2
 from experiments.paper import products
 from experiments.paper.products import TableSpec
 from experiments.paper.slam import CYCAB_SLAM, extractor_params
+from experiments.render import plots
 from experiments.sim.loops import loop_drive, loop_params
 from features import extract_features
 from slam import SlamConfig, interpolate_poses, run_slam, se2
 
-__all__ = ["RUNS", "loop_config", "loop_trial", "run"]
+__all__ = ["RUNS", "closure_map", "loop_config", "loop_trial", "run"]
 
 log = logging.getLogger(__name__)
 
@@ -123,6 +124,30 @@ def loop_trial(job: tuple, seed=None) -> dict:
     return row
 
 
+FIGURE_DRIVE = 5  # the park drive of the figure: one accepted closure (its test is the same)
+
+
+def closure_map(seed: int) -> bytes:
+    """loop_closure_map.png: park drive `seed` filtered without and with loop closure."""
+    seq = loop_drive(seed, "park", NOISE_SCALE)
+    kw = loop_config(False).features.extractor_kwargs()
+    feats = [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
+    truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    runs = {}
+    for closure in (False, True):
+        lg = run_slam(seq, loop_config(closure), features=feats)
+        at = [e["scan"] for e in lg.closures or [] if e["outcome"] == "accepted"]
+        label = f"closure {'on' if closure else 'off'}: final error " + (
+            f"{np.hypot(*(lg.pose[-1, :2] - truth[-1, :2])):.2f} m"
+        )
+        runs[label] = {"path": lg.pose[:, :2], "landmarks": lg.landmark_xy,
+                       "closures": lg.pose[at, :2]}  # fmt: skip
+    title = f"Simulated park, drive {seed}: one lap, out through open ground and back"
+    return products.png(
+        plots.plot_loop_closure, seq.truth_landmarks[:, :2], truth[:, :2], runs, title
+    )
+
+
 def _summary(rows: list[dict]) -> list[dict]:
     out = []
     for kind in RUNS:
@@ -199,5 +224,6 @@ def run(ctx) -> None:
     def finish(rows: list) -> None:
         ctx.config["loop-closure"] = {"runs": len(rows), "noise_scale": NOISE_SCALE}
         products.tables(ctx, [TABLE], rows)
+        products.write(ctx, {"loop_closure_map.png": closure_map(FIGURE_DRIVE)})
 
     ctx.later(batch, finish)

@@ -73,6 +73,7 @@ def test_the_experiment_writes_its_table(tmp_path):
     assert all(r["runs"] == "2" for r in rows)
     assert all(int(r["false_closures"]) == 0 for r in rows)
     assert json.loads((out / "manifest.json").read_text())["config"]["loop-closure"]["runs"] == 4
+    assert (out / "loop_closure_map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_the_smoother_sees_the_closed_loop():
