@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import pytest
-from subprocesses import TRUNKSLAM
+from subprocesses import start, trunkslam
 from typer.testing import CliRunner
 
 from experiments.cli import app
@@ -225,26 +225,6 @@ def test_slam_under_a_full_disk_keeps_the_old_outputs(drive, tmp_path, monkeypat
 # ---- Ctrl-C: a real subprocess sent SIGINT at several points ------------------------------------
 
 
-def _default_sigint() -> None:
-    """In the child before exec: SIGINT back to its default. A test suite started in the
-    background (`make test &`) inherits SIGINT ignored, and Python then never raises
-    KeyboardInterrupt: the interruption tests would test nothing."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
-def _start(args: list[str], cwd: Path) -> subprocess.Popen:
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen(
-        TRUNKSLAM + args,
-        cwd=cwd,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        preexec_fn=_default_sigint,
-    )
-
-
 def _interrupt_when(proc: subprocess.Popen, ready, timeout: float = 120.0) -> bool:
     """Send SIGINT once ready() is true; returns False if the process ended first."""
     t0 = time.monotonic()
@@ -283,7 +263,8 @@ def test_reproduce_interrupted_at_several_points_is_old_or_new(old_set, tmp_path
     }
     interrupted = 0
     for name, ready in points.items():
-        proc = _start(["reproduce", *FAST, "--quick", "--seed", "1", "--out", str(out)], tmp_path)
+        args = ["reproduce", *FAST, "--quick", "--seed", "1", "--out", str(out)]
+        proc = start(args, tmp_path, dict(os.environ, PYTHONUNBUFFERED="1"))
         sent = _interrupt_when(proc, ready)
         _, err = proc.communicate(timeout=120)
         assert "Traceback" not in err or "KeyboardInterrupt" in err, err
@@ -300,14 +281,7 @@ def test_reproduce_interrupted_at_several_points_is_old_or_new(old_set, tmp_path
 def _run_interrupted_at(point: str, args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     """Run trunkslam with a SIGINT raised at the named `interruption_point` (deterministic)."""
     env = dict(os.environ, PYTHONUNBUFFERED="1", TRUNKSLAM_INTERRUPT_AT=point)
-    return subprocess.run(
-        TRUNKSLAM + args,
-        cwd=cwd,
-        env=env,
-        capture_output=True,
-        text=True,
-        preexec_fn=_default_sigint,
-    )
+    return trunkslam(args, cwd, env)
 
 
 @pytest.mark.slow
