@@ -47,7 +47,9 @@ from slam import se2
 from slam.ekf import landmark_columns
 from slam.errors import SlamError
 
-__all__ = ["BASIS", "ClosureConfig", "ClosureEvent", "LoopCloser"]
+__all__ = ["BASIS", "OUTCOMES", "ClosureConfig", "ClosureEvent", "LoopCloser", "closure_counts"]
+
+OUTCOMES = ("accepted", "not jointly compatible", "no margin", "too few")
 
 # Recent landmarks whose pairs propose transforms (the most-seen first): 10 give 90 ordered
 # pairs; one right pair is enough, and the cost grows with the square of this.
@@ -124,6 +126,16 @@ class ClosureEvent:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+def closure_counts(events: list[dict]) -> dict:
+    """A run's matches (`ClosureEvent.to_dict()` each): how many were tried, how many ended in
+    each outcome (keys with "_" for " "), and the landmarks merged."""
+    out = {"tried": len(events)}
+    for outcome in OUTCOMES:
+        out[outcome.replace(" ", "_")] = sum(e["outcome"] == outcome for e in events)
+    out["landmarks_merged"] = sum(len(e["merged"]) for e in events)
+    return out
+
+
 class LoopCloser:
     """After each scan's map management: `closer(state, k, status)` (see the module doc)."""
 
@@ -188,14 +200,13 @@ class LoopCloser:
         joined = np.array([self.book.first_scan.get(int(i), -1) for i in ids])
         t_joined = np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
         seen = np.array([self.last_seen.get(int(i), t) for i in ids])
-        z_hat, _ = se2.observe(state.pose, state.landmarks_xy, self.laser)
-        in_range = z_hat[:, 0] <= self.view.max_range
-        if not in_view:
-            in_range = np.ones(ids.size, bool)
-        in_fov = self.view.contains(z_hat, margins=False) if in_view else in_range
-        recent = np.flatnonzero((t_joined >= t - cfg.recent_s) & in_range)
-        old = np.flatnonzero((seen < t - cfg.old_s) & in_fov)
-        return recent, old
+        recent = t_joined >= t - cfg.recent_s
+        old = seen < t - cfg.old_s
+        if in_view:
+            z_hat, _ = se2.observe(state.pose, state.landmarks_xy, self.laser)
+            recent &= z_hat[:, 0] <= self.view.max_range
+            old &= self.view.contains(z_hat, margins=False)
+        return np.flatnonzero(recent), np.flatnonzero(old)
 
     def _match(self, state, k: int, recent: np.ndarray, old: np.ndarray) -> ClosureEvent:
         cfg = self.cfg

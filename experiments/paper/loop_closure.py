@@ -31,7 +31,7 @@ from experiments.sim.loops import loop_drive, loop_params
 from features import extract_features
 from slam import SlamConfig, interpolate_poses, run_slam, se2
 
-__all__ = ["RUNS", "closure_map", "loop_config", "loop_trial", "run"]
+__all__ = ["RUNS", "closure_map", "drive_features", "loop_config", "loop_trial", "run"]
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +55,13 @@ def loop_config(closure: bool, noise_scale: float = NOISE_SCALE) -> SlamConfig:
             "closure.enabled": closure,
         }
     )
+
+
+def drive_features(seed: int, kind: str) -> tuple:
+    """(sequence, its paper-faithful features per scan) of `loop_drive(seed, kind)`."""
+    seq = loop_drive(seed, kind, NOISE_SCALE)
+    kw = loop_config(False).features.extractor_kwargs()
+    return seq, [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
 
 
 def _identities(lg, seq, feats) -> dict[int, int]:
@@ -106,10 +113,7 @@ def loop_trial(job: tuple, seed=None) -> dict:
     """One run (`job` = (kind, index)): the drive of seed `index` and the filter without and
     with loop closure; deterministic."""
     kind, index = job
-    seq = loop_drive(index, kind, NOISE_SCALE)
-    cfg = loop_config(False)
-    kw = cfg.features.extractor_kwargs()
-    feats = [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
+    seq, feats = drive_features(index, kind)
     x_truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)[:, 0]
     half = seq.n_scans // 2  # the return is in the second half of the lap
     k_return = half + int(np.argmax(x_truth[half:] > HOME_X_M))
@@ -129,9 +133,7 @@ FIGURE_DRIVE = 5  # the park drive of the figure: one accepted closure (its test
 
 def closure_map(seed: int) -> bytes:
     """loop_closure_map.png: park drive `seed` filtered without and with loop closure."""
-    seq = loop_drive(seed, "park", NOISE_SCALE)
-    kw = loop_config(False).features.extractor_kwargs()
-    feats = [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
+    seq, feats = drive_features(seed, "park")
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
     runs = {}
     for closure in (False, True):

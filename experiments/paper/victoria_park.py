@@ -54,6 +54,7 @@ from experiments.io.writers import json_types, write_atomic
 from experiments.paper import products
 from experiments.paper.products import TableSpec
 from slam import SlamConfig, SlamLog, run_slam, se2
+from slam.closure import closure_counts
 
 __all__ = [
     "GPS_GAP_S",
@@ -217,18 +218,16 @@ def _one(label, seq, cfg, ref, given=None, visualiser=None):
 def _closure_figures(lg) -> dict:
     """Loop closure's figures of a run (`slam.closure`; NaN when it was off): constellation
     matches tried, refused as not jointly compatible, accepted, and landmarks merged."""
-    ev = lg.closures
-    if ev is None:
-        return dict.fromkeys(
-            ("closure_matches", "closure_refused_jc", "closures_accepted", "landmarks_merged"),
-            math.nan,
-        )
-    return {
-        "closure_matches": len(ev),
-        "closure_refused_jc": sum(e["outcome"] == "not jointly compatible" for e in ev),
-        "closures_accepted": sum(e["outcome"] == "accepted" for e in ev),
-        "landmarks_merged": sum(len(e["merged"]) for e in ev),
+    names = {  # column: key of `slam.closure.closure_counts`
+        "closure_matches": "tried",
+        "closure_refused_jc": "not_jointly_compatible",
+        "closures_accepted": "accepted",
+        "landmarks_merged": "landmarks_merged",
     }
+    if lg.closures is None:
+        return dict.fromkeys(names, math.nan)
+    counts = closure_counts(lg.closures)
+    return {column: counts[key] for column, key in names.items()}
 
 
 def _vouched(seq, cfg) -> np.ndarray:

@@ -22,6 +22,7 @@ from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import atomic_folder, dumps_json, json_types, write_atomic
 from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, run_slam, se2
+from slam.closure import closure_counts
 
 __all__ = ["landmark_radii", "run_slam_file", "summarise"]
 
@@ -232,10 +233,7 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
 def _closures(events: list[dict]) -> dict:
     """The summary's loop closure part: matches tried by outcome, landmarks merged, and the
     accepted closures (scan, time, pairs, NIS, transform)."""
-    out = {"tried": len(events)}
-    for outcome in ("accepted", "not jointly compatible", "no margin", "too few"):
-        out[outcome.replace(" ", "_")] = sum(e["outcome"] == outcome for e in events)
-    out["landmarks_merged"] = sum(len(e["merged"]) for e in events)
+    out = closure_counts(events)
     keys = ("scan", "t_s", "best", "second", "nis", "nis_bound", "rotation_deg", "shift_m")
     out["accepted_closures"] = [
         {k: e[k] for k in keys} for e in events if e["outcome"] == "accepted"

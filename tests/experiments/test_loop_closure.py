@@ -6,18 +6,14 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from experiments.paper.loop_closure import NOISE_SCALE, _identities, loop_config
-from experiments.sim.loops import loop_drive, loop_scene
-from features import extract_features
+from experiments.paper.loop_closure import _identities, drive_features, loop_config
+from experiments.sim.loops import loop_scene
 from slam import run_slam
 
 
 def _run(seed: int, kind: str, closure: bool):
-    seq = loop_drive(seed, kind, NOISE_SCALE)
-    cfg = loop_config(closure)
-    kw = cfg.features.extractor_kwargs()
-    feats = [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
-    return seq, feats, run_slam(seq, cfg, features=feats)
+    seq, feats = drive_features(seed, kind)
+    return seq, feats, run_slam(seq, loop_config(closure), features=feats)
 
 
 def test_a_closed_loop_recovers_the_map_of_the_stand():
@@ -112,12 +108,9 @@ def test_the_run_shows_its_closures():
         def log_closure(self, event):
             self.marks.append((self.scan, event))
 
-    seq = loop_drive(5, "park", NOISE_SCALE)
-    cfg = loop_config(True)
-    kw = cfg.features.extractor_kwargs()
-    feats = [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
+    seq, feats = drive_features(5, "park")
     vis = Marks()
-    lg = run_slam(seq, cfg, features=feats, visualiser=vis)
+    lg = run_slam(seq, loop_config(True), features=feats, visualiser=vis)
     shown = [e for e in lg.closures if e["outcome"] != "too few"]
     assert [(s, e["scan"]) for s, e in vis.marks] == [(e["scan"], e["scan"]) for e in shown]
     assert any(e["outcome"] == "accepted" for _, e in vis.marks)
