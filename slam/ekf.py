@@ -328,6 +328,55 @@ class Filter(_Estimate):
         self.remove_landmarks(drop_ids)
         return float(v @ v)
 
+    def rigid_fit(self, keep_ids, drop_ids) -> tuple[float, np.ndarray, np.ndarray]:
+        """The pairs of `same_landmarks_nis` up to one rigid motion: the least-squares motion
+        (Kabsch: the drop landmarks' centroid onto the keep landmarks', rotated by theta) and
+        the NIS of what it leaves. The residuals r_j = (x_keep_j - c_keep) - R(theta)
+        (x_drop_j - c_drop) have covariance M P M^T (M: the centring and rotation, linear in
+        the landmarks); in a basis without the common translation (2 x pairs - 2 coordinates)
+        the rotation's direction is projected out by generalised least squares, and what is
+        left, chi-square with 2 x pairs - 3 dof when the pairs are the same trees once the drop
+        side is moved, is the NIS. Returns (nis, motion (tx, ty, theta) that moves the drop
+        centroid and rotates about it, c_drop (2,))."""
+        _, _, _, ck, cd = self._pair_constraint(keep_ids, drop_ids, 0.0)
+        n = ck.size // 2
+        if n < 2:
+            raise SlamError("rigid_fit: needs at least two pairs")
+        xk, xd = self.x[ck].reshape(n, 2), self.x[cd].reshape(n, 2)
+        ak, ad = xk - xk.mean(axis=0), xd - xd.mean(axis=0)
+        theta = math.atan2(float(np.sum(ad[:, 0] * ak[:, 1] - ad[:, 1] * ak[:, 0])),
+                           float(np.sum(ad * ak)))  # fmt: skip
+        rot = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+        moved = ad @ rot.T
+        r = (ak - moved).reshape(-1)
+        centre = np.eye(n) - 1.0 / n  # the centring, per axis
+        M = np.hstack([np.kron(centre, np.eye(2)), -np.kron(centre, rot)])
+        cols = np.concatenate([ck, cd])
+        Sigma = M @ self.P[np.ix_(cols, cols)] @ M.T
+        # an orthonormal basis of the residuals without the common translation
+        Q = np.linalg.svd(np.kron(centre, np.eye(2)))[0][:, : 2 * n - 2]
+        g = Q.T @ np.stack([-moved[:, 1], moved[:, 0]], axis=1).reshape(-1)
+        L = np.linalg.cholesky(Q.T @ Sigma @ Q)
+        v, w = np.linalg.solve(L, Q.T @ r), np.linalg.solve(L, g)
+        nis = float(v @ v - (w @ v) ** 2 / (w @ w))
+        c = xd.mean(axis=0)
+        return nis, np.array([*(xk.mean(axis=0) - c), theta]), c
+
+    def free_rigid_motion(self, landmark_ids, center, cov: np.ndarray) -> None:
+        """Let the vehicle and these landmarks move together by an unknown rigid motion
+        (tx, ty, theta about `center`) of covariance cov (3, 3): P += B cov B^T, with B the
+        motion's Jacobian on their rows (the other landmarks' rows are 0)."""
+        pos = np.array([self.index_of(int(i)) for i in np.asarray(landmark_ids).reshape(-1)])
+        xy_rows = np.concatenate([[0], 3 + 2 * pos]).astype(np.int64)
+        B = np.zeros((self.dim, 3))
+        B[xy_rows, 0] = B[xy_rows + 1, 1] = 1.0
+        B[xy_rows, 2] = -(self.x[xy_rows + 1] - center[1])
+        B[xy_rows + 1, 2] = self.x[xy_rows] - center[0]
+        B[2, 2] = 1.0
+        P = self.P
+        P += B @ np.asarray(cov, dtype=np.float64) @ B.T
+        P[:] = 0.5 * (P + P.T)
+
     def _pair_constraint(self, keep_ids, drop_ids, sigma_m: float):
         """(d (q,), H P (q, dim), S (q, q), keep columns, drop columns) of the constraint
         x_keep - x_drop = 0 over the pairs (q = 2 x pairs)."""

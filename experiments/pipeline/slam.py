@@ -232,9 +232,10 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
 
 def _closures(events: list[dict]) -> dict:
     """The summary's loop closure part: matches tried by outcome, landmarks merged, and the
-    accepted closures (scan, time, pairs, NIS, transform)."""
+    accepted closures (scan, time, pairs, NIS, transform, whether re-registered)."""
     out = closure_counts(events)
-    keys = ("scan", "t_s", "best", "second", "nis", "nis_bound", "rotation_deg", "shift_m")
+    keys = ("scan", "t_s", "best", "second", "nis", "nis_bound", "rotation_deg", "shift_m",
+            "re_registered")  # fmt: skip
     out["accepted_closures"] = [
         {k: e[k] for k in keys} for e in events if e["outcome"] == "accepted"
     ]

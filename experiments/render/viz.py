@@ -562,6 +562,12 @@ class Recorder(NullRecorder):
         )
         if e["nis"] == e["nis"]:
             text += f", joint NIS {e['nis']:.1f} (bound {e['nis_bound']:.1f})"
+        for key, name in (("drift", "dead-reckoning"), ("shape", "rigid-fit")):
+            v = e.get(f"{key}_nis", float("nan"))
+            if v == v:
+                text += f", {name} NIS {v:.1f} (bound {e[f'{key}_bound']:.1f})"
+        if e.get("re_registered"):
+            text += "; local map re-registered"
         if e["merged"]:
             text += f"; {len(e['merged'])} landmarks merged"
         level = rr.TextLogLevel.INFO if e["outcome"] == "accepted" else rr.TextLogLevel.DEBUG

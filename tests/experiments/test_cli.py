@@ -221,7 +221,7 @@ def test_slam_with_loop_closure_reports_its_matches(tmp_path):
     assert res.exit_code == 0, res.output
     s = json.loads((out / "summary.json").read_text())
     c = s["closures"]
-    parts = ("accepted", "not_jointly_compatible", "no_margin", "too_few")
+    parts = ("accepted", "not_jointly_compatible", "beyond_dead_reckoning", "no_margin", "too_few")
     assert c["tried"] == sum(c[k] for k in parts) == 0 and c["landmarks_merged"] == 0
     assert len(c["accepted_closures"]) == c["accepted"] and s["config"]["closure"]["enabled"]
     assert max(s["truth"]["mean_abs_error"].values()) < 0.05

@@ -1,5 +1,6 @@
 """Loop closure (`slam.closure`): the merge update, the constellation match, the decision
-(too few, no margin, not jointly compatible, accepted) and the log's relabelling."""
+(too few, no margin, beyond dead reckoning, not jointly compatible, accepted, re-registered)
+and the log's relabelling."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 import pytest
 
 from slam import SlamConfig, se2
-from slam.closure import ClosureConfig, LoopCloser, _hypotheses
+from slam.closure import ClosureConfig, LoopCloser, _hypotheses, dead_reckoned_cov
 from slam.ekf import Filter, initial_state
 from slam.errors import SlamError
 from slam.log import LogBuilder
@@ -73,11 +74,11 @@ def test_the_constellation_match_finds_a_moved_copy_and_its_pairs():
     th = math.radians(5.0)
     Rm = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
     recent = old[pick] @ Rm.T + [4.0, -1.0] + rng.normal(0, 0.03, (10, 2))
-    best, second, rot, shift, pairs = _hypotheses(recent, old, np.array([0.5, 3.0, 0.3, 15.0, 10]))
+    best, second, rot, txy, pairs = _hypotheses(recent, old, np.array([0.5, 3.0, 0.3, 15.0, 10]))
     assert best == 10 and second <= 3
     assert math.degrees(rot) == pytest.approx(-5.0, abs=0.5)
     assert sorted(map(tuple, pairs.tolist())) == sorted((i, int(pick[i])) for i in range(10))
-    assert shift == pytest.approx(np.hypot(*(recent.mean(0) - old[pick].mean(0))), abs=0.3)
+    np.testing.assert_allclose(se2.rotate(rot, recent) + txy, old[pick], atol=0.15)
 
 
 def _closer(state, cfg: ClosureConfig) -> LoopCloser:
@@ -144,15 +145,151 @@ def test_pairs_with_two_old_landmarks_near_are_left_out():
     assert f.n_landmarks == 34
 
 
-def test_a_closure_the_filter_cannot_explain_is_refused():
-    """The same stand 2.5 m off, but the filter believes its pose to 5 cm: the pairs are not
-    jointly compatible, and nothing is merged."""
+def _overconfident_revisit(drift_sd, shape_error=None):
+    """The stand of `test_a_return_with_drift_is_closed_and_the_pose_corrected` 2.5 m and
+    2 deg off, but the filter believes its pose to 5 cm and 0.06 deg; the log's odometry
+    (500 scans, 100 s, since the old landmarks were last seen) has dead-reckoned sds
+    `drift_sd` (x, y, heading) at the match, scan 500. shape_error: moved to the recent
+    landmarks (12, 2)."""
     rng = np.random.default_rng(11)
     pts = _stand(rng, 20)
-    f, _, _ = _revisit(pts, pts[:12], (2.0, -1.5, 0.0), pose_sd=(0.05, 0.05, 0.001))
-    ev = _closer(f, ClosureConfig(enabled=True))._match(f, 50, np.arange(20, 32), np.arange(20))
+    drift = (2.0, -1.5, math.radians(2.0))
+    recent_pts = pts[:12] if shape_error is None else pts[:12] + shape_error
+    f, old_ids, recent_ids = _revisit(pts, recent_pts, drift, pose_sd=(0.05, 0.05, 0.001))
+    closer = _closer(f, ClosureConfig(enabled=True))
+    closer.last_seen = {i: 0.0 for i in old_ids}  # the old trees: mapped and last seen at 0 s
+    closer.book.first_scan.update({i: 450 for i in recent_ids})  # the recent: at 90 s
+    closer.book.odo_delta[1:501] = [0.5, 0.0, 0.0]
+    closer.book.odo_cov[1:501] = np.diag(np.square(drift_sd) / 500.0)
+    return f, old_ids, recent_ids, closer
+
+
+def test_a_closure_the_filter_cannot_explain_is_refused_without_re_registration():
+    """The pairs are not jointly compatible with the filter's covariance: with re_register
+    off nothing is merged."""
+    f, _, _, closer = _overconfident_revisit((1.5, 1.5, 0.03))
+    closer.cfg = ClosureConfig(enabled=True, re_register=False)
+    ev = closer._match(f, 500, np.arange(20, 32), np.arange(20))
     assert ev.outcome == "not jointly compatible" and ev.nis > ev.nis_bound
+    assert math.isnan(ev.shape_nis) and not ev.re_registered
     assert f.n_landmarks == 32
+
+
+def test_re_registration_closes_what_the_filter_is_too_sure_to_allow():
+    """Same overconfident filter, dead reckoning allowing 1.5 m: the drift is within it, the
+    shape of the pairs fits one rigid motion, so the local map and the vehicle are freed and
+    moved onto the old trees: every recent landmark merged into its own tree, the pose back
+    at the truth, and its covariance grown to cover the correction it made."""
+    f, old_ids, recent_ids, closer = _overconfident_revisit((1.5, 1.5, 0.03))
+    ev = closer._match(f, 500, np.arange(20, 32), np.arange(20))
+    assert ev.nis > ev.nis_bound and ev.drift_nis <= ev.drift_bound
+    assert ev.shape_nis <= ev.shape_bound and ev.shape_nis < 1.0  # exact measurements
+    assert ev.outcome == "accepted" and ev.re_registered
+    assert sorted(ev.merged) == [(old_ids[j], recent_ids[j]) for j in range(12)]
+    np.testing.assert_allclose(f.pose, 0.0, atol=0.02)
+    assert f.n_landmarks == 20
+
+
+def test_a_drift_dead_reckoning_cannot_explain_is_refused():
+    """Dead reckoning allowing 10 cm and 0.1 deg cannot have drifted 2.5 m: "beyond dead
+    reckoning", nothing merged (in an orchard, a match one row over looks as good)."""
+    f, _, _, closer = _overconfident_revisit((0.1, 0.1, 0.002))
+    ev = closer._match(f, 500, np.arange(20, 32), np.arange(20))
+    assert ev.outcome == "beyond dead reckoning" and ev.drift_nis > ev.drift_bound
+    assert f.n_landmarks == 32
+
+
+def test_a_map_that_no_rigid_motion_fits_is_refused():
+    """The recent landmarks bent (each moved by up to 0.3 m, within the constellation's
+    match_m, by the bearing from the centre of the stand): no rigid motion puts them on the
+    old trees within their (1 cm) precision, so the closure is refused."""
+    rng = np.random.default_rng(11)
+    pts = _stand(rng, 20)[:12]
+    bend = 0.3 * (pts - pts.mean(axis=0))[:, ::-1] / 20.0 * [1.0, -1.0] * [1.0, 0.0]
+    f, _, _, closer = _overconfident_revisit((1.5, 1.5, 0.03), shape_error=bend)
+    ev = closer._match(f, 500, np.arange(20, 32), np.arange(20))
+    assert ev.best >= 6 and ev.shape_nis > ev.shape_bound
+    assert ev.outcome == "not jointly compatible" and f.n_landmarks == 32
+
+
+def test_dead_reckoned_cov_is_the_composed_odometry_noise():
+    """Straight increments of 1 m with independent noise: after n steps the along-track
+    variance is n q_x, the heading's n q_theta, and the cross-track variance
+    q_y n + q_theta (1^2 + ... + (n-1)^2) (each heading error swings the later steps);
+    a Monte Carlo of the composition agrees."""
+    n = 40
+    q = np.array([0.01, 0.004, 1e-4])
+    delta = np.zeros((n + 1, 3))
+    delta[1:] = [1.0, 0.0, 0.0]
+    cov = np.zeros((n + 1, 3, 3))
+    cov[1:] = np.diag(q)
+    C = dead_reckoned_cov(delta, cov, 0, n)
+    assert C[0, 0] == pytest.approx(n * q[0], rel=1e-9)
+    assert C[2, 2] == pytest.approx(n * q[2], rel=1e-9)
+    assert C[1, 1] == pytest.approx(n * q[1] + q[2] * sum(j * j for j in range(n)), rel=1e-9)
+    rng = np.random.default_rng(0)
+    ends = []
+    for _ in range(4000):
+        T = np.zeros(3)
+        for k in range(1, n + 1):
+            T = se2.compose(T, delta[k] + rng.normal(0.0, np.sqrt(q)))
+        ends.append(T)
+    sd = np.sqrt(np.diag(C))  # compared as correlations-scaled entries (sampling error ~0.02)
+    np.testing.assert_allclose(
+        np.cov(np.array(ends).T) / np.outer(sd, sd), C / np.outer(sd, sd), atol=0.07
+    )
+    assert dead_reckoned_cov(delta, cov, 5, 5).tolist() == np.zeros((3, 3)).tolist()
+
+
+def test_rigid_fit_recovers_the_motion_and_measures_what_it_leaves():
+    """Landmarks of one stand and their copy moved by 3 deg and (2, -1) m: the fit returns
+    the motion and a NIS near 0; moving one copy by 20 cm (landmark sd 1 cm) makes it large,
+    about (0.2 / 0.01)^2 x (1 - 1/n) x (its share once the rotation is fitted)."""
+    rng = np.random.default_rng(4)
+    pts = _stand(rng, 8)
+    th = math.radians(3.0)
+    copy = se2.rotate(-th, pts - pts.mean(axis=0)) + pts.mean(axis=0) - [2.0, -1.0]
+    f = Filter(initial_state(np.zeros(3), np.diag([1e-12, 1e-12, 1e-14])))
+    for j, p in enumerate(np.vstack([pts, copy])):
+        z, _ = se2.observe(np.zeros(3), p[None, :], LASER)
+        f.add_landmark(z[0], np.diag([1e-4, 1e-4 / max(float(z[0, 0]), 1.0) ** 2]), LASER, j)
+    nis, motion, centre = f.rigid_fit(list(range(8)), list(range(8, 16)))
+    assert nis < 1e-6
+    np.testing.assert_allclose(centre, copy.mean(axis=0), atol=1e-9)
+    np.testing.assert_allclose(motion, [2.0, -1.0, th], atol=1e-9)
+    f2 = Filter(initial_state(np.zeros(3), np.diag([1e-12, 1e-12, 1e-14])))
+    copy[3] += [0.2, 0.0]
+    for j, p in enumerate(np.vstack([pts, copy])):
+        z, _ = se2.observe(np.zeros(3), p[None, :], LASER)
+        f2.add_landmark(z[0], np.diag([1e-4, 1e-4 / max(float(z[0, 0]), 1.0) ** 2]), LASER, j)
+    nis2, _, _ = f2.rigid_fit(list(range(8)), list(range(8, 16)))
+    assert 50.0 < nis2 < 400.0
+    with pytest.raises(SlamError, match="two pairs"):
+        f.rigid_fit([0], [8])
+
+
+def test_freeing_a_rigid_motion_moves_the_vehicle_and_those_landmarks_together():
+    """P += B cov B^T: a translation-only cov adds the same cov to the vehicle's position,
+    to each freed landmark and to their cross covariances (they move together); the other
+    landmarks' rows do not change; the rotation part adds J (p - centre) terms."""
+    f = Filter(initial_state(np.array([1.0, 2.0, 0.3]), np.diag([0.01, 0.01, 1e-4])))
+    for j, p in enumerate([[5.0, 2.0], [8.0, -1.0], [3.0, 6.0]]):
+        z, _ = se2.observe(f.pose, np.array([p]), LASER)
+        f.add_landmark(z[0], np.diag([0.01, 1e-4]), LASER, 10 + j)
+    P0 = f.P.copy()
+    T = np.diag([0.5, 0.2, 0.0])
+    f.free_rigid_motion([10, 12], np.zeros(2), T)
+    dP = f.P - P0
+    freed = [0, 1, 3, 4, 7, 8]
+    np.testing.assert_allclose(dP[np.ix_(freed, freed)], np.kron(np.ones((3, 3)), T[:2, :2]))
+    assert np.all(dP[5:7] == 0) and np.all(dP[:, 5:7] == 0) and np.all(dP[2] == 0)
+    f = Filter(initial_state(np.zeros(3), np.diag([0.01, 0.01, 1e-4])))
+    f.add_landmark(np.array([10.0, 0.0]), np.diag([0.01, 1e-4]), LASER, 1)
+    P0 = f.P.copy()
+    f.free_rigid_motion([1], np.zeros(2), np.diag([0.0, 0.0, 0.01]))
+    dP = f.P - P0  # a rotation about the vehicle moves the landmark 10 m away along y
+    assert dP[4, 4] == pytest.approx(100 * 0.01) and dP[2, 4] == pytest.approx(10 * 0.01)
+    assert dP[0, 0] == 0.0 and dP[2, 2] == pytest.approx(0.01)
 
 
 def test_the_log_counts_a_merged_landmarks_measurements_as_the_kept_ones():
@@ -173,6 +310,8 @@ def test_the_log_counts_a_merged_landmarks_measurements_as_the_kept_ones():
         ({"closure": {"jc_prob": 1.0}}, r"closure\.jc_prob"),
         ({"closure": {"match_m": -1.0}}, r"closure\.match_m"),
         ({"closure": {"enabled": "yes"}}, r"closure\.enabled"),
+        ({"closure": {"re_register": 1}}, r"closure\.re_register"),
+        ({"closure": {"old_s": 20.0}}, r"closure\.old_s: must be >= recent_s"),
         ({"closure": {"every": 3}}, r"closure\.every.*did you mean 'every_scans'"),
     ],
 )
