@@ -388,6 +388,37 @@ def _vp_rows(s: Snapshot, label: str) -> list[list[str]]:
             "",
             "" if full is None else f"{full['rmse_m']:.2f} m, {int(full['landmarks'])}",
         ],
+        *_vp_closure_rows(runs, label),
+    ]
+
+
+def _vp_closure_rows(runs: dict, label: str) -> list[list[str]]:
+    """The full run's vouched RMSE and map size without and with loop closure."""
+    off = runs.get("full run, published detections, ihgr")
+    on = runs.get("full run, published detections, ihgr, loop closure")
+    if off is None or on is None:
+        return []
+    cell = " / ".join(f"{r['rmse_vouched_m']:.2f} m, {int(r['landmarks'])}" for r in (off, on))
+    text = " full run, published detections: vouched RMSE, landmarks; closure off / on"
+    return [[label + text, "", "", "", "", cell]]
+
+
+def _loop_rows(s: Snapshot, label: str) -> list[list[str]]:
+    """The simulated loops (the `paper` extractor), when the snapshot has them."""
+    if not (s.folder / "loop_closure.csv").is_file():
+        return []
+
+    def on(scene: str, key: str) -> int:
+        return int(s.value("loop_closure", key, scene=scene, closure="on"))
+
+    band = (
+        f"{on('park', 'with_closure_2_5_m')} / {on('park', 'closed_2_5_m')} of "
+        f"{on('park', 'returns_2_5_m')}"
+    )
+    false = f"{on('park', 'false_closures')} / {on('orchard', 'false_closures')}"
+    return [
+        [label + ": park returns drifted 2-5 m with a closure / closed", "", "", band, "", ""],
+        [label + ": false closures, park / orchard", "", "", false, "", ""],
     ]
 
 
@@ -417,6 +448,7 @@ def glance_table(s: Snapshot, pages: str = "docs/experiments/") -> str:
         _table4_row(s, link("slam", "Table 4") + ": false-detection rate, mean of 4 scan sets"),
         _nees_row(s, link("consistency", "pose NEES") + " inside its 95% bounds (share of scans)"),
         *_vp_rows(s, link("victoria-park", "Victoria Park")),
+        *_loop_rows(s, link("loop-closure", "Loop closure") + ", simulated"),
     ]
     head = "| " + " | ".join(GLANCE_HEADER) + " |\n|" + "---|" * len(GLANCE_HEADER) + "\n"
     return head + "".join("| " + " | ".join(c or "-" for c in r) + " |\n" for r in rows)
