@@ -13,7 +13,8 @@ after a rigid alignment; jumps flagged and counted), the same RMSE over scans 20
 school's map of 145 trees over scans 1-2000, aligned by the two paths: the share of its trees
 with a landmark within 1 m), NIS inside its 95% bounds, circles per scan, seconds, ms per scan.
 
-Writes victoria_park.md/.csv, vp_map.png (map and path over the GPS track), vp_timeseries.png
+Writes victoria_park.md/.csv, vp_map.png (map and path over the GPS track), vp_closures.png
+(the run with loop closure: where each match was tried and how it ended), vp_timeseries.png
 (error against time with the GPS gaps shaded, NIS and map size against time) and
 victoria_park.rrd (the full IHGR run, timelines `scan` and `time`). Skipped, with a note in the
 manifest, when the data is absent. --quick: the first 1500 scans of the full run, 400 of the raw.
@@ -270,8 +271,8 @@ def vp_trial(job: tuple, seed=None) -> tuple[dict, dict[str, bytes]]:
         kwargs = cfg.features.extractor_kwargs()
         given = [extract_features(seq.scan(k), features, **kwargs) for k in range(seq.n_scans)]
     if not keep:
-        row, _, _ = _one(label, seq, cfg, ref, given)
-        return row, {}
+        row, lg, _ = _one(label, seq, cfg, ref, given)
+        return row, {} if lg.closures is None else {"vp_closures.png": _closure_map(lg, seq)}
     from experiments.render.viz import MemoryRecorder
 
     with MemoryRecorder("slam", decimate=20, series=slam_panels(False)) as rec:
@@ -316,7 +317,7 @@ def run(ctx) -> None:
 
     def finish(got: list) -> None:
         products.tables(ctx, [TABLE], [row for row, _ in got])
-        products.write(ctx, got[0][1])
+        products.write(ctx, {k: v for _, files in got for k, v in files.items()})
         for label, which, features, assoc in jobs:  # each run's configuration beside its row
             part = "full" if which == "full" else "scans_1_2000"
             name = f"victoria_park_config_{part}_{features}_{assoc.replace('+', '_')}.toml"
@@ -479,6 +480,17 @@ TABLE = TableSpec(
     title="Victoria Park: EKF-SLAM against GPS",
     notes=_notes,
 )
+
+
+def _closure_map(lg, seq) -> bytes:
+    """vp_closures.png: a run with loop closure, where each constellation match was tried
+    and how it ended."""
+    from experiments.render import plots
+
+    ant = np.array([se2.compose(p, lg.antenna_pose)[:2] for p in lg.pose])
+    matches = [(ant[e["scan"]], e["outcome"]) for e in lg.closures]
+    title = "Victoria Park with loop closure: the constellation matches tried, by outcome"
+    return products.png(plots.plot_closure_map, seq.gps_xy, ant, lg.landmark_xy, matches, title)
 
 
 def _figures(label: str, lg, sc, full) -> dict[str, bytes]:

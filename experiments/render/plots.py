@@ -866,3 +866,42 @@ def plot_loop_closure(
         ax.legend(fontsize=8, loc="upper right")
     fig.suptitle(title)
     return save(fig, path)
+
+
+CLOSURE_MARKS = {  # outcome -> (marker, colour); "too few" is not drawn
+    "accepted": ("*", "red"),
+    "not jointly compatible": ("x", "tab:orange"),
+    "beyond dead reckoning": ("^", "tab:purple"),
+    "no margin": ("o", "tab:cyan"),
+}
+
+
+def plot_closure_map(
+    gps_xy: np.ndarray,
+    path_xy: np.ndarray,
+    map_xy: np.ndarray,
+    matches: Sequence[tuple[np.ndarray, str]],
+    title: str,
+    path: Output,
+) -> Output:
+    """A run with loop closure: the GPS fixes (grey dots), the estimated path (blue), the map
+    (black +) and the vehicle's position at each constellation match (`matches`: (xy, outcome)
+    pairs), by outcome (`CLOSURE_MARKS`; "too few" not drawn), world frame."""
+    fig, ax = _subplots(figsize=(9, 9))
+    ax.plot(gps_xy[:, 0], gps_xy[:, 1], ".", ms=2, color="0.6", label="GPS fixes", zorder=1)
+    ax.plot(path_xy[:, 0], path_xy[:, 1], "-", lw=0.9, color="tab:blue", label="estimate")
+    if len(map_xy):
+        ax.plot(map_xy[:, 0], map_xy[:, 1], "+", ms=4, color="k", label="map landmarks")
+    for outcome, (marker, colour) in CLOSURE_MARKS.items():
+        xy = np.array([m[0] for m in matches if m[1] == outcome], float).reshape(-1, 2)
+        if xy.size:
+            ax.plot(xy[:, 0], xy[:, 1], marker, ms=12 if marker == "*" else 7, color=colour,
+                    mfc="none" if marker == "o" else colour, zorder=4,
+                    label=f"match: {outcome} ({xy.shape[0]})")  # fmt: skip
+    ax.set_aspect("equal")
+    ax.set_xlabel("x east (m)")
+    ax.set_ylabel("y north (m)")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    return save(fig, path)

@@ -389,3 +389,21 @@ def test_readme_screenshots_are_full_colour(name):
         assert im.mode in ("RGB", "RGBA"), im.mode
         colours = im.convert("RGB").getcolors(maxcolors=1 << 20)
     assert colours is not None and len(colours) > 256
+
+
+def test_the_closure_map_marks_each_match_by_outcome(drawn):
+    """Matches drawn by outcome with their counts in the legend; "too few" is not drawn."""
+    xy = np.zeros((5, 2))
+    matches = [
+        (np.array([1.0, 1.0]), "accepted"),
+        (np.array([2.0, 1.0]), "not jointly compatible"),
+        (np.array([3.0, 1.0]), "not jointly compatible"),
+        (np.array([4.0, 1.0]), "beyond dead reckoning"),
+        (np.array([5.0, 1.0]), "too few"),
+    ]
+    plots.plot_closure_map(xy, xy, xy, matches, "t", path=None)
+    ax = drawn[0].axes[0]
+    assert _lines(ax, "accepted (1)")[0].get_xdata().tolist() == [1.0]
+    assert _lines(ax, "not jointly compatible (2)")[0].get_xdata().tolist() == [2.0, 3.0]
+    assert len(_lines(ax, "beyond dead reckoning (1)")) == 1
+    assert not _lines(ax, "too few") and not _lines(ax, "no margin")

@@ -106,6 +106,7 @@ def test_the_victoria_park_experiment_writes_the_config_of_each_run(tmp_path, vp
     assert len(list(out.glob("victoria_park_config_*.toml"))) == 8
     closure = load_slam_config(out / "victoria_park_config_full_detections_ihgr_closure.toml")
     assert closure.closure.enabled and closure.association.method == "ihgr"
+    assert (out / "vp_closures.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     row, _ = vp_trial(
         ("x", "raw", "geometric", "ihgr", False, False)
     )  # the full-size row (quick runs a head of the data)

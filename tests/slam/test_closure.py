@@ -83,6 +83,8 @@ def test_the_constellation_match_finds_a_moved_copy_and_its_pairs():
 
 def _closer(state, cfg: ClosureConfig) -> LoopCloser:
     book = LogBuilder(np.arange(1000) * 0.2)
+    for k in range(1000):  # the predictions the run loop logs before each scan's match
+        book.predicted(k, np.zeros(3), np.zeros((3, 3)))
     for lid in state.landmark_ids:
         book.first_scan[int(lid)] = 0
     view = View(fov=(-math.pi, math.pi), max_range=80.0)
