@@ -181,17 +181,33 @@ class LoopCloser:
         self.cfg, self.view, self.laser, self.book = cfg, view, laser, book
         self.scan_t = book.scan_t
         self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
-        self.last_seen: dict[int, float] = {}  # landmark id -> time of its last update
+        self._seen = np.full(256, np.nan)  # by landmark id: the time of its last update
         self.events: list[ClosureEvent] = []
         self.n_hidden = 0  # old landmarks hidden from the last scan's association
 
+    def mark_seen(self, ids, t: float, only_new: bool = False) -> None:
+        """Landmarks `ids` were updated at time t (only_new: those not seen before)."""
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        if ids.size and ids.max() >= self._seen.size:
+            grown = np.full(max(2 * self._seen.size, int(ids.max()) + 1), np.nan)
+            grown[: self._seen.size] = self._seen
+            self._seen = grown
+        if only_new:
+            ids = ids[np.isnan(self._seen[ids])]
+        self._seen[ids] = t
+
+    def seen_at(self, ids, default: float) -> np.ndarray:
+        """The time each landmark of `ids` was last updated (`default` if never)."""
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        out = np.full(ids.size, default)
+        known = ids < self._seen.size
+        out[known] = self._seen[ids[known]]
+        return np.where(np.isnan(out), default, out)
+
     def __call__(self, state, k: int, status: np.ndarray) -> ClosureEvent | None:
         t = float(self.scan_t[k])
-        ids = state.landmark_ids
-        for lid in status[status >= 0]:
-            self.last_seen[int(lid)] = t
-        for lid in ids:  # a landmark that joined this scan: seen now
-            self.last_seen.setdefault(int(lid), t)
+        self.mark_seen(status[status >= 0], t)
+        self.mark_seen(state.landmark_ids, t, only_new=True)  # joined this scan: seen now
         if k % self.cfg.every_scans or self.n_hidden < self.cfg.min_pairs:
             return None  # the per-scan association can still pair what is in view
         recent, old = self._candidates(state, t)
@@ -214,14 +230,17 @@ class LoopCloser:
         self.n_hidden = 0
         if ids.size < 2:
             return None
-        seen = np.array([self.last_seen.get(int(i), t) for i in ids])
-        z_hat, H5 = se2.observe(state.pose, state.landmarks_xy, self.laser)
-        cand = np.flatnonzero((seen < t - self.cfg.old_s) & self.view.contains(z_hat))
+        cand = np.flatnonzero(self.seen_at(ids, t) < t - self.cfg.old_s)
+        if not cand.size:
+            return None
+        z_hat, H5 = se2.observe(state.pose, state.landmarks_xy[cand], self.laser)
+        view = self.view.contains(z_hat)
+        cand, z_hat, H5 = cand[view], z_hat[view], H5[view]
         if not cand.size:
             return None
         C5 = state.cov(landmark_columns(cand))
-        S = np.einsum("nij,njk,nlk->nil", H5[cand], C5, H5[cand])
-        sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[cand, 0] ** 2 * S[:, 1, 1]))
+        S = np.einsum("nij,njk,nlk->nil", H5, C5, H5)
+        sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[:, 0] ** 2 * S[:, 1, 1]))
         xy = state.landmarks_xy
         d_nn = cKDTree(xy).query(xy[cand], k=2)[0][:, 1]
         out = np.zeros(ids.size, bool)
@@ -235,7 +254,7 @@ class LoopCloser:
         cfg, ids = self.cfg, state.landmark_ids
         joined = np.array([self.book.first_scan.get(int(i), -1) for i in ids])
         t_joined = np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
-        seen = np.array([self.last_seen.get(int(i), t) for i in ids])
+        seen = self.seen_at(ids, t)
         recent = t_joined >= t - cfg.recent_s
         old = seen < t - cfg.old_s
         if in_view:
@@ -310,7 +329,7 @@ class LoopCloser:
         to the vehicle's pose, d, against the covariance C of the odometry alone since the
         matched old landmarks were last seen (`dead_reckoned_cov` over the logged increments,
         plus the filter's pose covariance then): d^T C^-1 d within chi-square(3) at jc_prob."""
-        t_last = max(self.last_seen[int(i)] for i in keep)
+        t_last = float(self.seen_at(keep, math.nan).max())
         a = int(np.searchsorted(self.scan_t, t_last))
         C = dead_reckoned_cov(self.book.odo_delta, self.book.odo_cov, a, k)
         c, s = math.cos(self.book.pred_pose[a][2]), math.sin(self.book.pred_pose[a][2])
@@ -339,7 +358,7 @@ class LoopCloser:
         merged = [(int(a), int(b)) for a, b in zip(keep, drop)]
         for a, b in merged:
             self.book.merged(drop=b, keep=a)
-            self.last_seen[a] = t
+            self.mark_seen([a], t)
         return merged
 
     def _sweep(self, state, t: float) -> list[tuple[int, int]]:
@@ -399,14 +418,16 @@ def _hypotheses(recent, old, prm):
     translation (tx, ty) (2,), pairs (k, 2): [recent index, old index], each landmark at most
     once, nearest first)."""
     match, min_sep, max_rot, max_off, basis = prm
-    n, m = recent.shape[0], old.shape[0]
-    nb = min(n, int(basis))
+    nb = min(recent.shape[0], int(basis))
     cx, cy = recent[:, 0].mean(), recent[:, 1].mean()
     # every hypothesis's count and where it puts the recent centroid
     cap = 4096
     counts = np.zeros(cap, np.int64)
     where = np.zeros((cap, 2))
     params = np.zeros((cap, 3))
+    pa, pb, pd, start, orig = _pairs_by_length(old, match)
+    n_pairs = pd.size
+    key = np.zeros(cap, np.int64)
     h = 0
     for i in range(nb):
         for j in range(nb):
@@ -417,35 +438,40 @@ def _hypotheses(recent, old, prm):
             if d < min_sep:
                 continue
             ang_r = math.atan2(dy, dx)
-            for a in range(m):
-                for b in range(m):
-                    if a == b:
-                        continue
-                    ex, ey = old[b, 0] - old[a, 0], old[b, 1] - old[a, 1]
-                    if abs(math.hypot(ex, ey) - d) > match:
-                        continue
-                    phi = math.atan2(ey, ex) - ang_r
-                    phi = math.atan2(math.sin(phi), math.cos(phi))
-                    if abs(phi) > max_rot:
-                        continue
-                    c, s = math.cos(phi), math.sin(phi)
-                    tx = old[a, 0] - (c * recent[i, 0] - s * recent[i, 1])
-                    ty = old[a, 1] - (s * recent[i, 0] + c * recent[i, 1])
-                    px, py = c * cx - s * cy + tx, s * cx + c * cy + ty
-                    if math.hypot(px - cx, py - cy) > max_off:
-                        continue
-                    if h == cap:  # grow
-                        counts = np.concatenate((counts, np.zeros(cap, np.int64)))
-                        where = np.concatenate((where, np.zeros((cap, 2))))
-                        params = np.concatenate((params, np.zeros((cap, 3))))
-                        cap *= 2
-                    counts[h] = _inliers(recent, old, c, s, tx, ty, match)
-                    where[h, 0], where[h, 1] = px, py
-                    params[h, 0], params[h, 1], params[h, 2] = phi, tx, ty
-                    h += 1
+            lo = min(int((d - match) / match), start.size - 1)
+            hi = min(int((d + match) / match) + 1, start.size - 1)
+            for q in range(start[max(lo, 0)], start[hi]):
+                if abs(pd[q] - d) > match:
+                    continue
+                a, b = pa[q], pb[q]
+                ex, ey = old[b, 0] - old[a, 0], old[b, 1] - old[a, 1]
+                phi = math.atan2(ey, ex) - ang_r
+                phi = math.atan2(math.sin(phi), math.cos(phi))
+                if abs(phi) > max_rot:
+                    continue
+                c, s = math.cos(phi), math.sin(phi)
+                tx = old[a, 0] - (c * recent[i, 0] - s * recent[i, 1])
+                ty = old[a, 1] - (s * recent[i, 0] + c * recent[i, 1])
+                px, py = c * cx - s * cy + tx, s * cx + c * cy + ty
+                if math.hypot(px - cx, py - cy) > max_off:
+                    continue
+                if h == cap:  # grow
+                    counts = np.concatenate((counts, np.zeros(cap, np.int64)))
+                    where = np.concatenate((where, np.zeros((cap, 2))))
+                    params = np.concatenate((params, np.zeros((cap, 3))))
+                    key = np.concatenate((key, np.zeros(cap, np.int64)))
+                    cap *= 2
+                counts[h] = _inliers(recent, old, c, s, tx, ty, match)
+                where[h, 0], where[h, 1] = px, py
+                params[h, 0], params[h, 1], params[h, 2] = phi, tx, ty
+                key[h] = (i * nb + j) * n_pairs + orig[q]  # the order of an (a, b) scan
+                h += 1
     if h == 0:
         return 0, 0, 0.0, np.zeros(2), np.zeros((0, 2), np.int64)
-    kbest = np.argmax(counts[:h])
+    kbest = 0  # the most landmarks; of equals, the first in (i, j, a, b) order
+    for q in range(1, h):
+        if counts[q] > counts[kbest] or (counts[q] == counts[kbest] and key[q] < key[kbest]):
+            kbest = q
     second = 0
     for q in range(h):
         far = math.hypot(where[q, 0] - where[kbest, 0], where[q, 1] - where[kbest, 1]) > match
@@ -454,6 +480,37 @@ def _hypotheses(recent, old, prm):
     phi, tx, ty = params[kbest, 0], params[kbest, 1], params[kbest, 2]
     pairs = _pairs(recent, old, math.cos(phi), math.sin(phi), tx, ty, match)
     return counts[kbest], second, phi, params[kbest, 1:].copy(), pairs
+
+
+@njit(cache=True, nogil=True)
+def _pairs_by_length(old, width):
+    """Every ordered pair (a, b), a != b, of the old landmarks with its length, sorted into
+    bins of `width` by length (a counting sort): (a (P,), b (P,), length (P,), start (bins +
+    1,)); the pairs of bin k are start[k]:start[k + 1]."""
+    m = old.shape[0]
+    n = m * (m - 1)
+    pa = np.empty(n, np.int64)
+    pb = np.empty(n, np.int64)
+    pd = np.empty(n)
+    q = 0
+    for a in range(m):
+        for b in range(m):
+            if a != b:
+                pa[q], pb[q] = a, b
+                pd[q] = math.hypot(old[b, 0] - old[a, 0], old[b, 1] - old[a, 1])
+                q += 1
+    bins = (pd / width).astype(np.int64) if n else np.zeros(0, np.int64)
+    nbins = (bins.max() + 2) if n else 1
+    start = np.zeros(nbins + 1, np.int64)
+    for k in bins:
+        start[k + 1] += 1
+    start = np.cumsum(start)
+    order = np.empty(n, np.int64)
+    fill = start[:-1].copy()
+    for q in range(n):
+        order[fill[bins[q]]] = q
+        fill[bins[q]] += 1
+    return pa[order], pb[order], pd[order], start, order
 
 
 @njit(cache=True, nogil=True)

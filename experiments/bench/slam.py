@@ -63,8 +63,9 @@ def bench_victoria_park(
 ) -> list[dict]:
     """The full Victoria Park run (7249 scans, published detections, preset victoria_park_ute):
     the same rows, and the whole run's seconds (of a second run: the first loads the caches), at
-    this process's threads (`trunkslam --threads`, default 1) and once more with the BLAS at
-    every core, the library's own default before commands set it."""
+    this process's threads (`trunkslam --threads`, default 1), with loop closure on (`[closure]
+    enabled`), and once more without it with the BLAS at every core, the library's own
+    default before commands set it."""
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_victoria_park
 
@@ -77,6 +78,10 @@ def bench_victoria_park(
     rows = _rows(log, time.perf_counter() - t0, bins, "Victoria Park")
     from threadpoolctl import threadpool_limits
 
+    closure = cfg.with_(**{"closure.enabled": True})
+    t0 = time.perf_counter()
+    log = run_slam(seq, closure, progress=_scans(progress, "slam, Victoria Park, loop closure"))
+    rows += _rows(log, time.perf_counter() - t0, bins, "Victoria Park, loop closure")[-1:]
     cores = os.cpu_count() or 1
     with threadpool_limits(limits=cores, user_api="blas"):
         t0 = time.perf_counter()

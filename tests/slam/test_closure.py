@@ -159,7 +159,7 @@ def _overconfident_revisit(drift_sd, shape_error=None):
     recent_pts = pts[:12] if shape_error is None else pts[:12] + shape_error
     f, old_ids, recent_ids = _revisit(pts, recent_pts, drift, pose_sd=(0.05, 0.05, 0.001))
     closer = _closer(f, ClosureConfig(enabled=True))
-    closer.last_seen = {i: 0.0 for i in old_ids}  # the old trees: mapped and last seen at 0 s
+    closer.mark_seen(old_ids, 0.0)  # the old trees: mapped and last seen at 0 s
     closer.book.first_scan.update({i: 450 for i in recent_ids})  # the recent: at 90 s
     closer.book.odo_delta[1:501] = [0.5, 0.0, 0.0]
     closer.book.odo_cov[1:501] = np.diag(np.square(drift_sd) / 500.0)
