@@ -35,15 +35,17 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    - the pairs must be the same trees up to one rigid motion (`Filter.rigid_fit`): the NIS
      left by the least-squares rigid motion under the covariance of the centred residuals
      (chi-square, 2 x pairs - 3 dof at `jc_prob`), else "not jointly compatible";
-   - then the vehicle and every recent landmark are freed to move together by a rigid motion
-     (`Filter.free_rigid_motion`, standard deviations max_offset_m and max_rotation_deg, the
-     search's own bounds), so that the pairs, not the filter's belief, place the local map.
+   - then the drift dead reckoning allows is given back to the filter (`_free_local_map`,
+     `Filter.free_rigid_motion`): the vehicle and every landmark mapped since the old
+     landmarks were last seen may move together by a rigid motion of that covariance, grown
+     as a random walk (a landmark mapped halfway through the excursion shares half of it), so
+     that the pairs, not the filter's belief, place the excursion's map.
 4. Applying it (`Filter.merge_landmarks`): one update with "each pair differs by 0", then the
    recent duplicate is marginalised out; the log relabels its measurements with the old
    landmark's id (`LogBuilder.merged`), so the smoother sees the closed loop as well. Then,
-   the pose corrected, the other recent landmarks mapped a second time are swept up
-   (`LoopCloser._sweep`): each with a single old landmark near it, individually and jointly
-   compatible, is merged too.
+   the pose corrected, the other landmarks of the excursion (mapped since the old landmarks
+   were last seen) mapped a second time are swept up (`LoopCloser._sweep`): each with a
+   single old landmark near it, individually and jointly compatible, is merged too.
 
 Every check that reaches step 2 is recorded as a `ClosureEvent` (accepted or why not).
 """
@@ -248,15 +250,17 @@ class LoopCloser:
         self.n_hidden = int(out.sum())
         return out if out.any() else None
 
-    def _candidates(self, state, t: float, in_view: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def _candidates(
+        self, state, t: float, in_view: bool = True, since: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(positions of recent landmarks within range, of old landmarks in view; with
-        in_view False, every recent and old landmark)."""
+        in_view False, every recent and old landmark). since: recent means joined after
+        this time instead (the landmarks of an excursion)."""
         cfg, ids = self.cfg, state.landmark_ids
-        joined = np.array([self.book.first_scan.get(int(i), -1) for i in ids])
-        t_joined = np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
+        t_joined = self._joined_at(ids)
         seen = self.seen_at(ids, t)
-        recent = t_joined >= t - cfg.recent_s
         old = seen < t - cfg.old_s
+        recent = (t_joined >= t - cfg.recent_s if since is None else t_joined > since) & ~old
         if in_view:
             z_hat, _ = se2.observe(state.pose, state.landmarks_xy, self.laser)
             recent &= z_hat[:, 0] <= self.view.max_range
@@ -300,6 +304,7 @@ class LoopCloser:
             return ClosureEvent(**common, outcome="too few")
         keep = state.landmark_ids[old[pairs[:, 1]]].copy()
         drop = state.landmark_ids[recent[pairs[:, 0]]].copy()
+        t_from = float(self.seen_at(keep, math.nan).max())  # the excursion began
         common["nis"] = state.same_landmarks_nis(keep, drop)
         common["nis_bound"] = float(chi2.ppf(cfg.jc_prob, 2 * keep.size))
         if not common["nis"] <= common["nis_bound"]:
@@ -308,7 +313,7 @@ class LoopCloser:
             common |= self._drift_test(state, k, keep, (rot, shift_xy))
             if not common["drift_nis"] <= common["drift_bound"]:
                 return ClosureEvent(**common, outcome="beyond dead reckoning")
-            shape, _, centre = state.rigid_fit(keep, drop)
+            shape, _, _ = state.rigid_fit(keep, drop)
             common |= {
                 "shape_nis": shape,
                 "shape_bound": float(chi2.ppf(cfg.jc_prob, 2 * keep.size - 3)),
@@ -317,10 +322,10 @@ class LoopCloser:
                 __import__("os").environ.get("SHAPE_X", "1")
             ):
                 return ClosureEvent(**common, outcome="not jointly compatible")
-            self._free_local_map(state, common["t_s"], centre)
+            self._free_local_map(state, k, t_from)
             common["re_registered"] = True
         merged = self._merge(state, keep, drop, common["t_s"])
-        merged += self._sweep(state, common["t_s"])
+        merged += self._sweep(state, common["t_s"], t_from)
         return ClosureEvent(**common, outcome="accepted", merged=merged)
 
     def _drift_test(self, state, k: int, keep, motion: tuple) -> dict:
@@ -329,12 +334,7 @@ class LoopCloser:
         to the vehicle's pose, d, against the covariance C of the odometry alone since the
         matched old landmarks were last seen (`dead_reckoned_cov` over the logged increments,
         plus the filter's pose covariance then): d^T C^-1 d within chi-square(3) at jc_prob."""
-        t_last = float(self.seen_at(keep, math.nan).max())
-        a = int(np.searchsorted(self.scan_t, t_last))
-        C = dead_reckoned_cov(self.book.odo_delta, self.book.odo_cov, a, k)
-        c, s = math.cos(self.book.pred_pose[a][2]), math.sin(self.book.pred_pose[a][2])
-        A = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # frame of scan a -> world
-        C = A @ C @ A.T + self.book.pred_pose_cov[a]
+        C = self._dead_reckoning(k, float(self.seen_at(keep, math.nan).max()))
         rot, txy = motion
         p = state.pose
         d = np.array([*(se2.rotate(rot, p[:2]) + txy - p[:2]), rot])
@@ -344,14 +344,34 @@ class LoopCloser:
             v = np.full(3, np.inf)
         return {"drift_nis": float(v @ v), "drift_bound": float(chi2.ppf(self.cfg.jc_prob, 3))}
 
-    def _free_local_map(self, state, t: float, centre: np.ndarray) -> None:
-        """Re-registration (module doc, step 3): the vehicle and every recent landmark may be
-        moved together by a rigid motion about `centre`, with the constellation search's own
-        bounds as its standard deviations (max_offset_m each axis, max_rotation_deg)."""
-        recent, _ = self._candidates(state, t, in_view=False)
-        sd = np.array([self.cfg.max_offset_m, self.cfg.max_offset_m,
-                       math.radians(self.cfg.max_rotation_deg)])  # fmt: skip
-        state.free_rigid_motion(state.landmark_ids[recent], centre, np.diag(sd**2))
+    def _dead_reckoning(self, k: int, t_from: float) -> np.ndarray:
+        """(3, 3) the world-frame covariance of the vehicle's pose at scan k from the odometry
+        alone since time t_from (`dead_reckoned_cov`), plus the filter's pose covariance
+        then."""
+        a = int(np.searchsorted(self.scan_t, t_from))
+        C = dead_reckoned_cov(self.book.odo_delta, self.book.odo_cov, a, k)
+        c, s = math.cos(self.book.pred_pose[a][2]), math.sin(self.book.pred_pose[a][2])
+        A = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # frame of scan a -> world
+        return A @ C @ A.T + self.book.pred_pose_cov[a]
+
+    def _joined_at(self, ids) -> np.ndarray:
+        """The time each landmark joined the map (-inf if unknown)."""
+        joined = np.array([self.book.first_scan.get(int(i), -1) for i in ids], dtype=np.int64)
+        return np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
+
+    def _free_local_map(self, state, k: int, t_from: float) -> None:
+        """Re-registration (module doc, step 3): the drift dead reckoning allows since t_from
+        (when the matched old landmarks were last seen; `_dead_reckoning`, a covariance of the
+        vehicle's pose, so a rigid motion about the vehicle) is added to the vehicle and to
+        every landmark mapped since, grown as a random walk: a landmark mapped at t_join
+        shares (t_join - t_from) / (t - t_from) of it (`Filter.free_rigid_motion`)."""
+        t = float(self.scan_t[k])
+        ids = state.landmark_ids
+        t_joined = self._joined_at(ids)
+        sel = np.flatnonzero(t_joined > t_from)
+        shares = np.clip((t_joined[sel] - t_from) / max(t - t_from, 1e-9), 0.0, 1.0)
+        cov = self._dead_reckoning(k, t_from)
+        state.free_rigid_motion(ids[sel], state.pose[:2].copy(), cov, shares)
 
     def _merge(self, state, keep, drop, t: float) -> list[tuple[int, int]]:
         state.merge_landmarks(keep, drop)
@@ -361,12 +381,12 @@ class LoopCloser:
             self.mark_seen([a], t)
         return merged
 
-    def _sweep(self, state, t: float) -> list[tuple[int, int]]:
-        """After a closure, the other trees mapped twice (module doc, step 4): each recent
-        landmark with exactly one old landmark within 2 x match_m, closer than match_m and
-        individually compatible with it (2 dof at jc_prob), merged in one batch if the batch
-        is jointly compatible too."""
-        recent, old = self._candidates(state, t, in_view=False)
+    def _sweep(self, state, t: float, since: float) -> list[tuple[int, int]]:
+        """After a closure, the other trees mapped twice (module doc, step 4): each landmark
+        mapped since `since` (not old) with exactly one old landmark within 2 x match_m,
+        closer than match_m and individually compatible with it (2 dof at jc_prob), merged in
+        one batch if the batch is jointly compatible too."""
+        recent, old = self._candidates(state, t, in_view=False, since=since)
         if not (recent.size and old.size):
             return []
         xy, ids = state.landmarks_xy, state.landmark_ids

@@ -362,19 +362,40 @@ class Filter(_Estimate):
         c = xd.mean(axis=0)
         return nis, np.array([*(xk.mean(axis=0) - c), theta]), c
 
-    def free_rigid_motion(self, landmark_ids, center, cov: np.ndarray) -> None:
+    def free_rigid_motion(self, landmark_ids, center, cov: np.ndarray, shares=None) -> None:
         """Let the vehicle and these landmarks move together by an unknown rigid motion
         (tx, ty, theta about `center`) of covariance cov (3, 3): P += B cov B^T, with B the
-        motion's Jacobian on their rows (the other landmarks' rows are 0)."""
-        pos = np.array([self.index_of(int(i)) for i in np.asarray(landmark_ids).reshape(-1)])
-        xy_rows = np.concatenate([[0], 3 + 2 * pos]).astype(np.int64)
+        motion's Jacobian on their rows (the other landmarks' rows are 0).
+
+        shares: (L,) in [0, 1], or None (all 1): the motion grew as a random walk, and the
+        landmark with share f moved by the part accumulated when it was mapped, f of it (the
+        vehicle: all of it). Two rows with shares f, g then share min(f, g) cov:
+        P += sum_k (f_k - f_(k-1)) B_k cov B_k^T over the distinct shares f_1 < ... < f_K,
+        with B_k on the rows whose share is at least f_k."""
+        ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
+        pos = np.array([self.index_of(int(i)) for i in ids], dtype=np.int64)
+        f = np.ones(ids.size) if shares is None else np.asarray(shares, dtype=np.float64)
+        if f.shape != ids.shape or not np.all((f >= 0.0) & (f <= 1.0)):
+            raise SlamError("free_rigid_motion.shares: one in [0, 1] per landmark")
+        xy_rows = np.concatenate([[0], 3 + 2 * pos])
+        f = np.concatenate([[1.0], f])
         B = np.zeros((self.dim, 3))
         B[xy_rows, 0] = B[xy_rows + 1, 1] = 1.0
         B[xy_rows, 2] = -(self.x[xy_rows + 1] - center[1])
         B[xy_rows + 1, 2] = self.x[xy_rows] - center[0]
         B[2, 2] = 1.0
+        lam, V = np.linalg.eigh(np.asarray(cov, dtype=np.float64))
+        L = V * np.sqrt(np.maximum(lam, 0.0))  # L L^T = cov (cov may be singular)
+        row_share = np.zeros(self.dim)
+        row_share[xy_rows] = row_share[xy_rows + 1] = f
+        row_share[2] = 1.0
+        levels = np.unique(f[f > 0.0])
+        steps = np.diff(np.concatenate([[0.0], levels]))
+        G = np.hstack(
+            [np.sqrt(w) * ((row_share >= lv)[:, None] * B) @ L for lv, w in zip(levels, steps)]
+        )
         P = self.P
-        P += B @ np.asarray(cov, dtype=np.float64) @ B.T
+        P += G @ G.T
         P[:] = 0.5 * (P + P.T)
 
     def _pair_constraint(self, keep_ids, drop_ids, sigma_m: float):

@@ -179,9 +179,9 @@ def test_a_closure_the_filter_cannot_explain_is_refused_without_re_registration(
 
 def test_re_registration_closes_what_the_filter_is_too_sure_to_allow():
     """Same overconfident filter, dead reckoning allowing 1.5 m: the drift is within it, the
-    shape of the pairs fits one rigid motion, so the local map and the vehicle are freed and
-    moved onto the old trees: every recent landmark merged into its own tree, the pose back
-    at the truth, and its covariance grown to cover the correction it made."""
+    shape of the pairs fits one rigid motion, so the drift is given back to the vehicle and
+    the landmarks mapped since the old ones were seen, and they are moved onto the old trees:
+    every recent landmark merged into its own tree and the pose back at the truth."""
     f, old_ids, recent_ids, closer = _overconfident_revisit((1.5, 1.5, 0.03))
     ev = closer._match(f, 500, np.arange(20, 32), np.arange(20))
     assert ev.nis > ev.nis_bound and ev.drift_nis <= ev.drift_bound
@@ -212,6 +212,30 @@ def test_a_map_that_no_rigid_motion_fits_is_refused():
     ev = closer._match(f, 500, np.arange(20, 32), np.arange(20))
     assert ev.best >= 6 and ev.shape_nis > ev.shape_bound
     assert ev.outcome == "not jointly compatible" and f.n_landmarks == 32
+
+
+def test_freeing_with_shares_is_a_random_walk_of_the_motion():
+    """Shares f: a landmark gets f cov, two landmarks min(f, g) cov between them, each
+    landmark f cov with the vehicle (share 1); shares outside [0, 1] or of the wrong length
+    are refused by name."""
+    f = Filter(initial_state(np.zeros(3), np.diag([0.01, 0.01, 1e-4])))
+    for j, p in enumerate([[5.0, 2.0], [8.0, -1.0], [3.0, 6.0]]):
+        z, _ = se2.observe(f.pose, np.array([p]), LASER)
+        f.add_landmark(z[0], np.diag([0.01, 1e-4]), LASER, 10 + j)
+    P0 = f.P.copy()
+    T = np.diag([0.5, 0.2, 0.0])
+    f.free_rigid_motion([10, 11, 12], np.zeros(2), T, shares=[0.25, 1.0, 0.5])
+    dP = f.P - P0
+    x_rows = {"vehicle": 0, 10: 3, 11: 5, 12: 7}
+    share = {"vehicle": 1.0, 10: 0.25, 11: 1.0, 12: 0.5}
+    for a, ra in x_rows.items():
+        for b, rb in x_rows.items():
+            want = min(share[a], share[b]) * T[:2, :2]
+            np.testing.assert_allclose(dP[ra : ra + 2, rb : rb + 2], want, atol=1e-12)
+    with pytest.raises(SlamError, match="shares"):
+        f.free_rigid_motion([10], np.zeros(2), T, shares=[1.5])
+    with pytest.raises(SlamError, match="shares"):
+        f.free_rigid_motion([10, 11], np.zeros(2), T, shares=[0.5])
 
 
 def test_dead_reckoned_cov_is_the_composed_odometry_noise():
