@@ -490,7 +490,9 @@ def _closure_map(lg, seq) -> bytes:
     ant = np.array([se2.compose(p, lg.antenna_pose)[:2] for p in lg.pose])
     matches = [(ant[e["scan"]], e["outcome"]) for e in lg.closures]
     title = "Victoria Park with loop closure: the constellation matches tried, by outcome"
-    return products.png(plots.plot_closure_map, seq.gps_xy, ant, lg.landmark_xy, matches, title)
+    return products.png(
+        plots.plot_closure_map, seq.gps_xy, ant, lg.landmark_xy, matches, title=title
+    )
 
 
 def _figures(label: str, lg, sc, full) -> dict[str, bytes]:
