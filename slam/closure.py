@@ -278,7 +278,8 @@ class LoopCloser:
         # the most-seen recent landmarks first: they propose the hypotheses (BASIS of them)
         seen = np.array([self.book.n_obs.get(int(i), 0) for i in state.landmark_ids[recent]])
         recent = recent[np.argsort(-seen, kind="stable")]
-        best, second, rot, shift_xy, pairs = _hypotheses(
+        centroid = xy[recent].mean(axis=0)
+        best, second, rot, txy, pairs = _hypotheses(
             np.ascontiguousarray(xy[recent]),
             np.ascontiguousarray(xy[old]),
             np.array(
@@ -299,7 +300,7 @@ class LoopCloser:
             best=int(best),
             second=int(second),
             rotation_deg=math.degrees(rot),
-            shift_m=float(np.hypot(*shift_xy)),
+            shift_m=float(np.hypot(*(se2.rotate(rot, centroid) + txy - centroid))),
         )
         if best < cfg.min_pairs:
             return ClosureEvent(**common, outcome="too few")
@@ -315,7 +316,7 @@ class LoopCloser:
         if not common["nis"] <= common["nis_bound"]:
             if not cfg.re_register:
                 return ClosureEvent(**common, outcome="not jointly compatible")
-            common |= self._drift_test(state, k, keep, (rot, shift_xy))
+            common |= self._drift_test(state, k, keep, (rot, txy))
             if not common["drift_nis"] <= common["drift_bound"]:
                 return ClosureEvent(**common, outcome="beyond dead reckoning")
             shape, _, _ = state.rigid_fit(keep, drop)
@@ -323,9 +324,7 @@ class LoopCloser:
                 "shape_nis": shape,
                 "shape_bound": float(chi2.ppf(cfg.jc_prob, 2 * keep.size - 3)),
             }
-            if not shape <= common["shape_bound"] * float(
-                __import__("os").environ.get("SHAPE_X", "1")
-            ):
+            if not shape <= common["shape_bound"]:
                 return ClosureEvent(**common, outcome="not jointly compatible")
             self._free_local_map(state, k, t_from)
             common["re_registered"] = True
