@@ -316,7 +316,8 @@ class LoopCloser:
         if not common["nis"] <= common["nis_bound"]:
             if not cfg.re_register:
                 return ClosureEvent(**common, outcome="not jointly compatible")
-            common |= self._drift_test(state, k, keep, (rot, txy))
+            C = self._dead_reckoning(k, t_from)
+            common |= self._drift_test(state, C, (rot, txy))
             if not common["drift_nis"] <= common["drift_bound"]:
                 return ClosureEvent(**common, outcome="beyond dead reckoning")
             shape, _, _ = state.rigid_fit(keep, drop)
@@ -326,20 +327,20 @@ class LoopCloser:
             }
             if not shape <= common["shape_bound"]:
                 return ClosureEvent(**common, outcome="not jointly compatible")
-            self._free_local_map(state, k, t_from)
+            self._free_local_map(state, k, t_from, C)
             common["re_registered"] = True
         merged = self._merge(state, keep, drop, common["t_s"])
         if not common.get("re_registered"):  # the filter's covariance is trusted here
             merged += self._sweep(state, common["t_s"], t_from)
         return ClosureEvent(**common, outcome="accepted", merged=merged)
 
-    def _drift_test(self, state, k: int, keep, motion: tuple) -> dict:
+    def _drift_test(self, state, C: np.ndarray, motion: tuple) -> dict:
         """Whether dead reckoning could have drifted as far as the match says (module doc,
         step 3): the correction the motion (rotation about the origin, then translation) makes
         to the vehicle's pose, d, against the covariance C of the odometry alone since the
         matched old landmarks were last seen (`dead_reckoned_cov` over the logged increments,
-        plus the filter's pose covariance then): d^T C^-1 d within chi-square(3) at jc_prob."""
-        C = self._dead_reckoning(k, float(self.seen_at(keep, math.nan).max()))
+        plus the filter's pose covariance then; `_dead_reckoning`): d^T C^-1 d within
+        chi-square(3) at jc_prob."""
         rot, txy = motion
         p = state.pose
         d = np.array([*(se2.rotate(rot, p[:2]) + txy - p[:2]), rot])
@@ -364,10 +365,10 @@ class LoopCloser:
         joined = np.array([self.book.first_scan.get(int(i), -1) for i in ids], dtype=np.int64)
         return np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
 
-    def _free_local_map(self, state, k: int, t_from: float) -> None:
+    def _free_local_map(self, state, k: int, t_from: float, cov: np.ndarray) -> None:
         """Re-registration (module doc, step 3): the drift dead reckoning allows since t_from
-        (when the matched old landmarks were last seen; `_dead_reckoning`, a covariance of the
-        vehicle's pose, so a rigid motion about the vehicle) is added to the vehicle and to
+        (when the matched old landmarks were last seen; cov from `_dead_reckoning`, a covariance
+        of the vehicle's pose, so a rigid motion about the vehicle) is added to the vehicle and to
         every landmark mapped since, grown as a random walk: a landmark mapped at t_join
         shares (t_join - t_from) / (t - t_from) of it (`Filter.free_rigid_motion`)."""
         t = float(self.scan_t[k])
@@ -375,7 +376,6 @@ class LoopCloser:
         t_joined = self._joined_at(ids)
         sel = np.flatnonzero(t_joined > t_from)
         shares = np.clip((t_joined[sel] - t_from) / max(t - t_from, 1e-9), 0.0, 1.0)
-        cov = self._dead_reckoning(k, t_from)
         state.free_rigid_motion(ids[sel], state.pose[:2].copy(), cov, shares)
 
     def _merge(self, state, keep, drop, t: float) -> list[tuple[int, int]]:

@@ -482,12 +482,17 @@ TABLE = TableSpec(
 )
 
 
+def _antenna_path(lg) -> np.ndarray:
+    """(N, 2) the run's antenna positions, world frame."""
+    return np.array([se2.compose(p, lg.antenna_pose)[:2] for p in lg.pose])
+
+
 def _closure_map(lg, seq) -> bytes:
     """vp_closures.png: a run with loop closure, where each constellation match was tried
     and how it ended."""
     from experiments.render import plots
 
-    ant = np.array([se2.compose(p, lg.antenna_pose)[:2] for p in lg.pose])
+    ant = _antenna_path(lg)
     matches = [(ant[e["scan"]], e["outcome"]) for e in lg.closures]
     title = "Victoria Park with loop closure: the constellation matches tried, by outcome"
     return products.png(
@@ -499,7 +504,7 @@ def _figures(label: str, lg, sc, full) -> dict[str, bytes]:
     """vp_map.png and vp_timeseries.png of the run `lg` (scored `sc`) over `full`, as bytes."""
     from experiments.render import plots
 
-    ant = np.array([se2.compose(p, lg.antenna_pose)[:2] for p in lg.pose])
+    ant = _antenna_path(lg)
     title = "Victoria Park: estimated antenna path and map over the GPS fixes"
     vp_map = products.png(plots.plot_vp_map, full.gps_xy, {label: ant}, lg.landmark_xy, title)
     t_end = float(full.scan_t[-1])

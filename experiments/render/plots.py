@@ -596,23 +596,34 @@ def plot_vp_map(
     """The GPS fixes (grey dots), estimated antenna paths (one line each), the map's landmarks
     (black +) and, when given, reference landmarks (open circles), world frame."""
     fig, ax = _subplots(figsize=(9, 9))
+    _gps_paths_map(ax, gps_xy, paths, map_xy, map_ms=5)
+    if reference_xy is not None and len(reference_xy):
+        ref = reference_xy
+        label = "reference trees (SLAM school 2002)"
+        ax.plot(ref[:, 0], ref[:, 1], "o", ms=6, mfc="none", color="tab:orange", label=label)
+    _world_frame(ax, title)
+    return save(fig, path)
+
+
+def _gps_paths_map(ax, gps_xy, paths: dict, map_xy, map_ms: float) -> None:
+    """The GPS fixes (grey dots), the paths (one line each, blue first) and the map (black +)."""
     ax.plot(gps_xy[:, 0], gps_xy[:, 1], ".", ms=2, color="0.6", label="GPS fixes", zorder=1)
     colors = ["tab:blue", "tab:red", "tab:green", "tab:purple"]
     for (label, xy), c in zip(paths.items(), colors):
         ax.plot(xy[:, 0], xy[:, 1], "-", lw=0.9, color=c, label=label, zorder=2)
     if len(map_xy):
-        ax.plot(map_xy[:, 0], map_xy[:, 1], "+", ms=5, color="k", label="map landmarks", zorder=3)
-    if reference_xy is not None and len(reference_xy):
-        ref = reference_xy
-        label = "reference trees (SLAM school 2002)"
-        ax.plot(ref[:, 0], ref[:, 1], "o", ms=6, mfc="none", color="tab:orange", label=label)
+        ax.plot(map_xy[:, 0], map_xy[:, 1], "+", ms=map_ms, color="k", label="map landmarks",
+                zorder=3)  # fmt: skip
+
+
+def _world_frame(ax, title: str) -> None:
+    """Equal axes in metres east and north, the title, a grid and the legend."""
     ax.set_aspect("equal")
     ax.set_xlabel("x east (m)")
     ax.set_ylabel("y north (m)")
     ax.set_title(title)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="best")
-    return save(fig, path)
 
 
 def plot_vp_timeseries(
@@ -888,20 +899,12 @@ def plot_closure_map(
     (black +) and the vehicle's position at each constellation match (`matches`: (xy, outcome)
     pairs), by outcome (`CLOSURE_MARKS`; "too few" not drawn), world frame."""
     fig, ax = _subplots(figsize=(9, 9))
-    ax.plot(gps_xy[:, 0], gps_xy[:, 1], ".", ms=2, color="0.6", label="GPS fixes", zorder=1)
-    ax.plot(path_xy[:, 0], path_xy[:, 1], "-", lw=0.9, color="tab:blue", label="estimate")
-    if len(map_xy):
-        ax.plot(map_xy[:, 0], map_xy[:, 1], "+", ms=4, color="k", label="map landmarks")
+    _gps_paths_map(ax, gps_xy, {"estimate": path_xy}, map_xy, map_ms=4)
     for outcome, (marker, colour) in CLOSURE_MARKS.items():
         xy = np.array([m[0] for m in matches if m[1] == outcome], float).reshape(-1, 2)
         if xy.size:
             ax.plot(xy[:, 0], xy[:, 1], marker, ms=12 if marker == "*" else 7, color=colour,
                     mfc="none" if marker == "o" else colour, zorder=4,
                     label=f"match: {outcome} ({xy.shape[0]})")  # fmt: skip
-    ax.set_aspect("equal")
-    ax.set_xlabel("x east (m)")
-    ax.set_ylabel("y north (m)")
-    ax.set_title(title)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    _world_frame(ax, title)
     return save(fig, path)
