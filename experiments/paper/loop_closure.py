@@ -2,17 +2,20 @@
 
 Each run drives once around `experiments.sim.loops.loop_scene` (a stand of trees, then open
 ground long enough for the odometry to drift, then back into the stand) and the filter runs
-twice on it, with `[closure] enabled` false and true (`slam.closure`). The filter models the
-odometry noise as simulated (`loop_config`), with the paper-faithful extractor. Kinds: "park"
-(trees at random) and "orchard" (rows of identical trees on a grid, where a closure onto the
-wrong trees is easy).
+on it with `[closure] enabled` false and true (`slam.closure`), each with the standard
+Jacobians (the Cycab preset's filter, as in every other simulated experiment) and with
+first-estimates Jacobians (`[filter] first_estimates_jacobians`, the Victoria Park preset's).
+The filter models the odometry noise as simulated (`loop_config`), with the paper-faithful
+extractor. Kinds: "park" (trees at random) and "orchard" (rows of identical trees on a grid,
+where a closure onto the wrong trees is easy).
 
-Per run (`loop_trial`): the drift at the return (the filter's position error at the first scan
-back in the stand, with closure off: what the per-scan gate must bridge), the closures accepted
-and their pairs checked against the truth (a pair is right when both landmarks' measurements hit
-the same simulated tree; a closure with any wrong pair is a false closure), the map's size and
-duplicates (final landmarks whose measurements hit the same tree), the final position error and
-the share of scans after the return whose pose NEES is inside its 95% bounds.
+Per run and filter (`loop_trial`): the drift at the return (the filter's position error at the
+first scan back in the stand, with closure off: what the per-scan gate must bridge), the
+closures accepted and their pairs checked against the truth (a pair is right when both
+landmarks' measurements hit the same simulated tree; a closure with any wrong pair is a false
+closure), the map's size and duplicates (final landmarks whose measurements hit the same tree),
+the final position error and the share of scans after the return whose pose NEES is inside its
+95% bounds.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ from experiments.sim.loops import loop_drive, loop_params
 from features import extract_features
 from slam import SlamConfig, interpolate_poses, run_slam, se2
 
-__all__ = ["RUNS", "closure_map", "drive_features", "loop_config", "loop_trial", "run"]
+__all__ = ["JACOBIANS", "RUNS", "closure_map", "drive_features", "loop_config", "loop_trial", "run"]
 
 log = logging.getLogger(__name__)
 
@@ -39,17 +42,22 @@ RUNS = {"park": 40, "orchard": 100}
 QUICK_RUNS = 2  # of each kind, with --quick
 NOISE_SCALE = 0.5  # of the Cycab's odometry noise: returns drift 0-8 m (module doc)
 HOME_X_M = -15.0  # the stand starts here on the way back (`loop_scene`'s route)
+# the filters compared (table column "jacobians"): name -> first_estimates_jacobians
+JACOBIANS = {"standard": False, "first estimates": True}
 
 
-def loop_config(closure: bool, noise_scale: float = NOISE_SCALE) -> SlamConfig:
-    """Experiment 2's filter (`CYCAB_SLAM`, paper-faithful extractor, FEJ) with the odometry
-    noise of `loop_drive` and loop closure on or off."""
+def loop_config(
+    closure: bool, noise_scale: float = NOISE_SCALE, first_estimates: bool = False
+) -> SlamConfig:
+    """Experiment 2's filter (`CYCAB_SLAM`, paper-faithful extractor; standard Jacobians
+    unless `first_estimates`) with the odometry noise of `loop_drive` and loop closure on or
+    off."""
     params = extractor_params("paper", loop_params(noise_scale))
     return CYCAB_SLAM.with_(
         **{
             "features.method": "paper",
             **{f"features.extractor.{k}": v for k, v in params.items()},
-            "filter.first_estimates_jacobians": True,
+            "filter.first_estimates_jacobians": first_estimates,
             "vehicle.odometry_noise.speed_sigma_mps": 0.1 * noise_scale,
             "vehicle.odometry_noise.steer_sigma_rad": math.radians(2.0) * noise_scale,
             "closure.enabled": closure,
@@ -110,21 +118,23 @@ def _figures(lg, seq, feats, k_return: int) -> dict:
 
 
 def loop_trial(job: tuple, seed=None) -> dict:
-    """One run (`job` = (kind, index)): the drive of seed `index` and the filter without and
-    with loop closure; deterministic."""
+    """One run (`job` = (kind, index)): the drive of seed `index` and each filter of
+    `JACOBIANS` without and with loop closure; deterministic. Keys "<figure>_<jacobians>_<off
+    or on>" and "drift_at_return_m_<jacobians>"."""
     kind, index = job
     seq, feats = drive_features(index, kind)
     x_truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)[:, 0]
     half = seq.n_scans // 2  # the return is in the second half of the lap
     k_return = half + int(np.argmax(x_truth[half:] > HOME_X_M))
     row = {"kind": kind, "run": index}
-    for closure in (False, True):
-        lg = run_slam(seq, loop_config(closure), features=feats)
-        f = _figures(lg, seq, feats, k_return)
-        if not closure:
-            row["drift_at_return_m"] = float(f["error"][k_return])
-        tag = "on" if closure else "off"
-        row |= {f"{k}_{tag}": v for k, v in f.items() if k != "error"}
+    for jac, fej in JACOBIANS.items():
+        for closure in (False, True):
+            lg = run_slam(seq, loop_config(closure, first_estimates=fej), features=feats)
+            f = _figures(lg, seq, feats, k_return)
+            if not closure:
+                row[f"drift_at_return_m_{jac}"] = float(f["error"][k_return])
+            tag = f"{jac}_{'on' if closure else 'off'}"
+            row |= {f"{k}_{tag}": v for k, v in f.items() if k != "error"}
     return row
 
 
@@ -154,34 +164,36 @@ def _summary(rows: list[dict]) -> list[dict]:
     out = []
     for kind in RUNS:
         rs = [r for r in rows if r["kind"] == kind]
-        if not rs:
-            continue
-        drift = np.array([r["drift_at_return_m"] for r in rs])
-        band = (drift >= 2.0) & (drift <= 5.0)
-        for tag in ("off", "on"):
-
-            def col(name, rs=rs, tag=tag):
-                return np.array([r[f"{name}_{tag}"] for r in rs], dtype=float)
-
-            out.append(
-                {
-                    "scene": kind,
-                    "closure": tag,
-                    "runs": len(rs),
-                    "drift_at_return_median_m": float(np.median(drift)),
-                    "returns_2_5_m": int(band.sum()),
-                    "with_closure_2_5_m": int(np.sum(band & (col("closures") > 0))),
-                    "closed_2_5_m": int(np.sum(band & (col("duplicates") == 0))),
-                    "closures": int(col("closures").sum()),
-                    "false_closures": int(col("false_closures").sum()),
-                    "pairs_wrong": int(col("pairs_wrong").sum()),
-                    "landmarks_mean": float(col("landmarks").mean()),
-                    "duplicates_mean": float(col("duplicates").mean()),
-                    "final_error_median_m": float(np.median(col("final_error_m"))),
-                    "nees_inside_after_return": float(col("nees_inside").mean()),
-                }
-            )
+        if rs:
+            out += [_summary_row(rs, kind, jac, c) for jac in JACOBIANS for c in ("off", "on")]
     return out
+
+
+def _summary_row(rs: list[dict], kind: str, jac: str, closure: str) -> dict:
+    """The table's row of one scene, filter and closure setting."""
+    drift = np.array([r[f"drift_at_return_m_{jac}"] for r in rs])
+    band = (drift >= 2.0) & (drift <= 5.0)
+
+    def col(name):
+        return np.array([r[f"{name}_{jac}_{closure}"] for r in rs], dtype=float)
+
+    return {
+        "scene": kind,
+        "jacobians": jac,
+        "closure": closure,
+        "runs": len(rs),
+        "drift_at_return_median_m": float(np.median(drift)),
+        "returns_2_5_m": int(band.sum()),
+        "with_closure_2_5_m": int(np.sum(band & (col("closures") > 0))),
+        "closed_2_5_m": int(np.sum(band & (col("duplicates") == 0))),
+        "closures": int(col("closures").sum()),
+        "false_closures": int(col("false_closures").sum()),
+        "pairs_wrong": int(col("pairs_wrong").sum()),
+        "landmarks_mean": float(col("landmarks").mean()),
+        "duplicates_mean": float(col("duplicates").mean()),
+        "final_error_median_m": float(np.median(col("final_error_m"))),
+        "nees_inside_after_return": float(col("nees_inside").mean()),
+    }
 
 
 LABELS = {
@@ -205,7 +217,7 @@ PARTS = (
 TABLE = TableSpec(
     "loop_closure",
     _summary,
-    index=("scene", "closure"),
+    index=("scene", "jacobians", "closure"),
     values=tuple(LABELS),
     parts=PARTS,
     labels=LABELS,
@@ -213,7 +225,9 @@ TABLE = TableSpec(
     notes=(
         "experiments/paper/loop_closure.py. Each run: one lap of a stand of trees (park: 45 "
         "at random; orchard: 60 on a 4 m x 6 m grid), out through open ground and back, with "
-        f"the Cycab's odometry noise x {NOISE_SCALE}, filtered without and with [closure]. "
+        f"the Cycab's odometry noise x {NOISE_SCALE}, filtered without and with [closure], "
+        "with standard and with first-estimates Jacobians ([filter] "
+        "first_estimates_jacobians). "
         "Of them with a closure: returns that drifted 2-5 m with an accepted closure; closed: "
         "those that end with no tree mapped twice. False closures: accepted closures with a "
         "pair of different trees (a landmark is the tree most of its measurements hit)."

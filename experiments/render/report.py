@@ -404,12 +404,13 @@ def _vp_closure_rows(runs: dict, label: str) -> list[list[str]]:
 
 
 def _loop_rows(s: Snapshot, label: str) -> list[list[str]]:
-    """The simulated loops (the `paper` extractor), when the snapshot has them."""
+    """The simulated loops (the `paper` extractor, the standard filter), when the snapshot has
+    them."""
     if not (s.folder / "loop_closure.csv").is_file():
         return []
 
     def on(scene: str, key: str) -> int:
-        return int(s.value("loop_closure", key, scene=scene, closure="on"))
+        return int(s.value("loop_closure", key, scene=scene, jacobians="standard", closure="on"))
 
     band = (
         f"{on('park', 'with_closure_2_5_m')} / {on('park', 'closed_2_5_m')} of "

@@ -72,8 +72,8 @@ def test_a_look_alike_orchard_gives_no_false_closure(seed):
 
 
 def test_the_experiment_writes_its_table(tmp_path):
-    """`trunkslam reproduce loop-closure --quick`: two drives of each kind, a row per scene
-    and closure setting, the run count in the manifest."""
+    """`trunkslam reproduce loop-closure --quick`: two drives of each kind, a row per scene,
+    filter and closure setting, the run count in the manifest."""
     import csv
     import json
 
@@ -85,9 +85,12 @@ def test_the_experiment_writes_its_table(tmp_path):
     res = CliRunner().invoke(app, ["reproduce", "loop-closure", "--quick", "--out", str(out)])
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader((out / "loop_closure.csv").open()))
-    assert [(r["scene"], r["closure"]) for r in rows] == [
-        ("park", "off"), ("park", "on"), ("orchard", "off"), ("orchard", "on")
-    ]  # fmt: skip
+    assert [(r["scene"], r["jacobians"], r["closure"]) for r in rows] == [
+        (scene, jac, closure)
+        for scene in ("park", "orchard")
+        for jac in ("standard", "first estimates")
+        for closure in ("off", "on")
+    ]
     assert all(r["runs"] == "2" for r in rows)
     assert all(int(r["false_closures"]) == 0 for r in rows)
     assert json.loads((out / "manifest.json").read_text())["config"]["loop-closure"]["runs"] == 4
