@@ -42,15 +42,18 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
      that the pairs, not the filter's belief, place the excursion's map.
 4. Applying it (`Filter.merge_landmarks`): one update with "each pair differs by 0", then the
    recent duplicate is marginalised out; the log relabels its measurements with the old
-   landmark's id (`LogBuilder.merged`), so the smoother sees the closed loop as well. Then,
-   when the match passed the filter's own joint compatibility, the pose corrected, the other
-   landmarks of the excursion (mapped since the old landmarks were last seen) mapped a
-   second time are swept up (`LoopCloser._sweep`): each with a single old landmark near it,
-   individually and jointly compatible, is merged too. After a re-registration there is no
-   sweep: the sweep's tests would use a covariance already known to be too small for what
-   was mapped before the excursion's start (on Victoria Park its 14 merges moved the map of
-   scans 1-2000 by a median 1.7 m, and its recall against the 2002 reference fell from 0.99
-   to 0.23); the trees the match did not pair are re-found by later matches.
+   landmark's id (`LogBuilder.merged`), so the smoother sees the closed loop as well. Then
+   the other landmarks of the excursion (mapped since the old landmarks were last seen)
+   mapped a second time are swept up (`LoopCloser._sweep`): each with a single old landmark
+   near it, individually and jointly compatible, goes too. When the match passed the
+   filter's own joint compatibility, the sweep covers the whole map and merges as above.
+   After a re-registration it covers only the laser's range around the vehicle, where the
+   match has just aligned the two maps, and a swept duplicate is only marginalised out (its
+   measurements relabelled, no update): the sweep's tests use a covariance already known to
+   be too small for what was mapped before the excursion's start, and an update through it
+   can move the old map (on Victoria Park, merging the whole map's 14 such pairs moved the
+   map of scans 1-2000 by a median 1.7 m, and its recall against the 2002 reference fell
+   from 0.99 to 0.23; merging the local ones did the same).
 
 Every check that reaches step 2 is recorded as a `ClosureEvent` (accepted or why not).
 """
@@ -293,6 +296,7 @@ class LoopCloser:
             ),
         )
         common = dict(
+            re_registered=False,
             scan=k,
             t_s=float(self.scan_t[k]),
             n_recent=int(recent.size),
@@ -330,8 +334,7 @@ class LoopCloser:
             self._free_local_map(state, k, t_from, C)
             common["re_registered"] = True
         merged = self._merge(state, keep, drop, common["t_s"])
-        if not common.get("re_registered"):  # the filter's covariance is trusted here
-            merged += self._sweep(state, common["t_s"], t_from)
+        merged += self._sweep(state, common["t_s"], t_from, local=common["re_registered"])
         return ClosureEvent(**common, outcome="accepted", merged=merged)
 
     def _drift_test(self, state, C: np.ndarray, motion: tuple) -> dict:
@@ -378,20 +381,29 @@ class LoopCloser:
         shares = np.clip((t_joined[sel] - t_from) / max(t - t_from, 1e-9), 0.0, 1.0)
         state.free_rigid_motion(ids[sel], state.pose[:2].copy(), cov, shares)
 
-    def _merge(self, state, keep, drop, t: float) -> list[tuple[int, int]]:
-        state.merge_landmarks(keep, drop)
+    def _merge(self, state, keep, drop, t: float, update: bool = True) -> list[tuple[int, int]]:
+        if update:
+            state.merge_landmarks(keep, drop)
+        else:
+            state.remove_landmarks(drop)
         merged = [(int(a), int(b)) for a, b in zip(keep, drop)]
         for a, b in merged:
             self.book.merged(drop=b, keep=a)
             self.mark_seen([a], t)
         return merged
 
-    def _sweep(self, state, t: float, since: float) -> list[tuple[int, int]]:
+    def _sweep(self, state, t: float, since: float, local: bool) -> list[tuple[int, int]]:
         """After a closure, the other trees mapped twice (module doc, step 4): each landmark
         mapped since `since` (not old) with exactly one old landmark within 2 x match_m,
         closer than match_m and individually compatible with it (2 dof at jc_prob), merged in
-        one batch if the batch is jointly compatible too."""
+        one batch if the batch is jointly compatible too. local (after a re-registration):
+        only landmarks within the laser's range of the vehicle, and the duplicates are
+        marginalised out instead of merged by an update."""
         recent, old = self._candidates(state, t, in_view=False, since=since)
+        if local:
+            r = np.hypot(*(state.landmarks_xy - state.pose[:2]).T)
+            inside = r <= self.view.max_range
+            recent, old = recent[inside[recent]], old[inside[old]]
         if not (recent.size and old.size):
             return []
         xy, ids = state.landmarks_xy, state.landmark_ids
@@ -411,7 +423,7 @@ class LoopCloser:
             return []
         if state.same_landmarks_nis(keep, drop) > chi2.ppf(self.cfg.jc_prob, 2 * len(keep)):
             return []
-        return self._merge(state, keep, drop, t)
+        return self._merge(state, keep, drop, t, update=not local)
 
 
 @njit(cache=True, nogil=True)

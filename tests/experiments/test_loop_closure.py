@@ -59,6 +59,59 @@ def test_a_return_the_filter_is_too_sure_of_is_closed_by_re_registration():
     assert err_off > 2.0 and err_on < 0.25 * err_off
 
 
+def test_after_a_re_registration_the_nearby_duplicates_are_swept_without_an_update():
+    """Park drive 6: the match pairs 6 trees and re-registers the local map; the 4 other trees
+    of the return mapped twice, within the laser's range, are swept up by marginalising the
+    duplicates (their measurements relabelled to the old landmarks): every pair is one tree
+    and no tree is mapped twice. The sweep's duplicates are removed, not merged by an update,
+    so the old landmarks end where the match's merge left them."""
+    seq, feats, on = _run(6, "park", True)
+    accepted = [e for e in on.closures if e["outcome"] == "accepted"]
+    assert len(accepted) == 1 and accepted[0]["re_registered"]
+    e = accepted[0]
+    assert len(e["merged"]) > e["best"]  # the match's pairs, then the sweep's
+    ident = _identities(on, seq, feats)
+    assert all(ident[a] == ident[b] for a, b in e["merged"])
+    final = [ident[int(i)] for i in on.landmark_id]
+    assert len(final) == len(set(final))
+
+
+def test_the_local_sweep_marginalises_without_moving_the_map():
+    """`LoopCloser._merge(update=False)` (the sweep after a re-registration) removes the
+    duplicates from the state and relabels them in the log, and leaves every other estimate
+    and covariance entry as it was; the update merge moves the kept landmark."""
+    from slam.closure import ClosureConfig, LoopCloser
+    from slam.ekf import Filter, initial_state
+
+    class Book:
+        scan_t = np.zeros(1)
+
+        def __init__(self):
+            self.relabelled = []
+
+        def merged(self, drop, keep):
+            self.relabelled.append((keep, drop))
+
+    def state():
+        f = Filter(initial_state(np.zeros(3), np.diag([0.1, 0.1, 0.01])))
+        for lid, z in ((1, (10.0, 0.1)), (2, (10.3, 0.12)), (3, (20.0, -0.5))):
+            f.add_landmark(np.array(z), np.diag([0.04, 1e-4]), np.zeros(3), lid)
+        return f
+
+    book = Book()
+    closer = LoopCloser(ClosureConfig(enabled=True), None, np.zeros(3), book, gate_prob=0.99)
+    f = state()
+    before = f.snapshot()
+    assert closer._merge(f, np.array([1]), np.array([2]), 0.0, update=False) == [(1, 2)]
+    assert book.relabelled == [(1, 2)] and f.landmark_ids.tolist() == [1, 3]
+    keep = np.r_[0:5, 7:9]  # the pose, landmarks 1 and 3
+    assert np.array_equal(f.x, before.x[keep])
+    assert np.array_equal(f.P, before.P[np.ix_(keep, keep)])
+    g = state()
+    closer._merge(g, np.array([1]), np.array([2]), 0.0)
+    assert not np.allclose(g.x[3:5], before.x[3:5])
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_a_look_alike_orchard_gives_no_false_closure(seed):
     """Rows of identical trees one spacing apart: whatever the closure accepts pairs each
