@@ -23,8 +23,8 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
 3. Joint compatibility (`Filter.same_landmarks_nis`): the filter's own covariance must allow
    all the matched pairs to be the same trees at once (chi-square at `jc_prob`, 2 x pairs
    degrees of freedom). An EKF's covariance is too small after a long excursion (its
-   heading's linearisation; in the simulated park 40% of the scans after a return have a pose
-   NEES inside its 95% bounds), so a true closure often fails this test. With `re_register`
+   heading's linearisation; in the simulated park, without closure, fewer than half of the
+   scans after a return have a pose NEES inside its 95% bounds), so a true closure often fails this test. With `re_register`
    (the default) such a match is checked without the filter's absolute covariance:
    - dead reckoning must allow the drift (`_drift_test`): the pose correction the match
      implies against the covariance of the odometry alone since the matched old landmarks

@@ -38,7 +38,7 @@ __all__ = ["JACOBIANS", "RUNS", "closure_map", "drive_features", "loop_config", 
 
 log = logging.getLogger(__name__)
 
-RUNS = {"park": 40, "orchard": 100}
+RUNS = {"park": 100, "orchard": 100}
 QUICK_RUNS = 2  # of each kind, with --quick
 NOISE_SCALE = 0.5  # of the Cycab's odometry noise: returns drift 0-8 m (module doc)
 HOME_X_M = -15.0  # the stand starts here on the way back (`loop_scene`'s route)
