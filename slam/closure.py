@@ -7,9 +7,11 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
 
 1. Revisit detection (`LoopCloser.hidden`, before each scan's association): an *old*
    landmark (not seen for `old_s` seconds) whose prediction lies in view is hidden from the
-   scan's association when its gate reaches half the distance to its nearest neighbour in the
-   map. The trees of the way back are then mapped anew, as *recent* landmarks (joined the map
-   in the last `recent_s` seconds).
+   scan's association when its gate reaches half the distance to the nearest other tree in the
+   map: the nearest landmark farther than `match_m` (a landmark closer is this tree mapped
+   again, and the association may take one for the other without harm). The trees of the way
+   back are then mapped anew, as *recent* landmarks (joined the map in the last `recent_s`
+   seconds).
 2. Constellation match (`LoopCloser.__call__`, `_hypotheses`): every `every_scans` scans while
    at least `min_pairs` old landmarks are hidden (the per-scan association pairs the rest),
    the recent landmarks within the laser's range against the old ones in view, at least
@@ -24,8 +26,9 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    all the matched pairs to be the same trees at once (chi-square at `jc_prob`, 2 x pairs
    degrees of freedom). An EKF's covariance is too small after a long excursion (its
    heading's linearisation; in the simulated park, without closure, fewer than half of the
-   scans after a return have a pose NEES inside its 95% bounds), so a true closure often fails this test. With `re_register`
-   (the default) such a match is checked without the filter's absolute covariance:
+   scans after a return have a pose NEES inside its 95% bounds), so a true closure often
+   fails this test. With `re_register` (the default) such a match is checked without the
+   filter's absolute covariance:
    - dead reckoning must allow the drift (`_drift_test`): the pose correction the match
      implies against the covariance of the odometry alone since the matched old landmarks
      were last seen (`dead_reckoned_cov`, the logged increments composed to first order; no
@@ -53,7 +56,13 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    be too small for what was mapped before the excursion's start, and an update through it
    can move the old map (on Victoria Park, merging the whole map's 14 such pairs moved the
    map of scans 1-2000 by a median 1.7 m, and its recall against the 2002 reference fell
-   from 0.99 to 0.23; merging the local ones did the same).
+   from 0.99 to 0.23; merging the local ones did the same). The re-registration's own merge
+   can move the old map too, as one piece: the freed excursion and, where the whole map
+   shares the start's uncertainty (first-estimates Jacobians keep it), the old map may both
+   move. That is a motion of the world frame, which nothing observes, but it would move the
+   map away from the path already logged; so the whole estimate is then moved back by the
+   rigid motion that puts the old map where it was (`LoopCloser._hold_frame`,
+   `Filter.move_rigidly`).
 
 Every check that reaches step 2 is recorded as a `ClosureEvent` (accepted or why not).
 """
@@ -71,6 +80,7 @@ from scipy.stats import chi2
 from slam import se2
 from slam.ekf import landmark_columns
 from slam.errors import SlamError
+from slam.start import procrustes_2d
 
 __all__ = [
     "BASIS",
@@ -83,6 +93,10 @@ __all__ = [
 ]
 
 OUTCOMES = ("accepted", "not jointly compatible", "beyond dead reckoning", "no margin", "too few")
+
+# Landmarks searched around an old one for its nearest other tree (revisit detection): more
+# than a tree is ever mapped over in a run
+NEIGHBOURS = 16
 
 # Recent landmarks whose pairs propose transforms (the most-seen first): 10 give 90 ordered
 # pairs; one right pair is enough, and the cost grows with the square of this.
@@ -232,8 +246,9 @@ class LoopCloser:
         not pair, a mask over the state's landmarks (None: none). An old landmark in view is
         hidden when its gate at the new-feature level (radius sqrt(chi2_2) x the largest
         metric sd of its predicted measurement, range and range x bearing) reaches half the
-        distance to its nearest neighbour in the map: a measurement of the neighbour could
-        then fall in its gate, and the per-scan association cannot tell them apart. Those are
+        distance to the nearest other tree in the map (the nearest landmark farther than
+        match_m): a measurement of that tree could then fall in its gate, and the per-scan
+        association cannot tell them apart. Those are
         left to the constellation match, which pairs many at once."""
         t = float(self.scan_t[k])
         ids = state.landmark_ids
@@ -252,7 +267,9 @@ class LoopCloser:
         S = np.einsum("nij,njk,nlk->nil", H5, C5, H5)
         sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[:, 0] ** 2 * S[:, 1, 1]))
         xy = state.landmarks_xy
-        d_nn = cKDTree(xy).query(xy[cand], k=2)[0][:, 1]
+        d = cKDTree(xy).query(xy[cand], k=min(NEIGHBOURS, ids.size))[0]
+        # the nearest other tree: landmarks within match_m are this tree mapped again
+        d_nn = np.where(d > self.cfg.match_m, d, np.inf).min(axis=1)
         out = np.zeros(ids.size, bool)
         out[cand] = self.gate_radius * sd >= 0.5 * d_nn
         self.n_hidden = int(out.sum())
@@ -333,7 +350,10 @@ class LoopCloser:
                 return ClosureEvent(**common, outcome="not jointly compatible")
             self._free_local_map(state, k, t_from, C)
             common["re_registered"] = True
+        anchor = self._anchor(state, t_from) if common["re_registered"] else None
         merged = self._merge(state, keep, drop, common["t_s"])
+        if anchor is not None:
+            self._hold_frame(state, anchor)
         merged += self._sweep(state, common["t_s"], t_from, local=common["re_registered"])
         return ClosureEvent(**common, outcome="accepted", merged=merged)
 
@@ -380,6 +400,26 @@ class LoopCloser:
         sel = np.flatnonzero(t_joined > t_from)
         shares = np.clip((t_joined[sel] - t_from) / max(t - t_from, 1e-9), 0.0, 1.0)
         state.free_rigid_motion(ids[sel], state.pose[:2].copy(), cov, shares)
+
+    def _anchor(self, state, t_from: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """(ids, positions) of the landmarks mapped before t_from (the old map the excursion's
+        freed landmarks are merged into), or None when fewer than two."""
+        ids = state.landmark_ids
+        old = np.flatnonzero(self._joined_at(ids) <= t_from)
+        return (ids[old].copy(), state.landmarks_xy[old].copy()) if old.size >= 2 else None
+
+    def _hold_frame(self, state, anchor: tuple[np.ndarray, np.ndarray]) -> None:
+        """After a re-registration's merge (module doc, step 4): move the whole estimate by the
+        rigid motion that puts the old map back where it was (least squares over `anchor`,
+        from `_anchor` before the merge). The freed excursion's covariance lets the merge
+        move the old map as one piece too, a motion of the world frame that nothing observes
+        and that would shift the map away from the path already logged."""
+        ids, before = anchor
+        pos = np.flatnonzero(np.isin(state.landmark_ids, ids))
+        order = np.searchsorted(ids, state.landmark_ids[pos], sorter=np.argsort(ids))
+        before = before[np.argsort(ids)][order]
+        theta, t = procrustes_2d(state.landmarks_xy[pos], before)
+        state.move_rigidly(theta, t)
 
     def _merge(self, state, keep, drop, t: float, update: bool = True) -> list[tuple[int, int]]:
         if update:

@@ -398,6 +398,28 @@ class Filter(_Estimate):
         P += G @ G.T
         P[:] = 0.5 * (P + P.T)
 
+    def move_rigidly(self, theta: float, t: np.ndarray) -> None:
+        """Move the whole estimate by one rigid motion (p -> R(theta) p + t for the vehicle's
+        and every landmark's position, theta added to the heading): a change of the world
+        frame, which nothing observes. P -> J P J^T (J: R(theta) on each position's rows), and
+        the first estimates move with it, so the filter is the same filter in the new frame."""
+        c, s = math.cos(theta), math.sin(theta)
+        R = np.array([[c, -s], [s, c]])
+        t = np.asarray(t, dtype=np.float64).reshape(2)
+        xy = np.concatenate([[0], 3 + 2 * np.arange(self.n_landmarks)])
+        pts = np.stack([self.x[xy], self.x[xy + 1]], axis=1) @ R.T + t
+        self.x[xy], self.x[xy + 1] = pts[:, 0], pts[:, 1]
+        self.x[2] = float(wrap_angle(self.x[2] + theta))
+        P = self.P
+        for a in xy:  # J P J^T, J block diagonal: rotate each position's rows, then columns
+            P[a : a + 2, :] = R @ P[a : a + 2, :]
+        for a in xy:
+            P[:, a : a + 2] = P[:, a : a + 2] @ R.T
+        self.first_xy = self.first_xy @ R.T + t
+        self.prior_pose = np.array(
+            [*(R @ self.prior_pose[:2] + t), wrap_angle(self.prior_pose[2] + theta)]
+        )
+
     def _pair_constraint(self, keep_ids, drop_ids, sigma_m: float):
         """(d (q,), H P (q, dim), S (q, q), keep columns, drop columns) of the constraint
         x_keep - x_drop = 0 over the pairs (q = 2 x pairs)."""

@@ -7,6 +7,9 @@
 - `map_precision`: share of the landmarks that joined the map in the reference's span of scans
   with a reference tree within `tol_m`; landmarks that joined later are outside what the
   reference covers and are not judged.
+- `one_tree_pairs`: the landmarks mapped twice that a run leaves: pairs within 1.5 m, and of
+  them those that are one tree by the reference (both within `tol_m` of the same reference
+  tree) or by the laser (never both updated in one scan: the laser never saw them as two).
 - `false_detection_rate`: the paper's Table 4 figure on real data, where no detection carries a
   truth label: the share of the circles the filter considered (within its range, in scans it
   used) that no landmark of the final map explains, i.e. whose track (the landmark or tentative
@@ -17,12 +20,19 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from slam import se2
 from slam.log import OUT_OF_RANGE, SKIPPED
 from slam.start import procrustes_2d
 
-__all__ = ["false_detection_rate", "map_precision", "map_recall", "reference_in_our_frame"]
+__all__ = [
+    "false_detection_rate",
+    "map_precision",
+    "map_recall",
+    "one_tree_pairs",
+    "reference_in_our_frame",
+]
 
 
 def reference_in_our_frame(
@@ -77,3 +87,32 @@ def false_detection_rate(
         return float("nan")
     explained = np.isin(meas_track[considered], landmark_id) & (meas_track[considered] >= 0)
     return float(1.0 - np.mean(explained))
+
+
+def one_tree_pairs(
+    landmark_xy: np.ndarray,
+    landmark_id: np.ndarray,
+    obs: tuple[np.ndarray, np.ndarray],
+    trees_xy: np.ndarray,
+    within_m: float = 1.5,
+    tol_m: float = 1.0,
+) -> tuple[int, int]:
+    """(pairs of landmarks within `within_m` of each other, of them those that are one tree):
+    both within `tol_m` of the same tree of `trees_xy`, or never updated in the same scan.
+    obs: (scan, landmark id) of every update's observation (the log's obs_scan, obs_landmark)."""
+    xy = np.asarray(landmark_xy, dtype=np.float64).reshape(-1, 2)
+    ids = np.asarray(landmark_id).reshape(-1)
+    if ids.shape[0] != xy.shape[0]:
+        raise ValueError(f"one_tree_pairs: {xy.shape[0]} landmark positions but {ids.shape[0]} ids")
+    pairs = np.array(sorted(cKDTree(xy).query_pairs(within_m)), dtype=np.int64).reshape(-1, 2)
+    if not pairs.size:
+        return 0, 0
+    tree_of = np.full(ids.size, -1)
+    if trees_xy.shape[0]:
+        d, j = cKDTree(trees_xy[:, :2]).query(xy)
+        tree_of = np.where(d <= tol_m, j, -1)
+    same_tree = (tree_of[pairs[:, 0]] >= 0) & (tree_of[pairs[:, 0]] == tree_of[pairs[:, 1]])
+    scan, lid = (np.asarray(a).reshape(-1) for a in obs)
+    seen = {int(i): set(scan[lid == i].tolist()) for i in np.unique(ids[pairs])}
+    apart = np.array([not seen[int(ids[a])] & seen[int(ids[b])] for a, b in pairs])
+    return int(pairs.shape[0]), int(np.sum(same_tree | apart))

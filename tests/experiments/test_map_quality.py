@@ -12,6 +12,7 @@ from experiments.eval.map_quality import (
     false_detection_rate,
     map_precision,
     map_recall,
+    one_tree_pairs,
     reference_in_our_frame,
 )
 from slam import se2
@@ -54,3 +55,23 @@ def test_false_detections_are_circles_no_final_landmark_explains():
     # joined the map), 9; unexplained: track 12 (a tentative that never joined), the ambiguous
     assert false_detection_rate(status, track, landmark_id) == pytest.approx(2 / 6)
     assert math.isnan(false_detection_rate(status[5:7], track[5:7], landmark_id))
+
+
+def test_one_tree_pairs_counts_close_pairs_the_reference_or_the_laser_call_one_tree():
+    """Five landmarks: a and b 0.8 m apart at one reference tree (one tree by the reference,
+    though updated together once); c and d 1.2 m apart away from the reference, never updated
+    in one scan (one tree by the laser); e and f 1.0 m apart, each updated with the other in
+    scan 3 and at different reference trees (two trees); g alone. Three close pairs, two of
+    them one tree; none within 0.5 m."""
+    xy = np.array(
+        [[0.0, 0.0], [0.8, 0.0], [20.0, 0.0], [21.2, 0.0], [40.0, 0.0], [41.0, 0.0], [60, 0]]
+    )
+    ids = np.array([1, 2, 3, 4, 5, 6, 7])
+    trees = np.array([[0.4, 0.0], [40.0, 0.1], [41.0, -0.1]])
+    scan = np.array([0, 0, 1, 2, 3, 3, 4])
+    lid = np.array([1, 2, 3, 4, 5, 6, 7])
+    assert one_tree_pairs(xy, ids, (scan, lid), trees) == (3, 2)
+    assert one_tree_pairs(xy, ids, (scan, lid), trees, within_m=0.5) == (0, 0)
+    assert one_tree_pairs(xy, ids, (scan, lid), np.zeros((0, 2))) == (3, 1)  # the laser's
+    with pytest.raises(ValueError, match="7 landmark positions but 6 ids"):
+        one_tree_pairs(xy, ids[:6], (scan, lid), trees)
