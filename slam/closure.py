@@ -248,8 +248,8 @@ class LoopCloser:
         metric sd of its predicted measurement, range and range x bearing) reaches half the
         distance to the nearest other tree in the map (the nearest landmark farther than
         match_m): a measurement of that tree could then fall in its gate, and the per-scan
-        association cannot tell them apart. Those are
-        left to the constellation match, which pairs many at once."""
+        association cannot tell them apart. Those are left to the constellation match, which
+        pairs many at once."""
         t = float(self.scan_t[k])
         ids = state.landmark_ids
         self.n_hidden = 0
