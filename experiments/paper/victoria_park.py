@@ -421,10 +421,7 @@ PARTS = (
         "Map and consistency",
         ("landmarks", "reference_trees_1m", "precision_1m", "false_detection_rate", "nis_inside"),
     ),
-    (
-        "Trees mapped twice (landmark pairs within 1.5 m)",
-        ("close_pairs", "one_tree_pairs"),
-    ),
+    ("Trees mapped twice (landmark pairs within 1.5 m)", ("close_pairs", "one_tree_pairs")),
     (
         "Map quality on each half of scans 1-2000",
         (
