@@ -8,10 +8,11 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
 1. Revisit detection (`LoopCloser.hidden`, before each scan's association): an *old*
    landmark (not seen for `old_s` seconds) whose prediction lies in view is hidden from the
    scan's association when its gate reaches half the distance to the nearest other tree in the
-   map: the nearest landmark farther than `match_m` (a landmark closer is this tree mapped
-   again, and the association may take one for the other without harm). The trees of the way
-   back are then mapped anew, as *recent* landmarks (joined the map in the last `recent_s`
-   seconds).
+   map: the nearest landmark farther than `match_m`, and, within `SAME_TREE_M`, one the laser
+   has seen in the same scan as this one (a landmark closer, or never seen with it, is this
+   tree mapped again, and the association may take one for the other without harm). The
+   trees of the way back are then mapped anew, as *recent* landmarks (joined the map in the
+   last `recent_s` seconds).
 2. Constellation match (`LoopCloser.__call__`, `_hypotheses`): every `every_scans` scans while
    at least `min_pairs` old landmarks are hidden (the per-scan association pairs the rest),
    the recent landmarks within the laser's range against the old ones in view, at least
@@ -97,6 +98,10 @@ OUTCOMES = ("accepted", "not jointly compatible", "beyond dead reckoning", "no m
 # Landmarks searched around an old one for its nearest other tree (revisit detection): more
 # than a tree is ever mapped over in a run
 NEIGHBOURS = 16
+
+# Two landmarks closer than this are one tree mapped twice unless the laser has seen both in
+# one scan (the issue's measure of trees mapped twice, `experiments.eval.map_quality`)
+SAME_TREE_M = 1.5
 
 # Recent landmarks whose pairs propose transforms (the most-seen first): 10 give 90 ordered
 # pairs; one right pair is enough, and the cost grows with the square of this.
@@ -207,6 +212,7 @@ class LoopCloser:
         self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
         self._seen = np.full(256, np.nan)  # by landmark id: the time of its last update
         self.events: list[ClosureEvent] = []
+        self._together: dict[int, set] = {}  # id -> ids within SAME_TREE_M seen in one scan
         self.n_hidden = 0  # old landmarks hidden from the last scan's association
 
     def mark_seen(self, ids, t: float, only_new: bool = False) -> None:
@@ -232,6 +238,7 @@ class LoopCloser:
         t = float(self.scan_t[k])
         self.mark_seen(status[status >= 0], t)
         self.mark_seen(state.landmark_ids, t, only_new=True)  # joined this scan: seen now
+        self._seen_together(state, status[status >= 0])
         if k % self.cfg.every_scans or self.n_hidden < self.cfg.min_pairs:
             return None  # the per-scan association can still pair what is in view
         recent, old = self._candidates(state, t)
@@ -247,9 +254,10 @@ class LoopCloser:
         hidden when its gate at the new-feature level (radius sqrt(chi2_2) x the largest
         metric sd of its predicted measurement, range and range x bearing) reaches half the
         distance to the nearest other tree in the map (the nearest landmark farther than
-        match_m): a measurement of that tree could then fall in its gate, and the per-scan
-        association cannot tell them apart. Those are left to the constellation match, which
-        pairs many at once."""
+        match_m, and within SAME_TREE_M one seen in the same scan as this one,
+        `_seen_together`): a measurement of that tree could then fall in its gate, and the
+        per-scan association cannot tell them apart. Those are left to the constellation
+        match, which pairs many at once."""
         t = float(self.scan_t[k])
         ids = state.landmark_ids
         self.n_hidden = 0
@@ -267,13 +275,33 @@ class LoopCloser:
         S = np.einsum("nij,njk,nlk->nil", H5, C5, H5)
         sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[:, 0] ** 2 * S[:, 1, 1]))
         xy = state.landmarks_xy
-        d = cKDTree(xy).query(xy[cand], k=min(NEIGHBOURS, ids.size))[0]
-        # the nearest other tree: landmarks within match_m are this tree mapped again
-        d_nn = np.where(d > self.cfg.match_m, d, np.inf).min(axis=1)
+        d, j = cKDTree(xy).query(xy[cand], k=min(NEIGHBOURS, ids.size))
+        # the nearest other tree: not within match_m, and not within SAME_TREE_M unless the
+        # laser has seen both in one scan (else it is this tree mapped again)
+        other = d > self.cfg.match_m
+        for r, c in enumerate(cand):
+            close = other[r] & (d[r] <= SAME_TREE_M)
+            if close.any():
+                together = self._together.get(int(ids[c]), ())
+                other[r, close] = [int(ids[q]) in together for q in j[r, close]]
+        d_nn = np.where(other, d, np.inf).min(axis=1)
         out = np.zeros(ids.size, bool)
         out[cand] = self.gate_radius * sd >= 0.5 * d_nn
         self.n_hidden = int(out.sum())
         return out if out.any() else None
+
+    def _seen_together(self, state, updated: np.ndarray) -> None:
+        """Record the pairs of landmarks within SAME_TREE_M of each other that this scan
+        updated both of: the laser saw them as two trees."""
+        if updated.size < 2:
+            return
+        pos = np.array([state.index_of(int(i)) for i in updated], dtype=np.int64)
+        xy = state.landmarks_xy[pos]
+        d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+        for a, b in zip(*np.nonzero(np.triu(d <= SAME_TREE_M, 1))):
+            ia, ib = int(updated[a]), int(updated[b])
+            self._together.setdefault(ia, set()).add(ib)
+            self._together.setdefault(ib, set()).add(ia)
 
     def _candidates(
         self, state, t: float, in_view: bool = True, since: float | None = None
