@@ -442,10 +442,8 @@ class LoopCloser:
         from `_anchor` before the merge). The freed excursion's covariance lets the merge
         move the old map as one piece too, a motion of the world frame that nothing observes
         and that would shift the map away from the path already logged."""
-        ids, before = anchor
-        pos = np.flatnonzero(np.isin(state.landmark_ids, ids))
-        order = np.searchsorted(ids, state.landmark_ids[pos], sorter=np.argsort(ids))
-        before = before[np.argsort(ids)][order]
+        ids, before = anchor  # the merge removes only landmarks mapped after them
+        pos = [state.index_of(int(i)) for i in ids]
         theta, t = procrustes_2d(state.landmarks_xy[pos], before)
         state.move_rigidly(theta, t)
 

@@ -45,6 +45,7 @@ from scipy.linalg import blas
 
 from slam.errors import SlamError
 from slam.se2 import inverse_observe, observe, wrap_angle
+from slam.start import procrustes_2d
 
 __all__ = [
     "EkfState",
@@ -344,8 +345,7 @@ class Filter(_Estimate):
             raise SlamError("rigid_fit: needs at least two pairs")
         xk, xd = self.x[ck].reshape(n, 2), self.x[cd].reshape(n, 2)
         ak, ad = xk - xk.mean(axis=0), xd - xd.mean(axis=0)
-        theta = math.atan2(float(np.sum(ad[:, 0] * ak[:, 1] - ad[:, 1] * ak[:, 0])),
-                           float(np.sum(ad * ak)))  # fmt: skip
+        theta, _ = procrustes_2d(xd, xk)
         rot = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
         moved = ad @ rot.T
         r = (ak - moved).reshape(-1)

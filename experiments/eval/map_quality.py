@@ -7,7 +7,8 @@
 - `map_precision`: share of the landmarks that joined the map in the reference's span of scans
   with a reference tree within `tol_m`; landmarks that joined later are outside what the
   reference covers and are not judged.
-- `one_tree_pairs`: the landmarks mapped twice that a run leaves: pairs within 1.5 m, and of
+- `one_tree_pairs`: the landmarks mapped twice that a run leaves: pairs within 1.5 m
+  (`slam.closure.SAME_TREE_M`, the radius loop closure's revisit detection uses), and of
   them those that are one tree by the reference (both within `tol_m` of the same reference
   tree) or by the laser (never both updated in one scan: the laser never saw them as two).
 - `false_detection_rate`: the paper's Table 4 figure on real data, where no detection carries a
@@ -23,6 +24,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from slam import se2
+from slam.closure import SAME_TREE_M
 from slam.log import OUT_OF_RANGE, SKIPPED
 from slam.start import procrustes_2d
 
@@ -94,7 +96,7 @@ def one_tree_pairs(
     landmark_id: np.ndarray,
     obs: tuple[np.ndarray, np.ndarray],
     trees_xy: np.ndarray,
-    within_m: float = 1.5,
+    within_m: float = SAME_TREE_M,
     tol_m: float = 1.0,
 ) -> tuple[int, int]:
     """(pairs of landmarks within `within_m` of each other, of them those that are one tree):
