@@ -329,7 +329,9 @@ class Filter(_Estimate):
         self.remove_landmarks(drop_ids)
         return float(v @ v)
 
-    def rigid_fit(self, keep_ids, drop_ids) -> tuple[float, np.ndarray, np.ndarray]:
+    def rigid_fit(
+        self, keep_ids, drop_ids, tree_sd_m: float = 0.0
+    ) -> tuple[float, np.ndarray, np.ndarray]:
         """The pairs of `same_landmarks_nis` up to one rigid motion: the least-squares motion
         (Kabsch: the drop landmarks' centroid onto the keep landmarks', rotated by theta) and
         the NIS of what it leaves. The residuals r_j = (x_keep_j - c_keep) - R(theta)
@@ -337,8 +339,11 @@ class Filter(_Estimate):
         the landmarks); in a basis without the common translation (2 x pairs - 2 coordinates)
         the rotation's direction is projected out by generalised least squares, and what is
         left, chi-square with 2 x pairs - 3 dof when the pairs are the same trees once the drop
-        side is moved, is the NIS. Returns (nis, motion (tx, ty, theta) that moves the drop
-        centroid and rotates about it, c_drop (2,))."""
+        side is moved, is the NIS. tree_sd_m: an independent error (m, per axis) of each
+        landmark's position added to P's landmark blocks for the test (the trunk's centre as
+        seen from one side, which the filter's white measurement noise averages away).
+        Returns (nis, motion (tx, ty, theta) that moves the drop centroid and rotates about
+        it, c_drop (2,))."""
         _, _, _, ck, cd = self._pair_constraint(keep_ids, drop_ids, 0.0)
         n = ck.size // 2
         if n < 2:
@@ -352,7 +357,7 @@ class Filter(_Estimate):
         centre = np.eye(n) - 1.0 / n  # the centring, per axis
         M = np.hstack([np.kron(centre, np.eye(2)), -np.kron(centre, rot)])
         cols = np.concatenate([ck, cd])
-        Sigma = M @ self.P[np.ix_(cols, cols)] @ M.T
+        Sigma = M @ self.P[np.ix_(cols, cols)] @ M.T + tree_sd_m**2 * (M @ M.T)
         # an orthonormal basis of the residuals without the common translation
         Q = np.linalg.svd(np.kron(centre, np.eye(2)))[0][:, : 2 * n - 2]
         g = Q.T @ np.stack([-moved[:, 1], moved[:, 0]], axis=1).reshape(-1)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from slam import SlamConfig, se2
-from slam.closure import ClosureConfig, LoopCloser, _hypotheses, dead_reckoned_cov
+from slam.closure import HOLD_TOL_M, ClosureConfig, LoopCloser, _hypotheses, dead_reckoned_cov
 from slam.ekf import Filter, initial_state
 from slam.errors import SlamError
 from slam.log import LogBuilder
@@ -246,6 +246,36 @@ def test_a_re_registration_leaves_the_old_map_where_it_was(monkeypatch):
     assert moved_free > 0.3
 
 
+def test_after_a_re_registration_the_old_map_is_held_at_every_scan():
+    """Once a re-registration is accepted, each later scan moves the estimate back whenever
+    the old map has moved as one piece by more than HOLD_TOL_M (RMS): a turn of the whole
+    estimate by 0.5 deg is undone (the vehicle's pose with it), a shift of 5 mm is left. A
+    closer that never re-registered holds nothing."""
+    f, old_ids, _, closer = _overconfident_revisit(
+        (1.5, 1.5, 0.03), start_sd=(1.0, 1.0, math.radians(2.0))
+    )
+    assert closer._match(f, 500, np.arange(20, 32), np.arange(20)).re_registered
+    pos = [f.index_of(i) for i in old_ids]
+    held, pose = f.landmarks_xy[pos].copy(), f.pose.copy()
+    no_measurements = np.zeros(0, dtype=np.int64)
+    f.move_rigidly(math.radians(0.5), np.array([0.3, -0.2]))
+    assert np.hypot(*(f.landmarks_xy[pos] - held).T).max() > 0.1
+    closer(f, 501, no_measurements)
+    np.testing.assert_allclose(f.landmarks_xy[pos], held, atol=1e-9)
+    np.testing.assert_allclose(f.pose, pose, atol=1e-9)
+    f.move_rigidly(0.0, np.array([0.005, 0.0]))
+    closer(f, 502, no_measurements)
+    np.testing.assert_allclose(f.landmarks_xy[pos], held + [0.005, 0.0], atol=1e-9)
+    assert HOLD_TOL_M == 0.01
+    g, _, _, fresh = _overconfident_revisit((1.5, 1.5, 0.03))
+    x0 = g.x.copy()
+    g.move_rigidly(math.radians(0.5), np.zeros(2))
+    moved = g.x.copy()
+    fresh(g, 501, no_measurements)
+    np.testing.assert_array_equal(g.x, moved)
+    assert not np.allclose(moved, x0)
+
+
 def test_moving_the_estimate_rigidly_changes_only_the_frame():
     """`Filter.move_rigidly`: every position moved by the same rotation and translation, the
     heading turned, the covariance rotated with them (J P J^T); distances, the joint NIS of a
@@ -279,14 +309,19 @@ def test_a_drift_dead_reckoning_cannot_explain_is_refused():
     assert f.n_landmarks == 32
 
 
-def test_a_map_that_no_rigid_motion_fits_is_refused():
-    """The recent landmarks bent (each moved by up to 0.3 m, within the constellation's
-    match_m, by the bearing from the centre of the stand): no rigid motion puts them on the
-    old trees within their (1 cm) precision, so the closure is refused."""
+@pytest.mark.parametrize(("tree_sd_m", "scale"), [(0.0, 1.0), (0.05, 1.6)])
+def test_a_map_that_no_rigid_motion_fits_is_refused(tree_sd_m, scale):
+    """The recent landmarks bent (each moved by up to 0.21 m x scale, within the
+    constellation's match_m, by the bearing from the centre of the stand): no rigid motion
+    puts them on the old trees within their (1 cm) precision and the trunks' own error
+    (tree_sd_m: none, as for circles; 5 cm, the default, against a bend 1.6 times larger),
+    so the closure is refused."""
     rng = np.random.default_rng(11)
     pts = _stand(rng, 20)[:12]
-    bend = 0.3 * (pts - pts.mean(axis=0))[:, ::-1] / 20.0 * [1.0, -1.0] * [1.0, 0.0]
+    bend = scale * 0.3 * (pts - pts.mean(axis=0))[:, ::-1] / 20.0 * [1.0, -1.0] * [1.0, 0.0]
+    assert 0.2 * scale < np.abs(bend).max() < 0.22 * scale < 0.5  # 0.5: match_m
     f, _, _, closer = _overconfident_revisit((1.5, 1.5, 0.03), shape_error=bend)
+    closer.cfg = ClosureConfig(enabled=True, tree_sd_m=tree_sd_m)
     ev = closer._match(f, 500, np.arange(20, 32), np.arange(20))
     assert ev.best >= 6 and ev.shape_nis > ev.shape_bound
     assert ev.outcome == "not jointly compatible" and f.n_landmarks == 32
@@ -368,6 +403,13 @@ def test_rigid_fit_recovers_the_motion_and_measures_what_it_leaves():
         f2.add_landmark(z[0], np.diag([1e-4, 1e-4 / max(float(z[0, 0]), 1.0) ** 2]), LASER, j)
     nis2, _, _ = f2.rigid_fit(list(range(8)), list(range(8, 16)))
     assert 50.0 < nis2 < 400.0
+    # tree_sd_m is an independent error of each landmark: the same NIS as with it added to
+    # P's landmark blocks, and a 20 cm error against 5 cm of it is no longer far out
+    nis3, _, _ = f2.rigid_fit(list(range(8)), list(range(8, 16)), tree_sd_m=0.05)
+    for j in range(16):
+        f2.P[3 + 2 * j : 5 + 2 * j, 3 + 2 * j : 5 + 2 * j] += 0.05**2 * np.eye(2)
+    assert nis3 == pytest.approx(f2.rigid_fit(list(range(8)), list(range(8, 16)))[0], rel=1e-9)
+    assert 2.0 < nis3 < nis2 / 10.0
     with pytest.raises(SlamError, match="two pairs"):
         f.rigid_fit([0], [8])
 
@@ -415,6 +457,7 @@ def test_the_log_counts_a_merged_landmarks_measurements_as_the_kept_ones():
         ({"closure": {"match_m": -1.0}}, r"closure\.match_m"),
         ({"closure": {"enabled": "yes"}}, r"closure\.enabled"),
         ({"closure": {"re_register": 1}}, r"closure\.re_register"),
+        ({"closure": {"tree_sd_m": -0.05}}, r"closure\.tree_sd_m: must be >= 0"),
         ({"closure": {"old_s": 20.0}}, r"closure\.old_s: must be >= recent_s"),
         ({"closure": {"every": 3}}, r"closure\.every.*did you mean 'every_scans'"),
     ],
@@ -422,3 +465,7 @@ def test_the_log_counts_a_merged_landmarks_measurements_as_the_kept_ones():
 def test_bad_closure_settings_name_the_key(data, message):
     with pytest.raises(SlamError, match=message):
         SlamConfig.from_dict(data)
+
+
+def test_a_closure_setting_that_may_be_zero_is_accepted_at_zero():
+    assert SlamConfig.from_dict({"closure": {"tree_sd_m": 0.0}}).closure.tree_sd_m == 0.0
