@@ -69,6 +69,14 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    linearisation points of the old map and of the vehicle metres apart, and the updates that
    follow observe the world frame through them (on Victoria Park they turned the whole map
    by 1.3 deg within 30 scans).
+5. The duplicate sweep (`LoopCloser._sweep_duplicates`, every `every_scans` scans, closure
+   or not): two landmarks within the laser's range, closer than `match_m` to each other,
+   that no scan has updated both of, are one tree mapped twice when the filter knows their
+   relative position well enough (the pair's gate at `jc_prob`, with `tree_sd_m` on each,
+   narrower than `match_m`, so that another tree could not pass it) and their difference
+   passes that gate. The one with fewer sightings is marginalised out and its measurements
+   relabelled, with no update: nothing moves, and a pair the filter is unsure of (a return
+   after drift) is left to the constellation match, which corrects the drift as it merges.
 
 Every check that reaches step 2 is recorded as a `ClosureEvent` (accepted or why not).
 """
@@ -210,13 +218,15 @@ class ClosureEvent:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
-def closure_counts(events: list[dict]) -> dict:
+def closure_counts(events: list[dict], duplicates: list | None = None) -> dict:
     """A run's matches (`ClosureEvent.to_dict()` each): how many were tried, how many ended in
-    each outcome (keys with "_" for " "), and the landmarks merged."""
+    each outcome (keys with "_" for " "), and the landmarks they merged; duplicates: the
+    duplicate sweep's merges (`SlamLog.closure_duplicates`), counted as duplicates_merged."""
     out = {"tried": len(events)}
     for outcome in OUTCOMES:
         out[outcome.replace(" ", "_")] = sum(e["outcome"] == outcome for e in events)
     out["landmarks_merged"] = sum(len(e["merged"]) for e in events)
+    out["duplicates_merged"] = len(duplicates or [])
     return out
 
 
@@ -234,6 +244,7 @@ class LoopCloser:
         self._together: dict[int, set] = {}  # id -> ids within SAME_TREE_M seen in one scan
         self.n_hidden = 0  # old landmarks hidden from the last scan's association
         self._frame = None  # after a re-registration: (ids, positions) of the old map held
+        self.duplicates: list[tuple[int, int, int]] = []  # (kept id, dropped id, scan)
 
     def mark_seen(self, ids, t: float, only_new: bool = False) -> None:
         """Landmarks `ids` were updated at time t (only_new: those not seen before)."""
@@ -261,6 +272,8 @@ class LoopCloser:
         self._seen_together(state, status[status >= 0])
         if self._frame is not None:
             self._hold_frame(state, self._frame, tol_m=HOLD_TOL_M)
+        if k % self.cfg.every_scans == 0:
+            self._sweep_duplicates(state, k)
         if k % self.cfg.every_scans or self.n_hidden < self.cfg.min_pairs:
             return None  # the per-scan association can still pair what is in view
         recent, old = self._candidates(state, t)
@@ -492,6 +505,43 @@ class LoopCloser:
             self.book.merged(drop=b, keep=a)
             self.mark_seen([a], t)
         return merged
+
+    def _sweep_duplicates(self, state, k: int) -> None:
+        """The duplicate sweep (module doc, step 5): pairs of landmarks within the laser's
+        range of the vehicle, closer than match_m to each other, that no scan has updated
+        both of (`_seen_together`), and whose difference is compatible with 0 (2 dof at
+        jc_prob, tree_sd_m added to each): the one with fewer sightings is marginalised out
+        and its measurements relabelled (no update). Nearest pairs first, each landmark in
+        one pair at most."""
+        xy, ids = state.landmarks_xy, state.landmark_ids
+        near = np.flatnonzero(np.hypot(*(xy - state.pose[:2]).T) <= self.view.max_range)
+        if near.size < 2:
+            return
+        pairs = np.array(sorted(cKDTree(xy[near]).query_pairs(self.cfg.match_m)), np.int64)
+        if not pairs.size:
+            return
+        pairs = near[pairs]
+        order = np.argsort(np.hypot(*(xy[pairs[:, 0]] - xy[pairs[:, 1]]).T), kind="stable")
+        gate = float(chi2.ppf(self.cfg.jc_prob, 2))
+        keep, drop, used = [], [], set()
+        for a, b in pairs[order]:
+            ia, ib = int(ids[a]), int(ids[b])
+            if ia in used or ib in used or ib in self._together.get(ia, ()):
+                continue
+            d, S = state.pair_difference([ia], [ib], self.cfg.tree_sd_m)
+            # only a pair whose gate is narrower than match_m: a tree within it is this tree
+            if gate * np.linalg.eigvalsh(S)[-1] > self.cfg.match_m**2:
+                continue
+            if d @ np.linalg.solve(S, d) > gate:
+                continue
+            n_a, n_b = self.book.n_obs.get(ia, 0), self.book.n_obs.get(ib, 0)
+            kept, dropped = (ia, ib) if (n_a, -ia) >= (n_b, -ib) else (ib, ia)
+            keep.append(kept)
+            drop.append(dropped)
+            used |= {ia, ib}
+        if keep:
+            self._merge(state, keep, drop, float(self.scan_t[k]), update=False)
+            self.duplicates += [(a, b, k) for a, b in zip(keep, drop)]
 
     def _sweep(self, state, t: float, since: float, local: bool) -> list[tuple[int, int]]:
         """After a closure, the other trees mapped twice (module doc, step 4): each landmark

@@ -303,14 +303,24 @@ class Filter(_Estimate):
         self.landmark_ids = np.concatenate([self.landmark_ids, np.array([landmark_id], np.int64)])
         self.first_xy = np.concatenate([self.first_xy, m[None, :]])
 
-    def same_landmarks_nis(self, keep_ids, drop_ids) -> float:
+    def same_landmarks_nis(self, keep_ids, drop_ids, tree_sd_m: float = 0.0) -> float:
         """The joint compatibility of "landmark keep_ids[j] is landmark drop_ids[j]" for all j:
         d^T S^-1 d with d the stacked differences of their positions and S their covariance
-        (chi-square with 2 x pairs degrees of freedom when the pairs are the same trees)."""
-        d, HP, S, _, _ = self._pair_constraint(keep_ids, drop_ids, 0.0)
+        (chi-square with 2 x pairs degrees of freedom when the pairs are the same trees).
+        tree_sd_m: an independent error (m, per axis) of each landmark added to S (as in
+        `rigid_fit`)."""
+        d, HP, S, _, _ = self._pair_constraint(keep_ids, drop_ids, math.sqrt(2.0) * tree_sd_m)
         L = np.linalg.cholesky(S)
         v = np.linalg.solve(L, d)
         return float(v @ v)
+
+    def pair_difference(
+        self, keep_ids, drop_ids, tree_sd_m: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(d (q,), S (q, q)): the stacked differences x_keep - x_drop of the pairs of
+        `same_landmarks_nis` and their covariance, tree_sd_m added to each landmark."""
+        d, _, S, _, _ = self._pair_constraint(keep_ids, drop_ids, math.sqrt(2.0) * tree_sd_m)
+        return d, S
 
     def merge_landmarks(self, keep_ids, drop_ids, sigma_m: float = 1e-3) -> float:
         """Landmark drop_ids[j] is landmark keep_ids[j]: one batch update with the measurement

@@ -74,6 +74,8 @@ class SlamLog:
         (`slam.closure.ClosureEvent.to_dict()`), accepted or not; a merged landmark's
         measurements carry the id of the landmark it was merged into; meas_track_unmerged
         then holds the tracks as they were before any merge (None when nothing was merged).
+    closure_duplicates: with `[closure] enabled`, the landmarks the duplicate sweep
+        marginalised out, [kept id, dropped id, scan] each (`slam.closure`, step 5).
     """
 
     scan_t: np.ndarray
@@ -121,6 +123,7 @@ class SlamLog:
     config: dict
     window_stats: dict | None = None
     closures: list | None = None
+    closure_duplicates: list | None = None
     meas_track_unmerged: np.ndarray | None = None
     antenna_pose: np.ndarray | None = None
 
@@ -269,6 +272,7 @@ class LogBuilder:
         config: dict,
         window_stats: dict | None = None,
         closures: list | None = None,
+        closure_duplicates: list | None = None,
     ) -> SlamLog:
         ids = state.landmark_ids
         obs, meas = self.obs, self.meas
@@ -316,5 +320,6 @@ class LogBuilder:
             window_stats=window_stats,
             antenna_pose=self.antenna_pose,
             closures=closures,
+            closure_duplicates=closure_duplicates,
             meas_track_unmerged=np.array(meas["track"], np.int64) if self.alias else None,
         )

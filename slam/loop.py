@@ -251,6 +251,9 @@ def run_slam(
         config=cfg.to_dict(),
         window_stats=loop.maps.stats(),
         closures=None if loop.closer is None else [e.to_dict() for e in loop.closer.events],
+        closure_duplicates=None
+        if loop.closer is None
+        else [list(d) for d in loop.closer.duplicates],
     )
 
 

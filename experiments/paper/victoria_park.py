@@ -224,16 +224,18 @@ def _one(label, seq, cfg, ref, given=None, visualiser=None):
 
 def _closure_figures(lg) -> dict:
     """Loop closure's figures of a run (`slam.closure`; NaN when it was off): constellation
-    matches tried, refused as not jointly compatible, accepted, and landmarks merged."""
+    matches tried, refused as not jointly compatible, accepted, landmarks merged by them, and
+    landmarks the duplicate sweep marginalised out."""
     names = {  # column: key of `slam.closure.closure_counts`
         "closure_matches": "tried",
         "closure_refused_jc": "not_jointly_compatible",
         "closures_accepted": "accepted",
         "landmarks_merged": "landmarks_merged",
+        "duplicates_merged": "duplicates_merged",
     }
     if lg.closures is None:
         return dict.fromkeys(names, math.nan)
-    counts = closure_counts(lg.closures)
+    counts = closure_counts(lg.closures, lg.closure_duplicates)
     return {column: counts[key] for column, key in names.items()}
 
 
@@ -389,6 +391,7 @@ COLUMNS = [
     ("closure_refused_jc", "refused: not jointly compatible"),
     ("closures_accepted", "closures accepted"),
     ("landmarks_merged", "landmarks merged"),
+    ("duplicates_merged", "duplicates swept"),
 ]
 
 
@@ -437,7 +440,13 @@ PARTS = (
     ),
     (
         "Loop closure (runs with [closure] enabled)",
-        ("closure_matches", "closure_refused_jc", "closures_accepted", "landmarks_merged"),
+        (
+            "closure_matches",
+            "closure_refused_jc",
+            "closures_accepted",
+            "landmarks_merged",
+            "duplicates_merged",
+        ),
     ),
 )
 

@@ -202,7 +202,7 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
         "timing": timing,
         "config": json_types(lg.config),
         **({"window": lg.window_stats} if lg.window_stats else {}),
-        **({"closures": _closures(lg.closures)} if lg.closures is not None else {}),
+        **({"closures": _closures(lg)} if lg.closures is not None else {}),
     }
     if seq.gps_t is not None:
         vouched = vouched_for_sequence(seq, SlamConfig.from_dict(lg.config))
@@ -230,10 +230,12 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
     return null_scores(summary, reasons=missing_reasons(seq, summary))
 
 
-def _closures(events: list[dict]) -> dict:
-    """The summary's loop closure part: matches tried by outcome, landmarks merged, and the
-    accepted closures (scan, time, pairs, NIS, transform, whether re-registered)."""
-    out = closure_counts(events)
+def _closures(lg) -> dict:
+    """The summary's loop closure part: matches tried by outcome, landmarks merged by them and
+    by the duplicate sweep, and the accepted closures (scan, time, pairs, NIS, transform,
+    whether re-registered)."""
+    events = lg.closures
+    out = closure_counts(events, lg.closure_duplicates)
     keys = ("scan", "t_s", "best", "second", "nis", "nis_bound", "rotation_deg", "shift_m",
             "re_registered")  # fmt: skip
     out["accepted_closures"] = [
