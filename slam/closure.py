@@ -69,14 +69,15 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    linearisation points of the old map and of the vehicle metres apart, and the updates that
    follow observe the world frame through them (on Victoria Park they turned the whole map
    by 1.3 deg within 30 scans).
-5. The duplicate sweep (`LoopCloser._sweep_duplicates`, every `every_scans` scans, closure
-   or not): two landmarks within the laser's range, closer than `match_m` to each other,
-   that no scan has updated both of, are one tree mapped twice when the filter knows their
-   relative position well enough (the pair's gate at `jc_prob`, with `tree_sd_m` on each,
-   narrower than `match_m`, so that another tree could not pass it) and their difference
-   passes that gate. The one with fewer sightings is marginalised out and its measurements
-   relabelled, with no update: nothing moves, and a pair the filter is unsure of (a return
-   after drift) is left to the constellation match, which corrects the drift as it merges.
+5. The duplicate sweep (`LoopCloser._sweep_duplicates`, every `every_scans` scans, whether a
+   match is tried or not): two landmarks within the laser's range of the vehicle, closer
+   than `match_m` to each other, that no scan has updated both of, are one tree mapped twice
+   when the filter knows their relative position well enough (the pair's gate at
+   `jc_prob`, with `tree_sd_m` on each, narrower than `match_m`, so that another tree could
+   not pass it) and their difference passes that gate. The one with fewer sightings is
+   marginalised out and its measurements relabelled, with no update: nothing moves, and a
+   pair the filter is unsure of (a return after drift) is left to the constellation match,
+   which corrects the drift as it merges.
 
 Every check that reaches step 2 is recorded as a `ClosureEvent` (accepted or why not).
 """

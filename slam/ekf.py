@@ -309,7 +309,7 @@ class Filter(_Estimate):
         (chi-square with 2 x pairs degrees of freedom when the pairs are the same trees).
         tree_sd_m: an independent error (m, per axis) of each landmark added to S (as in
         `rigid_fit`)."""
-        d, HP, S, _, _ = self._pair_constraint(keep_ids, drop_ids, math.sqrt(2.0) * tree_sd_m)
+        d, S = self.pair_difference(keep_ids, drop_ids, tree_sd_m)
         L = np.linalg.cholesky(S)
         v = np.linalg.solve(L, d)
         return float(v @ v)

@@ -210,7 +210,8 @@ def test_slam_with_loop_closure_reports_its_matches(tmp_path):
     """[closure] in a configuration file turns loop closure on: the summary counts the
     constellation matches by outcome. A lap and a half of the tree park maps every tree on
     the first lap and re-finds them with the per-scan gate, so nothing is recent when the car
-    is back: no match is tried, nothing merged, and the run stays on its truth."""
+    is back: no match is tried, nothing merged (no tree mapped twice for the duplicate sweep
+    either), and the run stays on its truth."""
     run = tmp_path / "run.npz"
     res = runner.invoke(app, ["simulate-drive", "--scans", "360", "--seed", "2", "--out", str(run)])
     assert res.exit_code == 0, res.output
@@ -223,6 +224,7 @@ def test_slam_with_loop_closure_reports_its_matches(tmp_path):
     c = s["closures"]
     parts = ("accepted", "not_jointly_compatible", "beyond_dead_reckoning", "no_margin", "too_few")
     assert c["tried"] == sum(c[k] for k in parts) == 0 and c["landmarks_merged"] == 0
+    assert c["duplicates_merged"] == 0
     assert len(c["accepted_closures"]) == c["accepted"] and s["config"]["closure"]["enabled"]
     assert max(s["truth"]["mean_abs_error"].values()) < 0.05
     res = runner.invoke(app, ["slam", str(run), "--out", str(out)])
