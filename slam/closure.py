@@ -73,8 +73,9 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    match is tried or not): two landmarks within the laser's range of the vehicle, closer
    than `match_m` to each other, that no scan has updated both of, are one tree mapped twice
    when the filter knows their relative position well enough (the pair's gate at
-   `jc_prob`, with `tree_sd_m` on each, narrower than `match_m`, so that another tree could
-   not pass it) and their difference passes that gate. The one with fewer sightings is
+   `jc_prob`, with `tree_sd_m` on each, stops short of half the way to the nearest other
+   tree, revisit detection's rule, so that no other tree could pass it) and their difference
+   passes that gate. The one with fewer sightings is
    marginalised out and its measurements relabelled, with no update: nothing moves, and a
    pair the filter is unsure of (a return after drift) is left to the constellation match,
    which corrects the drift as it merges.
@@ -310,21 +311,26 @@ class LoopCloser:
         C5 = state.cov(landmark_columns(cand))
         S = np.einsum("nij,njk,nlk->nil", H5, C5, H5)
         sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[:, 0] ** 2 * S[:, 1, 1]))
-        xy = state.landmarks_xy
-        d, j = cKDTree(xy).query(xy[cand], k=min(NEIGHBOURS, ids.size))
-        # the nearest other tree: not within match_m, and not within SAME_TREE_M unless the
-        # laser has seen both in one scan (else it is this tree mapped again)
+        out = np.zeros(ids.size, bool)
+        out[cand] = self.gate_radius * sd >= 0.5 * self._nearest_other_tree(state, cand)
+        self.n_hidden = int(out.sum())
+        return out if out.any() else None
+
+    def _nearest_other_tree(self, state, pos: np.ndarray) -> np.ndarray:
+        """(len(pos),) the distance from each landmark at state positions `pos` to the
+        nearest other tree in the map (inf if none): the nearest landmark farther than
+        match_m, and within SAME_TREE_M only one the laser has seen in the same scan as this
+        one (`_seen_together`); a landmark closer, or never seen with it, is this tree mapped
+        again."""
+        xy, ids = state.landmarks_xy, state.landmark_ids
+        d, j = cKDTree(xy).query(xy[pos], k=min(NEIGHBOURS, ids.size))
         other = d > self.cfg.match_m
-        for r, c in enumerate(cand):
+        for r, c in enumerate(pos):
             close = other[r] & (d[r] <= SAME_TREE_M)
             if close.any():
                 together = self._together.get(int(ids[c]), ())
                 other[r, close] = [int(ids[q]) in together for q in j[r, close]]
-        d_nn = np.where(other, d, np.inf).min(axis=1)
-        out = np.zeros(ids.size, bool)
-        out[cand] = self.gate_radius * sd >= 0.5 * d_nn
-        self.n_hidden = int(out.sum())
-        return out if out.any() else None
+        return np.where(other, d, np.inf).min(axis=1)
 
     def _seen_together(self, state, updated: np.ndarray) -> None:
         """Record the pairs of landmarks within SAME_TREE_M of each other that this scan
@@ -510,10 +516,11 @@ class LoopCloser:
     def _sweep_duplicates(self, state, k: int) -> None:
         """The duplicate sweep (module doc, step 5): pairs of landmarks within the laser's
         range of the vehicle, closer than match_m to each other, that no scan has updated
-        both of (`_seen_together`), and whose difference is compatible with 0 (2 dof at
-        jc_prob, tree_sd_m added to each): the one with fewer sightings is marginalised out
-        and its measurements relabelled (no update). Nearest pairs first, each landmark in
-        one pair at most."""
+        both of (`_seen_together`), whose gate (2 dof at jc_prob, tree_sd_m added to each)
+        stops short of half the way to the nearest other tree (`_nearest_other_tree`) and
+        whose difference passes it: the one with fewer sightings is marginalised out and its
+        measurements relabelled (no update). Nearest pairs first, each landmark in one pair
+        at most."""
         xy, ids = state.landmarks_xy, state.landmark_ids
         near = np.flatnonzero(np.hypot(*(xy - state.pose[:2]).T) <= self.view.max_range)
         if near.size < 2:
@@ -523,15 +530,18 @@ class LoopCloser:
             return
         pairs = near[pairs]
         order = np.argsort(np.hypot(*(xy[pairs[:, 0]] - xy[pairs[:, 1]]).T), kind="stable")
+        pairs = pairs[order]
+        d_nn = self._nearest_other_tree(state, pairs.reshape(-1)).reshape(-1, 2).min(axis=1)
         gate = float(chi2.ppf(self.cfg.jc_prob, 2))
         keep, drop, used = [], [], set()
-        for a, b in pairs[order]:
+        for (a, b), reach in zip(pairs, 0.5 * d_nn):
             ia, ib = int(ids[a]), int(ids[b])
             if ia in used or ib in used or ib in self._together.get(ia, ()):
                 continue
             d, S = state.pair_difference([ia], [ib], self.cfg.tree_sd_m)
-            # only a pair whose gate is narrower than match_m: a tree within it is this tree
-            if gate * np.linalg.eigvalsh(S)[-1] > self.cfg.match_m**2:
+            # only a pair whose gate stops short of half the way to the nearest other tree
+            # (revisit detection's rule): no other tree could pass it
+            if gate * np.linalg.eigvalsh(S)[-1] >= reach**2:
                 continue
             if d @ np.linalg.solve(S, d) > gate:
                 continue

@@ -277,29 +277,33 @@ def test_after_a_re_registration_the_old_map_is_held_at_every_scan():
 
 
 def test_the_duplicate_sweep_marginalises_a_tree_mapped_twice_and_nothing_else():
-    """Four pairs of landmarks mapped from one well-known pose (relative sds of millimetres):
-    a copy 10 cm off that no scan updated with its tree is marginalised out (the one with
-    fewer sightings goes, its measurements are relabelled, nothing else moves); a pair 10 cm
-    apart that one scan updated both of (two stems), a pair 40 cm apart (beyond the 5 cm
-    trunk error at 1 cm precision) and a copy mapped after a 1.5 m pose uncertainty (its gate
-    wider than match_m: left to the constellation match) stay."""
+    """Five trees, each mapped twice. Copies mapped from the well-known start pose (relative
+    sds of millimetres): 10 cm off and never updated with its tree, it is marginalised out
+    (the one with fewer sightings goes, its measurements are relabelled, nothing else
+    moves); 10 cm off but updated with it in one scan (two stems), or 40 cm off (beyond the
+    5 cm trunk error), it stays. Copies mapped after the pose's sd grew: to 0.3 m, the
+    pair's gate (1.15 m) is wider than match_m but stops short of half the way to the
+    nearest other tree (30 m), and the copy goes; to 1.5 m, the gate (5.7 m) reaches past
+    half the way to a tree 4.2 m off, and the pair is left to the constellation match."""
     f = Filter(initial_state(np.zeros(3), np.diag([1e-6, 1e-6, 1e-8])))
-    trees = np.array([[10.0, 3.0], [12.0, -6.0], [20.0, 8.0], [25.0, -4.0]])
-    off = np.array([[0.1, 0.0], [0.0, 0.1], [0.4, 0.0], [0.1, 0.0]])
+    trees = np.array([[10.0, 3.0], [12.0, -6.0], [20.0, 8.0], [23.0, 5.0], [40.0, -20.0]])
+    off = np.array([[0.1, 0.0], [0.0, 0.1], [0.4, 0.0], [0.1, 0.0], [0.0, -0.1]])
     _add(f, np.zeros(3), trees, 0)
     _add(f, np.zeros(3), trees[:3] + off[:3], 10)
-    f.predict(np.zeros(3), np.eye(3), np.diag([1.5**2, 1.5**2, 1e-4]))
-    _add(f, np.zeros(3), trees[3:] + off[3:], 13)
+    f.predict(np.zeros(3), np.eye(3), np.diag([0.3**2, 0.3**2, 1e-8]))
+    _add(f, np.zeros(3), trees[4:] + off[4:], 14)
+    f.predict(np.zeros(3), np.eye(3), np.diag([1.5**2 - 0.3**2, 1.5**2 - 0.3**2, 1e-4]))
+    _add(f, np.zeros(3), trees[3:4] + off[3:4], 13)
     closer = _closer(f, ClosureConfig(enabled=True))
-    closer.book.n_obs.update({0: 40, 10: 3, 1: 40, 11: 3, 2: 40, 12: 3, 3: 40, 13: 3})
+    closer.book.n_obs.update({i: 40 for i in range(5)} | {i: 3 for i in range(10, 15)})
     closer(f, 3, np.array([1, 11]))  # k = 3: the pair 1, 11 seen in one scan; no sweep yet
-    x_before = f.x.copy()
+    x_before, ids_before = f.x.copy(), f.landmark_ids.copy()
     closer(f, 5, np.zeros(0, dtype=np.int64))  # k = 5: every_scans, the sweep runs
-    assert closer.duplicates == [(0, 10, 5)]
-    assert sorted(f.landmark_ids.tolist()) == [0, 1, 2, 3, 11, 12, 13]
-    assert closer.book.alias == {10: 0}
-    keep = np.isin(np.arange(8), [0, 1, 2, 3, 5, 6, 7])  # the others' rows, unchanged
-    np.testing.assert_array_equal(f.x, x_before[np.concatenate([[True] * 3, np.repeat(keep, 2)])])
+    assert sorted(closer.duplicates) == [(0, 10, 5), (4, 14, 5)]
+    assert sorted(f.landmark_ids.tolist()) == [0, 1, 2, 3, 4, 11, 12, 13]
+    assert closer.book.alias == {10: 0, 14: 4}
+    kept = ~np.isin(ids_before, [10, 14])  # the others' rows, unchanged
+    np.testing.assert_array_equal(f.x, x_before[np.concatenate([[True] * 3, np.repeat(kept, 2)])])
 
 
 def test_moving_the_estimate_rigidly_changes_only_the_frame():
