@@ -25,6 +25,7 @@ class NullVisualiser:
     def log_associations(self, from_xy, to_xy) -> None: ...
     def log_truth(self, pose) -> None: ...
     def log_closure(self, event: dict) -> None: ...
+    def log_duplicates(self, pairs: list) -> None: ...
 
 
 def show_scan(vis, loop, meas) -> None:
@@ -53,3 +54,5 @@ def show_scan(vis, loop, meas) -> None:
     if closer is not None and closer.events and closer.events[-1].scan == k:
         if closer.events[-1].outcome != "too few":  # a match worth a mark on the timeline
             vis.log_closure(closer.events[-1].to_dict())
+    if closer is not None and closer.duplicates and closer.duplicates[-1][2] == k:
+        vis.log_duplicates([(a, b) for a, b, scan in closer.duplicates if scan == k])

@@ -172,8 +172,9 @@ def test_the_smoother_sees_the_closed_loop():
 
 
 def test_the_run_shows_its_closures():
-    """A visualiser of the run gets each match worth marking (`log_closure`) at its scan:
-    here the accepted closure of park drive 5."""
+    """A visualiser of the run gets each match worth marking (`log_closure`) at its scan,
+    here the accepted closure of park drive 5, and each duplicate sweep's merges
+    (`log_duplicates`) at theirs."""
     from slam.visual import NullVisualiser
 
     class Marks(NullVisualiser):
@@ -186,9 +187,20 @@ def test_the_run_shows_its_closures():
         def log_closure(self, event):
             self.marks.append((self.scan, event))
 
+        def log_duplicates(self, pairs):
+            self.marks.append((self.scan, {"scan": self.scan, "outcome": "swept", "pairs": pairs}))
+
     seq, feats = drive_features(5, "park")
     vis = Marks()
     lg = run_slam(seq, loop_config(True), features=feats, visualiser=vis)
     shown = [e for e in lg.closures if e["outcome"] != "too few"]
     assert [(s, e["scan"]) for s, e in vis.marks] == [(e["scan"], e["scan"]) for e in shown]
     assert any(e["outcome"] == "accepted" for _, e in vis.marks)
+    # drive 1: the duplicate sweep marginalises one landmark out, marked at its scan
+    seq, feats = drive_features(1, "park")
+    vis = Marks()
+    lg = run_slam(seq, loop_config(True), features=feats, visualiser=vis)
+    assert len(lg.closure_duplicates) == 1
+    keep, drop, scan = lg.closure_duplicates[0]
+    swept = [(s, e["pairs"]) for s, e in vis.marks if e["outcome"] == "swept"]
+    assert swept == [(scan, [(keep, drop)])]

@@ -178,3 +178,13 @@ def test_a_loop_closure_is_marked_on_the_timeline(tmp_path):
             }
         )
     assert "events/closures" in read_recording(path)["entities"]
+
+
+def test_a_duplicate_sweep_is_marked_on_the_timeline(tmp_path):
+    """`log_duplicates` writes the sweep's merges to the same text log, even on a scan the
+    decimation skips."""
+    path = tmp_path / "d.rrd"
+    with Recorder(path, kind="slam", decimate=10) as rec:
+        rec.set_scan(7, 1.4)
+        rec.log_duplicates([(2, 159)])
+    assert "events/closures" in read_recording(path)["entities"]
