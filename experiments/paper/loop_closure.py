@@ -26,6 +26,7 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
+from experiments.eval.series import slam_panels, slam_series
 from experiments.paper import products
 from experiments.paper.products import TableSpec
 from experiments.paper.slam import CYCAB_SLAM, extractor_params
@@ -34,7 +35,15 @@ from experiments.sim.loops import loop_drive, loop_params
 from features import extract_features
 from slam import SlamConfig, interpolate_poses, run_slam, se2
 
-__all__ = ["JACOBIANS", "RUNS", "closure_map", "drive_features", "loop_config", "loop_trial", "run"]
+__all__ = [
+    "JACOBIANS",
+    "RUNS",
+    "closure_products",
+    "drive_features",
+    "loop_config",
+    "loop_trial",
+    "run",
+]
 
 log = logging.getLogger(__name__)
 
@@ -141,13 +150,23 @@ def loop_trial(job: tuple, seed=None) -> dict:
 FIGURE_DRIVE = 5  # the park drive of the figure: one accepted closure (its test is the same)
 
 
-def closure_map(seed: int) -> bytes:
-    """loop_closure_map.png: park drive `seed` filtered without and with loop closure."""
+def closure_products(seed: int) -> dict[str, bytes]:
+    """loop_closure_map.png: park drive `seed` filtered without and with loop closure; and
+    loop_closure.rrd: the run with closure, recorded as it goes (each match tried past the
+    count and each duplicate sweep marked on the timeline, `events/closures`)."""
+    from experiments.render.viz import MemoryRecorder
+
     seq, feats = drive_features(seed, "park")
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
     runs = {}
     for closure in (False, True):
-        lg = run_slam(seq, loop_config(closure), features=feats)
+        if closure:
+            with MemoryRecorder("slam", series=slam_panels(True)) as rec:
+                rec.log_truth_trees(seq.truth_landmarks)
+                lg = run_slam(seq, loop_config(closure), features=feats, visualiser=rec)
+                rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
+        else:
+            lg = run_slam(seq, loop_config(closure), features=feats)
         at = [e["scan"] for e in lg.closures or [] if e["outcome"] == "accepted"]
         label = f"closure {'on' if closure else 'off'}: final error " + (
             f"{np.hypot(*(lg.pose[-1, :2] - truth[-1, :2])):.2f} m"
@@ -155,9 +174,10 @@ def closure_map(seed: int) -> bytes:
         runs[label] = {"path": lg.pose[:, :2], "landmarks": lg.landmark_xy,
                        "closures": lg.pose[at, :2]}  # fmt: skip
     title = f"Simulated park, drive {seed}: one lap, out through open ground and back"
-    return products.png(
+    png = products.png(
         plots.plot_loop_closure, seq.truth_landmarks[:, :2], truth[:, :2], runs, title
     )
+    return {"loop_closure_map.png": png, "loop_closure.rrd": rec.data}
 
 
 def _summary(rows: list[dict]) -> list[dict]:
@@ -243,6 +263,6 @@ def run(ctx) -> None:
     def finish(rows: list) -> None:
         ctx.config["loop-closure"] = {"runs": len(rows), "noise_scale": NOISE_SCALE}
         products.tables(ctx, [TABLE], rows)
-        products.write(ctx, {"loop_closure_map.png": closure_map(FIGURE_DRIVE)})
+        products.write(ctx, closure_products(FIGURE_DRIVE))
 
     ctx.later(batch, finish)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.stats import chi2
+from support import read_recording
 
 from experiments.paper.loop_closure import _identities, drive_features, loop_config
 from experiments.sim.loops import loop_scene
@@ -126,7 +127,8 @@ def test_a_look_alike_orchard_gives_no_false_closure(seed):
 
 def test_the_experiment_writes_its_table(tmp_path):
     """`trunkslam reproduce loop-closure --quick`: two drives of each kind, a row per scene,
-    filter and closure setting, the run count in the manifest."""
+    filter and closure setting, the run count in the manifest, the figure, and the recording
+    of the figure's run with closure, its closure marked on the timeline."""
     import csv
     import json
 
@@ -148,6 +150,8 @@ def test_the_experiment_writes_its_table(tmp_path):
     assert all(int(r["false_closures"]) == 0 for r in rows)
     assert json.loads((out / "manifest.json").read_text())["config"]["loop-closure"]["runs"] == 4
     assert (out / "loop_closure_map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rec = read_recording(out / "loop_closure.rrd")  # the figure's run with closure
+    assert {"events/closures", "world/landmarks", "world/truth/trees"} <= set(rec["entities"])
 
 
 def test_the_smoother_sees_the_closed_loop():
