@@ -158,15 +158,13 @@ def closure_products(seed: int) -> dict[str, bytes]:
 
     seq, feats = drive_features(seed, "park")
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    off = run_slam(seq, loop_config(False), features=feats)
+    with MemoryRecorder("slam", series=slam_panels(True)) as rec:
+        rec.log_truth_trees(seq.truth_landmarks)
+        on = run_slam(seq, loop_config(True), features=feats, visualiser=rec)
+        rec.log_series(on.scan_t, slam_series(on, seq.truth_t, seq.truth_pose))
     runs = {}
-    for closure in (False, True):
-        if closure:
-            with MemoryRecorder("slam", series=slam_panels(True)) as rec:
-                rec.log_truth_trees(seq.truth_landmarks)
-                lg = run_slam(seq, loop_config(closure), features=feats, visualiser=rec)
-                rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
-        else:
-            lg = run_slam(seq, loop_config(closure), features=feats)
+    for closure, lg in ((False, off), (True, on)):
         at = [e["scan"] for e in lg.closures or [] if e["outcome"] == "accepted"]
         label = f"closure {'on' if closure else 'off'}: final error " + (
             f"{np.hypot(*(lg.pose[-1, :2] - truth[-1, :2])):.2f} m"
