@@ -270,9 +270,10 @@ class LoopCloser:
 
     def __call__(self, state, k: int, status: np.ndarray) -> ClosureEvent | None:
         t = float(self.scan_t[k])
-        self.mark_seen(status[status >= 0], t)
+        updated = status[status >= 0]
+        self.mark_seen(updated, t)
         self.mark_seen(state.landmark_ids, t, only_new=True)  # joined this scan: seen now
-        self._seen_together(state, status[status >= 0])
+        self._seen_together(state, updated)
         if self._frame is not None:
             self._hold_frame(state, self._frame, tol_m=HOLD_TOL_M)
         if k % self.cfg.every_scans == 0:
@@ -338,8 +339,7 @@ class LoopCloser:
         updated both of: the laser saw them as two trees."""
         if updated.size < 2:
             return
-        pos = np.array([state.index_of(int(i)) for i in updated], dtype=np.int64)
-        xy = state.landmarks_xy[pos]
+        xy = state.landmarks_xy[state.positions_of(updated)]
         d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
         for a, b in zip(*np.nonzero(np.triu(d <= SAME_TREE_M, 1))):
             ia, ib = int(updated[a]), int(updated[b])
@@ -491,9 +491,8 @@ class LoopCloser:
         linearisation points the re-registration has left metres apart, the updates after it
         keep moving it (on Victoria Park, by 1.3 deg within 30 scans)."""
         ids, before = anchor
-        order = np.argsort(state.landmark_ids)
-        pos = order[np.minimum(np.searchsorted(state.landmark_ids[order], ids), order.size - 1)]
-        there = state.landmark_ids[pos] == ids
+        pos = state.positions_of(ids)
+        there = pos >= 0
         if there.sum() < 2:
             return
         now, before = state.landmarks_xy[pos[there]], before[there]
@@ -514,6 +513,10 @@ class LoopCloser:
             self.mark_seen([a], t)
         return merged
 
+    def _in_range(self, state) -> np.ndarray:
+        """(n,) bool: the landmarks within the laser's range of the vehicle."""
+        return np.hypot(*(state.landmarks_xy - state.pose[:2]).T) <= self.view.max_range
+
     def _sweep_duplicates(self, state, k: int) -> None:
         """The duplicate sweep (module doc, step 5): pairs of landmarks within the laser's
         range of the vehicle, closer than match_m to each other, that no scan has updated
@@ -523,7 +526,7 @@ class LoopCloser:
         measurements relabelled (no update). Nearest pairs first, each landmark in one pair
         at most."""
         xy, ids = state.landmarks_xy, state.landmark_ids
-        near = np.flatnonzero(np.hypot(*(xy - state.pose[:2]).T) <= self.view.max_range)
+        near = np.flatnonzero(self._in_range(state))
         if near.size < 2:
             return
         pairs = np.array(sorted(cKDTree(xy[near]).query_pairs(self.cfg.match_m)), np.int64)
@@ -564,8 +567,7 @@ class LoopCloser:
         marginalised out instead of merged by an update."""
         recent, old = self._candidates(state, t, in_view=False, since=since)
         if local:
-            r = np.hypot(*(state.landmarks_xy - state.pose[:2]).T)
-            inside = r <= self.view.max_range
+            inside = self._in_range(state)
             recent, old = recent[inside[recent]], old[inside[old]]
         if not (recent.size and old.size):
             return []

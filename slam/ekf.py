@@ -130,6 +130,17 @@ class _Estimate:
             raise KeyError(f"landmark id {landmark_id} is not in the state")
         return int(hits[0])
 
+    def positions_of(self, landmark_ids) -> np.ndarray:
+        """`index_of` for many ids at once: (k,) positions, -1 where an id is not in the
+        state (one sort, not a scan of the state per id)."""
+        ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
+        if not self.landmark_ids.size:
+            return np.full(ids.size, -1, np.int64)
+        order = np.argsort(self.landmark_ids, kind="stable")
+        at = np.minimum(np.searchsorted(self.landmark_ids[order], ids), order.size - 1)
+        pos = order[at]
+        return np.where(self.landmark_ids[pos] == ids, pos, -1)
+
 
 @dataclass(frozen=True, eq=False)
 class EkfState(_Estimate):
@@ -303,13 +314,11 @@ class Filter(_Estimate):
         self.landmark_ids = np.concatenate([self.landmark_ids, np.array([landmark_id], np.int64)])
         self.first_xy = np.concatenate([self.first_xy, m[None, :]])
 
-    def same_landmarks_nis(self, keep_ids, drop_ids, tree_sd_m: float = 0.0) -> float:
+    def same_landmarks_nis(self, keep_ids, drop_ids) -> float:
         """The joint compatibility of "landmark keep_ids[j] is landmark drop_ids[j]" for all j:
         d^T S^-1 d with d the stacked differences of their positions and S their covariance
-        (chi-square with 2 x pairs degrees of freedom when the pairs are the same trees).
-        tree_sd_m: an independent error (m, per axis) of each landmark added to S (as in
-        `rigid_fit`)."""
-        d, S = self.pair_difference(keep_ids, drop_ids, tree_sd_m)
+        (chi-square with 2 x pairs degrees of freedom when the pairs are the same trees)."""
+        d, S = self.pair_difference(keep_ids, drop_ids)
         L = np.linalg.cholesky(S)
         v = np.linalg.solve(L, d)
         return float(v @ v)

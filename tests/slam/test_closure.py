@@ -306,6 +306,16 @@ def test_the_duplicate_sweep_marginalises_a_tree_mapped_twice_and_nothing_else()
     np.testing.assert_array_equal(f.x, x_before[np.concatenate([[True] * 3, np.repeat(kept, 2)])])
 
 
+def test_positions_of_finds_many_ids_at_once_and_marks_the_missing():
+    """`Filter.positions_of` is `index_of` for many ids (in any order), -1 for an id not in the
+    state, also after a landmark left it."""
+    f, ids, recent = _revisit(_stand(np.random.default_rng(3), 5), np.zeros((0, 2)), np.zeros(3))
+    got = f.positions_of([ids[3], 999, ids[0], ids[4]])
+    assert got.tolist() == [f.index_of(ids[3]), -1, f.index_of(ids[0]), f.index_of(ids[4])]
+    f.remove_landmarks([ids[1]])
+    assert f.positions_of(ids).tolist() == [0, -1, 1, 2, 3]
+
+
 def test_moving_the_estimate_rigidly_changes_only_the_frame():
     """`Filter.move_rigidly`: every position moved by the same rotation and translation, the
     heading turned, the covariance rotated with them (J P J^T); distances, the joint NIS of a
