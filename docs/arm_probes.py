@@ -30,6 +30,7 @@ from experiments.io.victoria_park import gtsam_graph, load_victoria_park
 from experiments.paper.victoria_park import run_config
 from slam import run_slam, se2
 from slam.smoother import SmootherOptions, problem_from_log, smooth, solve_graph_file
+from slam.start import procrustes_2d
 
 ARM_TOP = (1270.0, 1340.0)  # s: the top of the arm, where the run's error is largest
 LEVELS = (120.0, 150.0)  # m: y of the crossings reported (the way up the arm, x < -100 m)
@@ -82,31 +83,26 @@ def variants(problem):
     yield "ranges 0.1 m shorter", replace(p, meas_z=z)
 
 
-def icp(src: np.ndarray, dst: np.ndarray, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
-    """(R, t) putting the points src on their nearest points of dst: closest-point pairs within
-    5 m for the first 10 iterations, within 1 m after, each time the least-squares rigid motion
-    of the pairs (Kabsch)."""
+def icp(src: np.ndarray, dst: np.ndarray, iterations: int = 30) -> tuple[float, np.ndarray]:
+    """(theta, t) putting the points src on their nearest points of dst: closest-point pairs
+    within 5 m for the first 10 iterations, within 1 m after, each time the least-squares rigid
+    motion of the pairs (`slam.start.procrustes_2d`)."""
     from scipy.spatial import cKDTree
 
-    tree, R, t = cKDTree(dst), np.eye(2), np.zeros(2)
+    tree, theta, t = cKDTree(dst), 0.0, np.zeros(2)
     for it in range(iterations):
-        d, j = tree.query(src @ R.T + t)
+        d, j = tree.query(se2.rotate(theta, src) + t)
         m = d < (5.0 if it < 10 else 1.0)
-        ca, cb = src[m].mean(0), dst[j[m]].mean(0)
-        u, _, vt = np.linalg.svd((src[m] - ca).T @ (dst[j[m]] - cb))
-        R = vt.T @ np.diag([1.0, np.linalg.det(vt.T @ u.T)]) @ u.T
-        t = cb - ca @ R.T
-    return R, t
+        theta, t = procrustes_2d(src[m], dst[j[m]])
+    return theta, t
 
 
 def gtsam_rows(log, old_map: np.ndarray) -> None:
     g = solve_graph_file(gtsam_graph())
     start = log.start_pose
     first = np.array([se2.compose(start, q) for q in g.pose])
-    lm = np.array([se2.compose(start, np.r_[xy, 0.0])[:2] for xy in g.landmark_xy])
-    R, t = icp(lm, old_map)
-    a = math.atan2(R[1, 0], R[0, 0])
-    fitted = np.c_[first[:, :2] @ R.T + t, first[:, 2] + a]
+    a, t = icp(se2.transform_points(start, g.landmark_xy), old_map)
+    fitted = np.c_[se2.rotate(a, first[:, :2]) + t, first[:, 2] + a]
     for name, path in (
         ("first pose", first),
         (f"its old map ({math.degrees(a):+.2f} deg)", fitted),
