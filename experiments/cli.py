@@ -106,7 +106,7 @@ class ExperimentName(StrEnum):
     smoother = "smoother"
     noise_calibration = "noise-calibration"
     victoria_park_calibration = "victoria-park-calibration"
-    victoria_park_pruning = "victoria-park-pruning"
+    victoria_park_map_policy = "victoria-park-map-policy"
     loop_closure = "loop-closure"
 
 
@@ -508,8 +508,8 @@ def reproduce(
 
     - victoria-park-calibration: the ute's noise and laser yaw (25 min; only when named)
 
-    - victoria-park-pruning: the map policy's pruning settings from scans 1-2000 (seconds; only
-    when named)
+    - victoria-park-map-policy: the map policy's confirm_scans and pruning settings from scans
+    1-2000 (a minute; only when named)
 
     - loop-closure: simulated loops in a park and an orchard, loop closure off and on
     (minutes; only when named)

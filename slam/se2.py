@@ -28,6 +28,7 @@ __all__ = [
     "inverse",
     "inverse_observe",
     "observe",
+    "observed_points",
     "rotate",
     "sensor_position",
     "sinc_and_derivative",
@@ -163,6 +164,19 @@ def inverse_observe(pose, z, sensor_pose) -> tuple[np.ndarray, np.ndarray, np.nd
     Gx = np.array([[1.0, 0.0, dpL[0] - r * s], [0.0, 1.0, dpL[1] + r * c]])
     Gz = np.array([[c, -r * s], [s, r * c]])
     return m, Gx, Gz
+
+
+def observed_points(poses, z, sensor_pose) -> np.ndarray:
+    """(k, 2) world points seen at z (k, 2) [range, bearing] by a sensor mounted at
+    `sensor_pose` on a vehicle at poses (k, 3), one pose per observation (`inverse_observe`'s
+    point, for many at once)."""
+    P = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+    sp = np.asarray(sensor_pose, dtype=np.float64)
+    c, s = np.cos(P[:, 2]), np.sin(P[:, 2])
+    sensor = P[:, :2] + np.stack([c * sp[0] - s * sp[1], s * sp[0] + c * sp[1]], axis=1)
+    phi = P[:, 2] + sp[2] + z[:, 1]
+    return sensor + z[:, :1] * np.stack([np.cos(phi), np.sin(phi)], axis=1)
 
 
 def interpolate_poses(t_query, t_s, poses) -> np.ndarray:

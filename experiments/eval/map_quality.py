@@ -4,6 +4,8 @@
   scans 1-2000) mapped into the run's frame by the rigid fit of the reference laser path to the
   run's laser path over the scans both have.
 - `map_recall`: share of the reference trees with a landmark within `tol_m` (1 m).
+- `seen_trees`: the reference trees a detector came within `tol_m` of: over part of the
+  reference's span, recall is judged on them (the others were not in view).
 - `map_precision`: share of the landmarks that joined the map in the reference's span of scans
   with a reference tree within `tol_m`; landmarks that joined later are outside what the
   reference covers and are not judged.
@@ -34,6 +36,7 @@ __all__ = [
     "map_recall",
     "one_tree_pairs",
     "reference_in_our_frame",
+    "seen_trees",
 ]
 
 
@@ -60,6 +63,16 @@ def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def map_recall(landmark_xy: np.ndarray, trees_xy: np.ndarray, tol_m: float = 1.0) -> float:
     """Share of the trees with a landmark within tol_m."""
     return float(np.mean(_nearest(trees_xy, landmark_xy) <= tol_m))
+
+
+def seen_trees(points_xy: np.ndarray, trees_xy: np.ndarray, tol_m: float = 1.0) -> np.ndarray:
+    """(T,) bool: the trees with a point of points_xy (K, 2) (detections placed in the world)
+    within tol_m."""
+    points = np.asarray(points_xy, dtype=np.float64).reshape(-1, 2)
+    trees = np.asarray(trees_xy, dtype=np.float64)[:, :2]
+    if not points.shape[0]:
+        return np.zeros(trees.shape[0], bool)
+    return cKDTree(points).query(trees, distance_upper_bound=tol_m)[0] <= tol_m
 
 
 def map_precision(

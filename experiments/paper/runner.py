@@ -132,9 +132,10 @@ EXPERIMENTS: dict[str, Experiment] = {
         about="the ute's noise and laser yaw from scans 1-2000 (25 min; not in the default run)",
         default=False,
     ),
-    "victoria-park-pruning": Experiment(
-        "experiments.paper.vp_pruning:run",
-        about="the map policy's pruning settings from scans 1-2000 (seconds; only when named)",
+    "victoria-park-map-policy": Experiment(
+        "experiments.paper.vp_map_policy:run",
+        about="the map policy's confirm_scans and pruning settings from scans 1-2000 (a minute; "
+        "only when named)",
         default=False,
     ),
     "loop-closure": Experiment(

@@ -42,6 +42,7 @@ from experiments.eval.map_quality import (
     map_recall,
     one_tree_pairs,
     reference_in_our_frame,
+    seen_trees,
 )
 from experiments.eval.series import slam_panels, slam_series
 from experiments.eval.vouched import vouched_for_sequence
@@ -57,9 +58,11 @@ from experiments.paper import products
 from experiments.paper.products import TableSpec
 from slam import SlamConfig, SlamLog, run_slam, se2
 from slam.closure import closure_counts
+from slam.log import OUT_OF_RANGE, SKIPPED
 
 __all__ = [
     "GPS_GAP_S",
+    "HALVES",
     "PRESET",
     "PARTS",
     "PUBLISHED",
@@ -105,7 +108,9 @@ def reference_match(lg: SlamLog, laser_pose, ground: np.ndarray, trees: np.ndarr
     (landmarks that joined in scans 1-2000 with a reference tree within 1 m),
     false_detection_rate (circles no landmark of the final map explains), and the pairs of
     landmarks within 1.5 m, with those of them the reference or the laser says are one tree
-    (`one_tree_pairs`)."""
+    (`one_tree_pairs`). Each half of scans 1-2000 (`HALVES`) apart: precision, false
+    detections, and recall over the reference trees a circle the filter considered came within
+    1 m of in that half (`seen_trees`; reference_trees_seen_1m: the same over the run's span)."""
     n = min(ground.shape[0], lg.n_scans)
     ours = np.array([se2.compose(p, laser_pose)[:2] for p in lg.pose[:n]])
     tw = reference_in_our_frame(ours, ground, trees)
@@ -117,6 +122,14 @@ def reference_match(lg: SlamLog, laser_pose, ground: np.ndarray, trees: np.ndarr
     out["close_pairs"], out["one_tree_pairs"] = one_tree_pairs(
         lg.landmark_xy, lg.landmark_id, (lg.obs_scan, lg.obs_landmark), tw
     )
+    considered = (lg.meas_status != OUT_OF_RANGE) & (lg.meas_status != SKIPPED)
+    circles = se2.observed_points(lg.pose[lg.meas_scan], lg.meas_z, laser_pose)
+    for a, b, key in ((0, n, ""), *((a, b, f"_{a + 1}_{b}") for a, b in HALVES)):
+        m = considered & (lg.meas_scan >= a) & (lg.meas_scan < min(b, n))
+        seen = seen_trees(circles[m], tw)
+        out[f"reference_trees_seen_1m{key}"] = (
+            map_recall(lg.landmark_xy, tw[seen]) if seen.any() else math.nan
+        )
     for a, b in HALVES:  # the generalisation check: each half of the reference's span alone
         out[f"precision_{a + 1}_{b}"] = map_precision(
             lg.landmark_xy, lg.landmark_first_scan, tw, min(b, n), start=a

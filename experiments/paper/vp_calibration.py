@@ -57,6 +57,10 @@ explain the real errors' heavy tail, and the fitted filter is conservative on th
 degree of freedom 1 over the same scans (E[NIS] = dof, the mean of a consistent filter's NIS),
 found by bisection on ln k; the odometry noise and the yaw stay as fitted. Again no GPS error
 enters, and scans 2001-7249 never do.
+
+Last, with the fitted noise and start, the map policy's `confirm_scans` (every fit above uses
+the paper's 3): the number with the best map against the 2002 SLAM school's reference trees of
+the same scans (`vp_map_policy.confirm_sweep`, `derive_confirm`; no GPS either).
 """
 
 from __future__ import annotations
@@ -71,9 +75,9 @@ from scipy.optimize import minimize
 
 from experiments.errors import ConfigError, MissingDataError
 from experiments.io.config_file import config_toml
-from experiments.io.victoria_park import load_victoria_park
+from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 from experiments.io.writers import write_atomic
-from experiments.paper import products, vp_start, vp_steering
+from experiments.paper import products, vp_map_policy, vp_start, vp_steering
 from experiments.paper.products import TableSpec
 from experiments.paper.vp_steering import fit_steering
 from slam import OdometryNoise, SlamConfig, SteeringCalibration, run_slam
@@ -322,7 +326,8 @@ class VpCalibration:
     figures) at START; consistency: `consistency_scale`'s result; theta: the preset's
     parameters (the chosen fit, measurement sigmas x k) and final: (J, figures) there;
     start_rows: `vp_start.headings` along the preset's path; start_fit_m: the metres of GPS the
-    start is fitted to (`vp_start.derive`); seconds: the time it took.
+    start is fitted to (`vp_start.derive`); confirm_rows: `vp_map_policy.confirm_sweep` with
+    that noise and start, confirm_scans: its `derive_confirm`; seconds: the time it took.
     """
 
     steer: object
@@ -334,16 +339,19 @@ class VpCalibration:
     final: tuple[float, dict]
     start_rows: list
     start_fit_m: float
+    confirm_rows: list
+    confirm_scans: int
     seconds: float
 
     def preset(self) -> SlamConfig:
         """The preset's configuration (`preset_config`)."""
-        return preset_config(self.theta, self.steer.steering, self.start_fit_m)
+        return preset_config(self.theta, self.steer.steering, self.start_fit_m, self.confirm_scans)
 
 
-def calibration_study(seq, full, quick: bool = False, progress=None) -> VpCalibration:
+def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpCalibration:
     """The whole procedure (the module doc) on `seq` (scans 1-`FIT_SCANS`), the steering fit's
-    held-out GPS stretches from `full`. quick: a few evaluations of each step (a smoke run)."""
+    held-out GPS stretches from `full`, the map policy judged against `ref` (ground, trees;
+    `load_ss2002_reference`). quick: a few evaluations of each step (a smoke run)."""
     t0 = time.perf_counter()
     steer = fit_steering(full, FIT_SCANS, 10 if quick else vp_steering.EVALUATIONS)
     base = BASE.with_(**{"vehicle.steering": steer.steering})
@@ -362,6 +370,10 @@ def calibration_study(seq, full, quick: bool = False, progress=None) -> VpCalibr
     theta[MEASUREMENT] += math.log(cons["k"])
     final = objective(seq, theta, base)
     start_rows = vp_start.headings(seq, config_from(theta, base))
+    start_fit_m = vp_start.derive(start_rows)
+    confirm_rows = vp_map_policy.confirm_sweep(
+        seq, preset_config(theta, steer.steering, start_fit_m), ref
+    )
     return VpCalibration(
         steer=steer,
         fits=fits,
@@ -371,7 +383,9 @@ def calibration_study(seq, full, quick: bool = False, progress=None) -> VpCalibr
         theta=theta,
         final=final,
         start_rows=start_rows,
-        start_fit_m=vp_start.derive(start_rows),
+        start_fit_m=start_fit_m,
+        confirm_rows=confirm_rows,
+        confirm_scans=vp_map_policy.derive_confirm(confirm_rows),
         seconds=time.perf_counter() - t0,
     )
 
@@ -402,6 +416,8 @@ def _manifest_entry(st: VpCalibration) -> dict:
         "consistency_factor": st.consistency["k"],
         "start_fit_m": st.start_fit_m,
         "start_headings_deg": st.start_rows,
+        "confirm_scans": st.confirm_scans,
+        "confirm_sweep": st.confirm_rows,
         "consistency_evaluations": st.consistency["evaluations"],
         "seconds": round(st.seconds, 1),
     }
@@ -481,11 +497,12 @@ def run(ctx) -> None:
     try:
         seq = load_victoria_park(n_scans=FIT_SCANS)
         full = load_victoria_park(full=True)  # the steering fit's held-out GPS stretches
+        ref = load_ss2002_reference()  # the map policy's judge
     except MissingDataError as exc:
         log.warning("Victoria Park calibration skipped: %s", exc)
         ctx.config["victoria-park-calibration"] = f"skipped: {exc}"
         return
-    st = calibration_study(seq, full, quick=ctx.quick, progress=ctx.progress)
+    st = calibration_study(seq, full, ref, quick=ctx.quick, progress=ctx.progress)
     ctx.config["victoria-park-calibration"] = _manifest_entry(st)
     products.tables(ctx, TABLES, st)
     ctx.outputs.append(
@@ -493,15 +510,20 @@ def run(ctx) -> None:
     )
 
 
-def preset_config(theta, steering: SteeringCalibration, start_fit_m: float) -> SlamConfig:
+def preset_config(
+    theta, steering: SteeringCalibration, start_fit_m: float, confirm_scans: int | None = None
+) -> SlamConfig:
     """The preset: the fixed settings (BASE), the fitted parameters `theta` (the model's 6 or
-    8), the steering calibration and the start fitted along the filter's own path over the
-    first `start_fit_m` metres of GPS (`vp_start`)."""
+    8), the steering calibration, the start fitted along the filter's own path over the
+    first `start_fit_m` metres of GPS (`vp_start`) and the map policy's `confirm_scans`
+    (`vp_map_policy.derive_confirm`; None: BASE's, the paper's 3)."""
+    confirm = BASE.map_policy.confirm_scans if confirm_scans is None else int(confirm_scans)
     base = BASE.with_(
         **{
             "vehicle.steering": steering,
             "start.gps_track": "slam",
             "start.gps_fit_m": float(start_fit_m),
+            "map_policy.confirm_scans": confirm,
         }
     )
     return config_from(theta, base)
@@ -516,6 +538,7 @@ is used), then scaled the measurement sigmas by the factor that makes the NIS pe
 then chose the metres of GPS the start is fitted to along the filter's own path (the shortest
 stretch from which longer ones agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
 the same constant measurement model for every extractor, scans at rest skipped (1 mm).
+Last, the map policy's confirm_scans: the best map (F1) against the 2002 reference trees.
 Its extractor parameters are the defaults, short trunks included: most real trunks span 1-3 beams.
 Use: trunkslam slam vp_full.npz --config victoria_park_ute"""
 

@@ -345,8 +345,9 @@ def test_the_motion_terms_must_buy_more_likelihood_than_they_cost():
 
 def test_calibration_writes_what_the_preset_holds():
     """The calibration's fixed settings (BASE), its parameter vector (the motion-dependent
-    model, the one its BIC chose), steering calibration and start stretch rebuild the shipped
-    preset exactly, so `reproduce victoria-park-calibration` writes the preset's settings."""
+    model, the one its BIC chose), steering calibration, start stretch and confirm_scans
+    rebuild the shipped preset exactly, so `reproduce victoria-park-calibration` writes the
+    preset's settings."""
     from experiments.io.config_file import load_slam_config, preset_path
     from experiments.paper.vp_calibration import preset_config
 
@@ -368,7 +369,9 @@ def test_calibration_writes_what_the_preset_holds():
         ),
     ]
     assert preset.start.gps_track == "slam" and not preset.vehicle.steering.is_identity
-    got = preset_config(theta, preset.vehicle.steering, preset.start.gps_fit_m).to_dict()
+    got = preset_config(
+        theta, preset.vehicle.steering, preset.start.gps_fit_m, preset.map_policy.confirm_scans
+    ).to_dict()
     want = preset.to_dict()
 
     def flat(d, pre=""):
@@ -403,12 +406,16 @@ def test_start_stretch_is_the_shortest_from_which_the_heading_holds():
 @pytest.mark.data
 def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
     """The preset's gps_start_fit_m is what `vp_start` derives on scans 1-2000 with the
-    preset's noise; the start headings of fits longer than it agree within the tolerance."""
+    preset's noise and, as the calibration derives the start before the map policy, the
+    paper's confirm_scans; the start headings of fits longer than it agree within the
+    tolerance."""
     from experiments.io.config_file import load_slam_config, preset_path
     from experiments.paper import vp_start
+    from experiments.paper.vp_calibration import BASE
 
     cfg = load_slam_config(preset_path("victoria_park_ute"))
-    rows = vp_start.headings(load_victoria_park(vp_dir, n_scans=2000), cfg)
+    at_start = cfg.with_(**{"map_policy.confirm_scans": BASE.map_policy.confirm_scans})
+    rows = vp_start.headings(load_victoria_park(vp_dir, n_scans=2000), at_start)
     assert vp_start.derive(rows) == cfg.start.gps_fit_m
     later = [h for d, h, _ in rows if d >= cfg.start.gps_fit_m]
     assert max(later) - min(later) <= 2 * vp_start.TOLERANCE_DEG
