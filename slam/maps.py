@@ -18,6 +18,7 @@ landmark, which a mapped landmark missed by its own scan explains, and which are
 from __future__ import annotations
 
 import dataclasses
+import logging
 import math
 from dataclasses import dataclass, field
 
@@ -32,6 +33,8 @@ from slam.errors import SlamError
 from slam.log import AMBIGUOUS, CONFIRMED, OUT_OF_RANGE, TENTATIVE_HIT, LogBuilder
 from slam.mapping import MapPolicy, Tentatives, sighting
 from slam.sources import Measurements
+
+log = logging.getLogger(__name__)
 
 __all__ = ["Association", "Pruner", "TentativeMap", "View", "WindowMap", "make_map_manager"]
 
@@ -225,6 +228,14 @@ class WindowMap:
         rounding = {k: v for k, v in acfg.params.items() if k in ROUNDING_OPTIONS}
         self.ctx = ctx
         self.assoc = SlidingWindowAssociator(acfg.window_scans, acfg.gate_prob, model, **rounding)
+        if ctx.cfg.map_policy.confirm_scans > self.assoc.K:  # `manage` takes the smaller
+            log.warning(
+                "map_policy.confirm_scans = %d but the 'ihgr-window' association holds %d "
+                "scans (association.window_scans): new landmarks join after %d sightings",
+                ctx.cfg.map_policy.confirm_scans,
+                self.assoc.K,
+                self.assoc.K,
+            )
         self.scans: list = []  # [(use (m_use,) int, Q (3, 3))], oldest first
         self.counts = dict.fromkeys(
             ("steps", "fractional_lps", "rounded_steps", "lp_solves", "track_hypotheses"), 0

@@ -64,6 +64,23 @@ def test_window_does_not_map_a_ghost_seen_in_two_scans():
     assert log2.landmark_xy.shape[0] == 5
 
 
+def test_window_says_when_it_cannot_wait_for_confirm_scans(caplog):
+    """The window confirms on min(K, confirm_scans) sightings: asked for more scans than it
+    holds, it says so, and maps the ghost of two sightings as K = 2 does."""
+    seq = drive_sequence(1.5, 0.0, n_scans=20)
+    ghost = {5: [(6.0, 1.0)], 6: [(5.76, 1.0)]}
+    feats = point_features(seq, LANDMARKS, np.random.default_rng(1), extra=ghost)
+    cfg = window(2).with_(**{"map_policy.confirm_scans": 4})
+    with caplog.at_level("WARNING", logger="slam.maps"):
+        log = run_slam(seq, features=feats, association="ihgr-window", config=cfg)
+    assert "confirm_scans = 4 but the 'ihgr-window' association holds 2 scans" in caplog.text
+    assert log.landmark_xy.shape[0] == 5
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="slam.maps"):
+        run_slam(seq, features=feats, association="ihgr-window", config=window(3))
+    assert "ihgr-window" not in caplog.text  # the defaults, 3 and 3: nothing to say
+
+
 def test_window_ignores_an_ambiguous_measurement_near_a_mapped_landmark():
     seq = drive_sequence(1.5, 0.0, n_scans=12)
     feats = point_features(seq, LANDMARKS, np.random.default_rng(2), sigma=(0.002, 0.0002))
