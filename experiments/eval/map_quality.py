@@ -72,7 +72,9 @@ def seen_trees(points_xy: np.ndarray, trees_xy: np.ndarray, tol_m: float = 1.0) 
     trees = np.asarray(trees_xy, dtype=np.float64)[:, :2]
     if not points.shape[0]:
         return np.zeros(trees.shape[0], bool)
-    return cKDTree(points).query(trees, distance_upper_bound=tol_m)[0] <= tol_m
+    # the bound excludes a neighbour at exactly tol_m: the next float up includes it
+    bound = float(np.nextafter(tol_m, np.inf))
+    return cKDTree(points).query(trees, distance_upper_bound=bound)[0] <= tol_m
 
 
 def map_precision(

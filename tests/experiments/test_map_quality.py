@@ -14,6 +14,7 @@ from experiments.eval.map_quality import (
     map_recall,
     one_tree_pairs,
     reference_in_our_frame,
+    seen_trees,
 )
 from slam import se2
 from slam.log import AMBIGUOUS, OUT_OF_RANGE, SKIPPED
@@ -34,6 +35,17 @@ def test_recall_and_precision_count_landmarks_within_the_tolerance():
     # a span of scans alone: those that joined in scans 10-1999 (the 1.2 m one, a tree, a bush)
     assert map_precision(landmarks, first, TREES, 2000, start=10) == pytest.approx(1 / 3)
     assert map_recall(np.zeros((0, 2)), TREES) == 0.0
+
+
+def test_seen_trees_are_those_a_detection_came_within_the_tolerance_of():
+    points = np.array([[0.3, 0.4], [10.0, 1.5], [29.5, -5.0], [29.6, -4.9]])
+    # tree 0 at 0.5 m, tree 1 at 1.5 m (seen only with tol 1.5), tree 2 none, tree 3 at 0.5 m
+    np.testing.assert_array_equal(seen_trees(points, TREES), [True, False, False, True])
+    np.testing.assert_array_equal(seen_trees(points, TREES, 1.5), [True, True, False, True])
+    assert not seen_trees(np.zeros((0, 2)), TREES).any()
+    # radius columns of a reference map are ignored
+    with_r = np.column_stack([TREES, np.full(4, 0.2)])
+    np.testing.assert_array_equal(seen_trees(points, with_r), seen_trees(points, TREES))
 
 
 def test_the_reference_is_brought_into_our_frame_by_the_laser_paths():

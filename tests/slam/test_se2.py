@@ -54,6 +54,19 @@ def test_points_move_between_frames_and_back(T, pts):
     np.testing.assert_allclose(se2.rotate(T[2], p), w - T[:2], atol=1e-9)
 
 
+@settings(max_examples=100, deadline=None)
+@given(st.lists(st.tuples(poses, st.tuples(coord, coord)), min_size=1, max_size=5))
+def test_observed_points_undo_observe_one_pose_per_point(cases):
+    P = np.array([p for p, _ in cases])
+    m = np.array([q for _, q in cases], float)
+    z = np.array([se2.observe(p, q, LASER)[0][0] for p, q in zip(P, m)])
+    ok = z[:, 0] > 1e-6  # a point on the laser has no bearing
+    got = se2.observed_points(P[ok], z[ok], LASER)
+    np.testing.assert_allclose(got, m[ok], atol=1e-7)
+    for p, zi, g in zip(P[ok], z[ok], got):  # the same point as inverse_observe's
+        np.testing.assert_allclose(g, se2.inverse_observe(p, zi, LASER)[0], atol=1e-12)
+
+
 def test_wrap_angle_range():
     a = np.array([-3 * np.pi, -np.pi, 0.0, np.pi, 3 * np.pi + 0.1])
     w = se2.wrap_angle(a)
