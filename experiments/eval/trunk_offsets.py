@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from slam import se2
+
 __all__ = ["ViewOffset", "view_offset"]
 
 
@@ -53,12 +55,10 @@ def view_offset(
     m = log.obs_scan < n
     scan, lid, z = log.obs_scan[m], log.obs_landmark[m], log.obs_z[m]
     pose = log.pose[scan]
-    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
     lp = np.asarray(log.laser_pose, dtype=np.float64)
-    sensor = pose[:, :2] + np.stack([c * lp[0] - s * lp[1], s * lp[0] + c * lp[1]], axis=1)
     sight = pose[:, 2] + lp[2] + z[:, 1]  # world direction from the laser to the trunk
     u = np.stack([np.cos(sight), np.sin(sight)], axis=1)
-    world = sensor + z[:, :1] * u
+    world = se2.observed_points(pose, z, lp)
     t = log.scan_t[scan]
     bias, var = [], []
     for landmark in np.unique(lid):

@@ -7,13 +7,14 @@ either, and scans 2001-7249 never do.
 **How many scans a tentative must be seen in before it joins the map** (`confirm_scans`,
 `confirm_sweep` and `derive_confirm`). One run per candidate (`CONFIRM_CANDIDATES`, pruning
 off), each map judged against the 2002 SLAM school's 145 trees of the same scans
-(`victoria_park.reference_match`): recall (reference trees with a landmark within 1 m) and
-precision (landmarks with a reference tree within 1 m). The rule: the candidate with the
-highest F1 (their harmonic mean; a tie goes to the fewer scans), which must lie inside the
-candidates, not at either end. The path does not choose it: on these scans it moves by
-millimetres between candidates. The noise calibration (`vp_calibration`) fits with the paper's
-3 and then derives this, last, with the fitted noise and start, so the preset it writes holds
-the result.
+(`victoria_park.reference_match`): recall (of the reference trees a circle came within 1 m
+of, those with a landmark within 1 m; over all 145 a run of part of the scans would be judged
+on trees it never saw) and precision (landmarks with a reference tree within 1 m). The rule:
+the candidate with the highest F1 (their harmonic mean; a tie goes to the fewer scans), which
+must lie inside the candidates, not at either end. The path does not choose it: on these
+scans it moves by millimetres between candidates. The noise calibration (`vp_calibration`)
+fits with the paper's 3 and then derives this, last, with the fitted noise and start, so the
+preset it writes holds the result.
 
 **Pruning** (`detection_rates`, `derive`; off in the preset): the preset with pruning switched
 off, and for every landmark of the final map how often the detector reported it when it was in
@@ -209,9 +210,8 @@ def run(ctx) -> None:
             "within 1 m; F1: their harmonic mean, also of each half of scans 1-2000 alone "
             "(the trees seen and the landmarks that joined in it); one-tree pairs: landmarks "
             "within 1.5 m that the reference or the laser says are one tree. Derived "
-            "(experiments/paper/"
-            f"vp_map_policy.py, the highest F1): confirm_scans = {confirm}; the preset holds "
-            f"{cfg.map_policy.confirm_scans}."
+            f"(experiments/paper/vp_map_policy.py, the highest F1): confirm_scans = {confirm}; "
+            f"the preset holds {cfg.map_policy.confirm_scans}."
         ),
     )
 
