@@ -122,15 +122,18 @@ def reference_match(lg: SlamLog, laser_pose, ground: np.ndarray, trees: np.ndarr
     out["close_pairs"], out["one_tree_pairs"] = one_tree_pairs(
         lg.landmark_xy, lg.landmark_id, (lg.obs_scan, lg.obs_landmark), tw
     )
-    considered = (lg.meas_status != OUT_OF_RANGE) & (lg.meas_status != SKIPPED)
-    circles = se2.observed_points(lg.pose[lg.meas_scan], lg.meas_z, laser_pose)
-    for a, b, key in ((0, n, ""), *((a, b, f"_{a + 1}_{b}") for a, b in HALVES)):
-        m = considered & (lg.meas_scan >= a) & (lg.meas_scan < min(b, n))
-        seen = seen_trees(circles[m], tw)
-        out[f"reference_trees_seen_1m{key}"] = (
-            map_recall(lg.landmark_xy, tw[seen]) if seen.any() else math.nan
-        )
+    # the circles the filter considered in the reference's span, placed by the run's poses
+    used = (lg.meas_status != OUT_OF_RANGE) & (lg.meas_status != SKIPPED) & (lg.meas_scan < n)
+    scan = lg.meas_scan[used]
+    circles = se2.observed_points(lg.pose[scan], lg.meas_z[used], laser_pose)
+
+    def seen_recall(inside: np.ndarray) -> float:
+        seen = seen_trees(circles[inside], tw)
+        return map_recall(lg.landmark_xy, tw[seen]) if seen.any() else math.nan
+
+    out["reference_trees_seen_1m"] = seen_recall(np.ones(scan.size, bool))
     for a, b in HALVES:  # the generalisation check: each half of the reference's span alone
+        out[f"reference_trees_seen_1m_{a + 1}_{b}"] = seen_recall((scan >= a) & (scan < b))
         out[f"precision_{a + 1}_{b}"] = map_precision(
             lg.landmark_xy, lg.landmark_first_scan, tw, min(b, n), start=a
         )

@@ -76,28 +76,37 @@ def confirm_sweep(
     the landmarks, the recall (over the reference trees the detections came near), the
     precision, their F1, the F1 of each half of scans 1-2000 alone and the pairs within 1.5 m
     that are one tree."""
-    records = []
+    return [_confirm_record(k, lg, ref) for k, lg in _confirm_runs(seq, cfg, candidates).items()]
+
+
+def _confirm_runs(seq, cfg: SlamConfig, candidates) -> dict[int, SlamLog]:
+    """{candidate: the run of `seq` with `cfg`, that confirm_scans and pruning off}."""
+    runs = {}
     for k in candidates:
         run_cfg = cfg.with_(
             **{"map_policy.confirm_scans": int(k), "map_policy.prune_after_expected": 0}
         )
-        lg = run_slam(seq, run_cfg, features="detections", association="ihgr")
-        m = reference_match(lg, lg.laser_pose, *ref)
-        recall, precision = m["reference_trees_seen_1m"], m["precision_1m"]
-        row = {
-            "confirm_scans": int(k),
-            "landmarks": int(lg.landmark_id.size),
-            "recall": recall,
-            "precision": precision,
-            "f1": _f1(recall, precision),
-        }
-        for a, b in HALVES:
-            row[f"f1_{a + 1}_{b}"] = _f1(
-                m[f"reference_trees_seen_1m_{a + 1}_{b}"], m[f"precision_{a + 1}_{b}"]
-            )
-        row["one_tree_pairs"] = m["one_tree_pairs"]
-        records.append(row)
-    return records
+        runs[int(k)] = run_slam(seq, run_cfg, features="detections", association="ihgr")
+    return runs
+
+
+def _confirm_record(k: int, lg: SlamLog, ref: tuple[np.ndarray, np.ndarray]) -> dict:
+    """`confirm_sweep`'s record of candidate k, run as `lg`."""
+    m = reference_match(lg, lg.laser_pose, *ref)
+    recall, precision = m["reference_trees_seen_1m"], m["precision_1m"]
+    row = {
+        "confirm_scans": k,
+        "landmarks": int(lg.landmark_id.size),
+        "recall": recall,
+        "precision": precision,
+        "f1": _f1(recall, precision),
+    }
+    for a, b in HALVES:
+        row[f"f1_{a + 1}_{b}"] = _f1(
+            m[f"reference_trees_seen_1m_{a + 1}_{b}"], m[f"precision_{a + 1}_{b}"]
+        )
+    row["one_tree_pairs"] = m["one_tree_pairs"]
+    return row
 
 
 def _f1(recall: float, precision: float) -> float:
@@ -189,9 +198,13 @@ def run(ctx) -> None:
         ctx.config[name] = f"skipped: {exc}"
         return
     cfg = load_slam_config(preset_path("victoria_park_ute"))
-    sweep = confirm_sweep(seq, cfg, ref)
+    held = cfg.map_policy.confirm_scans
+    runs = _confirm_runs(seq, cfg, CONFIRM_CANDIDATES)
+    sweep = [_confirm_record(k, lg, ref) for k, lg in runs.items()]
     confirm = derive_confirm(sweep)
-    derived = _pruning_table(ctx, seq, cfg)
+    # the preset without pruning: the sweep's run of the preset's confirm_scans, if it has one
+    preset_run = runs[held] if held in runs else _confirm_runs(seq, cfg, (held,))[held]
+    derived = _pruning_table(ctx, seq, preset_run)
     ctx.config[name] = {"scans": seq.n_scans, "confirm_scans": confirm, **derived}
     ctx.outputs += write_tidy_table(
         ctx.out_dir / "victoria_park_confirm",
@@ -216,11 +229,9 @@ def run(ctx) -> None:
     )
 
 
-def _pruning_table(ctx, seq, cfg: SlamConfig) -> dict:
-    """The pruning's derivation (module doc) on `seq` with `cfg` (pruning switched off): its
-    table written, the derived settings returned."""
-    cfg = cfg.with_(**{"map_policy.prune_after_expected": 0})
-    lg = run_slam(seq, cfg, features="detections", association="ihgr")
+def _pruning_table(ctx, seq, lg: SlamLog) -> dict:
+    """The pruning's derivation (module doc) on `lg`, the preset's run of `seq` with pruning
+    switched off: its table written, the derived settings returned."""
     a0 = float(seq.scan_angle_min)
     fov = (a0, a0 + float(seq.scan_angle_increment) * (seq.n_beams - 1))
     rates = detection_rates(lg, lg.laser_pose, fov)
