@@ -26,14 +26,20 @@ def test_outputs_and_figures(quick_run):
 @pytest.mark.slow
 def test_table_rows(quick_run):
     rows = list(csv.DictReader((quick_run / "smoother.csv").open()))
-    graph, ekf, smoothed = rows
+    graph, *runs = rows
     assert graph["poses"] == "6969" and graph["landmarks"] == "151"
     assert float(graph["chi2_per_dof"]) <= 1.0 and graph["rmse_m"] == ""
-    assert ekf["solver"] == "EKF" and smoothed["solver"] == "smoother (batch)"
-    assert ekf["landmarks"] == smoothed["landmarks"] and ekf["poses"] == "1500"
-    assert 0.1 < float(smoothed["chi2_per_dof"]) < 5
-    # both within a few metres of the GPS on the first 1500 scans
-    assert float(ekf["rmse_m"]) < 5 and float(smoothed["rmse_m"]) < 5
+    assert [r["problem"] for r in runs] == [
+        *["Victoria Park, 1500 scans"] * 2,
+        *["Victoria Park, 1500 scans, loop closure"] * 2,
+    ]
+    for ekf, smoothed in (runs[:2], runs[2:]):
+        assert ekf["solver"] == "EKF" and smoothed["solver"] == "smoother (batch)"
+        assert ekf["landmarks"] == smoothed["landmarks"] and ekf["poses"] == "1500"
+        assert 0.1 < float(smoothed["chi2_per_dof"]) < 5
+        # both within a few metres of the GPS on the first 1500 scans, on every protocol
+        for key in ("rmse_m", "rmse_vouched_m", "rmse_rfs_m"):
+            assert float(ekf[key]) < 5 and float(smoothed[key]) < 5
 
 
 @pytest.mark.slow
