@@ -13,16 +13,21 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    tree mapped again, and the association may take one for the other without harm). The
    trees of the way back are then mapped anew, as *recent* landmarks (joined the map in the
    last `recent_s` seconds).
+   The second signature (`LoopCloser._passed_by`) needs no wide gate: a filter sure of a
+   wrong pose passes mapped trees by and maps them again. Landmarks in view that no scan has
+   updated for `recent_s` seconds, with recent landmarks within `max_offset_m` of them (the
+   farthest the match moves the recent map), count as old for the match below.
 2. Constellation match (`LoopCloser.__call__`, `_hypotheses`): every `every_scans` scans while
-   at least `min_pairs` old landmarks are hidden (the per-scan association pairs the rest),
-   the recent landmarks within the laser's range against the old ones in view, at least
-   `min_pairs` of each. Every pair of the `BASIS` most-seen recent landmarks at least
-   `min_sep_m` apart and every pair of old ones at the same distance (within `match_m`)
-   propose a rigid transform (rotation at most `max_rotation_deg`, moving the recent
-   landmarks' centroid at most `max_offset_m`); a hypothesis scores the recent landmarks it
-   puts within `match_m` of an old one. Trees in a park look alike, so the best hypothesis
-   must explain `min_pairs` landmarks and `margin` more than the best hypothesis that differs
-   from it (moves the centroid elsewhere by more than `match_m`).
+   at least `min_pairs` old landmarks are hidden, or else passed by (the per-scan
+   association pairs the rest), the recent landmarks within the laser's range against the
+   old ones in view, at least `min_pairs` of each. Every pair of the `BASIS` most-seen
+   recent landmarks at least `min_sep_m` apart and every pair of old ones at the same
+   distance (within `match_m`) propose a rigid transform (rotation at most
+   `max_rotation_deg`, moving the recent landmarks' centroid at most `max_offset_m`); a
+   hypothesis scores the recent landmarks it puts within `match_m` of an old one. Trees in a
+   park look alike, so the best hypothesis must explain `min_pairs` landmarks and `margin`
+   more than the best hypothesis that differs from it (moves the centroid elsewhere by more
+   than `match_m`).
 3. Joint compatibility (`Filter.same_landmarks_nis`): the filter's own covariance must allow
    all the matched pairs to be the same trees at once (chi-square at `jc_prob`, 2 x pairs
    degrees of freedom). An EKF's covariance is too small after a long excursion (its
@@ -278,9 +283,14 @@ class LoopCloser:
             self._hold_frame(state, self._frame, tol_m=HOLD_TOL_M)
         if k % self.cfg.every_scans == 0:
             self._sweep_duplicates(state, k)
-        if k % self.cfg.every_scans or self.n_hidden < self.cfg.min_pairs:
-            return None  # the per-scan association can still pair what is in view
-        recent, old = self._candidates(state, t)
+        if k % self.cfg.every_scans:
+            return None
+        passed_by = None
+        if self.n_hidden < self.cfg.min_pairs:
+            passed_by = self._passed_by(state, t)
+            if passed_by.size < self.cfg.min_pairs:
+                return None  # the per-scan association can still pair what is in view
+        recent, old = self._candidates(state, t, passed_by=passed_by)
         if recent.size < self.cfg.min_pairs or old.size < self.cfg.min_pairs:
             return None
         event = self._match(state, k, recent, old)
@@ -346,16 +356,41 @@ class LoopCloser:
             self._together.setdefault(ia, set()).add(ib)
             self._together.setdefault(ib, set()).add(ia)
 
+    def _passed_by(self, state, t: float) -> np.ndarray:
+        """Revisit detection's second signature (module doc, step 1): the positions of the
+        landmarks in view that no scan has updated for recent_s seconds while landmarks joined
+        the map within max_offset_m of them (the farthest the constellation match moves the
+        recent map): the per-scan association passes them by and maps their trees again."""
+        cfg, ids, xy = self.cfg, state.landmark_ids, state.landmarks_xy
+        stale = np.flatnonzero(self.seen_at(ids, t) < t - cfg.recent_s)
+        young = np.flatnonzero(self._joined_at(ids) >= t - cfg.recent_s)
+        if stale.size < cfg.min_pairs or young.size < cfg.min_pairs:
+            return np.zeros(0, np.int64)
+        z_hat, _ = se2.observe(state.pose, xy[stale], self.laser)
+        stale = stale[self.view.contains(z_hat, margins=False)]
+        if not stale.size:
+            return stale
+        d, _ = cKDTree(xy[young]).query(xy[stale], distance_upper_bound=cfg.max_offset_m)
+        return stale[np.isfinite(d)]
+
     def _candidates(
-        self, state, t: float, in_view: bool = True, since: float | None = None
+        self,
+        state,
+        t: float,
+        in_view: bool = True,
+        since: float | None = None,
+        passed_by: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """(positions of recent landmarks within range, of old landmarks in view; with
         in_view False, every recent and old landmark). since: recent means joined after
-        this time instead (the landmarks of an excursion)."""
+        this time instead (the landmarks of an excursion); passed_by: positions that count
+        as old too (`_passed_by`)."""
         cfg, ids = self.cfg, state.landmark_ids
         t_joined = self._joined_at(ids)
         seen = self.seen_at(ids, t)
         old = seen < t - cfg.old_s
+        if passed_by is not None:
+            old[passed_by] = True
         recent = (t_joined >= t - cfg.recent_s if since is None else t_joined > since) & ~old
         if in_view:
             z_hat, _ = se2.observe(state.pose, state.landmarks_xy, self.laser)

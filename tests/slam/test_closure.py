@@ -194,6 +194,30 @@ def _overconfident_revisit(drift_sd, shape_error=None, start_sd=(1e-3, 1e-3, 1e-
     return f, old_ids, recent_ids, closer
 
 
+def test_landmarks_passed_by_while_their_trees_are_mapped_again_start_a_match():
+    """Revisit detection's second signature: the filter is sure of its pose (nothing hidden)
+    and the old landmarks were seen 50 s ago (not old at old_s 60 s), but they lie in view,
+    no scan has updated them for recent_s, and landmarks joined the map near them: the match
+    runs and closes the loop. Without the landmarks that joined since, nothing is tried."""
+    f, old_ids, recent_ids, closer = _overconfident_revisit((1.5, 1.5, 0.03))
+    closer.mark_seen(old_ids, 50.0)
+    assert closer.hidden(f, 500) is None
+    passed = closer._passed_by(f, 100.0)
+    xy = f.landmarks_xy
+    near = np.hypot(*(xy[:20, None, :] - xy[None, 20:, :]).transpose(2, 0, 1)).min(axis=1)
+    assert passed.tolist() == np.flatnonzero(near <= closer.cfg.max_offset_m).tolist()
+    assert passed.size >= closer.cfg.min_pairs
+    ev = closer(f, 500, np.zeros(0, np.int64))
+    assert ev is not None and ev.outcome == "accepted" and ev.re_registered
+    assert sorted(ev.merged) == [(old_ids[j], recent_ids[j]) for j in range(12)]
+    np.testing.assert_allclose(f.pose, 0.0, atol=0.02)
+    f, old_ids, _, closer = _overconfident_revisit((1.5, 1.5, 0.03))
+    closer.mark_seen(old_ids, 50.0)
+    closer.book.first_scan.update({i: 300 for i in range(100, 112)})  # joined at 60 s
+    assert closer._passed_by(f, 100.0).size == 0
+    assert closer(f, 500, np.zeros(0, np.int64)) is None and not closer.events
+
+
 def test_a_closure_the_filter_cannot_explain_is_refused_without_re_registration():
     """The pairs are not jointly compatible with the filter's covariance: with re_register
     off nothing is merged."""
