@@ -61,6 +61,37 @@ def test_readme_glance_is_generated_from_the_snapshot(snapshot):
         assert what in block
 
 
+def test_the_glance_reports_the_loop_closure_goals(snapshot):
+    """The README's glance has every loop-closure goal's figure: the closure run's smoother
+    (not the run without closure) and RFS-protocol RMSE beside the best published one, the
+    orchard's closures, the drives counted and the NEES after the return."""
+    rows = {r.split(" | ")[0]: r for r in glance_table(snapshot).splitlines()}
+    run = "full run, published detections, ihgr, loop closure"
+    n = int(snapshot.value("victoria_park", "scans", source="ours", run=run))
+    smoothed = snapshot.value(
+        "smoother",
+        "rmse_vouched_m",
+        problem=f"Victoria Park, {n} scans, loop closure",
+        solver="smoother (batch)",
+    )
+    rfs = snapshot.value("victoria_park", "rmse_rfs_m", source="ours", run=run)
+    best = snapshot.value("victoria_park", "rmse_rfs_low_m", run="GM-PHD-PMAU-SLAM")
+    (vp,) = [r for k, r in rows.items() if "full run with loop closure" in k]
+    assert vp.endswith(f" | {smoothed:.2f} m / {rfs:.2f} m |")
+    assert f"best published {best:.2f} m" in vp
+
+    def lc(scene, key):
+        return snapshot.value("loop_closure", key, scene=scene, jacobians="standard", closure="on")
+
+    (nees,) = [r for k, r in rows.items() if "pose NEES after the return" in k]
+    assert f"{lc('park', 'nees_inside_after_return'):.2f} / " in nees
+    assert f" / {lc('orchard', 'nees_inside_after_return'):.2f}" in nees
+    (orchard,) = [r for k, r in rows.items() if "orchard returns drifted" in k]
+    assert f"{int(lc('orchard', 'with_closure_2_5_m'))} of " in orchard
+    (false,) = [r for k, r in rows.items() if "false closures" in k]
+    assert f" in {int(lc('park', 'runs'))} / {int(lc('orchard', 'runs'))}" in false
+
+
 def test_readme_is_the_front_door():
     lines = (REPO / "README.md").read_text().splitlines()
     assert len(lines) <= README_MAX_LINES
