@@ -16,7 +16,8 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    The second signature (`LoopCloser._passed_by`) needs no wide gate: a filter sure of a
    wrong pose passes mapped trees by and maps them again. Landmarks in view that no scan has
    updated for `recent_s` seconds, with recent landmarks within `max_offset_m` of them (the
-   farthest the match moves the recent map), count as old for the match below.
+   largest shift of the recent map's centroid that the match below allows), count as old
+   for it.
 2. Constellation match (`LoopCloser.__call__`, `_hypotheses`): every `every_scans` scans while
    at least `min_pairs` old landmarks are hidden, or else passed by (the per-scan
    association pairs the rest), the recent landmarks within the laser's range against the
@@ -139,10 +140,12 @@ class ClosureConfig:
 
     Where the defaults come from (none from Victoria Park): recent_s 30 and old_s 60 s: a
     landmark seen in the last 30 s is part of the local map, one unseen for a minute has been
-    left behind (at 1-3 m/s, 60-180 m away); min_pairs 6 with margin 3 and match_m 0.5 m were
-    set by hand in the simulated park (experiment `loop-closure`, drives 0-11): at 1.0 m,
-    random hypotheses in a stand of trees 3 m apart explained 5-6 landmarks, at 0.5 m 3-4, and
-    landmarks of one local map agree to a few centimetres; min_sep_m 3 m: the trees' spacing
+    left behind (at 1-3 m/s, 60-180 m away), and one in view unseen for 30 s while new
+    landmarks join the map within max_offset_m of it is passed by (module doc, step 1);
+    min_pairs 6 with margin 3 and match_m 0.5 m were set by hand in the simulated park
+    (experiment `loop-closure`, drives 0-11): at 1.0 m, random hypotheses in a stand of trees
+    3 m apart explained 5-6 landmarks, at 0.5 m 3-4, and landmarks of one local map agree to
+    a few centimetres; min_sep_m 3 m: the trees' spacing
     there; max_offset_m 15 m and max_rotation_deg 15 deg: larger than any drift of the
     simulated returns (0-8 m); jc_prob 0.999 as the association gates. every_scans 5: a match
     a second at 5 Hz. re_register: check a match the filter's covariance refuses against dead
@@ -359,8 +362,9 @@ class LoopCloser:
     def _passed_by(self, state, t: float) -> np.ndarray:
         """Revisit detection's second signature (module doc, step 1): the positions of the
         landmarks in view that no scan has updated for recent_s seconds while landmarks joined
-        the map within max_offset_m of them (the farthest the constellation match moves the
-        recent map): the per-scan association passes them by and maps their trees again."""
+        the map within max_offset_m of them (the largest shift of the recent map's centroid
+        that the constellation match allows): the per-scan association passes them by and
+        maps their trees again."""
         cfg, ids, xy = self.cfg, state.landmark_ids, state.landmarks_xy
         stale = np.flatnonzero(self.seen_at(ids, t) < t - cfg.recent_s)
         young = np.flatnonzero(self._joined_at(ids) >= t - cfg.recent_s)
@@ -382,13 +386,16 @@ class LoopCloser:
         passed_by: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """(positions of recent landmarks within range, of old landmarks in view; with
-        in_view False, every recent and old landmark). since: recent means joined after
-        this time instead (the landmarks of an excursion); passed_by: positions that count
-        as old too (`_passed_by`)."""
+        in_view False, every recent and old landmark). since: the excursion began then:
+        recent means joined after it, and a landmark last seen by then is old too (a match on
+        passed-by landmarks, `_passed_by`, begins its excursion less than old_s ago);
+        passed_by: positions that count as old too."""
         cfg, ids = self.cfg, state.landmark_ids
         t_joined = self._joined_at(ids)
         seen = self.seen_at(ids, t)
         old = seen < t - cfg.old_s
+        if since is not None:
+            old |= seen <= since
         if passed_by is not None:
             old[passed_by] = True
         recent = (t_joined >= t - cfg.recent_s if since is None else t_joined > since) & ~old
@@ -595,7 +602,8 @@ class LoopCloser:
 
     def _sweep(self, state, t: float, since: float, local: bool) -> list[tuple[int, int]]:
         """After a closure, the other trees mapped twice (module doc, step 4): each landmark
-        mapped since `since` (not old) with exactly one old landmark within 2 x match_m,
+        mapped since `since` (not old) with exactly one old landmark (`_candidates`: unseen
+        for old_s or since `since`) within 2 x match_m,
         closer than match_m and individually compatible with it (2 dof at jc_prob), merged in
         one batch if the batch is jointly compatible too. local (after a re-registration):
         only landmarks within the laser's range of the vehicle, and the duplicates are

@@ -83,7 +83,7 @@ def test_the_glance_reports_the_loop_closure_goals(snapshot):
     def lc(scene, key):
         return snapshot.value("loop_closure", key, scene=scene, jacobians="standard", closure="on")
 
-    (nees,) = [r for k, r in rows.items() if "pose NEES after the return" in k]
+    (nees,) = [r for k, r in rows.items() if "with the pose NEES inside" in k]
     assert f"{lc('park', 'nees_inside_after_return'):.2f} / " in nees
     assert f" / {lc('orchard', 'nees_inside_after_return'):.2f}" in nees
     (orchard,) = [r for k, r in rows.items() if "orchard returns drifted" in k]

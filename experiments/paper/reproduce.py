@@ -102,8 +102,9 @@ class _Ledger:
         # the resolved parameters, under every name the run stands for
         written = [k for k in ctx.config if k not in before_config and ctx.config[k]]
         shared = ctx.config[written[0]] if written else {}
-        for n in group:
-            ctx.config[n] = ctx.config.get(n) or shared
+        for n in group:  # an entry still empty may be filled by a deferred part: kept
+            if n not in ctx.config or (written and not ctx.config[n]):
+                ctx.config[n] = shared
         self.owned[name] = (_files(self.stage) - before_files, set(ctx.config) - before_config)
         log.info(
             "%s done in %.1f s (%.1f s CPU in this process)",

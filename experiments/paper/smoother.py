@@ -86,8 +86,8 @@ def smoother_trial(job: tuple, seed=None) -> dict:
 
 
 def run(ctx) -> None:
-    """The registered experiment `smoother`: its two parts are trials (`smoother_trial`), the
-    second also drawing the figures; the table is written after the other experiments have
+    """The registered experiment `smoother`: its parts are trials (`smoother_trial`), the run
+    without closure also drawing the figures; the table is written after the other experiments have
     started (`RunContext.later`): the two parts, of unequal length, share the workers with the
     next experiments' trials."""
     cfg_out = ctx.config.setdefault("smoother", {})
@@ -101,8 +101,8 @@ def run(ctx) -> None:
     try:
         load_victoria_park(full=True)
     except MissingDataError as exc:
-        log.warning("smoother: the Victoria Park run skipped: %s", exc)
-        cfg_out["victoria_park"] = f"skipped: {exc}"
+        log.warning("smoother: the Victoria Park runs skipped: %s", exc)
+        cfg_out["victoria_park"] = cfg_out["victoria_park_closure"] = f"skipped: {exc}"
     else:
         jobs += [("victoria-park", ctx.quick), ("victoria-park-closure", ctx.quick)]
     if not jobs:

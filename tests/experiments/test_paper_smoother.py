@@ -4,6 +4,7 @@ re-solved, with the data; skipped and said without."""
 from __future__ import annotations
 
 import csv
+import json
 
 import pytest
 from support import assert_outputs, assert_tidy_tables, quick_reproduce
@@ -43,6 +44,15 @@ def test_table_rows(quick_run):
 
 
 @pytest.mark.slow
+def test_manifest_says_what_each_part_ran(quick_run):
+    """The parts finished after the other experiments (the runs) still reach the manifest."""
+    cfg = json.loads((quick_run / "manifest.json").read_text())["config"]["smoother"]
+    assert cfg["gtsam_graph"]["method"].startswith("isam2")
+    assert cfg["victoria_park"] == {"preset": "victoria_park_ute", "scans": 1500, "closure": False}
+    assert cfg["victoria_park_closure"]["closure"] is True
+
+
+@pytest.mark.slow
 def test_table_is_tidy(quick_run):
     assert assert_tidy_tables(quick_run) == {"smoother.csv"}
 
@@ -56,6 +66,7 @@ def test_skipped_and_said_without_data(tmp_path, monkeypatch):
     run(ctx)
     assert ctx.config["smoother"]["gtsam_graph"].startswith("skipped")
     assert ctx.config["smoother"]["victoria_park"].startswith("skipped")
+    assert ctx.config["smoother"]["victoria_park_closure"].startswith("skipped")
     assert not ctx.outputs
 
 

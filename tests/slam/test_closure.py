@@ -198,23 +198,41 @@ def test_landmarks_passed_by_while_their_trees_are_mapped_again_start_a_match():
     """Revisit detection's second signature: the filter is sure of its pose (nothing hidden)
     and the old landmarks were seen 50 s ago (not old at old_s 60 s), but they lie in view,
     no scan has updated them for recent_s, and landmarks joined the map near them: the match
-    runs and closes the loop. Without the landmarks that joined since, nothing is tried."""
+    runs and closes the loop. A stale landmark out of view, or farther than max_offset_m from
+    every new one, is not passed by; the sweep after the match counts every landmark seen by
+    the time the excursion began as old."""
     f, old_ids, recent_ids, closer = _overconfident_revisit((1.5, 1.5, 0.03))
-    closer.mark_seen(old_ids, 50.0)
+    closer.view = View(fov=(-math.pi / 2, math.pi / 2), max_range=80.0)  # the half ahead
+    f.add_landmark(np.array([75.0, 0.0]), R_TINY, LASER, 50)  # ahead, past the stand
+    f.add_landmark(np.array([3.0, math.pi]), R_TINY, LASER, 51)  # behind, by the stand
+    closer.mark_seen([*old_ids, 50, 51], 50.0)
     assert closer.hidden(f, 500) is None
     passed = closer._passed_by(f, 100.0)
     xy = f.landmarks_xy
-    near = np.hypot(*(xy[:20, None, :] - xy[None, 20:, :]).transpose(2, 0, 1)).min(axis=1)
-    assert passed.tolist() == np.flatnonzero(near <= closer.cfg.max_offset_m).tolist()
-    assert passed.size >= closer.cfg.min_pairs
+    recent_xy = xy[f.positions_of(np.array(recent_ids))]
+    gap = np.hypot(*(xy[:, None, :] - recent_xy[None, :, :]).transpose(2, 0, 1)).min(axis=1)
+    z, _ = se2.observe(f.pose, xy, LASER)
+    ahead = np.abs(z[:, 1]) <= math.pi / 2
+    far, behind = f.positions_of(np.array([50, 51]))
+    assert ahead[far] and gap[far] > closer.cfg.max_offset_m  # in view, nothing new near it
+    assert not ahead[behind] and gap[behind] <= closer.cfg.max_offset_m  # out of view
+    want = [i for i in range(xy.shape[0]) if f.landmark_ids[i] < 100 and ahead[i]]
+    want = [i for i in want if gap[i] <= closer.cfg.max_offset_m]
+    assert passed.tolist() == want and len(want) >= closer.cfg.min_pairs
+    _, old = closer._candidates(f, 100.0, in_view=False)
+    assert old.size == 0  # by old_s alone, nothing is old
+    _, old = closer._candidates(f, 100.0, in_view=False, since=50.0)
+    assert sorted(f.landmark_ids[old].tolist()) == sorted([*old_ids, 50, 51])
     ev = closer(f, 500, np.zeros(0, np.int64))
     assert ev is not None and ev.outcome == "accepted" and ev.re_registered
     assert sorted(ev.merged) == [(old_ids[j], recent_ids[j]) for j in range(12)]
     np.testing.assert_allclose(f.pose, 0.0, atol=0.02)
+    # the new landmarks farther than max_offset_m from every stale one: nothing is tried
     f, old_ids, _, closer = _overconfident_revisit((1.5, 1.5, 0.03))
+    closer.cfg = ClosureConfig(enabled=True, max_offset_m=1.0)
     closer.mark_seen(old_ids, 50.0)
-    closer.book.first_scan.update({i: 300 for i in range(100, 112)})  # joined at 60 s
     assert closer._passed_by(f, 100.0).size == 0
+    assert closer._candidates(f, 100.0)[0].size >= closer.cfg.min_pairs  # recent ones there
     assert closer(f, 500, np.zeros(0, np.int64)) is None and not closer.events
 
 
