@@ -603,9 +603,9 @@ class LoopCloser:
     def _sweep(self, state, t: float, since: float, local: bool) -> list[tuple[int, int]]:
         """After a closure, the other trees mapped twice (module doc, step 4): each landmark
         mapped since `since` (not old) with exactly one old landmark (`_candidates`: unseen
-        for old_s or since `since`) within 2 x match_m,
-        closer than match_m and individually compatible with it (2 dof at jc_prob), merged in
-        one batch if the batch is jointly compatible too. local (after a re-registration):
+        for old_s or since `since`) within 2 x match_m, closer than match_m and individually
+        compatible with it (2 dof at jc_prob), merged in one batch if the batch is jointly
+        compatible too. local (after a re-registration):
         only landmarks within the laser's range of the vehicle, and the duplicates are
         marginalised out instead of merged by an update."""
         recent, old = self._candidates(state, t, in_view=False, since=since)
