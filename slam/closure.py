@@ -284,10 +284,9 @@ class LoopCloser:
         self._seen_together(state, updated)
         if self._frame is not None:
             self._hold_frame(state, self._frame, tol_m=HOLD_TOL_M)
-        if k % self.cfg.every_scans == 0:
-            self._sweep_duplicates(state, k)
         if k % self.cfg.every_scans:
             return None
+        self._sweep_duplicates(state, k)
         passed_by = None
         if self.n_hidden < self.cfg.min_pairs:
             passed_by = self._passed_by(state, t)
@@ -605,9 +604,9 @@ class LoopCloser:
         mapped since `since` (not old) with exactly one old landmark (`_candidates`: unseen
         for old_s or since `since`) within 2 x match_m, closer than match_m and individually
         compatible with it (2 dof at jc_prob), merged in one batch if the batch is jointly
-        compatible too. local (after a re-registration):
-        only landmarks within the laser's range of the vehicle, and the duplicates are
-        marginalised out instead of merged by an update."""
+        compatible too. local (after a re-registration): only landmarks within the laser's
+        range of the vehicle, and the duplicates are marginalised out instead of merged by an
+        update."""
         recent, old = self._candidates(state, t, in_view=False, since=since)
         if local:
             inside = self._in_range(state)
