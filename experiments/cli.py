@@ -586,29 +586,63 @@ def report(
     results: Annotated[
         list[Path],
         typer.Argument(
-            help="`trunkslam reproduce` folders; the first one's manifest.json is the snapshot's"
+            help="`trunkslam reproduce` folders; the first one's manifest.json is the snapshot's; "
+            "a later one may be a folder of benchmark tables (`make bench`'s bench_results)"
         ),
     ],
-    docs: Annotated[Path, typer.Option(help="the snapshot folder the documentation reads")] = Path(
-        "docs/results"
-    ),
+    docs: Annotated[
+        Path,
+        typer.Option(help="the snapshot folder the documentation reads (made by report, or new)"),
+    ] = Path("docs/results"),
     readme: Annotated[
         Path | None,
         typer.Option(help="README whose results-at-a-glance block is rewritten ('' for none)"),
     ] = Path("README.md"),
+    pages: Annotated[
+        Path | None,
+        typer.Option(
+            help="the documentation pages whose macros must still resolve ('' to check none)"
+        ),
+    ] = Path("docs"),
 ) -> None:
-    """Copy result tables and figures into the documentation's snapshot (docs/results/) and
-    rewrite the README's results-at-a-glance table from it."""
-    from experiments.io.outputs import check_outputs
-    from experiments.render.report import Snapshot, clear_snapshot, copy_results, update_readme
+    """Refresh the documentation's results snapshot (docs/results/) and the README's
+    results-at-a-glance table from result folders.
 
-    check_outputs("report", inputs=results, into={"--docs": docs})
-    clear_snapshot(docs)
-    written = copy_results(results, docs)
-    typer.echo(f"{len(written)} files -> {docs}/")
-    if readme is not None and str(readme):
-        changed = update_readme(readme, Snapshot(docs))
-        typer.echo(f"{readme}: results at a glance {'rewritten' if changed else 'unchanged'}")
+    The files the folders hold replace the snapshot's; its other files (the calibrations, the
+    benchmarks, experiments these folders did not run) are kept. Nothing is changed when a
+    folder is not a results folder, a table is corrupt, --docs holds a file report did not
+    write, or a page's macro would no longer resolve."""
+    from experiments.io.outputs import check_outputs, lock_folder
+    from experiments.render.refresh import refresh_snapshot
+
+    readme = readme if readme is not None and str(readme) else None
+    pages = pages if pages is not None and str(pages) else None
+    check_outputs("report", inputs=results, files={"--readme": readme}, into={"--docs": docs})
+    with lock_folder(docs, "--docs"):
+        done = refresh_snapshot(results, docs, pages=pages, readme=readme)
+    for line in _refresh_lines(done, docs, readme):
+        typer.echo(line)
+
+
+def _refresh_lines(done, docs: Path, readme: Path | None) -> list[str]:
+    """What `report` did, in lines: replaced, added, kept (by origin), not refreshed."""
+    lines = [
+        f"{docs}/: {len(done.replaced)} replaced, {len(done.added)} added, "
+        f"{sum(map(len, done.kept.values()))} kept (files)"
+    ]
+    for origin, names in done.kept.items():
+        shown = ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+        lines.append(f"  kept from {origin}: {shown}")
+    if done.stale:
+        lines.append(
+            f"  not refreshed (their experiments ran again and did not write them): "
+            f"{', '.join(done.stale)}"
+        )
+    if done.skipped:
+        lines.append(f"  skipped (links or not regular files): {', '.join(done.skipped)}")
+    if readme is not None:
+        lines.append(f"{readme}: results at a glance {done.readme}")
+    return lines
 
 
 @app.command()
