@@ -142,7 +142,7 @@ def refresh_snapshot(
             new_record = _stage(stage, dest, incoming, origins, record)
             check_glance_columns(stage, where=lambda name: incoming.get(name, (dest / name,))[0])
             snapshot = Snapshot(stage)
-            _check_pages(page_files, snapshot)
+            _check_pages(page_files, snapshot, quick=_quick(incoming))
             if readme_text is not None:
                 new_text = _readme_with_glance(Path(readme), readme_text, snapshot)
                 outcome.readme = "unchanged" if new_text == readme_text else "rewritten"
@@ -427,7 +427,15 @@ def _stage_file(path: Path, text: str) -> Path:
 # ---- 3. the pages and the README against the staged snapshot --------------------------------
 
 
-def _check_pages(pages: Iterable[Path], snapshot: Snapshot) -> None:
+def _quick(incoming: dict) -> bool:
+    """Whether the first source is a `reproduce --quick` run (its manifest says so)."""
+    entry = incoming.get(MANIFEST)
+    with contextlib.suppress(ValueError, UnicodeDecodeError, AttributeError):
+        return bool(json.loads(entry[1].decode("utf-8")).get("quick")) if entry else False
+    return False
+
+
+def _check_pages(pages: Iterable[Path], snapshot: Snapshot, quick: bool = False) -> None:
     for page in pages:
         try:
             text = page.read_text(encoding="utf-8")
@@ -438,9 +446,14 @@ def _check_pages(pages: Iterable[Path], snapshot: Snapshot) -> None:
         try:
             render_macros(text, snapshot, str(page))
         except ReportError as exc:
+            hint = (
+                "; these are `reproduce --quick` results, and the pages quote the full runs"
+                if quick
+                else ""
+            )
             raise ReportError(
                 f"refused: with these results a macro would not resolve: {exc} (nothing was "
-                "changed; report a results folder that holds it, or mend the page)"
+                f"changed; report a results folder that holds it, or mend the page{hint})"
             ) from None
 
 

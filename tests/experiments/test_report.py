@@ -246,6 +246,10 @@ def test_results_a_page_needs_are_refused_with_the_page_named(project, tmp_path)
     path.write_text("\n".join(lines[:2]) + "\n")
     refused(project, src, expect="a macro would not resolve")
     assert "table3.csv: 0 rows match" in report(project, src).output
+    assert "--quick" not in report(project, src).output
+    manifest = json.loads((src / "manifest.json").read_text())
+    (src / "manifest.json").write_text(json.dumps({**manifest, "quick": True}))
+    assert "these are `reproduce --quick` results" in report(project, src).output
 
 
 def test_snapshot_record_reads_origins_from_the_manifests(tmp_path):
