@@ -1012,6 +1012,32 @@ def bench_smoother(
     _emit(format_table(rows), out)
 
 
+@bench_app.command("cold")
+@handle_errors
+def bench_cold(
+    commands: Annotated[
+        str, typer.Option(help="comma-separated: check (make check), test (make test), quick")
+    ] = "check,test,quick",
+    repo: Annotated[
+        Path | None,
+        typer.Option(help="the git checkout to clone [default: the one holding trunkslam]"),
+    ] = None,
+    out: BenchOut = None,
+) -> None:
+    """A fresh clone's `make check`, `make test` and `reproduce --quick`, cold (numba's and
+    pytest's caches removed) and warm (run again at once): wall and CPU seconds. The clone of
+    the committed HEAD is installed in a temporary folder first (about a minute); the whole
+    benchmark takes about half an hour on two cores."""
+    from experiments.bench.cold import bench_cold as bench
+    from experiments.bench.cold import format_cold
+    from experiments.render.progress import Progress
+
+    names = [n.strip() for n in commands.split(",") if n.strip()]
+    with Progress() as progress:
+        rows = bench(names, repo, progress=progress)
+    _emit(format_cold(rows), out)
+
+
 @bench_app.command("reproduce")
 @handle_errors
 def bench_reproduce(

@@ -16,12 +16,19 @@ starts), because numba's cache is not safe for two processes compiling one funct
 (a cold cache, or a source file just edited): a process writes the function's index before its
 data file, so another can read an index entry whose file is not written yet or is an older one
 of the same name, and two processes compiling different signatures take the same file number,
-so one signature's entry can end up naming the other's code.
+so one signature's entry can end up naming the other's code. So that a fresh clone does not
+compile every kernel once per worker, the controlling process first compiles them once, alone,
+into a shared folder (`python -m experiments.bench.warm`: every extractor, a short simulated
+drive with each associator and loop closure), and each worker starts from a copy of it: its own
+folder, warm. A signature the warm-up did not compile is compiled by the worker that needs it,
+as before.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -35,12 +42,41 @@ settings.register_profile("dev", derandomize=False, print_blob=True)
 settings.load_profile("dev")  # `--hypothesis-profile=ci` loads `ci` after this file is read
 
 
+WARM_CACHE_ENV = "TRUNKSLAM_WARM_NUMBA_CACHE"  # the controller's warm cache, for the workers
+
+
 def pytest_configure(config: pytest.Config) -> None:
     worker = os.environ.get("PYTEST_XDIST_WORKER")
     if not worker:
+        if getattr(config.option, "numprocesses", None):  # before the workers start
+            _warm_shared_cache(config)
         return  # one process: numba's default cache beside the sources, BLAS as it starts
     _share_the_cores(int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
     _own_numba_cache(config, worker)
+
+
+def _cache_folder(config: pytest.Config, name: str) -> Path:
+    parent = os.environ.get("NUMBA_CACHE_DIR")
+    if parent:
+        return Path(parent) / f"xdist-{name}"
+    if getattr(config, "cache", None) is not None:
+        return config.cache.mkdir(f"numba-{name}")
+    return config.rootpath / ".pytest_cache" / "d" / f"numba-{name}"
+
+
+def _warm_shared_cache(config: pytest.Config) -> None:
+    """Compile every kernel once, in one process, into the folder the workers copy (see the
+    module docstring). A warm-up that fails leaves the workers to compile as they go."""
+    folder = _cache_folder(config, "warm")
+    folder.mkdir(parents=True, exist_ok=True)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(folder), "OMP_NUM_THREADS": "1"}
+    done = subprocess.run(  # its two lines show at once: a cold warm-up takes a minute
+        [sys.executable, "-m", "experiments.bench.warm"], env=env, cwd=config.rootpath, timeout=1800
+    )
+    if done.returncode != 0:
+        sys.stderr.write("numba warm-up failed (above); each worker compiles its own kernels\n")
+        return
+    os.environ[WARM_CACHE_ENV] = str(folder)
 
 
 # the BLAS (and OpenMP) threads a worker may use, and the limit each one holds
@@ -65,14 +101,13 @@ def _share_the_cores(workers: int) -> None:
 
 
 def _own_numba_cache(config: pytest.Config, worker: str) -> None:
-    """This worker's numba cache folder (see the module docstring)."""
-    parent = os.environ.get("NUMBA_CACHE_DIR")
-    if parent:
-        folder = Path(parent) / f"xdist-{worker}"
-    elif getattr(config, "cache", None) is not None:
-        folder = config.cache.mkdir(f"numba-{worker}")
-    else:
-        folder = config.rootpath / ".pytest_cache" / "d" / f"numba-{worker}"
+    """This worker's numba cache folder (see the module docstring), a copy of the controller's
+    warm cache when it made one."""
+    folder = _cache_folder(config, worker)
+    warm = os.environ.get(WARM_CACHE_ENV)
+    if warm and Path(warm).is_dir():
+        shutil.rmtree(folder, ignore_errors=True)  # a function's index and data files as one
+        shutil.copytree(warm, folder)
     folder.mkdir(parents=True, exist_ok=True)
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
     if "numba" in sys.modules:  # read at import: make numba see the new folder

@@ -54,7 +54,7 @@ def tree(root: Path) -> dict[str, str]:
     """Every file under root with its digest (links to the repository's folders not
     followed): what a refused report must leave as it was."""
     found = {}
-    for folder, dirs, names in os.walk(root):
+    for folder, _dirs, names in os.walk(root):
         for name in names:
             p = Path(folder) / name
             if p.is_file() and not p.is_symlink():
