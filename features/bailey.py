@@ -540,7 +540,7 @@ def _beam_angles(scan: Scan, p: BaileyParams) -> np.ndarray | None:
     if inc >= p.break_gap_rad:
         raise FeaturesError(
             f"scan.angle_increment_rad: {inc:.4g} rad is not below the detector's break gap "
-            f"({p.break_gap_rad:.4g} rad): every beam would be a segment of its own"
+            f"(break_gap_rad = {p.break_gap_rad:.4g} rad): every beam would be a segment of its own"
         )
     if n_beams == 361 and inc == BAILEY_BEAM_RAD:
         return None  # the original's angle table

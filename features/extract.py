@@ -57,7 +57,6 @@ __all__ = ["ExtractorParams", "PAPER_FAITHFUL", "extract_features", "METHODS"]
 
 METHODS = ("paper", "geometric", "kasa", "taubin", "bailey")
 _POSITIVE = ("sigma_r_m", "gate", "lrt_threshold", "r_max_m", "lambda0", "max_iter")
-LAMBDA0_LIMIT = 1e12  # the fit's damping stops rising here: from there no step is ever tried
 MAX_ITER_LIMIT = 10_000  # the fit converges in tens of steps; a fit costs at most this many
 _METHOD_CODE = {"paper": 0, "geometric": 1, "kasa": 2, "taubin": 3}
 _LINE_TESTS = {"paper": 0, "lrt": 1}
@@ -132,8 +131,6 @@ class ExtractorParams:
         ):
             if getattr(self, name) < 0:
                 raise FeaturesError(f"{name}: must be >= 0, got {getattr(self, name)!r}")
-        if not self.lambda0 < LAMBDA0_LIMIT:
-            raise FeaturesError(f"lambda0: must be below {LAMBDA0_LIMIT:g}, got {self.lambda0!r}")
         if self.max_iter > MAX_ITER_LIMIT:
             raise FeaturesError(
                 f"max_iter: must be at most {MAX_ITER_LIMIT}, got {self.max_iter!r}"
