@@ -247,11 +247,7 @@ class MeasurementConfig:
         models = dict(DEFAULT_CONSTANT_NOISE)  # the given methods replace their defaults
         for method, model in dict(self.constant_noise).items():
             m = NoiseModel(*model)
-            if not all(0 <= v < math.inf for v in m):
-                raise SlamError(
-                    f"measurement.constant_noise.{method}: sigmas must be finite and >= 0"
-                )
-            for name, v in m._asdict().items():
+            for name, v in m._asdict().items():  # each sigma finite, >= 0, in range
                 setting(f"measurement.constant_noise.{method}.{name}", v)
             models[method] = m
         object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
@@ -275,11 +271,16 @@ class MeasurementConfig:
         if kind == "auto":
             own = method in OWN_COVARIANCE if has_cov is None else has_cov
             kind = "fit" if own else "constant"
-        constant = self.constant_noise.get(method, self.constant_noise["other"])
+        key = method if method in self.constant_noise else "other"
+        constant = self.constant_noise[key]
         if kind == "constant" and (
             constant[0] + constant[1] <= 0 or constant[2] + constant[3] <= 0
         ):
-            raise SlamError(f"measurement: the constant noise model {tuple(constant)} is zero")
+            raise SlamError(
+                f"measurement: the constant noise model {tuple(constant)} is zero "
+                f"(measurement.constant_noise.{key}: range_sigma_m + range_sigma_per_m and "
+                "bearing_sigma_rad + cross_range_sigma_m must each be > 0)"
+            )
         return MeasurementModel(
             kind=kind,
             constant=constant,
@@ -356,6 +357,13 @@ class VehicleConfig:
         _finite("vehicle", "min_travel_m", self.min_travel_m)
 
 
+# The start's sigmas: a prior far wider than the measurements' noise loses their information to
+# rounding (the innovation covariance is then not positive definite in double precision: seen
+# from 1e7 m and 2e6 rad, with centimetre measurements); no heading is less known than +-pi.
+START_XY_SIGMA_LIMIT = 1e4  # m
+START_HEADING_SIGMA_LIMIT = math.pi  # rad
+
+
 @dataclass(frozen=True)
 class StartConfig:
     """The filter's prior at the first scan (`slam.start`): the truth when the sequence has it,
@@ -387,15 +395,17 @@ class StartConfig:
         ):
             raise SlamError("start.initial_pose_sigma: expected three finite sigmas >= 0")
         for i, v in enumerate(self.initial_pose_sigma):
-            setting(f"start.initial_pose_sigma[{i}]", v)
+            limit = START_HEADING_SIGMA_LIMIT if i == 2 else START_XY_SIGMA_LIMIT
+            setting(f"start.initial_pose_sigma[{i}]", v, limit=limit)
         h = self.initial_heading_rad
         if h is not None and (isinstance(h, bool) or not math.isfinite(h)):
             raise SlamError(f"start.initial_heading_rad: must be a finite number, got {h!r}")
         if h is not None:
             setting("start.initial_heading_rad", h, signed=True, limit=MAX_ANGLE_RAD)
         _choice("start", "gps_track", self.gps_track, GPS_START_TRACKS)
-        for name in ("gps_fit_m", "gps_sigma_m", "heading_sigma_rad"):
-            _finite("start", name, getattr(self, name))
+        _finite("start", "gps_fit_m", self.gps_fit_m)
+        setting("start.gps_sigma_m", self.gps_sigma_m, limit=START_XY_SIGMA_LIMIT)
+        setting("start.heading_sigma_rad", self.heading_sigma_rad, limit=START_HEADING_SIGMA_LIMIT)
 
 
 @dataclass(frozen=True)
