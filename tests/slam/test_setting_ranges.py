@@ -246,3 +246,23 @@ def test_smooth_on_a_run_log_with_a_1e_300_m_measurement_is_one_clear_error(tmp_
     np.savez(log, **arrays)
     proc = trunkslam(["smooth", tmp_path / "out", "--solver", "isam2"], tmp_path)
     error_line(proc, "GTSAM", "Indeterminate")
+
+
+def test_the_configuration_page_quotes_the_limits():
+    from pathlib import Path
+
+    from features.extract import MAX_ITER_LIMIT
+    from features.fitting import DAMPING_STEPS
+    from features.limits import PARAM_LIMIT, PARAM_TINY
+    from slam.config import START_XY_SIGMA_LIMIT
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "configuration.md").read_text()
+    text = " ".join(page.split())
+    for quoted in (
+        f"[{SETTING_TINY:g}, {SIGMA_LIMIT:g}]",
+        f"[{PARAM_TINY:g}, {PARAM_LIMIT:g}]",
+        f"at most {MAX_ITER_LIMIT}.",
+        f"within {START_XY_SIGMA_LIMIT:g} m",
+        f"at most {DAMPING_STEPS} dampings",
+    ):
+        assert quoted in text, quoted
