@@ -192,7 +192,11 @@ def _components(n_rows: int, indptr: np.ndarray, indices: np.ndarray) -> _Compon
 
 @njit(cache=True)
 def _find(parent: np.ndarray, a: int) -> int:
-    while parent[a] != a:
+    """The root of a's tree, halving the path. A union only hangs one root under another, so
+    the trees have no cycle and the path is shorter than parent.size: the loop's bound."""
+    for _ in range(parent.size):
+        if parent[a] == a:
+            break
         parent[a] = parent[parent[a]]
         a = parent[a]
     return a

@@ -42,6 +42,7 @@ import numpy as np
 from numba import njit
 
 from features.errors import FeaturesError
+from features.limits import PARAM_LIMIT, PARAM_TINY, magnitude_problem
 from features.types import KIND_CIRCLE, KIND_CLUTTER, Features, Scan
 
 __all__ = ["BAILEY_OPTIONS", "BaileyParams", "detect_trees", "extract_bailey", "BAILEY_BEAM_RAD"]
@@ -70,8 +71,11 @@ class BaileyParams:
             v = getattr(self, f.name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise FeaturesError(f"BaileyParams.{f.name}: must be a finite number, got {v!r}")
-            if not 0 <= v <= 1e9:
-                raise FeaturesError(f"BaileyParams.{f.name}: must be in [0, 1e9], got {v!r}")
+            if not 0 <= v <= PARAM_LIMIT or magnitude_problem(v):
+                raise FeaturesError(
+                    f"BaileyParams.{f.name}: must be 0 or in [{PARAM_TINY:g}, {PARAM_LIMIT:g}], "
+                    f"got {v!r}"
+                )
 
 
 _DEFAULT = BaileyParams()
@@ -516,9 +520,12 @@ def _noise_model(range_sigma_m, range_sigma_per_m, bearing_sigma_rad, radius_sig
             isinstance(v, bool)
             or not isinstance(v, (int, float))
             or not math.isfinite(v)
-            or not 0 <= v <= 1e9
+            or not 0 <= v <= PARAM_LIMIT
+            or magnitude_problem(v)
         ):
-            raise FeaturesError(f"{name}: must be a number in [0, 1e9], got {v!r}")
+            raise FeaturesError(
+                f"{name}: must be 0 or a number in [{PARAM_TINY:g}, {PARAM_LIMIT:g}], got {v!r}"
+            )
     noise = _NoiseModel(
         range_sigma_m, range_sigma_per_m, math.sin(bearing_sigma_rad), radius_sigma_m
     )
@@ -533,7 +540,7 @@ def _beam_angles(scan: Scan, p: BaileyParams) -> np.ndarray | None:
     if inc >= p.break_gap_rad:
         raise FeaturesError(
             f"scan.angle_increment_rad: {inc:.4g} rad is not below the detector's break gap "
-            f"({p.break_gap_rad:.4g} rad): every beam would be a segment of its own"
+            f"(break_gap_rad = {p.break_gap_rad:.4g} rad): every beam would be a segment of its own"
         )
     if n_beams == 361 and inc == BAILEY_BEAM_RAD:
         return None  # the original's angle table

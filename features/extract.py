@@ -32,7 +32,6 @@ Pipeline (paper section 2, details in the README's "Feature extraction" section)
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import asdict, dataclass, fields
 from functools import lru_cache
 from typing import NamedTuple
@@ -50,13 +49,15 @@ from features.fitting import (
     fit_circle_taubin,
     fit_line_tls,
 )
+from features.limits import magnitude_problem
 from features.segmentation import END_NO_RETURN, END_SCAN, max_growth_ratio, segment_kernel
 from features.types import Features, Scan
 
 __all__ = ["ExtractorParams", "PAPER_FAITHFUL", "extract_features", "METHODS"]
 
 METHODS = ("paper", "geometric", "kasa", "taubin", "bailey")
-PARAM_LIMIT = 1e9  # no extractor parameter is larger in size (metres, counts, thresholds)
+_POSITIVE = ("sigma_r_m", "gate", "lrt_threshold", "r_max_m", "lambda0", "max_iter")
+MAX_ITER_LIMIT = 10_000  # the fit converges in tens of steps; a fit costs at most this many
 _METHOD_CODE = {"paper": 0, "geometric": 1, "kasa": 2, "taubin": 3}
 _LINE_TESTS = {"paper": 0, "lrt": 1}
 
@@ -107,18 +108,17 @@ class ExtractorParams:
                         f"line_test: must be one of {sorted(_LINE_TESTS)}, got {v!r}"
                     )
                 continue
-            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
-                raise FeaturesError(f"{f.name}: must be a finite number, got {v!r}")
-            if abs(v) > PARAM_LIMIT:  # squares and int64 kernels must not overflow
-                raise FeaturesError(f"{f.name}: must be at most {PARAM_LIMIT:g}, got {v!r}")
+            # finite, 0 or within [PARAM_TINY, PARAM_LIMIT]
+            problem = magnitude_problem(v, positive=f.name in _POSITIVE)
+            if problem:
+                raise FeaturesError(f"{f.name}: {problem}")
             if f.type == "int":
                 if v != int(v):
                     raise FeaturesError(f"{f.name}: must be a whole number, got {v!r}")
                 object.__setattr__(self, f.name, int(v))
             else:
                 object.__setattr__(self, f.name, float(v))
-        positive = ("sigma_r_m", "gate", "lrt_threshold", "r_max_m", "lambda0", "max_iter")
-        for name in positive:
+        for name in _POSITIVE:
             if getattr(self, name) <= 0:
                 raise FeaturesError(f"{name}: must be > 0, got {getattr(self, name)!r}")
         for name in (
@@ -131,6 +131,10 @@ class ExtractorParams:
         ):
             if getattr(self, name) < 0:
                 raise FeaturesError(f"{name}: must be >= 0, got {getattr(self, name)!r}")
+        if self.max_iter > MAX_ITER_LIMIT:
+            raise FeaturesError(
+                f"max_iter: must be at most {MAX_ITER_LIMIT}, got {self.max_iter!r}"
+            )
         if not 0 < self.class_prob < 1:
             raise FeaturesError(f"class_prob: must be in (0, 1), got {self.class_prob!r}")
         if not 0 < self.max_incidence_deg < 90:
@@ -329,7 +333,7 @@ def _merge_arcs(beams, cfg, bounds0, reason, buf):
     bounds = np.empty_like(bounds0)
     ns = 0
     k = 0
-    while k < bounds0.shape[0]:
+    while k < bounds0.shape[0]:  # bounded: every pass of either loop advances k, S passes
         a = bounds0[k, 0]
         b = bounds0[k, 1]
         while cfg.merge and k + 1 < bounds0.shape[0]:

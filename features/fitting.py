@@ -24,6 +24,7 @@ import numpy as np
 from numba import njit
 
 __all__ = [
+    "DAMPING_STEPS",
     "fit_circle_paper",
     "fit_circle_kasa",
     "fit_circle_taubin",
@@ -32,6 +33,14 @@ __all__ = [
     "circle_ssr",
     "fit_line_tls",
 ]
+
+
+# The damping loops of the two Levenberg-Marquardt fits raise lambda x10 per rejected step until
+# it reaches 1e12. From the least positive double (5e-324) that takes 336 steps, so a positive
+# lambda always ends the loop by its own test first; the cap ends it when lambda has underflowed
+# to 0 (a tiny lambda0 divided by 10 on each accepted step), where x10 would never get there,
+# or is negative. A fit thus ends after at most max_iter steps of at most DAMPING_STEPS tries.
+DAMPING_STEPS = 336
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -232,7 +241,9 @@ def fit_circle_paper(x, y, lambda0=0.01, max_iter=100, tol=1e-10, max_init_radiu
             g2 -= a2 * g
         improved = False
         dE = 0.0
-        while lam < 1e12:
+        tries = 0
+        while lam < 1e12 and tries < DAMPING_STEPS:
+            tries += 1
             # eq. (9): (A^T A + lambda I) dp = -A^T g
             s0, s1, s2, okk = _solve_sym3(
                 (h00 + lam, h01, h02, h11 + lam, h12, h22 + lam), (g0, g1, g2)
@@ -310,7 +321,9 @@ def fit_circle_geometric(x, y, max_iter=50, tol=1e-12):
             g2 += e
         improved = False
         dE = 0.0
-        while lam < 1e12:
+        tries = 0
+        while lam < 1e12 and tries < DAMPING_STEPS:  # lam >= 1e-12: 25 steps at most
+            tries += 1
             f = 1.0 + lam
             s0, s1, s2, okk = _solve_sym3((h00 * f, h01, h02, h11 * f, h12, h22 * f), (g0, g1, g2))
             if not okk:

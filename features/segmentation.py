@@ -95,7 +95,7 @@ def segment_kernel(ranges, cos_gamma, sigma_r, q, gate, max_growth):
     p12 = 0.0
     p22 = 0.0
     i = 0
-    while i < n:
+    while i < n:  # bounded: every pass ends with i += 1, n passes
         z = ranges[i]
         if not (z == z):  # NaN: no return ends the open segment
             if start >= 0:

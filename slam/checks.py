@@ -16,6 +16,8 @@ import numpy as np
 from slam.errors import SlamError
 
 __all__ = [
+    "SETTING_TINY",
+    "SIGMA_LIMIT",
     "check_fit",
     "check_noise",
     "check_runnable",
@@ -24,17 +26,39 @@ __all__ = [
     "float_array",
     "nonnegative_fields",
     "readonly",
+    "setting",
     "times",
 ]
 
+# The range where the kernels' maths holds for a setting that feeds them (noise sigmas, floors,
+# poses, calibrations): a finite number whose size is 0 or within [SETTING_TINY, its limit].
+# Above the limit its square leaves the sequence file's range for variances (its squares and
+# their products overflow long before 1e300); below SETTING_TINY its square underflows to a
+# subnormal or 0 (a covariance that is singular by rounding). Subnormals are refused.
+SETTING_TINY = 1e-150  # (1e-150)^2 > 2.2e-308, the least normal double
+SIGMA_LIMIT = 1e8  # m, rad, m/s, ...: sqrt(slam.sequence.MAX_VARIANCE), the file's largest sigma
+
+
+def setting(path: str, v, *, signed: bool = False, limit: float = SIGMA_LIMIT) -> None:
+    """`v` a setting that feeds a kernel: a real number whose size is 0 or within
+    [SETTING_TINY, limit], and >= 0 unless `signed`; a `SlamError` naming `path` and the
+    allowed range otherwise."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise SlamError(f"{path}: must be a finite number, got {v!r}")
+    if not signed and v < 0:
+        raise SlamError(f"{path}: must be a finite number >= 0, got {v!r}")
+    if abs(v) > limit or (v != 0 and abs(v) < SETTING_TINY):
+        size = "of size " if signed else ""
+        raise SlamError(
+            f"{path}: must be 0 or a number {size}in [{SETTING_TINY:g}, {limit:g}], got {v!r}"
+        )
+
 
 def nonnegative_fields(owner: str, obj) -> None:
-    """Every field of the dataclass `obj` a finite real number >= 0 (noise sigmas); a
-    `SlamError` naming `owner`.field otherwise."""
+    """Every field of the dataclass `obj` a finite real number >= 0 (noise sigmas) in the range
+    of `setting`; a `SlamError` naming `owner`.field otherwise."""
     for f in fields(obj):
-        v = getattr(obj, f.name)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < math.inf):
-            raise SlamError(f"{owner}.{f.name}: must be a finite number >= 0, got {v!r}")
+        setting(f"{owner}.{f.name}", getattr(obj, f.name))
 
 
 def readonly(a: np.ndarray) -> np.ndarray:

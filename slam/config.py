@@ -36,6 +36,7 @@ from dataclasses import dataclass, field, fields, is_dataclass
 
 from features import ExtractorParams
 from features.bailey import BaileyParams
+from slam.checks import SETTING_TINY, setting
 from slam.closure import ClosureConfig
 from slam.errors import SlamError
 from slam.mapping import MapPolicy
@@ -47,6 +48,7 @@ from slam.measurement import (
     NoiseModel,
 )
 from slam.motion import IncrementNoise, UnicycleNoise
+from slam.sequence import MAX_ANGLE_RAD, MAX_COORDINATE_M
 from slam.vehicle import OdometryNoise, SteeringCalibration
 
 __all__ = [
@@ -80,9 +82,9 @@ GPS_START_TRACKS = ("dead-reckoning", "slam")  # StartConfig.gps_track
 OWN_COVARIANCE = ("geometric", "paper")
 
 
-def _finite(owner: str, name: str, v, low: float = 0.0) -> None:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (low <= v < math.inf):
-        raise SlamError(f"{owner}.{name}: must be a finite number >= {low:g}, got {v!r}")
+def _finite(owner: str, name: str, v) -> None:
+    """A finite number >= 0 in the range where the kernels' maths holds (`slam.checks.setting`)."""
+    setting(f"{owner}.{name}", v)
 
 
 def _choice(owner: str, name: str, v, choices) -> None:
@@ -237,23 +239,27 @@ class MeasurementConfig:
             _finite("measurement", name, getattr(self, name))
         if not self.max_range_m > 0:
             raise SlamError("measurement.max_range_m: must be > 0 (inf: no limit)")
+        if self.max_range_m < SETTING_TINY:
+            raise SlamError(
+                f"measurement.max_range_m: must be at least {SETTING_TINY:g} (inf: no limit), "
+                f"got {self.max_range_m!r}"
+            )
         models = dict(DEFAULT_CONSTANT_NOISE)  # the given methods replace their defaults
         for method, model in dict(self.constant_noise).items():
             m = NoiseModel(*model)
-            if not all(0 <= v < math.inf for v in m):
-                raise SlamError(
-                    f"measurement.constant_noise.{method}: sigmas must be finite and >= 0"
-                )
+            for name, v in m._asdict().items():  # each sigma finite, >= 0, in range
+                setting(f"measurement.constant_noise.{method}.{name}", v)
             models[method] = m
         object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
         biases = dict(DEFAULT_RANGE_BIAS)
         for method, v in dict(self.range_bias).items():
             ok = isinstance(v, (tuple, list)) and len(v) == 2
             ok = ok and all(isinstance(x, (int, float)) and math.isfinite(x) for x in v)
+            ok = ok and not any(x != 0 and abs(x) < SETTING_TINY for x in v)  # no subnormals
             if not ok or abs(v[0]) >= 1.0 or abs(v[1]) >= 0.1:
                 raise SlamError(
                     f"measurement.range_bias.{method}: expected (a_m, b_per_m) with |a| < 1 m "
-                    f"and |b| < 0.1, got {v!r}"
+                    f"and |b| < 0.1 (each 0 or at least {SETTING_TINY:g} in size), got {v!r}"
                 )
             biases[method] = (float(v[0]), float(v[1]))
         object.__setattr__(self, "range_bias", types.MappingProxyType(biases))
@@ -265,11 +271,16 @@ class MeasurementConfig:
         if kind == "auto":
             own = method in OWN_COVARIANCE if has_cov is None else has_cov
             kind = "fit" if own else "constant"
-        constant = self.constant_noise.get(method, self.constant_noise["other"])
+        key = method if method in self.constant_noise else "other"
+        constant = self.constant_noise[key]
         if kind == "constant" and (
             constant[0] + constant[1] <= 0 or constant[2] + constant[3] <= 0
         ):
-            raise SlamError(f"measurement: the constant noise model {tuple(constant)} is zero")
+            raise SlamError(
+                f"measurement: the constant noise model {tuple(constant)} is zero "
+                f"(measurement.constant_noise.{key}: range_sigma_m + range_sigma_per_m and "
+                "bearing_sigma_rad + cross_range_sigma_m must each be > 0)"
+            )
         return MeasurementModel(
             kind=kind,
             constant=constant,
@@ -333,9 +344,24 @@ class VehicleConfig:
             v = getattr(self, name)
             if v is not None and (len(v) != n or not all(math.isfinite(x) for x in v)):
                 raise SlamError(f"vehicle.{name}: expected {n} finite numbers, got {v!r}")
+            for i, x in enumerate(v or ()):  # x, y m (the file's coordinates); theta rad
+                limit = MAX_ANGLE_RAD if name == "laser_pose" and i == 2 else MAX_COORDINATE_M
+                setting(f"vehicle.{name}[{i}]", x, signed=True, limit=limit)
         if not self.max_odometry_gap_s > 0:
             raise SlamError("vehicle.max_odometry_gap_s: must be > 0")
+        if self.max_odometry_gap_s < SETTING_TINY:
+            raise SlamError(
+                f"vehicle.max_odometry_gap_s: must be at least {SETTING_TINY:g} s, "
+                f"got {self.max_odometry_gap_s!r}"
+            )
         _finite("vehicle", "min_travel_m", self.min_travel_m)
+
+
+# The start's sigmas: a prior far wider than the measurements' noise loses their information to
+# rounding (the innovation covariance is then not positive definite in double precision: seen
+# from 1e7 m and 2e6 rad, with centimetre measurements); no heading is less known than +-pi.
+START_XY_SIGMA_LIMIT = 1e4  # m
+START_HEADING_SIGMA_LIMIT = math.pi  # rad
 
 
 @dataclass(frozen=True)
@@ -368,12 +394,18 @@ class StartConfig:
             0 <= v < math.inf for v in self.initial_pose_sigma
         ):
             raise SlamError("start.initial_pose_sigma: expected three finite sigmas >= 0")
+        for i, v in enumerate(self.initial_pose_sigma):
+            limit = START_HEADING_SIGMA_LIMIT if i == 2 else START_XY_SIGMA_LIMIT
+            setting(f"start.initial_pose_sigma[{i}]", v, limit=limit)
         h = self.initial_heading_rad
         if h is not None and (isinstance(h, bool) or not math.isfinite(h)):
             raise SlamError(f"start.initial_heading_rad: must be a finite number, got {h!r}")
+        if h is not None:
+            setting("start.initial_heading_rad", h, signed=True, limit=MAX_ANGLE_RAD)
         _choice("start", "gps_track", self.gps_track, GPS_START_TRACKS)
-        for name in ("gps_fit_m", "gps_sigma_m", "heading_sigma_rad"):
-            _finite("start", name, getattr(self, name))
+        _finite("start", "gps_fit_m", self.gps_fit_m)
+        setting("start.gps_sigma_m", self.gps_sigma_m, limit=START_XY_SIGMA_LIMIT)
+        setting("start.heading_sigma_rad", self.heading_sigma_rad, limit=START_HEADING_SIGMA_LIMIT)
 
 
 @dataclass(frozen=True)

@@ -41,6 +41,7 @@ exactly the poses' 3 N).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -75,6 +76,33 @@ MEAS_TENTATIVE = 2  # a sighting while the landmark was still tentative (the EKF
 # covariance gets a prior of 1e-6 m and 1e-6 rad, which GTSAM's Gaussian can invert.
 PRIOR_FLOOR = 1e-12
 ROBUST_DEFAULT_K = {"huber": 1.345, "cauchy": 2.3849}  # 95% efficiency under Gaussian noise
+
+
+def _gtsam_errors(solve: Callable) -> Callable:
+    """`solve` with GTSAM's exceptions raised as `SlamError` naming the solve and GTSAM's reason.
+    Its Python binding raises C++ exceptions as RuntimeError (an indeterminate linear system,
+    e.g. a landmark measured at a range of 1e-300 m, which no bearing pins down; a cheirality
+    error; a missing key), std::invalid_argument as ValueError and out_of_range as IndexError.
+    The project's own errors pass unchanged."""
+
+    @functools.wraps(solve)
+    def wrapped(*args, **kwargs):
+        try:
+            return solve(*args, **kwargs)
+        except SlamError:
+            raise
+        except (RuntimeError, ValueError, IndexError, OverflowError) as exc:
+            reason = " ".join(str(exc).strip().split("\n\n")[0].split()) or type(exc).__name__
+            if "Indeterminate" in reason:
+                reason += (
+                    " (a pose or landmark that its factors do not determine: look for a "
+                    "measurement at a range near 0 m or a degenerate covariance)"
+                )
+            raise SlamError(
+                f"smoother: GTSAM could not solve the problem ({solve.__name__}): {reason}"
+            ) from None
+
+    return wrapped
 
 
 def _pose_key(k: int) -> int:
@@ -454,6 +482,7 @@ def _lm_params(o: SmootherOptions) -> gtsam.LevenbergMarquardtParams:
     return prm
 
 
+@_gtsam_errors
 def smooth(
     problem: Problem,
     options: SmootherOptions | None = None,
@@ -618,6 +647,7 @@ class GraphResult:
 GRAPH_METHODS = ("isam2-chunks", "isam2", "batch")
 
 
+@_gtsam_errors
 def solve_graph_file(
     path: str | Path, method: str = "isam2-chunks", chunk_poses: int = 25, polish: bool = True
 ) -> GraphResult:

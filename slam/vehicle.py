@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from slam.checks import finite, float_array, nonnegative_fields, times
+from slam.checks import finite, float_array, nonnegative_fields, setting, times
 from slam.errors import SlamError
 from slam.se2 import sinc_and_derivative, wrap_angle
 
@@ -180,7 +180,7 @@ class OdometryNoise:
     steer_sigma_per_lateral_mps2: float = 0.0
 
     def __post_init__(self) -> None:
-        nonnegative_fields("OdometryNoise", self)
+        nonnegative_fields("vehicle.odometry_noise", self)
 
     def Q_u(self, v_enc_mps: float, v_axle_mps: float, steer_rad: float, L: float) -> np.ndarray:
         """(2, 2) covariance of one sample's (v_e, alpha) readings."""
@@ -221,6 +221,8 @@ class SteeringCalibration:
                 raise SlamError(f"SteeringCalibration.{name}: must be a finite number, got {v!r}")
         if not self.gain > 0:
             raise SlamError(f"SteeringCalibration.gain: must be > 0, got {self.gain!r}")
+        for name in ("offset_rad", "gain", "cubic_per_rad2"):  # the range where the maths holds
+            setting(f"SteeringCalibration.{name}", getattr(self, name), signed=True)
 
     @property
     def is_identity(self) -> bool:

@@ -9,10 +9,19 @@ Their default action would end the process at once and leave `.NAME.partial-*` f
 A signal the caller ignores stays ignored (`nohup` ignores SIGHUP; a shell's background job
 ignores SIGINT); a handler someone else installed stays too. Only the main thread can install
 handlers: elsewhere this does nothing.
+
+A signal that arrives while a numba kernel runs is handled as the kernel returns, and there
+Python code that numba's or llvmlite's C code calls back may be running: numba unpickles the
+constants of a kernel's results as it boxes them (`_numba_unpickle`), llvmlite notifies its
+object cache while it compiles. An exception raised in such a callback becomes a `SystemError`
+traceback or is printed and dropped ("Exception ignored ..."): the stop would be a crash, or
+lost. So the handler does not raise there: it sends the signal again `RETRY_S` later, by which
+time the callback has returned (issue 43).
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 from collections.abc import Callable
@@ -30,7 +39,17 @@ class Stopped(KeyboardInterrupt):
         self.signum = signum
 
 
+RETRY_S = 0.01  # s: a stop signal that arrived in a numba or llvmlite callback is sent again
+_CALLBACK_PACKAGES = ("numba.", "llvmlite.")
+
+
 def _raise(signum, frame) -> None:
+    module = frame.f_globals.get("__name__", "") if frame is not None else ""
+    if module.startswith(_CALLBACK_PACKAGES):  # maybe called back from C: raise once out of it
+        again = threading.Timer(RETRY_S, os.kill, (os.getpid(), signum))
+        again.daemon = True
+        again.start()
+        return
     raise Stopped(signum)
 
 

@@ -1,0 +1,31 @@
+"""The range of the extractors' numeric parameters: the range where their maths holds.
+
+Every parameter that reaches a kernel is a finite number whose size is 0 or within
+[PARAM_TINY, PARAM_LIMIT]: its square is then a normal double (no variance or gate computed
+from it underflows to 0 or to a subnormal, and subnormal inputs are refused), and its square,
+or a product of a few such squares, stays far from overflow (int64 counts too).
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+__all__ = ["PARAM_LIMIT", "PARAM_TINY", "magnitude_problem"]
+
+PARAM_LIMIT = 1e9  # no extractor parameter is larger in size (metres, counts, thresholds)
+PARAM_TINY = 1e-150  # nor smaller, 0 apart: (1e-150)^2 > 2.2e-308, the least normal double
+
+
+def magnitude_problem(v, positive: bool = False) -> str | None:
+    """What is wrong with `v` as a parameter's value (None: nothing): not a finite real number,
+    or a size outside {0} and [PARAM_TINY, PARAM_LIMIT]. positive: the parameter must be > 0
+    (the message then leaves 0 out; the caller refuses 0 and negative values)."""
+    if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
+        return f"must be a finite number, got {v!r}"
+    if abs(v) > PARAM_LIMIT:  # squares and int64 kernels must not overflow
+        return f"must be at most {PARAM_LIMIT:g} in size, got {v!r}"
+    if v != 0 and abs(v) < PARAM_TINY:  # its square would underflow
+        least = "" if positive else "0 or "
+        return f"must be {least}at least {PARAM_TINY:g} in size, got {v!r}"
+    return None
