@@ -66,7 +66,8 @@ class SlamLog:
         covariance in that frame (the prediction's Q rotated into it, floor noise included);
         row 0 is zeros. The EKF's prediction is pose[k - 1] composed with odo_delta[k].
     final_x, final_P: the final state. landmark ids index `final_x` via landmark_id order.
-    start: "truth", "gps" or "origin". features_method, association_method: names used.
+    start: "truth", "gps", "origin" or "given" (`run_slam`'s prior).
+    features_method, association_method: names used.
     config: the resolved configuration (plain types).
     window_stats: association "ihgr-window" only: K, steps, fractional first LPs, steps the
         rounding changed (more than one LP solve), LP solves, track hypotheses built.

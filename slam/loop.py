@@ -206,6 +206,7 @@ def run_slam(
     visualiser=None,
     progress=None,
     warm_up: bool = True,
+    prior=None,
 ) -> SlamLog:
     """EKF-SLAM over `sequence` as `config` (default `SlamConfig()`) says; returns the `SlamLog`,
     whose `config` is the whole configuration of the run.
@@ -218,6 +219,9 @@ def run_slam(
     progress: callback(done, total) after each scan.
     warm_up: first run the steps over the first scans on a throwaway filter, so that
         `SlamLog.timing_s` holds the steps' own times and not one-off compilation.
+    prior: (pose (3,), covariance (3, 3)) of the filter at the first scan, given by the caller
+        (a published protocol's fixed start; `SlamLog.start` "given"); None: as the
+        configuration's start says (`slam.start.initial_pose`).
     Raises `SlamError` (a ValueError) for a run that cannot be made.
     """
     cfg = _resolve(config, features, association)
@@ -232,7 +236,12 @@ def run_slam(
         None if isinstance(features, str) else features,
         None if isinstance(association, str) else association,
     )
-    pose0, cov0, start = initial_pose(sequence, cfg, c.motion, c.T_vehicle_laser, _first_pass(c))
+    if prior is None:
+        pose0, cov0, start = initial_pose(
+            sequence, cfg, c.motion, c.T_vehicle_laser, _first_pass(c)
+        )
+    else:
+        pose0, cov0, start = _given_prior(prior)
     if warm_up:
         _warm_up(Slam(c, pose0, cov0))
     loop = Slam(c, pose0, cov0)
@@ -255,6 +264,17 @@ def run_slam(
         if loop.closer is None
         else [list(d) for d in loop.closer.duplicates],
     )
+
+
+def _given_prior(prior) -> tuple[np.ndarray, np.ndarray, str]:
+    """(pose, covariance, "given") of a caller's prior, checked."""
+    pose = np.asarray(prior[0], dtype=np.float64)
+    cov = np.asarray(prior[1], dtype=np.float64)
+    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        raise SlamError(f"prior: expected a finite pose of shape (3,), got {pose!r}")
+    if cov.shape != (3, 3) or not np.all(np.isfinite(cov)) or not np.allclose(cov, cov.T):
+        raise SlamError("prior: expected a finite symmetric (3, 3) covariance")
+    return pose.copy(), cov.copy(), "given"
 
 
 def _resolve(config, features, association) -> SlamConfig:

@@ -643,3 +643,19 @@ def test_scans_at_rest_are_skipped_as_if_they_were_not_there():
     assert used.size > 5 and np.all(np.diff(used[used < 12]) == 2)
     with pytest.raises(SlamError, match="vehicle.min_travel_m"):
         VehicleConfig(min_travel_m=-1.0)
+
+
+def test_a_given_prior_overrides_the_configured_start_and_bad_priors_are_errors():
+    """run_slam(prior=...): the filter starts at the caller's pose and covariance (a published
+    protocol's fixed start), even where the sequence has truth and GPS; the log says "given"."""
+    seq = drive_sequence(1.5, 0.0)  # has truth: without a prior the run starts there
+    pose0 = np.array([-5.0, 7.0, 1.0])
+    log = run_slam(seq, features="paper", prior=(pose0, np.zeros((3, 3))))
+    assert log.start == "given"
+    np.testing.assert_array_equal(log.pose[0], pose0)
+    np.testing.assert_array_equal(log.pose_cov[0], np.zeros((3, 3)))
+    # the same odometry from another start: the path is the truth's, moved rigidly
+    assert run_slam(seq, features="paper").start == "truth"
+    for bad in ((np.zeros(2), np.zeros((3, 3))), (pose0, np.eye(2)), (pose0, [[0, 1, 0]] * 3)):
+        with pytest.raises(SlamError, match="prior"):
+            run_slam(seq, features="paper", prior=bad)
