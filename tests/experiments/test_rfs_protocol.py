@@ -119,14 +119,24 @@ def test_protocol_constants_are_checked():
 @pytest.mark.slow
 @pytest.mark.data
 def test_quick_experiment_writes_the_protocol_beside_no_clutter_and_vouched(vp_dir, tmp_path):
-    """--quick end to end: three clutter draws (different clutter, the same scans scored), the
-    run without clutter and victoria-park's; the pooled RMSE is the RMS of the draws' (they
-    score the same scans), and the clutter adds about 5 false detections per scan."""
+    """--quick end to end, on the first 800 scans (the protocol's input made from their raw
+    laser and published detections as for the whole run): its clutter draws (different
+    clutter, the same scans scored), the run without clutter and victoria-park's; the pooled
+    RMSE is the RMS of the draws' (they score the same scans), and the clutter adds about 5
+    false detections per scan."""
+    from experiments.io.victoria_park import load_victoria_park
     from experiments.io.writers import read_tidy_csv
+    from experiments.paper import victoria_park_rfs as rfs
     from experiments.paper.reproduce import run_experiments
-    from experiments.paper.victoria_park_rfs import QUICK_DRAWS, ROWS
+    from experiments.paper.victoria_park import head, run_config
 
-    run_experiments(["victoria-park-rfs"], tmp_path, quick=True)
+    QUICK_DRAWS, ROWS = rfs.QUICK_DRAWS, rfs.ROWS
+    full, raw = load_victoria_park(vp_dir, full=True), load_victoria_park(vp_dir)
+    cfg = run_config("detections", "ihgr")
+    short = (rfs.protocol_input(head(full, 800), head(raw, 400), cfg), cfg)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(rfs, "_data", lambda quick: short)
+        run_experiments(["victoria-park-rfs"], tmp_path, quick=True)
     draws = read_tidy_csv(tmp_path / "victoria_park_rfs_draws.csv")
     summary = {r["run"]: r for r in read_tidy_csv(tmp_path / "victoria_park_rfs.csv")}
     assert set(summary) == set(ROWS.values())
