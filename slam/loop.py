@@ -24,6 +24,7 @@ the methods of `NullVisualiser`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -225,6 +226,7 @@ def run_slam(
     Raises `SlamError` (a ValueError) for a run that cannot be made.
     """
     cfg = _resolve(config, features, association)
+    sequence = _at_measurement_times(sequence, cfg)
     if cfg.features.file is not None and (features is None or isinstance(features, str)):
         raise SlamError(
             f"features.file {cfg.features.file!r}: read it and pass its features (the "
@@ -264,6 +266,16 @@ def run_slam(
         if loop.closer is None
         else [list(d) for d in loop.closer.duplicates],
     )
+
+
+def _at_measurement_times(seq: Sequence, cfg: SlamConfig) -> Sequence:
+    """`seq` with each scan at its measurement time, its stamp minus
+    `vehicle.laser_latency_s` (the sequence itself when that is 0: the run is then the same
+    to the bit)."""
+    latency = cfg.vehicle.laser_latency_s
+    if latency == 0:
+        return seq
+    return dataclasses.replace(seq, scan_t=np.asarray(seq.scan_t, np.float64) - latency)
 
 
 def _given_prior(prior) -> tuple[np.ndarray, np.ndarray, str]:
