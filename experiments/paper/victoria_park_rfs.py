@@ -29,7 +29,7 @@ import time
 import numpy as np
 
 from experiments.errors import MissingDataError
-from experiments.eval.gps import score_sequence
+from experiments.eval.gps import fixes_in_run, score_sequence
 from experiments.eval.rfs_protocol import (
     RfsProtocol,
     fov_cut,
@@ -194,7 +194,7 @@ def rfs_trial(job: tuple, seed=None) -> dict:
         "rmse_protocol_m": pooled_rmse([errors]),
         "scans_scored": int(np.isfinite(errors).sum()),
         "rmse_vouched_m": sc.vouched_rmse,
-        "vouched_errors": sc.errors[_vouched_mask(seq, cfg, sc)],
+        "vouched_errors": sc.errors[_vouched(seq, cfg)[fixes_in_run(seq.gps_t, lg.scan_t)]],
         "rmse_rfs_m": sc.rfs_rmse,
         "landmarks": int(lg.landmark_xy.shape[0]),
         "clutter": clutter,
@@ -211,12 +211,6 @@ def _vouched(seq, cfg) -> np.ndarray:
 
 
 _VOUCHED: dict = {}
-
-
-def _vouched_mask(seq, cfg, sc) -> np.ndarray:
-    """(matched fixes,) bool: which of the score's fixes are vouched for."""
-    inside = (seq.gps_t >= seq.scan_t[0]) & (seq.gps_t <= seq.scan_t[-1])
-    return _vouched(seq, cfg)[inside]
 
 
 def summary_records(rows: list[dict]) -> list[dict]:

@@ -150,3 +150,25 @@ def test_quick_experiment_writes_the_protocol_beside_no_clutter_and_vouched(vp_d
     for row in summary.values():
         assert 0.0 < row["rmse_protocol_m"] < 20.0 and 0.0 < row["rmse_vouched_m"] < 20.0
     assert summary[ROWS["no clutter"]]["runs"] == 1
+
+
+def test_clutter_joins_the_scans_with_detections_only_and_keeps_them_in_scan_order():
+    """`with_clutter`: the detector's scans get the draw's false detections (radius unknown),
+    the others none; the real detections are all still there; the draw is its seed's."""
+    from support import full_kwargs
+
+    from experiments.paper.victoria_park_rfs import ProtocolInput, with_clutter
+    from slam import Sequence
+
+    seq = Sequence(**{**full_kwargs(), "det_cov": None})
+    detected = np.bincount(seq.det_scan, minlength=seq.n_scans) > 0
+    inp = ProtocolInput(seq, detected, seq, 0)
+    out, n = with_clutter(inp, np.random.default_rng(3))
+    again, _ = with_clutter(inp, np.random.default_rng(3))
+    np.testing.assert_array_equal(out.det_range, again.det_range)
+    assert n == out.det_scan.size - seq.det_scan.size > 0
+    assert np.all(np.diff(out.det_scan) >= 0)
+    assert set(out.det_scan) == set(seq.det_scan)  # scans 0, 2, 4 only
+    pairs = set(zip(out.det_scan, out.det_range, out.det_bearing, strict=True))
+    assert all(p in pairs for p in zip(seq.det_scan, seq.det_range, seq.det_bearing, strict=True))
+    assert np.isnan(out.det_radius).sum() == n + np.isnan(seq.det_radius).sum()
