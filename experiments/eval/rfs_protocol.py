@@ -15,8 +15,9 @@ score their Victoria Park runs this way:
   generator seeded by the draw's number (`poisson_clutter`; theirs: `rng(file_idx,
   'twister')`, `poissrnd`, `rand`).
 - **Start.** Fixed, in the GPS frame: the laser at (-67.6493, -41.7142) m, heading 35.5 deg,
-  with zero covariance (`sim.x0`, `sim.P0`). Their vehicle state is the laser's position
-  (`f_func.m` moves the point a = 3.78 m ahead of and b = 0.5 m beside the rear axle).
+  with zero covariance (`sim.x0`, `sim.P0`). Their vehicle state is the laser's pose
+  (`f_func.m` moves the point a = 3.78 m ahead of and b = 0.5 m beside the rear axle, and
+  `h_func` measures from it along its heading: their model has no laser yaw).
 - **Score.** At every scan with detections, the estimate against the GPS fix nearest in
   time, when it is within 25 ms of the scan (`performance_summary.m`); the distance is taken
   at the laser, which is their state (`score_at_scans`). The RMSE is pooled over the scans

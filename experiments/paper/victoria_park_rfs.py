@@ -143,12 +143,15 @@ def with_clutter(inp: ProtocolInput, rng: np.random.Generator, protocol: RfsProt
 
 
 def start_prior(laser_pose, protocol: RfsProtocol = PROTOCOL) -> tuple[np.ndarray, np.ndarray]:
-    """(vehicle pose (3,), zero covariance (3, 3)): the rear-axle pose whose laser (at
-    `laser_pose`'s position in the vehicle frame) is at the published start, heading the
-    start's (their state is the laser's position with the vehicle's heading)."""
+    """(vehicle pose (3,), zero covariance (3, 3)): the rear-axle pose that puts the laser
+    (`laser_pose` in the vehicle frame) at the published start, position and heading. Their
+    state is the laser's pose: `h_func` measures from it and its heading (their model has no
+    laser yaw), so with our calibrated yaw the vehicle's heading is the start's minus it."""
     x, y, heading = protocol.start_laser
-    offset = se2.rotate(heading, np.asarray(laser_pose, np.float64)[:2].reshape(1, 2))[0]
-    return np.array([x - offset[0], y - offset[1], heading]), np.zeros((3, 3))
+    laser = np.asarray(laser_pose, np.float64)
+    vehicle_heading = heading - laser[2]
+    offset = se2.rotate(vehicle_heading, laser[:2].reshape(1, 2))[0]
+    return np.array([x - offset[0], y - offset[1], vehicle_heading]), np.zeros((3, 3))
 
 
 @functools.cache
@@ -281,7 +284,7 @@ def _notes(rows: list[dict]) -> str:
         "their code (experiments/eval/rfs_protocol.py names the files and commits): the tree "
         "detector's detections cut to 50 m and +-85 deg; Poisson clutter, mean 5, range and "
         "bearing uniform over that field of view, added to every scan with detections; the "
-        "start fixed at the laser (-67.6493, -41.7142) m, heading 35.5 deg, zero covariance; "
+        "start fixed: the laser at (-67.6493, -41.7142) m, heading 35.5 deg, zero covariance; "
         "each scan with detections scored at the laser against the GPS fix nearest in time "
         "when it is within 25 ms; the RMSE pooled over every scored scan of every draw "
         f"({draws} draws here; {scans} scans with detections). Detector: ours (`bailey`, the "
