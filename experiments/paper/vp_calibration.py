@@ -58,12 +58,12 @@ degree of freedom 1 over the same scans (E[NIS] = dof, the mean of a consistent 
 found by bisection on ln k; the odometry noise and the yaw stay as fitted. Again no GPS error
 enters, and scans 2001-7249 never do.
 
-Then the laser's latency (`latency_profile`, `derive_latency`): the scans are stamped when
+Then the laser's latency (`latency_profile`, `derive_latency`): the scans may be stamped when
 they arrive, not when they were measured, and the calibration above assumes one clock. With
 the fitted noise (after the consistency step), J is evaluated with each scan placed at the pose
 `vehicle.laser_latency_s` before its stamp, over the grid `LATENCIES_S`; the latency is the
-vertex of the parabola through the lowest J and its two neighbours (the grid's end, when the
-lowest J is there). The probe of 2026-11-26 (lab notebook) found J about 340 lower at 60 ms
+vertex of the parabola fitted to the whole profile by least squares, kept inside the grid.
+The probe of 2026-11-26 (lab notebook) found J about 340 lower at 60 ms
 than at 0. No GPS error enters it; the noise is not refitted at the new latency.
 
 Last, with the fitted noise, latency and start, the map policy's `confirm_scans` (every fit
@@ -119,7 +119,7 @@ MAX_WIDENINGS = 4  # of the consistency step's bracket (x16 either way)
 EVALUATIONS = {False: 200, True: 320}  # Nelder-Mead's budget, without and with the motion terms
 LN_AREA = math.log(80.0 * math.pi)  # the measurement space of the ute's laser, m x rad
 # the laser latencies J is profiled over (s): the probe's -0.15..+0.1 s shift found the lowest
-# J near 60 ms (lab notebook, 2026-11-26); a step of 20 ms, the parabola refines it
+# J near 60 ms (lab notebook, 2026-11-26); a grid around it, the fitted parabola refines it
 LATENCIES_S = (-0.04, -0.02, 0.0, 0.02, 0.04, 0.06, 0.08, 0.10, 0.12)
 QUICK_LATENCIES_S = (0.0, 0.06, 0.12)
 BASE = SlamConfig().with_(
@@ -345,21 +345,27 @@ def latency_profile(seq, theta, base: SlamConfig = BASE, latencies=LATENCIES_S, 
 
 
 def derive_latency(rows) -> float:
-    """The latency of `latency_profile`'s rows with the lowest J: the vertex of the parabola
-    through the lowest J and its neighbours on the grid (increasing latencies, equally spaced
-    or not), kept between those neighbours; the grid's end when the lowest J is there."""
+    """The latency of `latency_profile`'s rows: the vertex of the parabola fitted to the whole
+    profile by least squares, kept inside the grid; the lowest J's latency when the fit does
+    not curve upwards. The whole profile, not the lowest J and its neighbours: on scans
+    1-2000 J moves by tens at the 20 ms scale as associations flip (at 712572a J was within
+    65 of its lowest from 20 to 80 ms), and a three-point parabola follows those bumps."""
     if len(rows) < 1:
         raise ConfigError("latency profile: no rows")
     lat = np.array([r[0] for r in rows], dtype=float)
     J = np.array([r[1] for r in rows], dtype=float)
     if np.any(np.diff(lat) <= 0) or not np.all(np.isfinite(J)):
         raise ConfigError("latency profile: latencies must increase and every J be finite")
-    i = int(np.argmin(J))
-    if i == 0 or i == lat.size - 1:
-        log.warning("the lowest J is at the grid's end (%.3f s): widen LATENCIES_S", lat[i])
-        return float(lat[i])
-    a, b, c = np.polyfit(lat[i - 1 : i + 2], J[i - 1 : i + 2], 2)
-    return float(np.clip(-b / (2 * a), lat[i - 1], lat[i + 1])) if a > 0 else float(lat[i])
+    lowest = float(lat[int(np.argmin(J))])
+    if lat.size < 3:
+        return lowest
+    a, b, _ = np.polyfit(lat, J, 2)
+    if a <= 0:
+        return lowest
+    vertex = -b / (2 * a)
+    if not lat[0] < vertex < lat[-1]:
+        log.warning("the fitted latency %.3f s is outside the grid: widen LATENCIES_S", vertex)
+    return float(np.clip(vertex, lat[0], lat[-1]))
 
 
 @dataclass(frozen=True)
@@ -648,8 +654,8 @@ TABLES = (
         notes=lambda st: (
             "J (experiments/paper/vp_calibration.py) with the preset's noise, each scan placed "
             "at the pose this long before its stamp (vehicle.laser_latency_s). Chosen: "
-            f"{1e3 * st.latency_s:.1f} ms, the vertex of the parabola through the lowest J "
-            "and its neighbours. No GPS error of a run enters it."
+            f"{1e3 * st.latency_s:.1f} ms, the vertex of the parabola fitted to the whole "
+            "profile (least squares). No GPS error of a run enters it."
         ),
     ),
     TableSpec(

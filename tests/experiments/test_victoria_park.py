@@ -425,7 +425,7 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
 # ---- the laser latency (experiments/paper/vp_calibration.py) -------------------------------
 
 
-def test_derive_latency_finds_the_parabolas_vertex_and_stops_at_the_grids_end():
+def test_derive_latency_is_the_vertex_of_the_profiles_parabola_inside_the_grid():
     from experiments.paper.vp_calibration import LATENCIES_S, derive_latency
 
     def J(lat, best):
@@ -433,12 +433,20 @@ def test_derive_latency_finds_the_parabolas_vertex_and_stops_at_the_grids_end():
 
     for best in (0.055, 0.0, 0.071):
         assert derive_latency([(x, J(x, best)) for x in LATENCIES_S]) == pytest.approx(best)
-    # the lowest J at an end of the grid: that end (the grid should be widened)
+    # the vertex beyond the grid: the grid's end (the grid should be widened)
     assert derive_latency([(x, J(x, 0.3)) for x in LATENCIES_S]) == LATENCIES_S[-1]
     assert derive_latency([(x, J(x, -0.3)) for x in LATENCIES_S]) == LATENCIES_S[0]
     # an uneven grid: still the vertex
     grid = (0.0, 0.01, 0.05, 0.06, 0.1)
     assert derive_latency([(x, J(x, 0.052)) for x in grid]) == pytest.approx(0.052)
+    # bumps of +-40 at the grid's scale (associations flipping) do not move it to a bump: the
+    # lowest J is at 20 ms, the profile's vertex stays within 10 ms of the true 60 ms
+    bumps = [0.0, 40.0, -40.0, 40.0, -40.0, 40.0, 0.0, -40.0, 40.0]
+    bumpy = [(x, J(x, 0.06) + d) for x, d in zip(LATENCIES_S, bumps, strict=True)]
+    bumpy[3] = (bumpy[3][0], min(j for _, j in bumpy) - 1.0)
+    assert abs(derive_latency(bumpy) - 0.06) < 0.01
+    # a profile that does not curve upwards: its lowest J
+    assert derive_latency([(x, -x) for x in LATENCIES_S]) == LATENCIES_S[-1]
     for bad in ([], [(0.02, 1.0), (0.0, 2.0)], [(0.0, 1.0), (0.02, math.nan)]):
         with pytest.raises(ConfigError, match="latency profile"):
             derive_latency(bad)
