@@ -103,6 +103,7 @@ class ExperimentName(StrEnum):
     table4 = "table4"
     association = "association"
     victoria_park = "victoria-park"
+    victoria_park_rfs = "victoria-park-rfs"
     smoother = "smoother"
     noise_calibration = "noise-calibration"
     victoria_park_calibration = "victoria-park-calibration"
@@ -501,6 +502,9 @@ def reproduce(
     - association: IHGR, JCBB and NN side by side
 
     - victoria-park: EKF-SLAM on the real run against GPS (needs the data), victoria_park.rrd
+
+    - victoria-park-rfs: the full run under the published RFS protocol, exactly (100 clutter
+    draws; only when named)
 
     - smoother: GTSAM's Victoria Park graph solved; the full run's EKF against its smoother
 

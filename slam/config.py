@@ -11,8 +11,8 @@ a result (`config.toml`), it reproduces the run to the bit.
     [association]   method, gate_prob, new_feature_gate_prob, window_scans, view margins, params
     [measurement]   noise ("auto" | "fit" | "constant"), constant_noise.<method>, fit floors,
                     range_bias.<method>, max_range_m
-    [vehicle]       odometry_noise, steering, laser_pose, gps_antenna, max_odometry_gap_s,
-                    min_travel_m
+    [vehicle]       odometry_noise, steering, laser_pose, laser_latency_s, gps_antenna,
+                    max_odometry_gap_s, min_travel_m
     [start]         initial_pose_sigma, initial_heading_rad, GPS start fit
     [map_policy]    `slam.mapping.MapPolicy`
     [closure]       `slam.closure.ClosureConfig` (loop closure; off by default)
@@ -80,6 +80,9 @@ GPS_START_TRACKS = ("dead-reckoning", "slam")  # StartConfig.gps_track
 # in range across beam counts under the constant model (`noise-calibration`, `by-beams` in
 # docs/consistency_probes.py). Bailey's diameter-based covariance is not a fit's: constant noise.
 OWN_COVARIANCE = ("geometric", "paper")
+
+
+MAX_LATENCY_S = 1.0  # a laser stamped a second or more off its measurement is a clock fault
 
 
 def _finite(owner: str, name: str, v) -> None:
@@ -317,6 +320,12 @@ class VehicleConfig:
         offset + gain r + cubic r^3; the identity by default).
     laser_pose: (x_m, y_m, theta_rad) of the laser, replacing the sequence's (a calibrated
         mounting); None keeps the sequence's.
+    laser_latency_s: how long after it was measured a scan is stamped: scan k is placed at the
+        pose of its stamp minus this (`SlamLog.scan_t` holds those times; the sequence's own
+        stamps stay the scans', e.g. for choosing the GPS fixes within 25 ms of a scan). 0
+        (default): at its stamp. Derived for the ute by the calibration's J on scans 1-2000
+        (`experiments.paper.vp_calibration.latency_profile`), a sensor property, never a
+        GPS error; a magnitude of a second or more is an error.
     gps_antenna: (x_m, y_m) of the GPS antenna, replacing the sequence's; None keeps the
         sequence's (the laser's position when it has none).
     max_odometry_gap_s: a longer stretch without odometry inside the run is an error.
@@ -334,6 +343,7 @@ class VehicleConfig:
     increment_noise: IncrementNoise = field(default_factory=IncrementNoise)
     steering: SteeringCalibration = field(default_factory=SteeringCalibration)
     laser_pose: tuple[float, float, float] | None = None
+    laser_latency_s: float = 0.0
     gps_antenna: tuple[float, float] | None = None
     max_odometry_gap_s: float = 1.0
     min_travel_m: float = 0.0
@@ -355,6 +365,17 @@ class VehicleConfig:
                 f"got {self.max_odometry_gap_s!r}"
             )
         _finite("vehicle", "min_travel_m", self.min_travel_m)
+        v = self.laser_latency_s
+        if (
+            isinstance(v, bool)
+            or not isinstance(v, (int, float))
+            or not abs(v) < MAX_LATENCY_S
+            or (v != 0 and abs(v) < SETTING_TINY)
+        ):
+            raise SlamError(
+                f"vehicle.laser_latency_s: must be 0 or a number of magnitude in "
+                f"[{SETTING_TINY:g}, {MAX_LATENCY_S:g}) s, got {v!r}"
+            )
 
 
 # The start's sigmas: a prior far wider than the measurements' noise loses their information to

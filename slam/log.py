@@ -35,9 +35,11 @@ SKIPPED = -6
 class SlamLog:
     """Everything one run did. N scans; world frame; m, rad, s.
 
-    scan_t: (N,) scan times. pose, pose_cov: (N, 3), (N, 3, 3) the estimate of the rear-axle
-        centre after the scan's update. pred_pose, pred_pose_cov: the same after the prediction,
-        before the update (pred == pose for scans without an update).
+    scan_t: (N,) scan times: the times the scans were measured, the poses' times (their stamps
+        minus `vehicle.laser_latency_s`; the stamps themselves when it is 0).
+    pose, pose_cov: (N, 3), (N, 3, 3) the estimate of the rear-axle centre after the scan's
+        update. pred_pose, pred_pose_cov: the same after the prediction, before the update
+        (pred == pose for scans without an update).
     landmark_xy (n, 2), landmark_cov (n, 2, 2), landmark_id (n,), landmark_first_scan (n,),
         landmark_n_obs (n,): the final map (first_scan: the scan it joined the map; n_obs: the
         scans it was associated in, its tentative sightings included).
@@ -66,7 +68,8 @@ class SlamLog:
         covariance in that frame (the prediction's Q rotated into it, floor noise included);
         row 0 is zeros. The EKF's prediction is pose[k - 1] composed with odo_delta[k].
     final_x, final_P: the final state. landmark ids index `final_x` via landmark_id order.
-    start: "truth", "gps" or "origin". features_method, association_method: names used.
+    start: "truth", "gps", "origin" or "given" (`run_slam`'s prior).
+    features_method, association_method: names used.
     config: the resolved configuration (plain types).
     window_stats: association "ihgr-window" only: K, steps, fractional first LPs, steps the
         rounding changed (more than one LP solve), LP solves, track hypotheses built.

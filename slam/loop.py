@@ -24,6 +24,7 @@ the methods of `NullVisualiser`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -206,6 +207,7 @@ def run_slam(
     visualiser=None,
     progress=None,
     warm_up: bool = True,
+    prior=None,
 ) -> SlamLog:
     """EKF-SLAM over `sequence` as `config` (default `SlamConfig()`) says; returns the `SlamLog`,
     whose `config` is the whole configuration of the run.
@@ -218,9 +220,13 @@ def run_slam(
     progress: callback(done, total) after each scan.
     warm_up: first run the steps over the first scans on a throwaway filter, so that
         `SlamLog.timing_s` holds the steps' own times and not one-off compilation.
+    prior: (pose (3,), covariance (3, 3)) of the filter at the first scan, given by the caller
+        (a published protocol's fixed start; `SlamLog.start` "given"); None: as the
+        configuration's start says (`slam.start.initial_pose`).
     Raises `SlamError` (a ValueError) for a run that cannot be made.
     """
     cfg = _resolve(config, features, association)
+    sequence = _at_measurement_times(sequence, cfg)
     if cfg.features.file is not None and (features is None or isinstance(features, str)):
         raise SlamError(
             f"features.file {cfg.features.file!r}: read it and pass its features (the "
@@ -232,7 +238,12 @@ def run_slam(
         None if isinstance(features, str) else features,
         None if isinstance(association, str) else association,
     )
-    pose0, cov0, start = initial_pose(sequence, cfg, c.motion, c.T_vehicle_laser, _first_pass(c))
+    if prior is None:
+        pose0, cov0, start = initial_pose(
+            sequence, cfg, c.motion, c.T_vehicle_laser, _first_pass(c)
+        )
+    else:
+        pose0, cov0, start = _given_prior(prior)
     if warm_up:
         _warm_up(Slam(c, pose0, cov0))
     loop = Slam(c, pose0, cov0)
@@ -255,6 +266,27 @@ def run_slam(
         if loop.closer is None
         else [list(d) for d in loop.closer.duplicates],
     )
+
+
+def _at_measurement_times(seq: Sequence, cfg: SlamConfig) -> Sequence:
+    """`seq` with each scan at its measurement time, its stamp minus
+    `vehicle.laser_latency_s` (the sequence itself when that is 0: the run is then the same
+    to the bit)."""
+    latency = cfg.vehicle.laser_latency_s
+    if latency == 0:
+        return seq
+    return dataclasses.replace(seq, scan_t=np.asarray(seq.scan_t, np.float64) - latency)
+
+
+def _given_prior(prior) -> tuple[np.ndarray, np.ndarray, str]:
+    """(pose, covariance, "given") of a caller's prior, checked."""
+    pose = np.asarray(prior[0], dtype=np.float64)
+    cov = np.asarray(prior[1], dtype=np.float64)
+    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        raise SlamError(f"prior: expected a finite pose of shape (3,), got {pose!r}")
+    if cov.shape != (3, 3) or not np.all(np.isfinite(cov)) or not np.allclose(cov, cov.T):
+        raise SlamError("prior: expected a finite symmetric (3, 3) covariance")
+    return pose.copy(), cov.copy(), "given"
 
 
 def _resolve(config, features, association) -> SlamConfig:

@@ -75,7 +75,11 @@ def test_the_glance_reports_the_loop_closure_goals(snapshot):
         solver="smoother (batch)",
     )
     rfs = snapshot.value("victoria_park", "rmse_rfs_m", source="ours", run=run)
-    best = snapshot.value("victoria_park", "rmse_rfs_low_m", run="GM-PHD-PMAU-SLAM")
+    best = min(
+        r["rmse_rfs_m"]
+        for r in snapshot.records("victoria_park_published")
+        if math.isfinite(r["rmse_rfs_m"])
+    )
     (vp,) = [r for k, r in rows.items() if "full run with loop closure" in k]
     assert vp.endswith(f" | {smoothed:.2f} m / {rfs:.2f} m |")
     assert f"best published {best:.2f} m" in vp

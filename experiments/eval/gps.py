@@ -125,12 +125,15 @@ def score_against_gps(
     max_speed_mps: float,
     *,
     vouched: np.ndarray | None = None,
+    stamps: np.ndarray | None = None,
 ) -> GpsScore:
     """Score the rear-axle poses (N, 3) at scan_t (N,) against the fixes gps_xy (G, 2) at gps_t.
 
     antenna_pose: (3,) the antenna in the vehicle frame. max_speed_mps: the vehicle's top speed
     (fixes implying more are jumps). vouched: (G,) bool, the fixes the odometry vouches for
-    (`experiments.eval.vouched`), or None. See the module doc.
+    (`experiments.eval.vouched`), or None. stamps: (N,) the scans' own time stamps, which choose
+    the fixes within 25 ms of a scan (None: scan_t; they differ when the run placed its scans a
+    laser latency before their stamps, `vehicle.laser_latency_s`). See the module doc.
     """
     scan_t = np.asarray(scan_t, dtype=np.float64)
     gps_t = np.asarray(gps_t, dtype=np.float64)
@@ -151,7 +154,10 @@ def score_against_gps(
     ca = _stats(e_al[clean])
     v = None if vouched is None else np.asarray(vouched, bool)[inside]
     vs = _stats(e[v]) if v is not None else (math.nan,) * 3
-    near = _near_a_scan(t, scan_t, RFS_TOLERANCE_S)
+    stamps = scan_t if stamps is None else np.asarray(stamps, dtype=np.float64)
+    if stamps.shape != scan_t.shape:
+        raise ValueError(f"stamps: expected {scan_t.shape[0]} scan stamps, got {stamps.shape}")
+    near = _near_a_scan(t, stamps, RFS_TOLERANCE_S)
     return GpsScore(
         matched=int(t.size),
         jumps=int(jump.sum()),
@@ -203,7 +209,9 @@ def score_sequence(
 ) -> GpsScore:
     """`score_against_gps` for a run over `seq`: its GPS, at the antenna `antenna` (the run's
     `SlamLog.antenna_pose`; None: the sequence's gps_pose, else its laser); vouched: (G,) the
-    fixes the odometry vouches for (`experiments.eval.vouched.vouched_for_sequence`) or None."""
+    fixes the odometry vouches for (`experiments.eval.vouched.vouched_for_sequence`) or None.
+    The fixes within 25 ms of a scan are chosen by the sequence's own stamps of its first
+    len(scan_t) scans (the run's scan_t are its poses' times)."""
     if antenna is None:
         antenna = seq.gps_pose if seq.gps_pose is not None else seq.laser_pose
     return score_against_gps(
@@ -214,4 +222,12 @@ def score_sequence(
         antenna_pose=antenna,
         max_speed_mps=top_speed(seq),
         vouched=vouched,
+        stamps=_stamps(seq, scan_t),
     )
+
+
+def _stamps(seq, scan_t) -> np.ndarray | None:
+    """The sequence's stamps of the run's scans (its first len(scan_t)), or None when the run
+    has more scans than the sequence (then the run's own times choose the fixes)."""
+    n = np.asarray(scan_t).shape[0]
+    return None if seq.n_scans < n else np.asarray(seq.scan_t, dtype=np.float64)[:n]

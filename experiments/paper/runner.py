@@ -120,6 +120,12 @@ EXPERIMENTS: dict[str, Experiment] = {
         "experiments.paper.victoria_park:run",
         about="EKF-SLAM on the real run against GPS (needs the data; skipped without)",
     ),
+    "victoria-park-rfs": Experiment(
+        "experiments.paper.victoria_park_rfs:run",
+        about="the full run under the published RFS protocol, exactly: 100 clutter draws "
+        "(needs the data; an hour or more on two cores; --quick: 10 draws; only when named)",
+        default=False,
+    ),
     "smoother": Experiment(
         "experiments.paper.smoother:run",
         about="GTSAM smoother: GTSAM's Victoria Park graph; the EKF's full run re-solved",

@@ -58,9 +58,18 @@ degree of freedom 1 over the same scans (E[NIS] = dof, the mean of a consistent 
 found by bisection on ln k; the odometry noise and the yaw stay as fitted. Again no GPS error
 enters, and scans 2001-7249 never do.
 
-Last, with the fitted noise and start, the map policy's `confirm_scans` (every fit above uses
-the paper's 3): the number with the best map against the 2002 SLAM school's reference trees of
-the same scans (`vp_map_policy.confirm_sweep`, `derive_confirm`; no GPS either).
+Then the laser's latency (`latency_profile`, `derive_latency`): the scans may be stamped when
+they arrive, not when they were measured, and the calibration above assumes one clock. With
+the fitted noise (after the consistency step), J is evaluated with each scan placed at the pose
+`vehicle.laser_latency_s` before its stamp, over the grid `LATENCIES_S`; the latency is the
+vertex of the parabola fitted to the whole profile by least squares, kept inside the grid.
+The probe of 2026-11-26 (lab notebook) found J about 340 lower at 60 ms
+than at 0. No GPS error enters it; the noise is not refitted at the new latency.
+
+Last, with the fitted noise, latency and start, the map policy's `confirm_scans` (every fit
+above uses the paper's 3): the number with the best map against the 2002 SLAM school's
+reference trees of the same scans (`vp_map_policy.confirm_sweep`, `derive_confirm`; no GPS
+either).
 """
 
 from __future__ import annotations
@@ -94,6 +103,8 @@ __all__ = [
     "calibration_study",
     "config_from",
     "consistency_scale",
+    "derive_latency",
+    "latency_profile",
     "nis_per_dof",
     "objective",
     "preset_config",
@@ -107,6 +118,10 @@ FIT_SCANS = 2000
 MAX_WIDENINGS = 4  # of the consistency step's bracket (x16 either way)
 EVALUATIONS = {False: 200, True: 320}  # Nelder-Mead's budget, without and with the motion terms
 LN_AREA = math.log(80.0 * math.pi)  # the measurement space of the ute's laser, m x rad
+# the laser latencies J is profiled over (s): the probe's -0.15..+0.1 s shift found the lowest
+# J near 60 ms (lab notebook, 2026-11-26); a grid around it, the fitted parabola refines it
+LATENCIES_S = (-0.04, -0.02, 0.0, 0.02, 0.04, 0.06, 0.08, 0.10, 0.12)
+QUICK_LATENCIES_S = (0.0, 0.06, 0.12)
 BASE = SlamConfig().with_(
     **{
         "features.method": "detections",
@@ -317,6 +332,42 @@ def consistency_scale(
     return {"k": best[0], "nis_per_dof": best[1], "evaluations": evals}
 
 
+def latency_profile(seq, theta, base: SlamConfig = BASE, latencies=LATENCIES_S, progress=None):
+    """[(latency_s, J), ...]: J (`objective`) of the parameters `theta` with each scan placed
+    at the pose `latency_s` before its stamp (`vehicle.laser_latency_s`), for each latency."""
+    rows = []
+    for i, latency in enumerate(latencies):
+        cfg = base.with_(**{"vehicle.laser_latency_s": float(latency)})
+        rows.append((float(latency), objective(seq, theta, cfg)[0]))
+        if progress is not None:
+            progress("Victoria Park laser latency", i + 1, len(latencies))
+    return rows
+
+
+def derive_latency(rows) -> float:
+    """The latency of `latency_profile`'s rows: the vertex of the parabola fitted to the whole
+    profile by least squares, kept inside the grid; the lowest J's latency when the fit does
+    not curve upwards. The whole profile, not the lowest J and its neighbours: on scans
+    1-2000 J moves by tens at the 20 ms scale as associations flip (at 712572a J was within
+    65 of its lowest from 20 to 80 ms), and a three-point parabola follows those bumps."""
+    if len(rows) < 1:
+        raise ConfigError("latency profile: no rows")
+    lat = np.array([r[0] for r in rows], dtype=float)
+    J = np.array([r[1] for r in rows], dtype=float)
+    if np.any(np.diff(lat) <= 0) or not np.all(np.isfinite(J)):
+        raise ConfigError("latency profile: latencies must increase and every J be finite")
+    lowest = float(lat[int(np.argmin(J))])
+    if lat.size < 3:
+        return lowest
+    a, b, _ = np.polyfit(lat, J, 2)
+    if a <= 0:
+        return lowest
+    vertex = -b / (2 * a)
+    if not lat[0] < vertex < lat[-1]:
+        log.warning("the fitted latency %.3f s is outside the grid: widen LATENCIES_S", vertex)
+    return float(np.clip(vertex, lat[0], lat[-1]))
+
+
 @dataclass(frozen=True)
 class VpCalibration:
     """The results of the calibration, in the order found.
@@ -325,6 +376,7 @@ class VpCalibration:
     `calibrate`'s result; motion: the lower BIC's (`select_model`); start: (J, the run's
     figures) at START; consistency: `consistency_scale`'s result; theta: the preset's
     parameters (the chosen fit, measurement sigmas x k) and final: (J, figures) there;
+    latency_rows: `latency_profile` at the preset's noise, latency_s: its `derive_latency`;
     start_rows: `vp_start.headings` along the preset's path; start_fit_m: the metres of GPS the
     start is fitted to (`vp_start.derive`); confirm_rows: `vp_map_policy.confirm_sweep` with
     that noise and start, confirm_scans: its `derive_confirm`; seconds: the time it took.
@@ -337,6 +389,8 @@ class VpCalibration:
     consistency: dict
     theta: np.ndarray
     final: tuple[float, dict]
+    latency_rows: list
+    latency_s: float
     start_rows: list
     start_fit_m: float
     confirm_rows: list
@@ -345,7 +399,9 @@ class VpCalibration:
 
     def preset(self) -> SlamConfig:
         """The preset's configuration (`preset_config`)."""
-        return preset_config(self.theta, self.steer.steering, self.start_fit_m, self.confirm_scans)
+        return preset_config(
+            self.theta, self.steer.steering, self.start_fit_m, self.confirm_scans, self.latency_s
+        )
 
 
 def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpCalibration:
@@ -368,11 +424,15 @@ def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpC
     cons = consistency_scale(seq, config_from(fit["theta"], base), iterations=1 if quick else 7)
     theta = np.asarray(fit["theta"], dtype=float)
     theta[MEASUREMENT] += math.log(cons["k"])
+    grid = QUICK_LATENCIES_S if quick else LATENCIES_S
+    latency_rows = latency_profile(seq, theta, base, grid, progress)
+    latency = derive_latency(latency_rows)
+    base = base.with_(**{"vehicle.laser_latency_s": latency})
     final = objective(seq, theta, base)
     start_rows = vp_start.headings(seq, config_from(theta, base))
     start_fit_m = vp_start.derive(start_rows)
     confirm_rows = vp_map_policy.confirm_sweep(
-        seq, preset_config(theta, steer.steering, start_fit_m), ref
+        seq, preset_config(theta, steer.steering, start_fit_m, latency_s=latency), ref
     )
     return VpCalibration(
         steer=steer,
@@ -382,6 +442,8 @@ def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpC
         consistency=cons,
         theta=theta,
         final=final,
+        latency_rows=latency_rows,
+        latency_s=latency,
         start_rows=start_rows,
         start_fit_m=start_fit_m,
         confirm_rows=confirm_rows,
@@ -414,6 +476,8 @@ def _manifest_entry(st: VpCalibration) -> dict:
         "bic": {"constant": bic(fits[False]), "motion": bic(fits[True])},
         "chosen": "motion" if st.motion else "constant",
         "consistency_factor": st.consistency["k"],
+        "laser_latency_s": st.latency_s,
+        "latency_profile": st.latency_rows,
         "start_fit_m": st.start_fit_m,
         "start_headings_deg": st.start_rows,
         "confirm_scans": st.confirm_scans,
@@ -511,12 +575,17 @@ def run(ctx) -> None:
 
 
 def preset_config(
-    theta, steering: SteeringCalibration, start_fit_m: float, confirm_scans: int | None = None
+    theta,
+    steering: SteeringCalibration,
+    start_fit_m: float,
+    confirm_scans: int | None = None,
+    latency_s: float = 0.0,
 ) -> SlamConfig:
     """The preset: the fixed settings (BASE), the fitted parameters `theta` (the model's 6 or
     8), the steering calibration, the start fitted along the filter's own path over the
-    first `start_fit_m` metres of GPS (`vp_start`) and the map policy's `confirm_scans`
-    (`vp_map_policy.derive_confirm`; None: BASE's, the paper's 3)."""
+    first `start_fit_m` metres of GPS (`vp_start`), the map policy's `confirm_scans`
+    (`vp_map_policy.derive_confirm`; None: BASE's, the paper's 3) and the laser latency
+    (`derive_latency`)."""
     confirm = BASE.map_policy.confirm_scans if confirm_scans is None else int(confirm_scans)
     base = BASE.with_(
         **{
@@ -524,6 +593,7 @@ def preset_config(
             "start.gps_track": "slam",
             "start.gps_fit_m": float(start_fit_m),
             "map_policy.confirm_scans": confirm,
+            "vehicle.laser_latency_s": float(latency_s),
         }
     )
     return config_from(theta, base)
@@ -535,8 +605,9 @@ The Victoria Park ute: `trunkslam reproduce victoria-park-calibration`
 GPS stretches of scans 1-2000, then the laser yaw, odometry noise and measurement noise by
 maximum likelihood of the filter's own innovations on the same scans (no GPS error of a SLAM run
 is used), then scaled the measurement sigmas by the factor that makes the NIS per dof 1 there,
-then chose the metres of GPS the start is fitted to along the filter's own path (the shortest
-stretch from which longer ones agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
+then the laser latency from a profile of the same likelihood, then chose the metres of GPS the
+start is fitted to along the filter's own path (the shortest stretch from which longer ones
+agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
 the same constant measurement model for every extractor, scans at rest skipped (1 mm).
 Last, the map policy's confirm_scans: the best map (F1) against the 2002 reference trees.
 Its extractor parameters are the defaults, short trunks included: most real trunks span 1-3 beams.
@@ -572,6 +643,20 @@ TABLES = (
         labels=CALIBRATION_LABELS,
         title="Victoria Park: the ute's noise and laser yaw by maximum likelihood (scans 1-2000)",
         notes=_calibration_notes,
+    ),
+    TableSpec(
+        "victoria_park_latency",
+        lambda st: [{"latency_ms": 1e3 * lat, "j": J} for lat, J in st.latency_rows],
+        index=("latency_ms",),
+        values=("j",),
+        labels={"latency_ms": "laser latency (ms)", "j": "J"},
+        title="Victoria Park: the calibration's J against the laser latency (scans 1-2000)",
+        notes=lambda st: (
+            "J (experiments/paper/vp_calibration.py) with the preset's noise, each scan placed "
+            "at the pose this long before its stamp (vehicle.laser_latency_s). Chosen: "
+            f"{1e3 * st.latency_s:.1f} ms, the vertex of the parabola fitted to the whole "
+            "profile (least squares). No GPS error of a run enters it."
+        ),
     ),
     TableSpec(
         "victoria_park_start",

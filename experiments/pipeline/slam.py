@@ -211,11 +211,11 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
     inside = (
         np.zeros(seq.n_scans, bool)
         if seq.truth_t is None
-        else (seq.scan_t >= seq.truth_t[0]) & (seq.scan_t <= seq.truth_t[-1])
+        else (lg.scan_t >= seq.truth_t[0]) & (lg.scan_t <= seq.truth_t[-1])
     )
     inside[0] = False  # the run may start at the truth
-    if inside.any():  # score only the scans the truth covers
-        truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    if inside.any():  # score only the scans the truth covers, at the poses' own times
+        truth = interpolate_poses(lg.scan_t, seq.truth_t, seq.truth_pose)
         e = pose_errors(lg.pose, truth)[inside]
         covs = lg.pose_cov[inside]
         ok = np.linalg.det(covs) > 0

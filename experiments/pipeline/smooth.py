@@ -156,7 +156,10 @@ def _scores(run_dir: Path, problem: Problem, r: SmootherResult) -> dict:
         seq = load_sequence(summary["input"])
     except (OSError, ValueError, KeyError, TypeError, DataError):
         return {"scored": "no: the run's summary.json or its input sequence is not readable"}
-    if seq.n_scans != problem.n_scans or not np.allclose(seq.scan_t, problem.scan_t):
+    # the run's scan times are the scans' stamps minus its laser latency (`vehicle.laser_latency_s`)
+    latency = summary.get("config", {}).get("vehicle", {}).get("laser_latency_s", 0.0)
+    latency = latency if isinstance(latency, (int, float)) else 0.0
+    if seq.n_scans != problem.n_scans or not np.allclose(seq.scan_t - latency, problem.scan_t):
         return {"scored": f"no: {summary['input']} is not the sequence of this run"}
     out: dict = {"scored": summary["input"]}
     if seq.gps_t is not None:
@@ -164,10 +167,11 @@ def _scores(run_dir: Path, problem: Problem, r: SmootherResult) -> dict:
             seq, problem.scan_t, r.pose, _antenna(seq, problem), vouched=_vouched(seq, summary)
         ).to_dict()
     if seq.truth_t is not None:
-        inside = (seq.scan_t >= seq.truth_t[0]) & (seq.scan_t <= seq.truth_t[-1])
+        t = problem.scan_t  # the poses' own times
+        inside = (t >= seq.truth_t[0]) & (t <= seq.truth_t[-1])
         inside[0] = False
         if inside.any():
-            truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+            truth = interpolate_poses(t, seq.truth_t, seq.truth_pose)
             e = pose_errors(r.pose, truth)[inside]
             out["truth"] = {
                 "mean_abs_error": dict(

@@ -400,13 +400,7 @@ def _vp_smoother_rows(s: Snapshot, runs: dict, label: str) -> list[list[str]]:
         for r in (s.records("smoother") if (s.folder / "smoother.csv").is_file() else [])
         if r.get("problem") == problem and r.get("solver") != "EKF"
     ]
-    published = [
-        r["rmse_rfs_low_m"]
-        for r in s.records("victoria_park")
-        if r.get("source") == "published"
-        and isinstance(r.get("rmse_rfs_low_m"), float)
-        and math.isfinite(r["rmse_rfs_low_m"])
-    ]
+    published = _published_rfs(s)
     best = f"; best published {min(published):.2f} m" if published else ""
     text = (
         " full run with loop closure: its smoother's vouched RMSE / its RMSE on every fix within "
@@ -414,6 +408,21 @@ def _vp_smoother_rows(s: Snapshot, runs: dict, label: str) -> list[list[str]]:
     )
     cell = f"{_metres(smoothed[0]) if len(smoothed) == 1 else 'n/a'} / {_metres(on['rmse_rfs_m'])}"
     return [[label + text, "", "", "", "", cell]]
+
+
+def _published_rfs(s: Snapshot) -> list[float]:
+    """The published RMSEs under the RFS protocol (a single figure or the low end of a range):
+    from victoria_park_published.csv, else (an older snapshot) the published rows of
+    victoria_park.csv."""
+    own = (s.folder / "victoria_park_published.csv").is_file()
+    rows = s.records("victoria_park_published" if own else "victoria_park")
+    return [
+        r[k]
+        for r in rows
+        if r.get("source") == "published"
+        for k in ("rmse_rfs_m", "rmse_rfs_low_m")
+        if isinstance(r.get(k), float) and math.isfinite(r[k])
+    ]
 
 
 def _loop_rows(s: Snapshot, label: str) -> list[list[str]]:

@@ -251,6 +251,26 @@ def test_slam_with_the_ihgr_window(tmp_path):
     assert res.exit_code != 0 and "--window" in res.output
 
 
+def test_a_run_with_a_laser_latency_is_scored_and_smoothed_at_its_poses_times(tmp_path):
+    """[vehicle] laser_latency_s: the EKF's and the smoother's truth errors are taken at the
+    poses' own times (stamps minus the latency), and the smoother still recognises the run's
+    input sequence."""
+    run = tmp_path / "run.npz"
+    res = runner.invoke(app, ["simulate-drive", "--scans", "40", "--seed", "4", "--out", str(run)])
+    assert res.exit_code == 0, res.output
+    cfg = tmp_path / "latency.toml"
+    cfg.write_text("[vehicle]\nlaser_latency_s = 0.05\n")
+    out = tmp_path / "out"
+    res = runner.invoke(
+        app, ["slam", str(run), "--config", str(cfg), "--out", str(out), "--smooth"]
+    )
+    assert res.exit_code == 0, res.output
+    ekf, sm = (json.loads((out / n).read_text()) for n in ("summary.json", "smoother.json"))
+    assert ekf["config"]["vehicle"]["laser_latency_s"] == 0.05
+    assert sm["scored"] == str(run) and sm["truth"]["scans_scored"] == ekf["truth"]["scans_scored"]
+    assert sum(sm["truth"]["mean_abs_error"].values()) < 1.0
+
+
 def test_slam_smooth_and_smooth_after_the_fact(tmp_path):
     run = tmp_path / "run.npz"
     res = runner.invoke(app, ["simulate-drive", "--scans", "80", "--seed", "4", "--out", str(run)])

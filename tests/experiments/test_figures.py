@@ -10,6 +10,7 @@ figure, so a test looks at the lines as drawn (their data, colours, labels)."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -301,12 +302,40 @@ def test_victoria_park_markdown_is_narrow_tables_each_a_pivot_of_the_csv(tmp_pat
     # the CSV is the one tidy table: every column, one row per run
     rows = read_tidy_csv(tmp_path / "victoria_park.csv")
     assert list(rows[0]) == ["source"] + [k for k, _ in vp.COLUMNS]
-    assert len(rows) == 2 + len(vp.PUBLISHED)
+    assert len(rows) == 2 and {r["source"] for r in rows} == {"ours"}  # published: own table
     assert math.isnan(rows[0]["published_matched"]) and rows[1]["scans"] == 7248
     md = (tmp_path / "victoria_park.md").read_text()
     assert [line for line in md.splitlines() if line.startswith("## ")] == [
         f"## {h}" for h, _ in vp.PARTS
     ]
+
+
+def test_published_rows_are_one_table_each_with_its_source(tmp_path):
+    """The published figures are printed once, in victoria_park_published (not as n/a rows in
+    every part of victoria_park), each with the repository and commit it comes from; the rows
+    without a source are gone and the course project is not called Zamora et al.'s."""
+    from experiments.io.writers import read_tidy_csv
+    from experiments.paper import products
+    from experiments.paper import victoria_park as vp
+
+    products.tables(_Ctx(tmp_path), [vp.TABLE, vp.PUBLISHED_TABLE], _vp_rows())
+    assert assert_tidy_tables(tmp_path) == {"victoria_park.csv", "victoria_park_published.csv"}
+    assert "| published |" not in (tmp_path / "victoria_park.md").read_text()
+    pub = {r["run"]: r for r in read_tidy_csv(tmp_path / "victoria_park_published.csv")}
+    assert len(pub) == len(vp.PUBLISHED) == 4
+    for r in pub.values():
+        assert re.search(r"github\.com/\S+ README\.md at [0-9a-f]{7}", r["reference"]), r[
+            "reference"
+        ]
+    course = next(r for name, r in pub.items() if "course project" in name)
+    assert (course["rmse_m"], course["landmarks"]) == (1.394, 182)
+    assert "0123gabriel/SLAM-VictoriaPark" in course["reference"]
+    assert not any("Zamora" in name or name == "PHD-SLAM" for name in pub)
+    assert (
+        pub["PHD-SLAM 3.0"]["rmse_rfs_low_m"] == 3.36
+        and "16f625a" in pub["PHD-SLAM 3.0"]["reference"]
+    )
+    assert min(r["rmse_rfs_m"] for r in pub.values() if math.isfinite(r["rmse_rfs_m"])) == 2.46
 
 
 def test_the_tidy_check_fails_on_a_narrow_table_that_is_not_the_pivot(tmp_path):

@@ -124,3 +124,22 @@ def test_features_json_errors_name_the_scan(tmp_path):
     path.write_text("{not json")
     with pytest.raises(DataError, match="not a features JSON"):
         load_features_json(path, 2)
+
+
+def test_the_25_ms_rule_chooses_fixes_by_the_scans_own_stamps():
+    """A run that placed its scans 60 ms before their stamps (a laser latency): the fixes within
+    25 ms of a scan are those near the stamps, not near the poses' times."""
+    gps_t = np.arange(10) * 0.2
+    gps = np.column_stack([gps_t, np.zeros(10)])
+    stamps = gps_t[1:-1] + 0.01
+    pose_t = stamps - 0.06
+    pose = np.column_stack([pose_t, np.zeros((pose_t.size, 2))])
+    by_pose = score_against_gps(pose_t, pose, gps_t, gps, np.zeros(3), max_speed_mps=5)
+    by_stamp = score_against_gps(
+        pose_t, pose, gps_t, gps, np.zeros(3), max_speed_mps=5, stamps=stamps
+    )
+    assert by_pose.rfs_fixes == 0  # every pose time is 50 ms from a fix
+    assert by_stamp.rfs_fixes == by_stamp.matched == 7  # fixes 0.2 .. 1.4 s, in the run's span
+    assert by_stamp.all_rmse == by_pose.all_rmse  # the pairing of fixes to poses is unchanged
+    with pytest.raises(ValueError, match="stamps"):
+        score_against_gps(pose_t, pose, gps_t, gps, np.zeros(3), 5, stamps=stamps[:-1])

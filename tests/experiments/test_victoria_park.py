@@ -420,3 +420,50 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
     later = [h for d, h, _ in rows if d >= cfg.start.gps_fit_m]
     assert max(later) - min(later) <= 2 * vp_start.TOLERANCE_DEG
     assert rows[-1][0] > 900  # scans 1-2000 drive about a kilometre
+
+
+# ---- the laser latency (experiments/paper/vp_calibration.py) -------------------------------
+
+
+def test_derive_latency_is_the_vertex_of_the_profiles_parabola_inside_the_grid():
+    from experiments.paper.vp_calibration import LATENCIES_S, derive_latency
+
+    def J(lat, best):
+        return -61000.0 + 1e5 * (lat - best) ** 2
+
+    for best in (0.055, 0.0, 0.071):
+        assert derive_latency([(x, J(x, best)) for x in LATENCIES_S]) == pytest.approx(best)
+    # the vertex beyond the grid: the grid's end (the grid should be widened)
+    assert derive_latency([(x, J(x, 0.3)) for x in LATENCIES_S]) == LATENCIES_S[-1]
+    assert derive_latency([(x, J(x, -0.3)) for x in LATENCIES_S]) == LATENCIES_S[0]
+    # an uneven grid: still the vertex
+    grid = (0.0, 0.01, 0.05, 0.06, 0.1)
+    assert derive_latency([(x, J(x, 0.052)) for x in grid]) == pytest.approx(0.052)
+    # bumps of +-40 at the grid's scale (associations flipping) do not move it to a bump: the
+    # lowest J is at 20 ms, the profile's vertex stays within 10 ms of the true 60 ms
+    bumps = [0.0, 40.0, -40.0, 40.0, -40.0, 40.0, 0.0, -40.0, 40.0]
+    bumpy = [(x, J(x, 0.06) + d) for x, d in zip(LATENCIES_S, bumps, strict=True)]
+    bumpy[3] = (bumpy[3][0], min(j for _, j in bumpy) - 1.0)
+    assert abs(derive_latency(bumpy) - 0.06) < 0.01
+    # a profile that does not curve upwards: its lowest J
+    assert derive_latency([(x, -x) for x in LATENCIES_S]) == LATENCIES_S[-1]
+    for bad in ([], [(0.02, 1.0), (0.0, 2.0)], [(0.0, 1.0), (0.02, math.nan)]):
+        with pytest.raises(ConfigError, match="latency profile"):
+            derive_latency(bad)
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_latency_profile_is_j_at_each_latency_and_zero_is_the_plain_run(vp_dir):
+    """On the first 200 scans: the profile's J at 0 is the calibration's J without the
+    setting, to the bit; at 60 ms it differs (each scan is placed at another pose)."""
+    from experiments.io.config_file import load_slam_config, preset_path
+    from experiments.paper.vp_calibration import BASE, START, latency_profile, objective
+
+    seq = load_victoria_park(vp_dir, n_scans=200)
+    steering = load_slam_config(preset_path("victoria_park_ute")).vehicle.steering
+    base = BASE.with_(**{"vehicle.steering": steering})
+    rows = latency_profile(seq, START[:6], base, (0.0, 0.06))
+    assert [lat for lat, _ in rows] == [0.0, 0.06]
+    assert rows[0][1] == objective(seq, START[:6], base)[0]
+    assert rows[1][1] != rows[0][1] and math.isfinite(rows[1][1])

@@ -643,3 +643,44 @@ def test_scans_at_rest_are_skipped_as_if_they_were_not_there():
     assert used.size > 5 and np.all(np.diff(used[used < 12]) == 2)
     with pytest.raises(SlamError, match="vehicle.min_travel_m"):
         VehicleConfig(min_travel_m=-1.0)
+
+
+def test_a_given_prior_overrides_the_configured_start_and_bad_priors_are_errors():
+    """run_slam(prior=...): the filter starts at the caller's pose and covariance (a published
+    protocol's fixed start), even where the sequence has truth and GPS; the log says "given"."""
+    seq = drive_sequence(1.5, 0.0)  # has truth: without a prior the run starts there
+    pose0 = np.array([-5.0, 7.0, 1.0])
+    log = run_slam(seq, features="paper", prior=(pose0, np.zeros((3, 3))))
+    assert log.start == "given"
+    np.testing.assert_array_equal(log.pose[0], pose0)
+    np.testing.assert_array_equal(log.pose_cov[0], np.zeros((3, 3)))
+    # the same odometry from another start: the path is the truth's, moved rigidly
+    assert run_slam(seq, features="paper").start == "truth"
+    for bad in ((np.zeros(2), np.zeros((3, 3))), (pose0, np.eye(2)), (pose0, [[0, 1, 0]] * 3)):
+        with pytest.raises(SlamError, match="prior"):
+            run_slam(seq, features="paper", prior=bad)
+
+
+def test_laser_latency_places_each_scan_at_the_pose_before_its_stamp():
+    """vehicle.laser_latency_s = L: scan k's pose is the truth at its stamp minus L (exact
+    odometry, no returns), the log's times are those measurement times; L = 0 is the run
+    without the setting, to the bit; a latency of a second or more is an error."""
+    base = drive_sequence(1.5, 0.3)
+    seq = dataclasses.replace(base, scan_t=base.scan_t[1:], scan_ranges=base.scan_ranges[1:])
+    latency = (
+        0.05  # a multiple of the truth's 50 ms samples: the truth there is exact, not interpolated
+    )
+    cfg = SlamConfig().with_(**{"vehicle.laser_latency_s": latency})
+    log = run_slam(seq, cfg, features="paper")
+    np.testing.assert_allclose(log.scan_t, seq.scan_t - latency, rtol=0, atol=1e-15)
+    truth = interpolate_poses(seq.scan_t - latency, seq.truth_t, seq.truth_pose)
+    assert np.abs(log.pose - truth).max() < 1e-9
+    at_stamp = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
+    assert np.abs(log.pose[:, :2] - at_stamp[:, :2]).max() > 0.07  # 1.5 m/s x 50 ms
+    plain = run_slam(seq, features="paper")
+    zero = run_slam(seq, SlamConfig().with_(**{"vehicle.laser_latency_s": 0.0}), features="paper")
+    np.testing.assert_array_equal(zero.pose, plain.pose)
+    np.testing.assert_array_equal(zero.scan_t, seq.scan_t)
+    for bad in (1.0, -1.5, math.nan, True):
+        with pytest.raises(SlamError, match="laser_latency_s"):
+            SlamConfig().with_(**{"vehicle.laser_latency_s": bad})
