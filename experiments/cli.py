@@ -707,6 +707,13 @@ def slam_cmd(
     smooth: Annotated[
         bool, typer.Option(help="then re-solve the run with the GTSAM smoother (batch)")
     ] = False,
+    reference_map: Annotated[
+        Path | None,
+        typer.Option(
+            help="score the map against this one (CSV of x,y in metres, the run's frame): "
+            "GOSPA and OSPA at c = 1 and 20 m in summary.json [default: none]"
+        ),
+    ] = None,
 ) -> None:
     """EKF-SLAM over a sequence as its settings say: trajectory (TUM and CSV with covariance),
     map, config.toml (the whole configuration: `--config` with it reproduces the run), summary,
@@ -743,9 +750,13 @@ def slam_cmd(
                 ),
                 ellipse_scale=ellipse_scale,
                 inputs=(config_file,),
+                reference_map=reference_map,
             )
         err = _gps_words(s.get("gps"))
         done = f"{s['n_scans']} scans, {s['landmarks']} landmarks{err}, {s['seconds']:.1f} s"
+        if "reference_map" in s:
+            g = s["reference_map"]["gospa_20m"]
+            done += f", GOSPA {g['distance']:.2f} m (c = 20 m) against the reference map"
         typer.echo(f"{done} -> {out}/")
         if smooth:
             from experiments.pipeline.smooth import smooth_run
