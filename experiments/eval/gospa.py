@@ -32,10 +32,30 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-__all__ = ["GOSPA_SETTINGS", "Gospa", "gospa", "gospa_columns", "ospa"]
+__all__ = [
+    "GOSPA_COLUMNS",
+    "GOSPA_LABELS",
+    "GOSPA_SETTINGS",
+    "Gospa",
+    "gospa",
+    "gospa_columns",
+    "ospa",
+]
 
 # (c m, p, alpha) of the published RFS-SLAM figure and of the 1 m of precision and recall
 GOSPA_SETTINGS = ((1.0, 2.0, 2.0), (20.0, 2.0, 2.0))
+# the keys of `gospa_columns` with the default settings, and their labels for result tables
+GOSPA_LABELS = {
+    f"gospa_{c:g}m{part}": f"GOSPA c = {c:g} m{label}"
+    for c, _, _ in GOSPA_SETTINGS
+    for part, label in (
+        ("", ", m"),
+        ("_localisation", ": localisation, m^2"),
+        ("_missed", ": missed, m^2"),
+        ("_false", ": false, m^2"),
+    )
+}
+GOSPA_COLUMNS = tuple(GOSPA_LABELS)
 
 
 @dataclass(frozen=True)

@@ -286,3 +286,17 @@ def test_g2o_text_reads_back_exactly_and_fills_missing_values_as_readG2o(tmp_pat
     back = read_g2o(again).graph
     for name in read.graph.__dataclass_fields__:
         assert np.array_equal(getattr(back, name), getattr(read.graph, name)), name
+
+
+def test_readG2o_reads_no_factor_after_a_comment(tmp_path):
+    """Why `g2o_text` writes no comment (nor FIX): GTSAM's readG2o stops reading factors at
+    one, though it still reads the vertices after it."""
+    path = tmp_path / "c.g2o"
+    edge = "1 0 0 1 0 0 1 0 1"
+    path.write_text(
+        f"VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 {edge}\n# a comment\n"
+        f"VERTEX_SE2 2 2 0 0\nEDGE_SE2 1 2 {edge}\n"
+    )
+    graph, values = gtsam.readG2o(str(path), False)
+    assert (graph.size(), values.size()) == (1, 3)
+    assert read_g2o(path).graph.n_factors == 2
