@@ -874,6 +874,10 @@ def smooth_cmd(
     associations): trajectory_smoothed.tum/.csv, map_smoothed.csv, smoother.json. Or solve a
     graph file (`export-graph`'s, GTSAM's): its solution as a g2o file (--out)."""
     if run_dir.is_file():
+        if measurements is not SmootherMeasurements.ekf:
+            raise typer.BadParameter(
+                "not for a graph file (its factors are given)", param_hint="--measurements"
+            )
         opts = dict(polish=polish, robust=robust, every=isam2_every, skip=skip_tag)
         return _smooth_graph(run_dir, out, solver, edge_noise=edge_noise, **opts)
     if out is not None or skip_tag or edge_noise is not EdgeNoise.information:
