@@ -962,6 +962,59 @@ def export_graph_cmd(
         )
 
 
+class MapFormat(StrEnum):  # experiments.pipeline.export_map.MAP_FORMATS
+    geojson = "geojson"
+    csv = "csv"
+
+
+@app.command("export-map")
+@handle_errors
+def export_map_cmd(
+    run_dir: Annotated[Path, typer.Argument(help="output folder of `trunkslam slam`")],
+    format: Annotated[
+        MapFormat, typer.Option("--format", help="geojson (points and ellipse polygons) or csv")
+    ] = MapFormat.geojson,
+    out: Annotated[
+        Path | None, typer.Option(help="the file [default: map.geojson or map_export.csv]")
+    ] = None,
+    confidence: Annotated[
+        float, typer.Option(help="the covariance ellipses' confidence, in (0, 1)")
+    ] = 0.95,
+    vertices: Annotated[
+        int, typer.Option(min=3, max=1000, help="points of each ellipse polygon")
+    ] = 36,
+    origin: Annotated[
+        str | None,
+        typer.Option(
+            help="LAT,LON[,ALT]: the GNSS origin of the run's GPS (degrees, m); the map in WGS84 "
+            "longitude and latitude (runs that started from GPS) [default: none, the run's "
+            "frame in metres]"
+        ),
+    ] = None,
+    smoothed: Annotated[
+        bool, typer.Option(help="the smoother's map (map_smoothed.csv) instead of the EKF's")
+    ] = False,
+) -> None:
+    """Write a run's map for GIS and plotting tools: GeoJSON or CSV with the frame named, each
+    landmark's covariance as an ellipse (polygon in GeoJSON, axes in CSV)."""
+    from experiments.pipeline.export_map import export_map
+
+    lla = (
+        None if origin is None else _numbers("--origin", origin, 3 if origin.count(",") > 1 else 2)
+    )
+    path = out or Path("map.geojson" if format is MapFormat.geojson else "map_export.csv")
+    done = export_map(
+        run_dir,
+        path,
+        format.value,
+        confidence=confidence,
+        vertices=vertices,
+        origin=lla,
+        smoothed=smoothed,
+    )
+    typer.echo(f"{done['landmarks']} landmarks ({done['map']}, frame {done['frame']}) -> {path}")
+
+
 def _smoother_progress(progress):
     """The smoother's stages as progress tasks; iSAM2 every 50th update."""
 
