@@ -93,9 +93,10 @@ class _Builder:
         i, j = _id(v[0], where), _id(v[1], where)
         if tag in EDGE_TAGS:
             info = np.array([[v[5], v[6], v[7]], [v[6], v[8], v[9]], [v[7], v[9], v[10]]])
+            if np.linalg.eigvalsh(info).min() <= 0:
+                what = "covariance" if self.covariance else "information matrix"
+                raise DataError(f"{where}: {tag}: not a positive definite {what}")
             if self.covariance:
-                if np.linalg.eigvalsh(info).min() <= 0:
-                    raise DataError(f"{where}: {tag}: not a positive definite covariance")
                 info = np.linalg.inv(info)
             self.odo.append((i, j, np.array(v[2:5]), info))
             self.pose.setdefault(i, np.zeros(3))
@@ -110,6 +111,8 @@ class _Builder:
             bearing, rng = math.atan2(v[3], v[2]), math.hypot(v[2], v[3])
             same = abs(v[4] - v[6]) < 1e-4
             sigma = (math.sqrt(v[4] / 10.0), math.sqrt(v[4])) if same else (1.0, 1.0)
+        if not (rng > 0 and min(sigma) > 0):
+            raise DataError(f"{where}: {tag}: the range and standard deviations must be > 0")
         self.br.append((i, j, bearing, rng, sigma))
         p = self.pose.setdefault(i, np.zeros(3))
         if j not in self.landmark:

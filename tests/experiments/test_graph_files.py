@@ -206,8 +206,9 @@ def test_victoria_park_solves_to_gtsams_own_batch_error(victoria_park_head):
         ("VERTEX_SE2 0.5 0 0 0\n", r"line 1: id 0.5 is not an integer"),
         ("VERTEX_SE2 0 0 0 0\nFIX 3\n", r"FIX 3: no such pose"),
         ("VERTEX_XY 0 0 0\n", r"no pose"),
-        ("EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", r"odo_info\[0\]: not a symmetric positive"),
-        ("BR 0 1 0.1 5 0 0.1\n", r"br_sigma"),
+        ("EDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n", r"line 1: EDGE_SE2: not a positive definite info"),
+        ("BR 0 1 0.1 5 0 0.1\n", r"line 1: BR: the range and standard deviations must be > 0"),
+        ("BR 0 1 0.1 -5 1 0.1\n", r"line 1: BR: the range"),
     ],
 )
 def test_a_bad_graph_file_is_a_clear_error(tmp_path, text, message):
