@@ -962,6 +962,11 @@ def export_graph_cmd(
         )
 
 
+class MapFrame(StrEnum):  # experiments.io.map_export.MAP_FRAMES
+    local = "local"
+    wgs84 = "wgs84"
+
+
 class MapFormat(StrEnum):  # experiments.pipeline.export_map.MAP_FORMATS
     geojson = "geojson"
     csv = "csv"
@@ -983,12 +988,18 @@ def export_map_cmd(
     vertices: Annotated[
         int, typer.Option(min=3, max=1000, help="points of each ellipse polygon")
     ] = 36,
+    frame: Annotated[
+        MapFrame,
+        typer.Option(
+            help="local: the run's frame, metres; wgs84: longitude and latitude (runs that "
+            "started from GPS; about the sequence's gps_origin or --origin)"
+        ),
+    ] = MapFrame.local,
     origin: Annotated[
         str | None,
         typer.Option(
-            help="LAT,LON[,ALT]: the GNSS origin of the run's GPS (degrees, m); the map in WGS84 "
-            "longitude and latitude (runs that started from GPS) [default: none, the run's "
-            "frame in metres]"
+            help="LAT,LON[,ALT]: the GNSS origin of the run's GPS (degrees, m) for --frame "
+            "wgs84 [default: the run's sequence's gps_origin]"
         ),
     ] = None,
     smoothed: Annotated[
@@ -1009,6 +1020,7 @@ def export_map_cmd(
         format.value,
         confidence=confidence,
         vertices=vertices,
+        frame=frame.value,
         origin=lla,
         smoothed=smoothed,
     )

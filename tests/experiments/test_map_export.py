@@ -4,10 +4,10 @@ frame named, covariance ellipses as polygons."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import os
-import shutil
 
 import numpy as np
 import pytest
@@ -18,6 +18,7 @@ from experiments.errors import DataError
 from experiments.io.map_export import ellipse_polygon, read_map_csv, wgs84_from_local
 from experiments.io.results import MAP_COLUMNS
 from experiments.io.rosbag import local_metres
+from experiments.io.sequence_file import load_sequence, save_sequence
 
 runner = CliRunner()
 
@@ -122,34 +123,55 @@ def test_geojson_and_csv_hold_the_map_and_its_ellipses(run_dir, tmp_path):
         assert a >= b and float(r["confidence"]) == 0.5
 
 
+@pytest.fixture(scope="module")
+def gps_run(run_dir, tmp_path_factory):
+    """The same drive without its truth, so that the run starts from GPS, and with a GNSS
+    origin as the rosbag converter keeps one."""
+    tmp = tmp_path_factory.mktemp("gps_run")
+    seq = load_sequence(json.loads((run_dir / "summary.json").read_text())["input"])
+    blind = dataclasses.replace(
+        seq, truth_t=None, truth_pose=None, truth_landmarks=None, scan_labels=None,
+        gps_origin=np.array(ORIGIN),
+    )  # fmt: skip
+    save_sequence(blind, tmp / "gps.npz")
+    assert load_sequence(tmp / "gps.npz").gps_origin.tolist() == list(ORIGIN)
+    out = tmp / "out"
+    res = runner.invoke(app, ["slam", str(tmp / "gps.npz"), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert json.loads((out / "summary.json").read_text())["start"] == "gps"
+    return out
+
+
+ORIGIN = (48.1, 11.5, 520.0)
+
+
 @pytest.mark.slow
-def test_wgs84_only_for_a_run_that_started_from_gps(run_dir, tmp_path):
-    res = runner.invoke(app, ["export-map", str(run_dir), "--origin", "48.1,11.5",
-                              "--out", str(tmp_path / "w.geojson")])  # fmt: skip
+def test_wgs84_only_for_a_run_that_started_from_gps(run_dir, gps_run, tmp_path):
+    res = runner.invoke(app, ["export-map", str(run_dir), "--frame", "wgs84", "--origin",
+                              "48.1,11.5", "--out", str(tmp_path / "w.geojson")])  # fmt: skip
     assert res.exit_code == 1 and "started from 'truth', not from GPS" in res.output
-    # the same map as if the run had started from GPS (its frame then the GPS's)
-    gps_run = tmp_path / "gps_run"
-    shutil.copytree(run_dir, gps_run)
-    s = json.loads((gps_run / "summary.json").read_text())
-    (gps_run / "summary.json").write_text(json.dumps({**s, "start": "gps"}))
+    # the sequence's gps_origin
     path = tmp_path / "w.geojson"
-    res = runner.invoke(app, ["export-map", str(gps_run), "--origin", "48.1,11.5,520",
-                              "--out", str(path)])  # fmt: skip
+    res = runner.invoke(app, ["export-map", str(gps_run), "--frame", "wgs84", "--out", str(path)])
     assert res.exit_code == 0, res.output
     doc = json.loads(path.read_text())
     assert doc["frame"]["name"] == "wgs84"
-    assert doc["frame"]["gnss_origin_lat_lon_alt"] == [48.1, 11.5, 520.0]
+    assert doc["frame"]["gnss_origin_lat_lon_alt"] == list(ORIGIN)
     m = read_map_csv(gps_run / "map.csv")
     lonlat = np.array([f["geometry"]["coordinates"] for f in doc["features"][::2]])
-    back = local_metres(lonlat[:, 1], lonlat[:, 0], 48.1, 11.5, 520.0)
+    back = local_metres(lonlat[:, 1], lonlat[:, 0], *ORIGIN)
     assert np.abs(back - m.xy).max() < 1e-4  # 1e-10 degrees written: about 1e-5 m
-    res = runner.invoke(app, ["export-map", str(gps_run), "--format", "csv", "--origin",
-                              "48.1,11.5", "--out", str(tmp_path / "w.csv")])  # fmt: skip
+    # --origin instead of the sequence's
+    args = ["--format", "csv", "--frame", "wgs84", "--origin", "-33.9,151.2"]
+    res = runner.invoke(app, ["export-map", str(gps_run), *args, "--out", str(tmp_path / "w.csv")])
     rows = list(csv.DictReader((tmp_path / "w.csv").open()))
-    assert float(rows[0]["lat_deg"]) == pytest.approx(48.1, abs=0.01)
+    assert float(rows[0]["lat_deg"]) == pytest.approx(-33.9, abs=0.01)
+    res = runner.invoke(app, ["export-map", str(gps_run), "--origin", "48,11",
+                              "--out", str(tmp_path / "b.geojson")])  # fmt: skip
+    assert res.exit_code == 1 and "give --frame wgs84 with it" in res.output
     for bad in ("91,0", "48,11,x", "48"):
-        res = runner.invoke(app, ["export-map", str(gps_run), "--origin", bad,
-                                  "--out", str(tmp_path / "b.geojson")])  # fmt: skip
+        res = runner.invoke(app, ["export-map", str(gps_run), "--frame", "wgs84", "--origin",
+                                  bad, "--out", str(tmp_path / "b.geojson")])  # fmt: skip
         assert res.exit_code in (1, 2) and "origin" in res.output, bad
 
 
@@ -170,3 +192,23 @@ def test_export_map_refuses_bad_places_and_values(run_dir, tmp_path):
     assert res.exit_code == 1 and "symbolic link" in res.output and target.read_text() == "keep"
     res = runner.invoke(app, ["export-map", str(run_dir), "--format", "kml"])
     assert res.exit_code == 2
+
+
+def test_a_sequence_checks_its_gnss_origin():
+    from support import full_kwargs
+
+    from slam import Sequence, SlamError
+
+    kw = full_kwargs()
+    assert Sequence(**kw).gps_origin.tolist() == [-33.89, 151.19, 12.0]
+    for bad, message in (
+        ([90.0, 0.0, 0.0], "latitude within"),
+        ([0.0, 181.0, 0.0], "longitude within"),
+        ([0.0, 0.0], "expected shape"),
+        ([0.0, np.nan, 0.0], "gps_origin"),
+    ):
+        with pytest.raises(SlamError, match=message):
+            Sequence(**{**kw, "gps_origin": bad})
+    no_gps = {**kw, "gps_t": None, "gps_xy": None, "gps_pose": None}
+    with pytest.raises(SlamError, match="no gps_t"):
+        Sequence(**no_gps)
