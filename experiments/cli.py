@@ -79,6 +79,11 @@ class SmootherMeasurements(StrEnum):
     all = "all"
 
 
+class EdgeNoise(StrEnum):  # experiments.io.g2o.EDGE_NOISE
+    information = "information"
+    covariance = "covariance"
+
+
 class LineTest(StrEnum):
     lrt = "lrt"
     paper = "paper"
@@ -745,6 +750,13 @@ def slam_cmd(
     smooth: Annotated[
         bool, typer.Option(help="then re-solve the run with the GTSAM smoother (batch)")
     ] = False,
+    reference_map: Annotated[
+        Path | None,
+        typer.Option(
+            help="score the map against this one (CSV of x,y in metres, the run's frame): "
+            "GOSPA and OSPA at c = 1 and 20 m in summary.json [default: none]"
+        ),
+    ] = None,
 ) -> None:
     """EKF-SLAM over a sequence as its settings say: trajectory (TUM and CSV with covariance),
     map, config.toml (the whole configuration: `--config` with it reproduces the run), summary,
@@ -781,9 +793,13 @@ def slam_cmd(
                 ),
                 ellipse_scale=ellipse_scale,
                 inputs=(config_file,),
+                reference_map=reference_map,
             )
         err = _gps_words(s.get("gps"))
         done = f"{s['n_scans']} scans, {s['landmarks']} landmarks{err}, {s['seconds']:.1f} s"
+        if "reference_map" in s:
+            g = s["reference_map"]["gospa_20m"]
+            done += f", GOSPA {g['distance']:.2f} m (c = 20 m) against the reference map"
         typer.echo(f"{done} -> {out}/")
         if smooth:
             from experiments.pipeline.smooth import smooth_run
@@ -847,7 +863,13 @@ def _echo_smoothed(s: dict) -> None:
 @app.command("smooth")
 @handle_errors
 def smooth_cmd(
-    run_dir: Annotated[Path, typer.Argument(help="output folder of `trunkslam slam`")],
+    run_dir: Annotated[
+        Path,
+        typer.Argument(
+            help="output folder of `trunkslam slam`, or a 2D graph file in GTSAM's g2o "
+            "conventions (.g2o; see docs/graph-files.md)"
+        ),
+    ],
     solver: Annotated[
         SmootherSolver, typer.Option(help="batch Levenberg-Marquardt, or iSAM2 fed scan by scan")
     ] = SmootherSolver.batch,
@@ -866,9 +888,41 @@ def smooth_cmd(
     covariances: Annotated[
         bool, typer.Option(help="marginal covariances of every pose and landmark")
     ] = True,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            help="a graph file's solution (g2o) [default: GRAPH_smoothed.g2o beside it]; not "
+            "for a run folder"
+        ),
+    ] = None,
+    skip_tag: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="a graph file's lines of this tag are passed over (as GTSAM's readG2o passes "
+            "over every tag it does not know; repeatable) [default: none, an unknown tag is an "
+            "error]"
+        ),
+    ] = None,
+    edge_noise: Annotated[
+        EdgeNoise,
+        typer.Option(help="what a graph file's six odometry noise numbers are (g2o: information)"),
+    ] = EdgeNoise.information,
 ) -> None:
     """Re-solve a `trunkslam slam` run with the GTSAM smoother (same odometry, measurements and
-    associations): trajectory_smoothed.tum/.csv, map_smoothed.csv, smoother.json."""
+    associations): trajectory_smoothed.tum/.csv, map_smoothed.csv, smoother.json. Or solve a
+    graph file (`export-graph`'s, GTSAM's): its solution as a g2o file (--out)."""
+    if run_dir.is_file():
+        if measurements is not SmootherMeasurements.ekf:
+            raise typer.BadParameter(
+                "not for a graph file (its factors are given)", param_hint="--measurements"
+            )
+        opts = dict(polish=polish, robust=robust, every=isam2_every, skip=skip_tag)
+        return _smooth_graph(run_dir, out, solver, edge_noise=edge_noise, **opts)
+    if out is not None or skip_tag or edge_noise is not EdgeNoise.information:
+        raise typer.BadParameter(
+            "--out, --skip-tag and --edge-noise are for a graph file, not a run folder",
+            param_hint="RUN_DIR",
+        )
     from experiments.pipeline.smooth import smooth_run
     from experiments.render.progress import Progress
     from slam.smoother import SmootherOptions
@@ -883,6 +937,132 @@ def smooth_cmd(
     with Progress() as progress:
         summary = smooth_run(run_dir, options, measurements.value, _smoother_progress(progress))
     _echo_smoothed(summary)
+
+
+def _smooth_graph(path, out, solver, *, polish, robust, every, skip, edge_noise) -> None:
+    """`trunkslam smooth GRAPH_FILE`: batch, or iSAM2 fed `every` poses per update."""
+    from experiments.pipeline.graph import smooth_graph_file
+
+    if robust is not Robust.none:
+        raise typer.BadParameter("not for a graph file (no robust kernel)", param_hint="--robust")
+    s = smooth_graph_file(
+        path,
+        out,
+        method="batch" if solver is SmootherSolver.batch else "isam2-chunks",
+        chunk_poses=every,
+        polish=polish,
+        skip=tuple(skip or ()),
+        edge_noise=edge_noise.value,
+    )
+    chi2 = "n/a" if s["chi2_per_dof"] is None else f"{s['chi2_per_dof']:.3f}"
+    skipped = "".join(f", {n} {tag} lines skipped" for tag, n in s["skipped"].items())
+    typer.echo(
+        f"{s['poses']} poses, {s['landmarks']} landmarks, {s['factors']} factors{skipped}; "
+        f"{s['method']}: chi2 {s['chi2']:.6g} (initial {s['initial_chi2']:.6g}), chi2/dof "
+        f"{chi2} after {s['iterations']} iterations, {s['seconds']:.1f} s -> {s['out']}"
+    )
+
+
+class GraphFormat(StrEnum):  # experiments.pipeline.graph.GRAPH_FORMATS
+    g2o = "g2o"
+
+
+@app.command("export-graph")
+@handle_errors
+def export_graph_cmd(
+    run_dir: Annotated[Path, typer.Argument(help="output folder of `trunkslam slam`")],
+    format: Annotated[
+        GraphFormat, typer.Option("--format", help="g2o: GTSAM's readG2o conventions")
+    ] = GraphFormat.g2o,
+    out: Annotated[Path, typer.Option(help="the graph file")] = Path("graph.g2o"),
+    measurements: Annotated[
+        SmootherMeasurements,
+        typer.Option(
+            help="ekf: the measurements the filter used; all: also the tentative sightings of "
+            "mapped landmarks"
+        ),
+    ] = SmootherMeasurements.ekf,
+) -> None:
+    """Write a run's pose-landmark graph (the laser's poses, odometry and range-bearing factors
+    with their noise, the associations as run, closures included) as a graph file that GTSAM's
+    readG2o, g2o and `trunkslam smooth` read."""
+    from experiments.pipeline.graph import export_graph
+
+    g = export_graph(run_dir, out, format.value, measurements.value)
+    typer.echo(
+        f"{g.poses} poses, {g.landmarks} landmarks, {g.odometry} odometry and {g.measurements} "
+        f"bearing-range factors -> {g.path}"
+    )
+    if g.correlated:
+        typer.echo(
+            f"note: {g.correlated} measurements have a range-bearing correlation; a BR line "
+            "carries none: written with their marginal standard deviations"
+        )
+
+
+class MapFrame(StrEnum):  # experiments.io.map_export.MAP_FRAMES
+    local = "local"
+    wgs84 = "wgs84"
+
+
+class MapFormat(StrEnum):  # experiments.pipeline.export_map.MAP_FORMATS
+    geojson = "geojson"
+    csv = "csv"
+
+
+@app.command("export-map")
+@handle_errors
+def export_map_cmd(
+    run_dir: Annotated[Path, typer.Argument(help="output folder of `trunkslam slam`")],
+    format: Annotated[
+        MapFormat, typer.Option("--format", help="geojson (points and ellipse polygons) or csv")
+    ] = MapFormat.geojson,
+    out: Annotated[
+        Path | None, typer.Option(help="the file [default: map.geojson or map_export.csv]")
+    ] = None,
+    confidence: Annotated[
+        float, typer.Option(help="the covariance ellipses' confidence, in (0, 1)")
+    ] = 0.95,
+    vertices: Annotated[
+        int, typer.Option(min=3, max=1000, help="points of each ellipse polygon")
+    ] = 36,
+    frame: Annotated[
+        MapFrame,
+        typer.Option(
+            help="local: the run's frame, metres; wgs84: longitude and latitude (runs that "
+            "started from GPS; about the sequence's gps_origin or --origin)"
+        ),
+    ] = MapFrame.local,
+    origin: Annotated[
+        str | None,
+        typer.Option(
+            help="LAT,LON[,ALT]: the GNSS origin of the run's GPS (degrees, m) for --frame "
+            "wgs84 [default: the run's sequence's gps_origin]"
+        ),
+    ] = None,
+    smoothed: Annotated[
+        bool, typer.Option(help="the smoother's map (map_smoothed.csv) instead of the EKF's")
+    ] = False,
+) -> None:
+    """Write a run's map for GIS and plotting tools: GeoJSON or CSV with the frame named, each
+    landmark's covariance as an ellipse (polygon in GeoJSON, axes in CSV)."""
+    from experiments.pipeline.export_map import export_map
+
+    lla = (
+        None if origin is None else _numbers("--origin", origin, 3 if origin.count(",") > 1 else 2)
+    )
+    path = out or Path("map.geojson" if format is MapFormat.geojson else "map_export.csv")
+    done = export_map(
+        run_dir,
+        path,
+        format.value,
+        confidence=confidence,
+        vertices=vertices,
+        frame=frame.value,
+        origin=lla,
+        smoothed=smoothed,
+    )
+    typer.echo(f"{done['landmarks']} landmarks ({done['map']}, frame {done['frame']}) -> {path}")
 
 
 def _smoother_progress(progress):

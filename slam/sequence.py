@@ -83,6 +83,7 @@ OPTIONAL = (
     "gps_t",
     "gps_xy",
     "gps_pose",
+    "gps_origin",
     "truth_t",
     "truth_pose",
     "truth_landmarks",
@@ -162,6 +163,23 @@ def _scalar(name: str, value, *, allow_inf: bool = False) -> float:
     if math.isnan(v) or (math.isinf(v) and not allow_inf):
         raise SlamError(f"Sequence.{name}: must be finite, got {v!r}")
     return v
+
+
+def _gnss_origin(value, has_gps: bool) -> np.ndarray:
+    """gps_origin (3,) [lat deg, lon deg, alt m]: within +-89 deg (the local projection divides
+    by the cosine of the latitude), +-180 deg and +-1e5 m; only beside GPS fixes."""
+    o = _arr("gps_origin", value, 1)
+    if o.shape != (3,):
+        raise SlamError(f"Sequence.gps_origin: expected shape (3,) [lat, lon, alt], got {o.shape}")
+    _fin("gps_origin", o)
+    if not (abs(o[0]) <= 89.0 and abs(o[1]) <= 180.0 and abs(o[2]) <= 1e5):
+        raise SlamError(
+            "Sequence.gps_origin: latitude within +-89 deg, longitude within +-180 deg and "
+            f"altitude within +-1e5 m, got {o.tolist()}"
+        )
+    if not has_gps:
+        raise SlamError("Sequence.gps_origin: the origin of GPS fixes, but there is no gps_t")
+    return o
 
 
 def _pose(name: str, value) -> np.ndarray:
@@ -431,7 +449,8 @@ class Sequence:
         "encoder_offset_m": 0.76} or its JSON text is accepted and made one (encoder_offset_m
         defaults to 0).
       gps_t (G,) s, gps_xy (G, 2) m world, both or neither; gps_pose (3,) antenna in the vehicle
-        frame (the laser's position when absent).
+        frame (the laser's position when absent); gps_origin (3,) [latitude deg, longitude deg,
+        altitude m] (WGS84) that gps_xy's east and north metres are measured from, with gps_t.
       truth_t (T,) s, truth_pose (T, 3) [x, y, theta] of the rear-axle centre, world frame, both
         or neither.
       truth_landmarks (L, 3) [x, y, r] m, world frame, r > 0.
@@ -464,6 +483,7 @@ class Sequence:
     gps_t: np.ndarray | None = None
     gps_xy: np.ndarray | None = None
     gps_pose: np.ndarray | None = None
+    gps_origin: np.ndarray | None = None
     truth_t: np.ndarray | None = None
     truth_pose: np.ndarray | None = None
     truth_landmarks: np.ndarray | None = None
@@ -603,6 +623,8 @@ class Sequence:
             put(name, v)
         if self.gps_pose is not None:
             put("gps_pose", _pose("gps_pose", self.gps_pose))
+        if self.gps_origin is not None:
+            put("gps_origin", _gnss_origin(self.gps_origin, self.gps_t is not None))
 
         for name, v in _timed_pair("truth_t", self.truth_t, "truth_pose", self.truth_pose, 3):
             put(name, v)

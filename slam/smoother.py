@@ -41,6 +41,7 @@ exactly the poses' 3 N).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -52,6 +53,7 @@ import gtsam
 import numpy as np
 
 from slam.errors import SlamError
+from slam.graph import PoseGraph2D
 from slam.log import CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT, SlamLog
 
 __all__ = [
@@ -62,9 +64,11 @@ __all__ = [
     "Problem",
     "SmootherOptions",
     "SmootherResult",
+    "pose_graph_factors",
     "problem_from_log",
     "smooth",
     "solve_graph_file",
+    "solve_pose_graph",
 ]
 
 # Problem.meas_kind: what the EKF did with each measurement.
@@ -659,24 +663,83 @@ def solve_graph_file(
     landmark at its first bearing-range measurement). polish: a batch Levenberg-Marquardt after
     iSAM2. The first pose gets a prior (sigma 1e-6) that fixes the gauge and adds no error.
     """
-    if method not in GRAPH_METHODS:
-        raise SlamError(f"method: expected one of {list(GRAPH_METHODS)}, got {method!r}")
-    if isinstance(chunk_poses, bool) or not isinstance(chunk_poses, int) or chunk_poses < 1:
-        raise SlamError(f"chunk_poses: expected an integer >= 1, got {chunk_poses!r}")
+    _check_method(method, chunk_poses)
     path = Path(path)
     if not path.is_file():
         raise SlamError(f"{path}: no such graph file")
     graph, values = gtsam.load2D(str(path))
+    if not values.size() or not graph.size():
+        raise SlamError(f"{path}: no poses or no factors read (not a GTSAM 2D graph file?)")
+    return _solve_loaded(graph, values, method, chunk_poses, polish=polish)
+
+
+def _check_method(method: str, chunk_poses: int) -> None:
+    if method not in GRAPH_METHODS:
+        raise SlamError(f"method: expected one of {list(GRAPH_METHODS)}, got {method!r}")
+    if isinstance(chunk_poses, bool) or not isinstance(chunk_poses, int) or chunk_poses < 1:
+        raise SlamError(f"chunk_poses: expected an integer >= 1, got {chunk_poses!r}")
+
+
+def solve_pose_graph(
+    pg: PoseGraph2D,
+    method: str = "batch",
+    chunk_poses: int = 25,
+    polish: bool = True,
+    fixed: int | None = None,
+) -> GraphResult:
+    """Solve a `slam.graph.PoseGraph2D` (e.g. a g2o file read by `experiments.io.g2o`) as
+    `solve_graph_file` solves a file: the same factors GTSAM's `readG2o` makes of it (keys: pose
+    id i, landmark id l as L(l)), and a prior (sigma 1e-6) on pose `fixed` (None: the pose of
+    lowest id) at its starting value to fix the gauge. The result's landmark_id are the graph's
+    ids, not GTSAM keys."""
+    if not isinstance(pg, PoseGraph2D):
+        raise SlamError(f"graph: expected a slam.graph.PoseGraph2D, got {type(pg).__name__}")
+    _check_method(method, chunk_poses)
+    if fixed is not None and fixed not in set(pg.pose_id.tolist()):
+        raise SlamError(f"fixed: pose {fixed} is not in the graph")
+    graph, values = pose_graph_factors(pg)
+    if not graph.size():
+        raise SlamError("graph: no factors")
+    r = _solve_loaded(graph, values, method, chunk_poses, polish=polish, fixed=fixed)
+    lid = np.array([gtsam.Symbol(int(k)).index() for k in r.landmark_id], np.int64)
+    return dataclasses.replace(r, landmark_id=lid)
+
+
+def pose_graph_factors(pg: PoseGraph2D) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+    """The GTSAM graph and starting values of `pg`: BetweenFactorPose2 with the information
+    matrices and BearingRangeFactor2D with diagonal sigmas, in the order readG2o makes them of
+    a file with the odometry lines first; poses keyed by their id, landmarks by L(id)."""
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    for i, p in zip(pg.pose_id, pg.pose):
+        values.insert(int(i), gtsam.Pose2(*p))
+    for i, xy in zip(pg.landmark_id, pg.landmark_xy):
+        values.insert(_landmark_key(int(i)), np.asarray(xy, dtype=np.float64))
+    for i, j, d, info in zip(pg.odo_from, pg.odo_to, pg.odo_delta, pg.odo_info):
+        noise = gtsam.noiseModel.Gaussian.Information(0.5 * (info + info.T), True)
+        graph.add(gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(*d), noise))
+    for i, j, b, r, sig in zip(pg.br_pose, pg.br_landmark, pg.br_bearing, pg.br_range, pg.br_sigma):
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sig, dtype=np.float64))
+        graph.add(
+            gtsam.BearingRangeFactor2D(
+                int(i), _landmark_key(int(j)), gtsam.Rot2(float(b)), float(r), noise
+            )
+        )
+    return graph, values
+
+
+def _solve_loaded(graph, values, method: str, chunk_poses: int, *, polish: bool, fixed=None):
+    """`solve_graph_file`'s solve of a loaded graph and its starting values."""
     n_factors, n_values = int(graph.size()), int(values.size())
     poses = sorted(k for k in values.keys() if _is_pose(values, k))
     landmarks = sorted(k for k in values.keys() if not _is_pose(values, k))
-    if not poses or not n_factors:
-        raise SlamError(f"{path}: no poses or no factors read (not a GTSAM 2D graph file?)")
+    if not poses:
+        raise SlamError("graph: no poses")
+    gauge = poses[0] if fixed is None else int(fixed)
     dims = sum(graph.at(i).dim() for i in range(n_factors))
     dof = dims - 3 * len(poses) - 2 * len(landmarks) + 3
     initial_chi2 = 2.0 * graph.error(values)
     prior = gtsam.PriorFactorPose2(
-        poses[0], values.atPose2(poses[0]), gtsam.noiseModel.Isotropic.Sigma(3, 1e-6)
+        gauge, values.atPose2(gauge), gtsam.noiseModel.Isotropic.Sigma(3, 1e-6)
     )
     full = gtsam.NonlinearFactorGraph(graph)
     full.add(prior)
@@ -735,7 +798,7 @@ def _isam2_graph(graph, values, poses, prior, chunk: int) -> gtsam.Values:
         buckets[max(rank[k] for k in keys if k in rank)].append(f)
         if isinstance(f, gtsam.BetweenFactorPose2) and all(k in rank for k in keys):
             odometry[keys[1]] = (keys[0], f.measured())
-    buckets[0].append(prior)
+    buckets[rank[prior.keys()[0]]].append(prior)
     isam = gtsam.ISAM2(gtsam.ISAM2Params())
     current = {poses[0]: values.atPose2(poses[0])}
     known = set()

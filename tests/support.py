@@ -36,6 +36,7 @@ def full_kwargs() -> dict:
         gps_t=np.array([10.0, 10.5, 11.0]),
         gps_xy=np.array([[0.0, 1.0], [1.0, 1.5], [2.0, 2.0]]),
         gps_pose=[1.0, 0.0, 0.0],
+        gps_origin=[-33.89, 151.19, 12.0],
         truth_t=np.arange(N) * 0.2 + 10.0,
         truth_pose=rng.normal(size=(N, 3)),
         truth_landmarks=np.array([[5.0, 1.0, 0.2], [8.0, -2.0, 0.35]]),

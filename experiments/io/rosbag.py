@@ -16,7 +16,8 @@ bare MCAP file, read with the pure-Python `rosbags` library (no ROS install).
   pose.pose (datasets/FORMAT.md, "The vehicle"; the filter's models are `slam.motion`).
 - `sensor_msgs/NavSatFix` (optional, `gps=`) -> `gps_t`, `gps_xy`: local metres, x east and y
   north, by `local_metres` (an equirectangular projection about the first fix, error bound
-  there). Fixes with status < 0 (no fix) or a non-finite position are dropped and counted.
+  there), and `gps_origin`: that fix's latitude, longitude and altitude. Fixes with status
+  < 0 (no fix) or a non-finite position are dropped and counted.
   The fixes' `position_covariance` is **not kept**: the sequence format has no place for a GPS
   covariance (`gps_xy` only; a run's start takes its GPS uncertainty from the configuration's
   `[start] gps_sigma_m`).
@@ -674,6 +675,7 @@ def _gps_fields(fixes, seconds, tf, base) -> tuple[dict, int]:
     stamp, lat, lon, alt = (np.array(c) for c in zip(*fixes.kept))
     h0 = float(alt[0]) if math.isfinite(alt[0]) else 0.0
     out = {"gps_t": seconds(stamp), "gps_xy": local_metres(lat, lon, lat[0], lon[0], h0)}
+    out["gps_origin"] = np.array([lat[0], lon[0], h0])  # export-map's WGS84 frame
     T = None
     if tf is not None and fixes.frame:
         T = next((t for b in base if (t := tf.chain(b, fixes.frame)) is not None), None)

@@ -51,6 +51,7 @@ SCHEMA: dict[str, Var] = {
     "gps_t": Var("float", ("G",)),
     "gps_xy": Var("float", ("G", 2)),
     "gps_pose": Var("float", (3,)),
+    "gps_origin": Var("float", (3,)),
     "truth_t": Var("float", ("T",)),
     "truth_pose": Var("float", ("T", 3)),
     "truth_landmarks": Var("float", ("L", 3)),

@@ -54,6 +54,7 @@ from typing import NamedTuple
 import numpy as np
 
 from experiments.eval.detections import dominant_label, false_detections, run_labels
+from experiments.eval.gospa import GOSPA_COLUMNS, GOSPA_LABELS, gospa_columns
 from experiments.eval.poses import consistency as consistency_figures
 from experiments.eval.poses import nees, nees_bounds, pose_errors
 from experiments.eval.series import slam_panels, slam_series
@@ -260,7 +261,9 @@ class Exp2Results:
     abs_err (R, 3): the run's mean |dx|, |dy|, |dtheta|. nees (R, N): NaN at scan 0.
     nis, nis_dof (R, N): batch NIS of each scan and its dof (0: no update). detected, false
     (R, N): circles per scan. map_size, map_on_trees (R,): final landmarks, and how many lie
-    within false_match_m of a tree. time_slam, time_extract (R,): mean seconds per scan.
+    within false_match_m of a tree. gospa: {GOSPA_COLUMNS name: (R,)} the final map's GOSPA
+    against all the scene's trees (`experiments.eval.gospa.gospa_columns`). time_slam,
+    time_extract (R,): mean seconds per scan.
     logs0: the SlamLog of run 0 per method; seq0: run 0's sequence.
     sm_abs_err (R, 3), sm_nees (R, N), time_smoother (R,): the same for the GTSAM smoother of
     each run (empty when `config.smoother` is off); sm_pose0: its path of run 0 per method.
@@ -275,6 +278,7 @@ class Exp2Results:
     false: dict = field(default_factory=dict)
     map_size: dict = field(default_factory=dict)
     map_on_trees: dict = field(default_factory=dict)
+    gospa: dict = field(default_factory=dict)
     time_slam: dict = field(default_factory=dict)
     time_extract: dict = field(default_factory=dict)
     logs0: dict = field(default_factory=dict)
@@ -360,6 +364,7 @@ def slam_trial(job: tuple[Exp2Config, int, bool], seed) -> dict:
                 lg.landmark_xy[:, None, 1] - lm[None, :, 1],
             )
             o["map_on_trees"] = int(np.sum(d.min(axis=1) <= cfg.false_match_m))
+        o["gospa"] = gospa_columns(lg.landmark_xy, lm[:, :2])
         if keep and name == m:
             o["log0"] = lg
         out["runs"][name] = o
@@ -388,6 +393,7 @@ def monte_carlo(
             d[name] = np.zeros((R, N), np.int64)
         for d in (res.map_size, res.map_on_trees):
             d[name] = np.zeros(R, np.int64)
+        res.gospa[name] = {k: np.zeros(R) for k in GOSPA_COLUMNS}
         res.time_slam[name] = np.zeros(R)
         res.time_extract[name] = np.zeros(R)
         if cfg.smoother:
@@ -423,6 +429,8 @@ def monte_carlo(
                 res.detected[name][r], res.false[name][r] = o["detected"], o["false"]
             res.map_size[name][r] = o["map_size"]
             res.map_on_trees[name][r] = o["map_on_trees"]
+            for k in GOSPA_COLUMNS:
+                res.gospa[name][k][r] = o["gospa"][k]
             if "log0" in o:
                 res.logs0[name] = o["log0"]
         if r == 0:
@@ -642,6 +650,7 @@ def consistency_records(res: Exp2Results) -> list[dict]:
                 "landmarks": float(res.map_size[name].mean()),
                 "landmarks_on_trees": float(res.map_on_trees[name].mean()),
                 "ms_per_scan": 1e3 * float(res.time_slam[name].mean()),
+                **{k: float(v.mean()) for k, v in res.gospa[name].items()},
             }
         )
     return rows
@@ -655,7 +664,10 @@ def _consistency_notes(res: Exp2Results) -> str:
         "0.9). NIS: per scan, the batch NIS summed over the runs against the chi-square bounds "
         "of the summed degrees of freedom; NIS per dof is the overall ratio (1 when "
         "consistent). Landmarks: final map size (mean over runs), and how many lie within "
-        f"{cfg.false_match_m} m of a tree. ms per scan: the filter alone (prediction, "
+        f"{cfg.false_match_m} m of a tree; GOSPA (p = 2, alpha = 2; c = 1 m and the RFS-SLAM "
+        "papers' c = 20 m) of the final map against all the scene's trees, mean over runs, "
+        "with its localisation, missed and false parts in m^2 (in each run they add up to its "
+        "square; experiments/eval/gospa.py). ms per scan: the filter alone (prediction, "
         "association, update, map management), features extracted beforehand. Rows after the "
         "three methods are variants that explain the figures (docs/experiments/consistency.md), "
         "on the first "
@@ -706,6 +718,7 @@ TABLES = (
             "smoother_nees_in_bounds": "smoother NEES in 95% bounds",
             "landmarks_on_trees": "on trees",
             "ms_per_scan": "ms per scan",
+            **GOSPA_LABELS,
         },
         title="Consistency of the EKF (NEES, NIS)",
         notes=_consistency_notes,

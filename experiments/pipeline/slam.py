@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import DataError
+from experiments.eval.gospa import GOSPA_SETTINGS, gospa, ospa
 from experiments.eval.gps import score_sequence
 from experiments.eval.missing import null_scores
 from experiments.eval.poses import nees, pose_errors
@@ -16,6 +17,7 @@ from experiments.eval.vouched import vouched_for_sequence
 from experiments.io.config_file import config_toml
 from experiments.io.features_json import load_features_json
 from experiments.io.outputs import check_output_folder, check_outputs, lock_folder, write_manifest
+from experiments.io.reference_map import read_reference_map
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.run_log import RUN_LOG_NAME, write_run_log
 from experiments.io.sequence_file import load_sequence
@@ -24,7 +26,7 @@ from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, run_slam, se2
 from slam.closure import closure_counts
 
-__all__ = ["landmark_radii", "run_slam_file", "summarise"]
+__all__ = ["landmark_radii", "reference_map_scores", "run_slam_file", "summarise"]
 
 
 def run_slam_file(
@@ -36,6 +38,7 @@ def run_slam_file(
     progress=None,
     ellipse_scale: float = 10.0,
     inputs: tuple = (),
+    reference_map: Path | str | None = None,
 ) -> dict:
     """Run EKF-SLAM over the sequence file `input_path` as `config` says (default
     `SlamConfig()`; `features.file`, when set, is a features JSON from `trunkslam extract` whose
@@ -54,11 +57,13 @@ def run_slam_file(
     run_log.npz      what the GTSAM smoother needs (`trunkslam smooth`; experiments.io.run_log)
     summary.json     input, methods, start, counts, timings (mean, median, p95, max per phase),
                      errors against GPS (`experiments.eval.gps`) when the sequence has GPS, and
-                     against the truth (Table-3 errors, mean NEES) when it has truth
+                     against the truth (Table-3 errors, mean NEES) when it has truth, and the
+                     map's GOSPA against `reference_map` when given (`reference_map_scores`)
     manifest.json    every file of the set (`experiments.io.outputs.write_manifest`)
     Returns the summary. rerun_path: also write a recording (`experiments.render.viz`, kind
     "slam"; simulated truth trees and path when the sequence has them), its covariance
-    ellipses drawn `ellipse_scale` times their 95% size.
+    ellipses drawn `ellipse_scale` times their 95% size. reference_map: a CSV of x,y (m, the
+    run's world frame; `experiments.io.reference_map`), read and checked before the run.
 
     The files are written as one set (`experiments.io.writers.atomic_folder`): into a temporary
     folder beside out_dir, summary.json and manifest.json last, then swapped for out_dir as a
@@ -74,22 +79,26 @@ def run_slam_file(
     out = Path(out_dir)
     check_outputs(
         "slam",
-        inputs=[input_path, features_file, *inputs],
+        inputs=[input_path, features_file, reference_map, *inputs],
         files={"--rerun": rerun_path},
         folders={"--out": out},
     )
     rerun_in_out = _recording_place(rerun_path, out)
+    reference = (
+        None if reference_map is None else (reference_map, read_reference_map(reference_map))
+    )
     with lock_folder(out, "--out"):
         check_output_folder(out, "--out", "slam")  # again: now no other command changes it
         rerun = (rerun_path, rerun_in_out)
         view = (progress, ellipse_scale)
-        return _run_into(out, (input_path, features_file), cfg, rerun, view)
+        return _run_into(out, (input_path, features_file, reference), cfg, rerun, view)
 
 
 def _run_into(out: Path, inputs, cfg: SlamConfig, rerun, view) -> dict:
     """The run and its files (`run_slam_file`'s body, out held); inputs: (sequence, features
-    file), rerun: (path, its place inside out or None), view: (progress, ellipse scale)."""
-    input_path, features_file = inputs
+    file, (reference map file, its points) or None), rerun: (path, its place inside out or
+    None), view: (progress, ellipse scale)."""
+    input_path, features_file, reference = inputs
     rerun_path, rerun_in_out = rerun
     seq = load_sequence(input_path)
     given = None
@@ -103,6 +112,8 @@ def _run_into(out: Path, inputs, cfg: SlamConfig, rerun, view) -> dict:
         _write_run(stage, seq, cfg, lg, f"trunkslam slam {input_path}")
         summary = summarise(lg, seq, seconds)
         summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
+        if reference is not None:
+            summary["reference_map"] = reference_map_scores(lg.landmark_xy, *reference)
         write_atomic(stage / SUMMARY, dumps_json(summary))
         write_manifest(stage, "slam")  # last: the set is complete
     return summary
@@ -228,6 +239,17 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
             "scans_scored": int(inside.sum()),
         }
     return null_scores(summary, reasons=missing_reasons(seq, summary))
+
+
+def reference_map_scores(landmark_xy: np.ndarray, path, trees: np.ndarray) -> dict:
+    """The summary's reference_map part: the file, its landmarks, and the map's GOSPA against
+    them at c = 1 m and c = 20 m (p = 2, alpha = 2; `experiments.eval.gospa`), each with its
+    localisation, missed and false parts (m^2) and counts, and OSPA (p = 2) at the same c."""
+    out: dict = {"file": str(path), "landmarks": int(trees.shape[0])}
+    for c, p, alpha in GOSPA_SETTINGS:
+        out[f"gospa_{c:g}m"] = gospa(landmark_xy, trees, p=p, c=c, alpha=alpha).to_dict()
+        out[f"ospa_{c:g}m"] = ospa(landmark_xy, trees, p=p, c=c)
+    return out
 
 
 def _closures(lg) -> dict:

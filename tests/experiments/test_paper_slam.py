@@ -13,6 +13,7 @@ from regenerate_golden import FILES, slam_rng
 from support import assert_tidy_tables
 
 from experiments.eval.detections import false_detections
+from experiments.eval.gospa import gospa
 from experiments.io.results import MAP_COLUMNS, TRAJECTORY_COLUMNS
 from experiments.io.sequence_file import save_sequence
 from experiments.paper.reproduce import run_experiments
@@ -157,6 +158,16 @@ def test_experiment2_writes_every_output(tmp_path):
     assert {(int(r["first_scan"]), int(r["last_scan"])) for r in rates} == set(SCAN_SETS)
     cons = list(csv.DictReader((tmp_path / "consistency.csv").open()))
     assert float(cons[0]["nees_bound_low"]) < 3 < float(cons[0]["nees_bound_high"])
+    # the map's GOSPA against every tree of the scene: run 0's from its map, the column the mean
+    trees = res.seq0.truth_landmarks[:, :2]
+    for m in ("paper", "bailey"):
+        g = gospa(res.logs0[m].landmark_xy, trees, p=2, c=20.0, alpha=2)
+        assert res.gospa[m]["gospa_20m"][0] == g.distance
+        assert res.gospa[m]["gospa_20m_missed"][0] == 200.0 * g.n_missed
+        row = next(r for r in cons if r["method"] == m)
+        assert float(row["gospa_20m"]) == pytest.approx(res.gospa[m]["gospa_20m"].mean())
+        parts = sum(float(row[f"gospa_1m_{k}"]) for k in ("localisation", "missed", "false"))
+        assert parts == pytest.approx(np.mean(res.gospa[m]["gospa_1m"] ** 2))
     assert assert_tidy_tables(tmp_path) == {"table3.csv", "table4.csv", "consistency.csv"}
 
 

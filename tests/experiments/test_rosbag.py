@@ -331,6 +331,8 @@ def test_a_bag_gives_back_what_was_written(storage, drive, bags):
     np.testing.assert_array_equal(seq.gps_t, want.gps_t)
     np.testing.assert_allclose(seq.gps_xy, drive.gps_xy, rtol=0, atol=1e-8)
     np.testing.assert_allclose(seq.gps_pose, [1.55, 0.0, 0.0], rtol=0, atol=1e-15)
+    # the first fix, the origin of the metres (export-map's WGS84 frame)
+    np.testing.assert_allclose(seq.gps_origin, [LAT0, LON0, ALT_M], rtol=0, atol=1e-12)
     assert f"t = 0 at ROS time {ORIGIN_NS // 10**9}.000000000 s" in seq.name
 
     pose = convert(bags[storage], "pose").sequence
