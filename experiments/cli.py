@@ -595,8 +595,8 @@ def report(
     results: Annotated[
         list[Path],
         typer.Argument(
-            help="`trunkslam reproduce` folders; the first one's manifest.json is the snapshot's; "
-            "a later one may be a folder of benchmark tables (`make bench`'s bench_results)"
+            help="`trunkslam reproduce` folders (the first one's manifest.json is the "
+            "snapshot's) and folders of benchmark tables (`make bench`'s bench_results)"
         ),
     ],
     docs: Annotated[

@@ -6,8 +6,10 @@ folders (and the benchmark tables of `make bench`), and a record of its own, `sn
 every file of the snapshot and where it came from (the source folder, its commit, date and
 experiments). `refresh_snapshot`
 
-1. reads and checks everything before it touches anything: each source is a folder (the first
-   a `trunkslam reproduce` folder, with its manifest.json), every CSV parses row by row, and
+1. reads and checks everything before it touches anything: each source is a `trunkslam
+   reproduce` folder (its manifest.json; the first one's becomes the snapshot's, a later one's
+   `manifest_<folder>.json`) or a folder of benchmark tables (`bench_*.md`, as `make bench`
+   writes them; its other files are skipped), every CSV parses row by row, and
    the columns the README's glance reads as numbers hold numbers (`GLANCE_COLUMNS`); the
    snapshot folder is absent, empty, or ours (every file in it listed by its `snapshot.json`:
    a file it does not list is named and nothing is touched); the README has its glance block;
@@ -171,23 +173,25 @@ def _read_sources(sources: list[Path]) -> tuple[dict, dict, Refresh]:
     incoming: dict[str, tuple[Path, bytes, str]] = {}
     origins: dict[str, dict] = {}
     outcome = Refresh()
-    for i, src in enumerate(sources):
+    for src in sources:
         _check_source_folder(src)
-        manifest = _source_manifest(src, first=i == 0)
+        manifest = _source_manifest(src)
         label = _label(src, origins)
         origins[label] = _origin(label, manifest)
+        main = manifest is not None and MANIFEST not in incoming
         files = 0
         for f in sorted(src.iterdir(), key=lambda p: p.name):
             if f.suffix not in KEPT_SUFFIXES or f.name == RECORD:
                 continue
-            if f.is_symlink() or not f.is_file():
+            if f.is_symlink() or not f.is_file() or (manifest is None and not _bench(f.name)):
                 outcome.skipped.append(str(f))
                 continue
-            name = f.name if (f.name != MANIFEST or i == 0) else f"manifest_{label}.json"
+            name = f.name if (f.name != MANIFEST or main) else f"manifest_{label}.json"
             incoming[name] = (f, _read_source_file(f), label)
             files += 1
         if not files:
-            raise ReportError(f"{src}: holds no tables, figures or manifests to report")
+            what = "tables, figures or manifests" if manifest else "benchmark tables (bench_*.md)"
+            raise ReportError(f"{src}: holds no {what} to report")
     for name, (path, data, _) in incoming.items():
         if name.endswith(".csv"):
             _check_csv(path, data)
@@ -203,14 +207,18 @@ def _check_source_folder(src: Path) -> None:
         raise ReportError(f"{src}: not a folder (give a `trunkslam reproduce --out` folder)")
 
 
-def _source_manifest(src: Path, first: bool) -> dict | None:
-    """The source's manifest: required of the first (a `trunkslam reproduce` folder), read
-    when a later one has one."""
+def _bench(name: str) -> bool:
+    return name.startswith("bench_") and name.endswith(".md")
+
+
+def _source_manifest(src: Path) -> dict | None:
+    """The source's manifest (a `trunkslam reproduce` folder's); None for a folder of
+    benchmark tables (no manifest.json, some bench_*.md)."""
     if not (src / MANIFEST).exists():
-        if first:
+        if not any(_bench(p.name) for p in src.iterdir()):
             raise ReportError(
-                f"{src}: not a `trunkslam reproduce` folder (no {MANIFEST}); the first folder "
-                "given must be one"
+                f"{src}: not a `trunkslam reproduce` folder (no {MANIFEST}) nor a folder of "
+                "benchmark tables (no bench_*.md)"
             )
         return None
     try:
@@ -220,7 +228,7 @@ def _source_manifest(src: Path, first: bool) -> dict | None:
     if manifest["command"] != "trunkslam reproduce":
         raise ReportError(
             f"{src}: an output of `{manifest['command']}`, not of `trunkslam reproduce`; report "
-            "takes reproduce folders (and, after the first, folders of benchmark tables)"
+            "takes reproduce folders and folders of benchmark tables"
         )
     return manifest
 

@@ -131,6 +131,29 @@ def test_kept_files_of_an_experiment_that_ran_again_are_named_not_refreshed(proj
     assert "loop_closure.csv" not in stale  # loop-closure did not run: kept, and fresh
 
 
+def test_benchmark_tables_alone_refresh_only_themselves(project, tmp_path):
+    """`make bench` then `trunkslam report bench_results`: the bench tables are replaced or
+    added, the snapshot's manifest and every other file kept, a stray file skipped."""
+    snap = project / "docs" / "results"
+    before = tree(snap)
+    bench = tmp_path / "bench_results"
+    bench.mkdir()
+    (bench / "bench_slam.md").write_text("Full run (a machine)\n\n| a |\n|---|\n| 1 |\n")
+    (bench / "bench_new.md").write_text("New (a machine)\n\n| b |\n|---|\n| 2 |\n")
+    (bench / "notes.md").write_text("not a benchmark table\n")
+    res = report(project, bench)
+    assert res.exit_code == 0, res.output
+    after = tree(snap)
+    assert after["bench_slam.md"] != before["bench_slam.md"]
+    assert "bench_new.md" in after and "notes.md" not in after
+    assert after["manifest.json"] == before["manifest.json"]
+    changed = {n for n in before if after[n] != before[n]}
+    assert changed == {"bench_slam.md", "snapshot.json"}
+    assert "1 replaced, 1 added" in res.output and "skipped" in res.output
+    record = json.loads((snap / RECORD).read_text())
+    assert record["files"]["bench_new.md"] == "bench_results"
+
+
 def test_a_second_report_keeps_what_the_first_one_kept(project, tmp_path):
     src = reproduce_sized(project, tmp_path)
     assert report(project, src).exit_code == 0
@@ -166,7 +189,10 @@ def test_a_bad_source_changes_nothing(project, tmp_path):
     refused(project, slam_out, expect="not of `trunkslam reproduce`")
     src = reproduce_sized(project, tmp_path)
     (tmp_path / "no_tables").mkdir()
-    refused(project, src, tmp_path / "no_tables", expect="holds no tables")
+    refused(project, src, tmp_path / "no_tables", expect="nor a folder of benchmark tables")
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "chapter1.md").write_text("mine\n")
+    refused(project, tmp_path / "notes", expect="nor a folder of benchmark tables")
 
 
 def test_a_bad_readme_or_docs_folder_changes_nothing(project, tmp_path):
