@@ -420,3 +420,18 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
     later = [h for d, h, _ in rows if d >= cfg.start.gps_fit_m]
     assert max(later) - min(later) <= 2 * vp_start.TOLERANCE_DEG
     assert rows[-1][0] > 900  # scans 1-2000 drive about a kilometre
+
+
+def test_an_installed_wheel_names_no_repository_and_no_default(tmp_path, monkeypatch):
+    """From a wheel there is no repository beside the package: the message says where the data
+    come from without pointing to one, and no default folder is tried."""
+    monkeypatch.delenv(data.DATA_ENV, raising=False)
+    monkeypatch.setattr(data, "DEFAULT_DATA_ROOT", tmp_path)  # exists, but not for a wheel
+    monkeypatch.setattr(data, "IN_CHECKOUT", False)
+    with pytest.raises(DataError) as info:
+        data.data_root()
+    msg = str(info.value)
+    assert "beside" not in msg and "repository" not in msg and str(tmp_path) not in msg
+    assert data.DATA_ENV in msg and "aa3_dr.mat" in msg and "README" in msg
+    monkeypatch.setattr(data, "IN_CHECKOUT", True)
+    assert data.data_root() == tmp_path.resolve()
