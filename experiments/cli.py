@@ -520,15 +520,17 @@ def reproduce(
 
     - smoother: GTSAM's Victoria Park graph solved; the full run's EKF against its smoother
 
-    - noise-calibration: measurement-noise model of each extractor (3 s)
+    - noise-calibration: measurement-noise model of each extractor
 
-    - victoria-park-calibration: the ute's noise and laser yaw (25 min; only when named)
+    - victoria-park-calibration: the ute's noise and laser yaw (only when named)
 
     - victoria-park-map-policy: the map policy's confirm_scans and pruning settings from scans
-    1-2000 (a minute; only when named)
+    1-2000 (only when named)
 
     - loop-closure: simulated loops in a park and an orchard, loop closure off and on
-    (minutes; only when named)
+    (only when named)
+
+    Run times: docs/performance.md (from the manifest of the run behind the docs)
     """
     from experiments.exec import make_executor
     from experiments.paper.reproduce import run_experiments

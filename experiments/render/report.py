@@ -43,6 +43,7 @@ __all__ = [
     "ReportError",
     "Snapshot",
     "copy_results",
+    "format_duration",
     "glance_table",
     "render_macros",
     "update_readme",
@@ -57,6 +58,15 @@ MACRO = re.compile(r"\{\{\s*(.+?)\s*\}\}", re.DOTALL)
 
 class ReportError(ConfigError):
     """A macro or a glance row that the snapshot cannot answer."""
+
+
+def format_duration(seconds: float) -> str:
+    """A time to plan with: "40 s", "2.6 min", "1.2 h"."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 90 * 60:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 class Snapshot:
@@ -148,6 +158,19 @@ class Snapshot:
             f"{m.get('machine', 'an unrecorded machine')}."
         )
 
+    def duration(self, experiment: str = "") -> str:
+        """How long an experiment took in the snapshot's runs ("2.6 min"): its seconds in
+        manifest.json, else in the latest (by `finished`) manifest_*.json that ran it; no
+        experiment: the run of manifest.json, its experiments' times added (as `timings`)."""
+        if not experiment:
+            return format_duration(sum(self.manifest().get("seconds", {}).values()))
+        others = sorted(self.folder.glob("manifest_*.json"))
+        later = sorted((json.loads(p.read_text()) for p in others), key=lambda m: m["finished"])
+        for m in [self.manifest(), *reversed(later)]:
+            if experiment in m.get("seconds", {}):
+                return format_duration(m["seconds"][experiment])
+        raise ReportError(f"results snapshot: no manifest records the time of {experiment!r}")
+
     def provenance(self) -> str:
         """One sentence: which run made the snapshot."""
         m = self.manifest()
@@ -231,6 +254,8 @@ def render_macros(text: str, snapshot: Snapshot, where: str = "") -> str:
                 return snapshot.provenance()
             if name == "timings":
                 return snapshot.timings()
+            if name == "duration":
+                return snapshot.duration(*args, **kwargs)
             if name == "glance":
                 return glance_table(snapshot, *args, **kwargs).rstrip("\n")
         except TypeError as exc:
@@ -238,7 +263,8 @@ def render_macros(text: str, snapshot: Snapshot, where: str = "") -> str:
         except ReportError as exc:
             raise ReportError(f"{where}: {exc}") from None
         raise ReportError(
-            f"{where}: unknown macro {name!r} (table, cell, stat, provenance, timings, glance)"
+            f"{where}: unknown macro {name!r} (table, cell, stat, provenance, timings, duration, "
+            "glance)"
         )
 
     return MACRO.sub(replace, text)

@@ -3,6 +3,7 @@ refusals, counts in words, the licence, and summaries that say why a figure is m
 
 from __future__ import annotations
 
+import json
 import re
 import tomllib
 from pathlib import Path
@@ -178,3 +179,33 @@ def test_bench_startup_times_each_answer():
     assert [r["command"] for r in rows] == ["trunkslam " + " ".join(a) for a, _ in COMMANDS]
     assert all(r["wall_s"] > 0 and r["cpu_s"] > 0 and r["runs"] == 1 for r in rows)
     assert "`trunkslam slam missing.npz`" in format_table(rows)
+
+
+def test_the_readmes_run_time_is_the_manifests():
+    """The README's duration of `make reproduce` is the snapshot's, as the docs' `duration`
+    macro prints it, not a figure typed once and left behind."""
+    from experiments.render.report import Snapshot
+
+    snap = Snapshot(REPO / "docs" / "results")
+    cores = snap.manifest()["machine"].split(", ")[1]  # "2 cores"
+    readme = " ".join((REPO / "README.md").read_text().split())
+    assert f"about {snap.duration()} on two cores" in readme and cores == "2 cores"
+
+
+def test_durations_for_planning():
+    from experiments.render.report import Snapshot, format_duration
+
+    assert [format_duration(s) for s in (40.4, 154.0, 1031.0, 7200.0)] == [
+        "40 s",
+        "2.6 min",
+        "17.2 min",
+        "2.0 h",
+    ]
+    snap = Snapshot(REPO / "docs" / "results")
+    seconds = snap.manifest()["seconds"]
+    assert snap.duration("table3 table4") == format_duration(seconds["table3 table4"])
+    assert snap.duration() == format_duration(sum(seconds.values()))
+    # an experiment only a later run recorded: that run's manifest
+    cal = json.loads((REPO / "docs/results/manifest_results_cal2.json").read_text())
+    want = format_duration(cal["seconds"]["victoria-park-calibration"])
+    assert snap.duration("victoria-park-calibration") == want
