@@ -151,7 +151,8 @@ class Progress:
         doing = "compiling kernels" if compiling_now() else "working"
         running = [d for d, (n, t) in self._counts.items() if n < t]
         if not running:
-            return f"still {doing} ({now - self._last_event:.0f} s since the last count)"
+            since = "the last count" if self._counts else "the start"
+            return f"still {doing} ({now - self._last_event:.0f} s since {since})"
         desc = max(running, key=lambda d: self._last_line.get(d, 0.0))
         done, total = self._counts[desc]
         return f"{self._line(desc, done, total, *self._clock(desc, now))} (still {doing})"

@@ -55,6 +55,16 @@ def test_a_slow_trial_gets_heartbeats_off_a_terminal(monkeypatch):
     assert max(b - a for a, b in zip(times, times[1:])) < 0.6  # a heartbeat is 0.1 s; slack
 
 
+def test_a_heartbeat_before_any_count_says_so(monkeypatch):
+    err = _Stamped()
+    monkeypatch.setattr(sys, "stderr", err)
+    with Progress(console=_off_terminal(), heartbeat_s=0.05):
+        time.sleep(0.3)  # imports, a compile: no task has counted yet
+    assert err.stamps and all(
+        "still working" in ln and "since the start" in ln for _, ln in err.stamps
+    )
+
+
 def test_no_heartbeat_while_lines_come():
     err = _Stamped()
     old, sys.stderr = sys.stderr, err
