@@ -7,6 +7,7 @@ fraction of a second of silence, not ten seconds."""
 from __future__ import annotations
 
 import io
+import logging
 import sys
 import threading
 import time
@@ -17,6 +18,13 @@ from rich.console import Console
 import experiments.render.compiling as compiling
 import experiments.render.progress as progress_module
 from experiments.render.progress import ETA_AFTER, Progress
+
+
+@pytest.fixture(autouse=True)
+def _plain_lines(caplog):
+    """Progress writes plain lines (not log records), whatever `-v` an earlier test set."""
+    with caplog.at_level(logging.WARNING, logger="trunkslam.progress"):
+        yield
 
 
 class _Stamped(io.StringIO):
