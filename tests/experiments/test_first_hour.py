@@ -209,3 +209,26 @@ def test_durations_for_planning():
     cal = json.loads((REPO / "docs/results/manifest_results_cal2.json").read_text())
     want = format_duration(cal["seconds"]["victoria-park-calibration"])
     assert snap.duration("victoria-park-calibration") == want
+
+
+def warn_twice(cfg, seed) -> int:  # noqa: ARG001 (a trial's signature)
+    """A trial that meets the same condition twice (module level: sent to the workers)."""
+    import logging
+    import os
+
+    for _ in range(2):
+        logging.getLogger("experiments.probe").warning("the same setting, again")
+    return os.getpid()
+
+
+@pytest.mark.slow
+def test_a_worker_shows_each_warning_once(capfd):
+    """Eight trials in two worker processes, each trial warning twice: the warning shows at
+    most once per worker (before, every trial's every warning reached stderr)."""
+    from experiments.exec.local import ProcessExecutor
+
+    with ProcessExecutor(2) as executor:
+        pids = executor.map(warn_twice, list(range(8)), chunksize=1)
+    err = capfd.readouterr().err
+    shown = err.count("WARNING the same setting, again")
+    assert 1 <= shown <= len(set(pids)) <= 2, err
