@@ -50,6 +50,7 @@ bench: $(STAMP)
 	$(BENCH) slam --out bench_results/bench_slam.md
 	$(BENCH) raycast --out bench_results/bench_raycast.md
 	$(BENCH) smoother --out bench_results/bench_smoother.md
+	$(BENCH) startup --out bench_results/bench_startup.md
 	$(BENCH) cold --out bench_results/bench_cold.md
 
 # the documentation site, into build/site; --strict: a broken link or an unresolved number fails

@@ -3,11 +3,11 @@ estimated path against every fix in the run's time span (the pose interpolated a
 time), as is and after the best rigid 2D alignment, with the fixes flagged as jumps left out of
 the clean figures.
 
-    python examples/score_against_gps.py                      # simulate a drive, run SLAM
+    python examples/score_against_gps.py [OUT_DIR]             # simulate a drive, run SLAM
     python examples/score_against_gps.py SEQUENCE.npz RUN_DIR  # a `trunkslam slam` output
 
 e.g. RUN_DIR from `trunkslam slam vp.npz --features detections --config victoria_park_ute
---out RUN_DIR`. Writes gps_score.json into RUN_DIR (default: a temp dir).
+--out RUN_DIR`. Writes gps_score.json into RUN_DIR, or OUT_DIR (default: a temp dir).
 """
 
 import json
@@ -22,6 +22,8 @@ from experiments.io.sequence_file import load_sequence
 from experiments.sim import CycabParams, simulate_cycab_run
 from slam import run_slam
 
+if len(sys.argv) > 3:
+    sys.exit(f"usage: {sys.argv[0]} [OUT_DIR] | SEQUENCE.npz RUN_DIR")
 if len(sys.argv) == 3:  # an existing run: its trajectory.csv (t, x, y, theta, covariance)
     seq, out = load_sequence(sys.argv[1]), Path(sys.argv[2])
     table = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1, ndmin=2)
@@ -31,7 +33,8 @@ else:  # a simulated tree-park drive with 2 cm DGPS at 10 Hz
     seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=240))
     log = run_slam(seq)  # the built-in configuration: paper's extractor, IHGR
     scan_t, pose, antenna = log.scan_t, log.pose, log.antenna_pose
-    out = Path(tempfile.mkdtemp(prefix="trunkslam_"))
+    out = Path(sys.argv[1]) if len(sys.argv) == 2 else Path(tempfile.mkdtemp(prefix="trunkslam_"))
+    out.mkdir(parents=True, exist_ok=True)
 
 s = score_sequence(seq, scan_t, pose, antenna)
 print(f"{s.matched} fixes in the run's time span ({s.unmatched} outside), {s.jumps} jumps")

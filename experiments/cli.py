@@ -19,8 +19,10 @@ from typing import Annotated
 import typer
 
 from experiments.bundled import scene_names  # light: lists the package's scenes for the help
+from experiments.render.cli_style import TrunkslamGroup, counted  # light: metavars, -v anywhere
 
 app = typer.Typer(
+    cls=TrunkslamGroup,
     name="trunkslam",
     help="Tree-trunk features from 2D laser scans, data association and EKF-SLAM.",
     no_args_is_help=True,
@@ -230,8 +232,8 @@ def main(
         typer.Option(
             "--verbose",
             "-v",
-            help="log what the commands do, progress detail included (before the command: "
-            "trunkslam -v slam ...)",
+            help="log what the commands do, progress detail included (before or after the "
+            "command: trunkslam -v slam ..., trunkslam slam ... -v)",
         ),
     ] = False,
     version: Annotated[
@@ -250,24 +252,37 @@ def main(
         ),
     ] = None,
 ) -> None:
+    from experiments.exec.once import OnceFilter
     from experiments.exec.signals import interrupt_on_stop_signals
     from experiments.exec.threads import set_threads
 
     set_threads(threads)  # first: before numpy, whose BLAS reads it when it starts
     # SIGTERM and SIGHUP clean up as Ctrl-C does; the handlers go when the command ends
     ctx.call_on_close(interrupt_on_stop_signals())
-    from experiments.render.progress import CONSOLE
-
     level = logging.INFO if verbose else logging.WARNING
-    if CONSOLE.is_terminal:  # log lines print above the progress bars
+    if _terminal():  # log lines print above the progress bars
         from rich.logging import RichHandler
 
+        from experiments.render.progress import CONSOLE
+
         handler = RichHandler(console=CONSOLE, show_path=False, show_time=False)
+        handler.addFilter(OnceFilter())  # each warning once per command
         logging.basicConfig(level=level, format="%(message)s", handlers=[handler], force=True)
     else:
         handler = _StderrHandler()
         handler.setFormatter(logging.Formatter("%(levelname)s %(message)s"))
+        handler.addFilter(OnceFilter())
         logging.basicConfig(level=level, handlers=[handler], force=True)
+
+
+def _terminal() -> bool:
+    """Whether stderr is rich's terminal; rich (0.1 s to import) only loads when it may be."""
+    env = os.environ
+    if not (sys.stderr.isatty() or env.get("TTY_COMPATIBLE") == "1" or env.get("FORCE_COLOR")):
+        return False  # rich would say no too (rich.console.Console.is_terminal)
+    from experiments.render.progress import CONSOLE
+
+    return CONSOLE.is_terminal
 
 
 @app.command()
@@ -300,6 +315,7 @@ def extract(
     ] = None,
 ) -> None:
     """Extract circles, lines, edges and clutter from every scan of a sequence file."""
+    _check_input(input, "sequence file")
     from experiments.pipeline.extract import run_extract
     from experiments.render.progress import Progress
 
@@ -320,7 +336,7 @@ def extract(
             features=features,
             config_file=None if config is None else Path(config),
         )
-    typer.echo(f"{s['scans']} scans -> {out} ({s['circles']} circles)")
+    typer.echo(f"{counted(s['scans'], 'scan')} -> {out} ({counted(s['circles'], 'circle')})")
 
 
 @convert_app.command("victoria-park")
@@ -457,7 +473,7 @@ def simulate_drive(
     check_outputs("simulate-drive", inputs=[Path(scene)], files={"--out": out})
     seq = simulate_cycab_run(np.random.default_rng(seed), scene, CycabParams(n_scans=scans))
     save_sequence(seq, out)
-    typer.echo(f"{seq.n_scans} scans of {scene} ({seq.scan_t[-1]:.1f} s) -> {out}")
+    typer.echo(f"{counted(seq.n_scans, 'scan')} of {scene} ({seq.scan_t[-1]:.1f} s) -> {out}")
 
 
 @app.command()
@@ -513,15 +529,17 @@ def reproduce(
 
     - smoother: GTSAM's Victoria Park graph solved; the full run's EKF against its smoother
 
-    - noise-calibration: measurement-noise model of each extractor (3 s)
+    - noise-calibration: measurement-noise model of each extractor
 
-    - victoria-park-calibration: the ute's noise and laser yaw (25 min; only when named)
+    - victoria-park-calibration: the ute's noise and laser yaw (only when named)
 
     - victoria-park-map-policy: the map policy's confirm_scans and pruning settings from scans
-    1-2000 (a minute; only when named)
+    1-2000 (only when named)
 
     - loop-closure: simulated loops in a park and an orchard, loop closure off and on
-    (minutes; only when named)
+    (only when named)
+
+    Run times: docs/performance.md (from the manifest of the run behind the docs)
     """
     from experiments.exec import make_executor
     from experiments.paper.reproduce import run_experiments
@@ -761,6 +779,8 @@ def slam_cmd(
     """EKF-SLAM over a sequence as its settings say: trajectory (TUM and CSV with covariance),
     map, config.toml (the whole configuration: `--config` with it reproduces the run), summary,
     and the run log the smoother reads (`trunkslam smooth`)."""
+    if config is None and not dump_config:  # a --config's errors are said first, as ever
+        _check_input(input, "sequence file")
     from experiments.io.config_file import config_toml, load_slam_config
     from experiments.pipeline.slam import run_slam_file
     from experiments.render.progress import Progress
@@ -795,8 +815,9 @@ def slam_cmd(
                 inputs=(config_file,),
                 reference_map=reference_map,
             )
-        err = _gps_words(s.get("gps"))
-        done = f"{s['n_scans']} scans, {s['landmarks']} landmarks{err}, {s['seconds']:.1f} s"
+        err = _gps_words(s.get("gps")) + _truth_words(s.get("truth"))
+        done = f"{counted(s['n_scans'], 'scan')}, {counted(s['landmarks'], 'landmark')}{err}"
+        done += f", {s['seconds']:.1f} s" + _compiling_words(s.get("compile_s"))
         if "reference_map" in s:
             g = s["reference_map"]["gospa_20m"]
             done += f", GOSPA {g['distance']:.2f} m (c = 20 m) against the reference map"
@@ -807,6 +828,14 @@ def slam_cmd(
             with Progress() as progress:
                 summary = smooth_run(out, progress=_smoother_progress(progress))
             _echo_smoothed(summary)
+
+
+def _check_input(path: Path | None, what: str) -> None:
+    """A missing or unreadable input refused before the command's heavy imports load."""
+    if path is not None:
+        from experiments.io.paths import check_input_file  # light: no numpy
+
+        check_input_file(path, what)
 
 
 def _held(out: Path, smooth: bool):
@@ -848,6 +877,20 @@ def _gps_words(gps: dict | None) -> str:
     if gps.get("all_rmse") is None:
         return ", not scored against GPS (no fix within the run; see not_computed in summary.json)"
     return f", {gps['all_rmse']:.2f} m RMS from GPS"
+
+
+def _compiling_words(seconds: float | None) -> str:
+    """ " (+ 75 s compiling kernels, first run only)" when the run compiled kernels."""
+    if not seconds or seconds < 0.05:
+        return ""
+    return f" (+ {seconds:.0f} s compiling kernels, first run only)"
+
+
+def _truth_words(truth: dict | None) -> str:
+    """ ", 0.02 m RMS from truth" (evo_ape's figure against truth.tum), or nothing."""
+    if not truth or truth.get("rmse_m") is None:
+        return ""
+    return f", {truth['rmse_m']:.3f} m RMS from truth"
 
 
 def _echo_smoothed(s: dict) -> None:
@@ -1093,6 +1136,12 @@ def export_reference_cmd(
             f"{out / 'gps.tum'} RUN/trajectory_gps_antenna.tum --sync_method interpolation "
             f"--t_max_diff {done.t_max_diff_s:g}"
         )
+    if any(p.name == "truth.tum" for p in done.files):
+        typer.echo(
+            f"against a run's trajectory.tum (summary.json's truth.rmse_m): evo_ape tum "
+            f"{out / 'truth.tum'} RUN/trajectory.tum --sync_method interpolation "
+            f"--t_max_diff {done.t_max_diff_s:g}"
+        )
     if done.n_fixes >= done.n_scans:  # evo then resamples the GPS at the scans, not the run
         typer.echo(
             f"(more fixes than the {done.n_scans} scans: evo compares each scan with the GPS "
@@ -1269,6 +1318,25 @@ def bench_raycast(
 
     with Progress() as progress:
         rows = bench(repeats=repeats, seed=seed, progress=progress)
+    _emit(format_table(rows), out)
+
+
+@bench_app.command("startup")
+@handle_errors
+def bench_startup(
+    repeats: Annotated[
+        int, typer.Option(min=1, max=1000, help="timed runs of each command (at most 1000)")
+    ] = 5,
+    out: BenchOut = None,
+) -> None:
+    """Seconds until `trunkslam presets`, `trunkslam slam --help` and `trunkslam slam
+    missing.npz` answer, each in fresh processes (median; target under 0.5 s)."""
+    from experiments.bench.startup import bench_startup as bench
+    from experiments.bench.startup import format_table
+    from experiments.render.progress import Progress
+
+    with Progress() as progress:
+        rows = bench(repeats=repeats, progress=progress)
     _emit(format_table(rows), out)
 
 

@@ -39,9 +39,18 @@ class ExperimentFailed(TrunkslamError):
 
 def input_errors() -> tuple[type[BaseException], ...]:
     """The exception types that mean bad input (files, data, parameters), not a bug: the
-    project's own errors of every package, and OSError. Imported lazily: `--help` stays fast."""
-    from association.errors import AssociationError
-    from features.errors import FeaturesError
-    from slam.errors import SlamError
+    project's own errors of every package, and OSError. A package's error is taken only once
+    the package is loaded (none of its errors can have been raised before): importing
+    `slam.errors` would load all of `slam` (numpy, numba, scipy), and a refused input or
+    `--help` would pay for it."""
+    import sys
 
-    return (TrunkslamError, FeaturesError, AssociationError, SlamError, OSError)
+    out: list[type[BaseException]] = [TrunkslamError]
+    for module, name in (
+        ("features.errors", "FeaturesError"),
+        ("association.errors", "AssociationError"),
+        ("slam.errors", "SlamError"),
+    ):
+        if module in sys.modules:
+            out.append(getattr(sys.modules[module], name))
+    return (*out, OSError)

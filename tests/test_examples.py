@@ -118,9 +118,10 @@ def test_score_against_gps(tmp_path, monkeypatch, capsys):
     assert f"{ours['matched']} fixes in the run's time span" in out
     assert json.loads(Path("slam_out/gps_score.json").read_text())["all_rmse"] == ours["all_rmse"]
 
-    out = run_example("score_against_gps.py", monkeypatch, capsys)
+    out = run_example("score_against_gps.py", monkeypatch, capsys, "own")  # a single OUT_DIR
     figures = [float(v) for v in re.search(pattern, out).groups()]
     np.testing.assert_allclose(figures, expected, atol=1e-4)
+    assert json.loads(Path("own/gps_score.json").read_text())["all_rmse"] == ours["all_rmse"]
     # no path beats the DGPS noise: each fix carries 2D noise of RMS sqrt(2) sigma, so the RMSE
     # over 478 fixes is at least that less 4 standard errors (about 2% each)
     assert figures[0] > math.sqrt(2) * CycabParams().dgps_sigma_m * 0.9

@@ -10,15 +10,11 @@ tree-park drive and runs SLAM on it with output files identical to the byte to t
 The venv imports our packages only from the wheel (checked: `experiments.__file__` is in the
 venv and the checkout is not on `sys.path`).
 
-What it does not: install the third-party dependencies afresh. That needs the package index
-(gtsam and rerun-sdk come from PyPI), takes from half a minute with a warm pip cache to minutes
-without, and may bring newer releases than this environment's, which the byte comparison would
-then be testing instead of the wheel. So the new venv is made without them and a .pth file
-appends this environment's site-packages to its path. A .pth line only adds a folder: the .pth
-files inside that folder, among them the editable install's hook to the checkout, are not run,
-which is why the checkout stays invisible. The full fresh install (`pip install dist/*.whl`,
-dependencies and all, into a plain venv, then the same commands) was checked by hand for
-issue 28.
+The third-party dependencies are installed afresh into that venv from the wheel's own metadata
+(the `dependencies` of pyproject.toml), by pip from its local cache or the package index, so a
+dependency missing from pyproject.toml fails the test. They are constrained to the versions
+of this environment (`pip freeze`), so that the byte comparison tests the wheel and not a newer
+release of a dependency.
 
 Building from a copy matters: setuptools also packs the files listed in a leftover
 `*.egg-info/SOURCES.txt`, such as the editable install's in the checkout, so a wheel built in
@@ -31,7 +27,6 @@ import os
 import shutil
 import subprocess
 import sys
-import sysconfig
 import tomllib
 import venv
 import zipfile
@@ -69,7 +64,7 @@ def wheel(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("wheel")
     src = root / "src"
     src.mkdir()
-    for name in ("pyproject.toml", "README.md"):
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
         shutil.copy2(REPO / name, src / name)
     find = tomllib.loads((REPO / "pyproject.toml").read_text())["tool"]["setuptools"]
     for pattern in find["packages"]["find"]["include"]:
@@ -83,19 +78,15 @@ def wheel(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def installed(wheel, tmp_path_factory) -> Path:
-    """The bin/ folder of a new venv holding the wheel (dependencies: see the module's doc)."""
+    """The bin/ folder of a new venv holding the wheel and the dependencies it declares."""
     root = tmp_path_factory.mktemp("venv")
     env_dir = root / "venv"
     venv.create(env_dir, with_pip=False)
     bin_dir = env_dir / "bin"
-    install = ["--python", bin_dir / "python", "install", "-q", "--no-deps", "--no-index", wheel]
+    pins = root / "constraints.txt"  # this environment's versions, not the newest releases
+    pins.write_text(_run([*PIP, "freeze", "--exclude-editable"], root, dict(os.environ)))
+    install = ["--python", bin_dir / "python", "install", "-q", "-c", pins, wheel]
     _run([*PIP, *install], root, dict(os.environ))
-    code = "import sysconfig; print(sysconfig.get_paths()['purelib'])"
-    site = Path(_run([bin_dir / "python", "-c", code], root, _env(bin_dir)).strip())
-    deps = {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}
-    (site / "dependencies_from_the_test_env.pth").write_text(
-        "".join(f"{d}\n" for d in sorted(deps))
-    )
     return bin_dir
 
 
@@ -104,6 +95,8 @@ def test_the_wheel_carries_the_presets_and_scenes(wheel):
     assert {f"experiments/presets/{p}.toml" for p in preset_names()} <= names
     assert {f"experiments/scenes/{s}.json" for s in scene_names()} <= names
     assert not any(n.startswith(("datasets/", "tests/")) for n in names)
+    (licence,) = [n for n in names if n.endswith(".dist-info/licenses/LICENSE")]
+    assert zipfile.ZipFile(wheel).read(licence) == (REPO / "LICENSE").read_bytes()
 
 
 def test_the_installed_command_works_outside_the_checkout(installed, tmp_path):
@@ -111,6 +104,9 @@ def test_the_installed_command_works_outside_the_checkout(installed, tmp_path):
     code = "import experiments, sys; print(experiments.__file__, *sys.path, sep=chr(10))"
     where, *path = _run([installed / "python", "-c", code], tmp_path, env).splitlines()
     assert Path(where).is_relative_to(installed.parent) and str(REPO) not in path, (where, path)
+    code = "import gtsam, numba, rerun, scipy; print(gtsam.__file__, numba.__file__, sep=chr(10))"
+    deps = _run([installed / "python", "-c", code], tmp_path, env).splitlines()
+    assert all(Path(d).is_relative_to(installed.parent) for d in deps), deps
 
     trunkslam = installed / "trunkslam"
     listed = [ln.split()[0] for ln in _run([trunkslam, "presets"], tmp_path, env).splitlines()]

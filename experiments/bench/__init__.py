@@ -4,4 +4,5 @@
 - `association`: time per scan of each associator at Victoria Park scale
 - `slam`: EKF-SLAM time per scan against the size of the map
 - `raycast`: the simulator's ray casting
+- `startup`: how long the command line takes to answer (presets, help, a refused input)
 """

@@ -20,8 +20,8 @@ def null_scores(summary: dict, scores=("gps", "truth"), reasons: dict | None = N
     """`summary` with every non-finite number (NaN, inf: a figure that could not be computed)
     replaced by None, and `not_computed` = {dotted key: why} listing those, and the figures of
     the `scores` sections that are None already (elsewhere None is a setting left unset).
-    reasons: why, by top-level key ("gps": "no fix within the run"); others get a general
-    reason."""
+    reasons: why, by dotted key ("gps.vouched_rmse": ...) or, failing that, by top-level key
+    ("gps": "no fix within the run"); others get a general reason."""
     reasons = reasons or {}
     found: dict[str, str] = {}
 
@@ -34,7 +34,7 @@ def null_scores(summary: dict, scores=("gps", "truth"), reasons: dict | None = N
             v = v.item()
         top = path.split(".", 1)[0].split("[", 1)[0]
         if (v is None and top in scores) or (isinstance(v, float) and not math.isfinite(v)):
-            found[path] = reasons.get(top, "too few values to compute it from")
+            found[path] = reasons.get(path, reasons.get(top, "too few values to compute it from"))
             return None
         return v
 

@@ -29,6 +29,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from multiprocessing import get_context
 
+from experiments.exec.once import warn_once_per_process
 from experiments.exec.trials import Executor, run_chunk
 
 __all__ = ["ONE_THREAD", "ProcessExecutor", "warm_kernels"]
@@ -91,6 +92,7 @@ def die_with_parent(parent_pid: int) -> None:
 def _init_worker(parent_pid: int) -> None:
     die_with_parent(parent_pid)
     os.environ.update(ONE_THREAD)  # for anything the worker starts in turn
+    warn_once_per_process()
     warm_kernels()
 
 

@@ -11,16 +11,20 @@ are refused here with a message saying what they are.
 
 from __future__ import annotations
 
+import difflib
 import tomllib
 from importlib.resources.abc import Traversable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import tomli_w
 
 from experiments.bundled import PRESET_SUFFIX, preset_names, presets_dir
 from experiments.errors import ConfigError, DataError
 from experiments.io.paths import read_text_file
-from slam import SlamConfig, SlamError
+
+if TYPE_CHECKING:  # `slam` (numpy, numba, scipy) loads when a configuration is read, not for
+    from slam import SlamConfig  # `trunkslam presets` or a misspelt preset's name
 
 __all__ = ["config_toml", "load_slam_config", "preset_path", "presets"]
 
@@ -43,8 +47,10 @@ def preset_path(name_or_path: str | Path) -> Path | Traversable:
         candidate = presets_dir() / f"{name_or_path}{PRESET_SUFFIX}"
         if candidate.is_file():
             return candidate
+        close = difflib.get_close_matches(str(name_or_path), preset_names(), n=1)
+        hint = f"; did you mean {close[0]!r}?" if close else ""
         raise ConfigError(
-            f"config {name_or_path!r}: not a file nor a preset (presets: {sorted(presets())})"
+            f"config {name_or_path!r}: not a file nor a preset (presets: {sorted(presets())}){hint}"
         )
     return p
 
@@ -52,6 +58,8 @@ def preset_path(name_or_path: str | Path) -> Path | Traversable:
 def load_slam_config(path: str | Path) -> SlamConfig:
     """The `SlamConfig` in a TOML file (or preset name); `DataError`/`ConfigError` naming the
     file and what is wrong."""
+    from slam import SlamConfig, SlamError
+
     path = preset_path(path)
     text = read_text_file(path, "config file")
     try:

@@ -25,7 +25,6 @@ from __future__ import annotations
 import logging
 import math
 import resource
-import stat
 import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -34,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import DataError
+from experiments.io.paths import check_input_file  # noqa: F401  (here before; light there)
 
 __all__ = ["PARSE_ERRORS", "Var", "available_memory", "check_input_file", "read_npz"]
 
@@ -71,22 +71,6 @@ class Var:
             if self.shape
             else ("a string" if self.kind == "str" else f"one {_KIND_WORDS[self.kind][:-1]}")
         )
-
-
-def check_input_file(path: Path, what: str) -> Path:
-    """`path` is a regular file that can be opened; `DataError` naming it and why not."""
-    try:
-        st = path.stat()
-    except FileNotFoundError:
-        if path.is_symlink():
-            raise DataError(f"{what} {path}: a symbolic link to nothing") from None
-        raise DataError(f"{what} not found: {path}") from None
-    except OSError as exc:  # a link to itself (ELOOP), a path through a file (ENOTDIR), ...
-        raise DataError(f"{what} {path}: cannot be read ({exc.strerror or exc})") from None
-    if not stat.S_ISREG(st.st_mode):
-        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
-        raise DataError(f"{what} {path} is not a file ({kind})")
-    return path
 
 
 def available_memory() -> int | None:

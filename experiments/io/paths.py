@@ -1,4 +1,5 @@
-"""Where the real datasets live: `TRUNKSLAM_DATA`, else `../shared/datasets` next to the repo.
+"""Where the real datasets live: `TRUNKSLAM_DATA`, else `../shared/datasets` next to the repo
+(a checkout only: an installed wheel has no default).
 
 The data are not part of the repository. `TRUNKSLAM_DATA` names the folder holding one
 sub-folder per dataset (`victoria_park/`, ...). A relative `TRUNKSLAM_DATA` is taken relative to
@@ -9,6 +10,7 @@ the current directory, or failing that to the repository root (CI sets
 from __future__ import annotations
 
 import os
+import stat
 from importlib.resources.abc import Traversable
 from pathlib import Path
 
@@ -18,7 +20,9 @@ __all__ = [
     "DATA_ENV",
     "REPO_ROOT",
     "DEFAULT_DATA_ROOT",
+    "check_input_file",
     "data_root",
+    "how_to_get",
     "read_text_file",
     "victoria_park_dir",
 ]
@@ -27,13 +31,30 @@ DATA_ENV = "TRUNKSLAM_DATA"
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_DATA_ROOT = REPO_ROOT.parent / "shared" / "datasets"
 
-_HOW_TO_GET = (
-    "The Victoria Park files (aa3_dr.mat, aa3_gpsx.mat, partial_raw_scans_ss2002/sick.mat, "
-    "reference_detections/VictoriaParkSinSincronizar.mat) and where each comes from are listed "
-    "in shared/datasets/victoria_park/README.md (the shared data folder beside this "
-    "repository, with each file's source repository and sha256). Put them under "
-    f"<data>/victoria_park/ and set {DATA_ENV}=<data>."
+# a checkout (pyproject.toml beside the packages) has a default data folder; an installed wheel
+# (the packages in site-packages) has none, and no repository beside it to point to
+IN_CHECKOUT = (REPO_ROOT / "pyproject.toml").is_file()
+
+_FILES = (
+    "aa3_dr.mat, aa3_gpsx.mat, partial_raw_scans_ss2002/sick.mat, "
+    "reference_detections/VictoriaParkSinSincronizar.mat"
 )
+
+
+def how_to_get() -> str:
+    """Where the Victoria Park files come from, said for a checkout or for an installed wheel."""
+    if IN_CHECKOUT:
+        return (
+            f"The Victoria Park files ({_FILES}) and where each comes from are listed in "
+            "shared/datasets/victoria_park/README.md (the shared data folder beside this "
+            "repository, with each file's source repository and sha256). Put them under "
+            f"<data>/victoria_park/ and set {DATA_ENV}=<data>."
+        )
+    return (
+        f"The Victoria Park files ({_FILES}) are not part of the trunkslam package: obtain "
+        "them as the project's README says (section Data: each file's source and sha256), put "
+        f"them under <data>/victoria_park/ and set {DATA_ENV}=<data>."
+    )
 
 
 def data_root() -> Path:
@@ -48,13 +69,15 @@ def data_root() -> Path:
                 return c.resolve()
         tried = ", ".join(str(c) for c in candidates)
         raise MissingDataError(
-            f"{DATA_ENV}={value!r} is not a folder (tried {tried}). {_HOW_TO_GET}"
+            f"{DATA_ENV}={value!r} is not a folder (tried {tried}). {how_to_get()}"
         )
-    if DEFAULT_DATA_ROOT.is_dir():
+    if IN_CHECKOUT and DEFAULT_DATA_ROOT.is_dir():
         return DEFAULT_DATA_ROOT.resolve()
+    if not IN_CHECKOUT:
+        raise MissingDataError(f"no dataset folder: {DATA_ENV} is not set. {how_to_get()}")
     raise MissingDataError(
         f"no dataset folder: {DATA_ENV} is not set and the default {DEFAULT_DATA_ROOT} does not "
-        f"exist. {_HOW_TO_GET}"
+        f"exist. {how_to_get()}"
     )
 
 
@@ -62,7 +85,7 @@ def victoria_park_dir() -> Path:
     """`data_root() / "victoria_park"`; `MissingDataError` if it is missing."""
     d = data_root() / "victoria_park"
     if not d.is_dir():
-        raise MissingDataError(f"Victoria Park folder not found: {d}. {_HOW_TO_GET}")
+        raise MissingDataError(f"Victoria Park folder not found: {d}. {how_to_get()}")
     return d
 
 
@@ -74,3 +97,19 @@ def read_text_file(path: Path | Traversable, what: str) -> str:
         raise DataError(f"{what} not found: {path}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: cannot be read ({exc})") from None
+
+
+def check_input_file(path: Path, what: str) -> Path:
+    """`path` is a regular file that can be opened; `DataError` naming it and why not."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        if path.is_symlink():
+            raise DataError(f"{what} {path}: a symbolic link to nothing") from None
+        raise DataError(f"{what} not found: {path}") from None
+    except OSError as exc:  # a link to itself (ELOOP), a path through a file (ENOTDIR), ...
+        raise DataError(f"{what} {path}: cannot be read ({exc.strerror or exc})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        raise DataError(f"{what} {path} is not a file ({kind})")
+    return path

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import ConfigError, DataError, MissingDataError
-from experiments.io.paths import victoria_park_dir
+from experiments.io.paths import how_to_get, victoria_park_dir
 from slam import Sequence
 
 __all__ = [
@@ -67,11 +67,6 @@ SS2002_FILES = {
     "vehicle": "partial_raw_scans_ss2002/vehicle.mat",
     "features": "partial_raw_scans_ss2002/features.mat",
 }
-
-_HOW_TO_GET = (
-    "see shared/datasets/victoria_park/README.md (beside this repository) for where each file "
-    "comes from and its sha256"
-)
 
 
 # sha256 of the published files (the data folder's README.md lists the same sums, with sources)
@@ -118,7 +113,7 @@ def verify_file(root: Path, rel: str) -> Path:
     try:
         st = path.stat()
     except FileNotFoundError:
-        raise MissingDataError(f"Victoria Park file missing: {path}; {_HOW_TO_GET}") from None
+        raise MissingDataError(f"Victoria Park file missing: {path}; {how_to_get()}") from None
     key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
     got = _verified.get(key)
     if got is None:
@@ -133,7 +128,7 @@ def verify_file(root: Path, rel: str) -> Path:
     if got != expected:
         raise DataError(
             f"{path}: sha256 {got} differs from the published file's {expected}: the file is "
-            f"corrupt or another version; {_HOW_TO_GET}"
+            f"corrupt or another version; {how_to_get()}"
         )
     return path
 
@@ -154,15 +149,17 @@ def load_mat(root: Path, key: str, variables: tuple[str, ...]) -> dict[str, np.n
 
     path = root / VP_FILES[key]
     if not path.is_file():
-        raise MissingDataError(f"Victoria Park file missing: {path}; {_HOW_TO_GET}")
+        raise MissingDataError(f"Victoria Park file missing: {path}; {how_to_get()}")
     verify_file(root, VP_FILES[key])
     try:
         mat = loadmat(path)
     except Exception as exc:  # scipy raises assorted errors on corrupt files
-        raise DataError(f"{path}: cannot be read as a MATLAB file ({exc}); {_HOW_TO_GET}") from None
+        raise DataError(
+            f"{path}: cannot be read as a MATLAB file ({exc}); {how_to_get()}"
+        ) from None
     missing = [v for v in variables if v not in mat]
     if missing:
-        raise DataError(f"{path}: missing variable(s) {missing}; {_HOW_TO_GET}")
+        raise DataError(f"{path}: missing variable(s) {missing}; {how_to_get()}")
     return mat
 
 
@@ -357,7 +354,7 @@ def load_ss2002_reference(root: Path | str | None = None) -> tuple[np.ndarray, n
         try:
             mat = scipy.io.loadmat(path, squeeze_me=True, struct_as_record=False)
         except FileNotFoundError:
-            raise MissingDataError(f"{path}: not found; {_HOW_TO_GET}") from None
+            raise MissingDataError(f"{path}: not found; {how_to_get()}") from None
         except Exception as exc:  # scipy raises many types for a corrupt file
             raise DataError(f"{path}: cannot be read as a MATLAB file ({exc})") from None
         if var not in mat:

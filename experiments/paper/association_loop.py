@@ -73,10 +73,13 @@ SEEN_SCANS = 3  # a tree detected in this many scans could have been mapped
 
 
 def _config(base: SlamConfig, association: str, K: int) -> SlamConfig:
-    """`base` with the association method (and the window's K when given)."""
+    """`base` with the association method (and the window's K when given; a window of K scans
+    confirms a new landmark after at most K sightings, so confirm_scans is min(its, K): what the
+    filter does anyway, said in the configuration rather than warned about at every run)."""
     changes = {"association.method": association}
     if K:
         changes["association.window_scans"] = K
+        changes["map_policy.confirm_scans"] = min(base.map_policy.confirm_scans, K)
     return base.with_(**changes)
 
 

@@ -135,19 +135,18 @@ EXPERIMENTS: dict[str, Experiment] = {
     ),
     "victoria-park-calibration": Experiment(
         "experiments.paper.vp_calibration:run",
-        about="the ute's noise and laser yaw from scans 1-2000 (25 min; not in the default run)",
+        about="the ute's noise and laser yaw from scans 1-2000 (not in the default run)",
         default=False,
     ),
     "victoria-park-map-policy": Experiment(
         "experiments.paper.vp_map_policy:run",
-        about="the map policy's confirm_scans and pruning settings from scans 1-2000 (a minute; "
-        "only when named)",
+        about="the map policy's confirm_scans and pruning settings from scans 1-2000 (only when "
+        "named)",
         default=False,
     ),
     "loop-closure": Experiment(
         "experiments.paper.loop_closure:run",
-        about="simulated loops in a park and an orchard, loop closure off and on (minutes; "
-        "only when named)",
+        about="simulated loops in a park and an orchard, loop closure off and on (only when named)",
         default=False,
     ),
 }

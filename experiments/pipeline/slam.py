@@ -9,7 +9,7 @@ import numpy as np
 
 from experiments.errors import DataError
 from experiments.eval.gospa import GOSPA_SETTINGS, gospa, ospa
-from experiments.eval.gps import score_sequence
+from experiments.eval.gps import RFS_TOLERANCE_S, score_sequence
 from experiments.eval.missing import null_scores
 from experiments.eval.poses import nees, pose_errors
 from experiments.eval.series import slam_panels, slam_series
@@ -22,6 +22,7 @@ from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.run_log import RUN_LOG_NAME, write_run_log
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import atomic_folder, dumps_json, json_types, write_atomic
+from experiments.render.compiling import compile_seconds, watch_compiles
 from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, run_slam, se2
 from slam.closure import closure_counts
@@ -106,14 +107,17 @@ def _run_into(out: Path, inputs, cfg: SlamConfig, rerun, view) -> dict:
         given = load_features_json(features_file, seq.n_scans, seq.n_beams)
     with atomic_folder(out) as stage:
         rec_path = rerun_path if rerun_in_out is None else stage / rerun_in_out
-        t0 = time.perf_counter()
+        watch_compiles()  # the run's time leaves numba's first compile out, reported apart
+        c0, t0 = compile_seconds(), time.perf_counter()
         lg = _run_recorded(seq, cfg, given, rec_path, view)
-        seconds = time.perf_counter() - t0
+        compiling = compile_seconds() - c0
+        seconds = time.perf_counter() - t0 - compiling
         _write_run(stage, seq, cfg, lg, f"trunkslam slam {input_path}")
         summary = summarise(lg, seq, seconds)
         summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
         if reference is not None:
             summary["reference_map"] = reference_map_scores(lg.landmark_xy, *reference)
+        summary["compile_s"] = compiling  # 0 once the kernels are in numba's cache
         write_atomic(stage / SUMMARY, dumps_json(summary))
         write_manifest(stage, "slam")  # last: the set is complete
     return summary
@@ -189,7 +193,7 @@ def _str(p) -> str | None:
 def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
     """Counts, timings per phase, the configuration, errors against GPS (when the sequence has
     GPS) and against the truth (scans the truth covers, the first left out since the run may
-    start there)."""
+    start there; but for `rmse_m`, evo's figure, which counts it)."""
     timing = {}
     for k, v in lg.timing_s.items():
         timing[k] = {
@@ -224,10 +228,12 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
         if seq.truth_t is None
         else (lg.scan_t >= seq.truth_t[0]) & (lg.scan_t <= seq.truth_t[-1])
     )
+    covered = inside.copy()  # evo_ape's pairing against truth.tum: the first scan included
     inside[0] = False  # the run may start at the truth
     if inside.any():  # score only the scans the truth covers, at the poses' own times
         truth = interpolate_poses(lg.scan_t, seq.truth_t, seq.truth_pose)
-        e = pose_errors(lg.pose, truth)[inside]
+        e_all = pose_errors(lg.pose, truth)
+        e = e_all[inside]
         covs = lg.pose_cov[inside]
         ok = np.linalg.det(covs) > 0
         n = nees(e[ok], covs[ok])
@@ -237,6 +243,9 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
             ),
             "nees_mean": float(np.mean(n)) if n.size else None,
             "scans_scored": int(inside.sum()),
+            # position RMSE over every scan the truth covers, the first too: evo_ape's figure
+            # against `trunkslam export-reference`'s truth.tum
+            "rmse_m": float(np.sqrt(np.mean(np.sum(e_all[covered, :2] ** 2, axis=1)))),
         }
     return null_scores(summary, reasons=missing_reasons(seq, summary))
 
@@ -273,6 +282,28 @@ def missing_reasons(seq: Sequence, summary: dict) -> dict[str, str]:
     span = f"{seq.scan_t[0]:.3f}-{seq.scan_t[-1]:.3f} s"
     if not gps.get("matched"):
         out["gps"] = f"no GPS fix within the run's time span ({span}); all are outside it"
-    else:
-        out["gps"] = f"too few GPS fixes within the run ({gps['matched']}) to compute it"
+        return out
+    out["gps"] = f"too few GPS fixes within the run ({gps['matched']}) to compute it"
+    return out | gps_reasons(gps)
+
+
+def gps_reasons(gps: dict) -> dict[str, str]:
+    """Why each GPS figure a run with fixes inside it can still lack is missing: its rule and
+    the count of the fixes it counts (`experiments.eval.gps`), by dotted key."""
+    n, clean = gps["matched"], gps["matched"] - gps.get("jumps", 0)
+    out = {}
+    for k in ("clean_rmse", "clean_median", "clean_p95"):
+        out[f"gps.{k}"] = f"no fix that is not a jump among the {n} within the run"
+    for k in ("rotation_deg", "all_rmse_aligned", "clean_rmse_aligned", "clean_median_aligned",
+              "clean_p95_aligned"):  # fmt: skip
+        out[f"gps.{k}"] = (
+            f"the alignment needs at least 3 fixes within the run that are not jumps; {clean} are"
+        )
+    for k in ("vouched_rmse", "vouched_median", "vouched_p95"):
+        out[f"gps.{k}"] = (
+            f"none of the {n} fixes within the run is vouched for by the odometry "
+            "(experiments.eval.vouched)"
+        )
+    ms = 1e3 * RFS_TOLERANCE_S
+    out["gps.rfs_rmse"] = f"none of the {n} fixes within the run is within {ms:g} ms of a scan"
     return out

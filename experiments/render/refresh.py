@@ -35,6 +35,7 @@ import io
 import json
 import math
 import os
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -475,7 +476,25 @@ def _readme_with_glance(readme: Path, text: str, snapshot: Snapshot) -> str:
         ) from None
     head, rest = text.split(GLANCE_BEGIN, 1)
     _, tail = rest.split(GLANCE_END, 1)
-    return head + GLANCE_BEGIN + "\n" + table + GLANCE_END + tail
+    return _run_time(head + GLANCE_BEGIN + "\n" + table + GLANCE_END + tail, snapshot)
+
+
+RUN_TIME = re.compile(r"about\s+[0-9.]+\s+(?:s|min|h)\s+on\s+(\w+)\s+cores")
+_NUMBERS = {1: "one", 2: "two", 3: "three", 4: "four", 8: "eight"}
+
+
+def _run_time(text: str, snapshot: Snapshot) -> str:
+    """The README's time of `make reproduce` ("about 7.6 min on two cores") set to the
+    snapshot's: its manifest's experiments' times added, on its machine's cores."""
+    if not RUN_TIME.search(text):
+        return text
+    try:
+        seconds = snapshot.duration()
+        cores = int(str(snapshot.manifest().get("machine", "")).split(" cores")[0].split()[-1])
+    except (ReportError, ValueError, IndexError, TypeError):
+        return text  # a manifest without the run's times or its machine: left as it was
+    words = f"about {seconds} on {_NUMBERS.get(cores, str(cores))} cores"
+    return RUN_TIME.sub(words, text, count=1)
 
 
 def snapshot_record(folder: Path | str) -> dict:

@@ -142,6 +142,7 @@ def test_a_bug_is_not_turned_into_a_one_line_message(tmp_path, monkeypatch):
         raise ValueError("operands could not be broadcast together")
 
     monkeypatch.setattr(pipeline, "run_extract", broken)
+    (tmp_path / "x.npz").write_bytes(b"")  # there: the command checks that before its work
     res = runner.invoke(app, ["extract", str(tmp_path / "x.npz")])
     assert res.exit_code != 0 and isinstance(res.exception, ValueError)
     assert "error: operands" not in res.output

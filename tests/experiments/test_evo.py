@@ -126,9 +126,11 @@ def test_evo_ape_on_victoria_park_equals_our_gps_score(vp_dir, tmp_path, monkeyp
 @pytest.mark.slow
 def test_evo_ape_on_a_simulated_drive(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    for command in SIM_RECIPE:
-        _trunkslam(command)
+    printed = [_trunkslam(command) for command in SIM_RECIPE]
     summary = json.loads(Path("slam_out/summary.json").read_text())
+    # the run prints the truth RMSE and export-reference the evo call that gives it back
+    assert f"{summary['truth']['rmse_m']:.3f} m RMS from truth" in printed[1]
+    assert "evo_ape tum ref/truth.tum RUN/trajectory.tum --sync_method interpolation" in printed[2]
     seq = load_sequence("run.npz")
     scan_t, pose = _trajectory(Path("slam_out"))
 
@@ -144,6 +146,7 @@ def test_evo_ape_on_a_simulated_drive(tmp_path, monkeypatch):
     np.testing.assert_allclose(errors, np.hypot(e[:, 0], e[:, 1]), atol=ROUNDING_M)
     assert errors[0] == 0.0
     assert stats["rmse"] == pytest.approx(np.sqrt(np.mean(e[:, 0] ** 2 + e[:, 1] ** 2)), abs=1e-6)
+    assert stats["rmse"] == pytest.approx(summary["truth"]["rmse_m"], abs=ROUNDING_M)
 
     # against the GPS: 478 fixes at 10 Hz against 240 scans, so evo interpolates the GPS at each
     # scan; the interpolation averages the fixes' independent noise (variance 2 sigma^2 in 2D) to

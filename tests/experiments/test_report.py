@@ -109,11 +109,27 @@ def test_a_reproduce_run_replaces_its_files_and_keeps_the_others(project, tmp_pa
     assert record["files"][kept_calibration] == "results_cal2"
     n_src = len([p for p in src.iterdir()])
     assert f"{n_src} replaced, 0 added" in res.output
+    assert f"about {Snapshot(snap).duration()} on two cores" in " ".join(
+        (project / "README.md").read_text().split()
+    )
     # every page still builds from the refreshed snapshot
     for page in (project / "docs").rglob("*.md"):
         if snap not in page.parents:
             out = render_macros(page.read_text(), Snapshot(snap), str(page))
             assert not MACRO.search(out)
+
+
+def test_the_readmes_run_time_follows_the_new_manifest(project, tmp_path):
+    src = reproduce_sized(project, tmp_path)
+    manifest = json.loads((src / "manifest.json").read_text())
+    manifest["seconds"] = {k: 2 * v for k, v in manifest["seconds"].items()}
+    (src / "manifest.json").write_text(json.dumps(manifest))
+    old = f"about {Snapshot(project / 'docs' / 'results').duration()} on two cores"
+    assert old in " ".join((project / "README.md").read_text().split())
+    res = report(project, src)
+    assert res.exit_code == 0, res.output
+    new = f"about {Snapshot(project / 'docs' / 'results').duration()} on two cores"
+    assert new != old and new in " ".join((project / "README.md").read_text().split())
 
 
 def test_kept_files_of_an_experiment_that_ran_again_are_named_not_refreshed(project, tmp_path):

@@ -467,3 +467,18 @@ def test_latency_profile_is_j_at_each_latency_and_zero_is_the_plain_run(vp_dir):
     assert [lat for lat, _ in rows] == [0.0, 0.06]
     assert rows[0][1] == objective(seq, START[:6], base)[0]
     assert rows[1][1] != rows[0][1] and math.isfinite(rows[1][1])
+
+
+def test_an_installed_wheel_names_no_repository_and_no_default(tmp_path, monkeypatch):
+    """From a wheel there is no repository beside the package: the message says where the data
+    come from without pointing to one, and no default folder is tried."""
+    monkeypatch.delenv(data.DATA_ENV, raising=False)
+    monkeypatch.setattr(data, "DEFAULT_DATA_ROOT", tmp_path)  # exists, but not for a wheel
+    monkeypatch.setattr(data, "IN_CHECKOUT", False)
+    with pytest.raises(DataError) as info:
+        data.data_root()
+    msg = str(info.value)
+    assert "beside" not in msg and "repository" not in msg and str(tmp_path) not in msg
+    assert data.DATA_ENV in msg and "aa3_dr.mat" in msg and "README" in msg
+    monkeypatch.setattr(data, "IN_CHECKOUT", True)
+    assert data.data_root() == tmp_path.resolve()
