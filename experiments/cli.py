@@ -815,19 +815,24 @@ def slam_cmd(
                 inputs=(config_file,),
                 reference_map=reference_map,
             )
-        err = _gps_words(s.get("gps")) + _truth_words(s.get("truth"))
-        done = f"{counted(s['n_scans'], 'scan')}, {counted(s['landmarks'], 'landmark')}{err}"
-        done += f", {s['seconds']:.1f} s" + _compiling_words(s.get("compile_s"))
-        if "reference_map" in s:
-            g = s["reference_map"]["gospa_20m"]
-            done += f", GOSPA {g['distance']:.2f} m (c = 20 m) against the reference map"
-        typer.echo(f"{done} -> {out}/")
+        typer.echo(f"{_slam_words(s)} -> {out}/")
         if smooth:
             from experiments.pipeline.smooth import smooth_run
 
             with Progress() as progress:
                 summary = smooth_run(out, progress=_smoother_progress(progress))
             _echo_smoothed(summary)
+
+
+def _slam_words(s: dict) -> str:
+    """A slam run's summary in one line: scans, landmarks, GPS and truth errors, time, GOSPA."""
+    err = _gps_words(s.get("gps")) + _truth_words(s.get("truth"))
+    done = f"{counted(s['n_scans'], 'scan')}, {counted(s['landmarks'], 'landmark')}{err}"
+    done += f", {s['seconds']:.1f} s" + _compiling_words(s.get("compile_s"))
+    if "reference_map" in s:
+        g = s["reference_map"]["gospa_20m"]
+        done += f", GOSPA {g['distance']:.2f} m (c = 20 m) against the reference map"
+    return done
 
 
 def _check_input(path: Path | None, what: str) -> None:
