@@ -35,7 +35,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from experiments.errors import MissingDataError
-from experiments.eval.gospa import GOSPA_LABELS, gospa_columns
+from experiments.eval.gospa import GOSPA_LABELS, GOSPA_SETTINGS, gospa_columns
 from experiments.eval.gps import score_sequence
 from experiments.eval.map_quality import (
     false_detection_rate,
@@ -500,7 +500,13 @@ PARTS = (
             "duplicates_merged",
         ),
     ),
-    ("GOSPA against the reference trees (landmarks of scans 1-2000)", tuple(GOSPA_LABELS)),
+    *(
+        (
+            f"GOSPA against the reference trees, c = {c:g} m (landmarks of scans 1-2000)",
+            tuple(k for k in GOSPA_LABELS if k.startswith(f"gospa_{c:g}m")),
+        )
+        for c, _, _ in GOSPA_SETTINGS
+    ),
 )
 
 
