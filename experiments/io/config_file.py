@@ -19,7 +19,7 @@ import tomli_w
 
 from experiments.bundled import PRESET_SUFFIX, preset_names, presets_dir
 from experiments.errors import ConfigError, DataError
-from experiments.io.paths import read_text_file
+from experiments.io.paths import check_depth, read_text_file
 from slam import SlamConfig, SlamError
 
 __all__ = ["config_toml", "load_slam_config", "preset_path", "presets"]
@@ -60,6 +60,7 @@ def load_slam_config(path: str | Path) -> SlamConfig:
         raise DataError(f"{path}: not valid TOML ({exc})") from None
     except RecursionError:
         raise DataError(f"{path}: nested too deeply to be a configuration") from None
+    check_depth(data, path)
     try:
         return SlamConfig.from_dict(data)
     except SlamError as exc:
