@@ -622,8 +622,29 @@ def _link_setups() -> dict[tuple[str, str], Callable]:
     }
 
 
+def _stale_partial(command: str, setup) -> CommandCase:
+    """A symbolic link named as a killed run's temporary folder (`.NAME.partial-PID-XXXX`,
+    whose process is gone: removed by the next run) pointing at a user's folder: the link is
+    not followed (its folder and files are kept) and the run completes."""
+
+    def build(folder: Path):
+        args, out, _ = setup(folder)
+        mine = folder / "thesis"
+        mine.mkdir()
+        precious(mine)
+        at = out.parent / f".{out.name}.partial-999999999-abcd"
+        at.symlink_to(mine)
+        return args, [mine, mine / "thesis.tex"], at.name
+
+    label = f"{command}: symlink at a dead run's temporary folder -> the user's folder"
+    return CommandCase("links", label, "", build, ok_if_runs=True)
+
+
 def links_cases() -> list[CommandCase]:
     out = []
+    setups = _link_setups()
+    out.append(_stale_partial("slam", setups[("slam", "--out")]))
+    out.append(_stale_partial("export-reference", setups[("export-reference", "--out")]))
     for (command, where), setup in _link_setups().items():
         for how in PLANTS:
             if how == "FIFO" and "lock" not in where and where not in ("--out",):
