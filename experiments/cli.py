@@ -171,6 +171,24 @@ def _numbers(option: str, text: str, n: int) -> list[float]:
     return values
 
 
+MAX_WORKERS = 4096  # --workers, --threads: processes or threads of one machine
+MAX_BENCH_TREES = 5000  # bench slam --trees: the filter's covariance, (3 + 2 n)^2 floats
+MAX_CHUNK = 100_000  # bench smoother --chunks: poses per iSAM2 update (Victoria Park: 7,249)
+
+
+def _dask_address(value: str | None) -> str | None:
+    """--dask checked before any work: a scheduler address of a scheme dask knows."""
+    if value is not None:
+        from experiments.errors import ConfigError
+        from experiments.exec.cluster import check_address
+
+        try:
+            check_address(value)
+        except ConfigError as exc:
+            raise typer.BadParameter(str(exc)) from None
+    return value
+
+
 class _StderrHandler(logging.StreamHandler):
     """Writes to whatever sys.stderr is when a record comes (not the one at set-up)."""
 
@@ -247,6 +265,7 @@ def main(
         typer.Option(
             "--threads",
             min=1,
+            max=MAX_WORKERS,
             help="BLAS/OpenMP threads of this process (the filter is fastest with one; "
             "reproduce and sweep use one per worker) [default: $OMP_NUM_THREADS, else 1]",
         ),
@@ -401,12 +420,12 @@ def convert_rosbag(
 ) -> None:
     """A robot's ROS bag (laser scans, wheel odometry, optional GPS) as one sequence file."""
     from experiments.io.outputs import check_outputs
-    from experiments.io.rosbag import read_rosbag
+    from experiments.io.rosbag import bag_inputs, read_rosbag
     from experiments.io.sequence_file import save_sequence
     from experiments.render.progress import Progress
 
     mount = None if laser_pose is None else _numbers("--laser-pose", laser_pose, 3)
-    check_outputs("convert", inputs=[bag], files={"--out": out})
+    check_outputs("convert", inputs=bag_inputs(bag), files={"--out": out})
     with Progress() as progress:
         run = read_rosbag(
             bag,
@@ -492,13 +511,16 @@ def reproduce(
         int | None,
         typer.Option(
             min=1,
-            help="local worker processes for the trials (1: this process) [default: every core]",
+            max=MAX_WORKERS,
+            help="local worker processes for the trials (1: this process; at most 4096) "
+            "[default: every core]",
         ),
     ] = None,
     dask: Annotated[
         str | None,
         typer.Option(
             envvar="TRUNKSLAM_DASK",
+            callback=_dask_address,
             help="run the trials on this Dask scheduler (tcp://host:8786) instead of local "
             "processes; needs trunkslam[dask] [default: $TRUNKSLAM_DASK, else none]",
         ),
@@ -571,14 +593,16 @@ def sweep(
         int | None,
         typer.Option(
             min=1,
-            help="local worker processes (1: this process) [default: the file's [executor], "
-            "else every core]",
+            max=MAX_WORKERS,
+            help="local worker processes (1: this process; at most 4096) [default: the file's "
+            "[executor], else every core]",
         ),
     ] = None,
     dask: Annotated[
         str | None,
         typer.Option(
             envvar="TRUNKSLAM_DASK",
+            callback=_dask_address,
             help="run the trials on this Dask scheduler (tcp://host:8786) [default: "
             "$TRUNKSLAM_DASK, else the file's [executor]]",
         ),
@@ -1198,7 +1222,13 @@ def bench_association(
 @handle_errors
 def bench_slam(
     trees: Annotated[
-        int, typer.Option(min=1, help="trees along the avenue (the final map size)")
+        int,
+        typer.Option(
+            min=1,
+            max=MAX_BENCH_TREES,
+            help="trees along the avenue (the final map size; at most 5,000: the filter's "
+            "covariance is then 0.8 GB)",
+        ),
     ] = 800,
     association: Annotated[Association, typer.Option(help="data association")] = Association.ihgr,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
@@ -1240,9 +1270,13 @@ def bench_smoother(
     from experiments.bench.smoother import bench_smoother as bench
     from experiments.bench.smoother import format_table
 
-    sizes = [int(v) for v in _numbers("--chunks", chunks, len(chunks.split(",")))]
-    if any(v < 1 for v in sizes):
-        raise typer.BadParameter("poses per update must be >= 1", param_hint="--chunks")
+    sizes = _numbers("--chunks", chunks, len(chunks.split(",")))
+    if any(v != int(v) or not 1 <= v <= MAX_CHUNK for v in sizes):
+        raise typer.BadParameter(
+            f"poses per update must be whole numbers in 1..{MAX_CHUNK}, got {chunks!r}",
+            param_hint="--chunks",
+        )
+    sizes = [int(v) for v in sizes]
     from experiments.render.progress import Progress
 
     with Progress() as progress:
@@ -1286,11 +1320,18 @@ def bench_reproduce(
     quick: Annotated[bool, typer.Option(help="the small-sample version")] = False,
     workers: Annotated[
         int | None,
-        typer.Option(min=2, help="the parallel run's worker processes [default: every core]"),
+        typer.Option(
+            min=2,
+            max=MAX_WORKERS,
+            help="the parallel run's worker processes (at most 4096) [default: every core]",
+        ),
     ] = None,
     dask: Annotated[
         str | None,
-        typer.Option(help="also run on this Dask scheduler (tcp://host:8786) [default: no]"),
+        typer.Option(
+            callback=_dask_address,
+            help="also run on this Dask scheduler (tcp://host:8786) [default: no]",
+        ),
     ] = None,
     out: BenchOut = None,
 ) -> None:

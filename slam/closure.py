@@ -133,6 +133,10 @@ HOLD_TOL_M = 0.01
 # pairs; one right pair is enough, and the cost grows with the square of this.
 BASIS = 10
 
+# The smallest match_m: the match bins landmark pairs by length in steps of match_m, so a
+# subnormal one makes the bins' count overflow; 1 mm is far below any trunk's measured spread.
+MIN_MATCH_M = 1e-3
+
 
 @dataclass(frozen=True)
 class ClosureConfig:
@@ -191,6 +195,10 @@ class ClosureConfig:
                 raise SlamError(f"closure.{f.name}: must be > 0, got {v!r}")
         if not 0.0 < self.jc_prob < 1.0:
             raise SlamError(f"closure.jc_prob: must be in (0, 1), got {self.jc_prob!r}")
+        if self.match_m < MIN_MATCH_M:  # pairs are binned by length in steps of match_m
+            raise SlamError(
+                f"closure.match_m: must be >= {MIN_MATCH_M} m (MIN_MATCH_M), got {self.match_m!r}"
+            )
         if self.old_s < self.recent_s:  # an old landmark must not be a recent one too
             raise SlamError(
                 f"closure.old_s: must be >= recent_s ({self.recent_s!r}), got {self.old_s!r}"

@@ -17,7 +17,9 @@ sweep specification (TOML) and the scene file (JSON).
   nesting) and written back.
 
 Run as a script it prints the audit's counts per format and verdict:
-`python tests/hostile.py` (the counts in docs/outputs.md, checked by test_hostile_files.py).
+`python tests/hostile.py` (the counts in docs/outputs.md, checked by test_hostile_files.py),
+then those of the whole commands' case kinds (`tests/hostile_commands.py`: convert rosbag,
+links, option extremes, the [closure] section; checked by test_hostile_commands.py).
 """
 
 from __future__ import annotations
@@ -401,6 +403,7 @@ STRING_MUTATIONS: dict[str, Callable] = {
     "an empty string": lambda s: np.array(""),
     "a list of strings": lambda s: np.array([str(s), str(s)]),
     "bytes": lambda s: np.array(str(s).encode()),
+    "a number as text": lambda s: np.array("3.0"),
 }
 
 
@@ -506,7 +509,7 @@ SEQUENCE_VALID = {
     *[(k, "removed") for k in ("scan_max_range", "name", "gps_pose", "truth_landmarks",
                                 "scan_labels", "det_cov", "det_method", "vehicle",
                                 "scan_n_beams")],
-    ("name", "an empty string"),  # free text
+    ("name", "an empty string"), ("name", "a number as text"),  # free text
     ("truth_landmarks", "a row short"),  # any number of landmarks
     ("det_scan", "reversed"),  # the drive's: all in order
 }  # fmt: skip
@@ -754,6 +757,9 @@ if __name__ == "__main__":
     sys.path[:] = [str(here.parent), str(here)] + [p for p in sys.path if p not in ("", str(here))]
     shown = int(sys.argv[1]) if len(sys.argv) > 1 else 0
     total = audit(show=shown)
+    from hostile_commands import audit as command_audit  # whole commands (issue 43)
+
+    total |= command_audit(show=shown)
     print(json.dumps(total, indent=1))
 
 

@@ -18,7 +18,7 @@ from experiments.errors import ConfigError
 from experiments.exec.local import warm_kernels
 from experiments.exec.trials import Executor, run_chunk
 
-__all__ = ["DaskExecutor"]
+__all__ = ["DaskExecutor", "check_address"]
 
 log = logging.getLogger(__name__)
 
@@ -32,10 +32,29 @@ def _client(address_or_client):
         ) from None
     if isinstance(address_or_client, Client):
         return address_or_client, False
+    check_address(address_or_client)
     try:
         return Client(address_or_client, timeout="20s"), True
     except OSError as exc:
         raise ConfigError(f"--dask: no Dask scheduler at {address_or_client!r}: {exc}") from None
+
+
+def check_address(address) -> None:
+    """`ConfigError` naming --dask when `address` is not a scheduler address dask can use (a
+    string of a known scheme: tcp://host:8786, tls://..., or host:port), before connecting."""
+    if not isinstance(address, str) or not address.strip():
+        raise ConfigError(
+            f"--dask: expected a scheduler address (tcp://host:8786), got {address!r}"
+        )
+    try:
+        from distributed.comm.addressing import parse_address
+        from distributed.comm.registry import get_backend
+    except ImportError:
+        return  # `_client` says what to install
+    try:
+        get_backend(parse_address(address)[0])
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"--dask {address!r}: not a Dask scheduler address ({exc})") from None
 
 
 class DaskExecutor(Executor):

@@ -21,7 +21,7 @@ import tomli_w
 
 from experiments.bundled import PRESET_SUFFIX, preset_names, presets_dir
 from experiments.errors import ConfigError, DataError
-from experiments.io.paths import read_text_file
+from experiments.io.paths import check_depth, read_text_file
 
 if TYPE_CHECKING:  # `slam` (numpy, numba, scipy) loads when a configuration is read, not for
     from slam import SlamConfig  # `trunkslam presets` or a misspelt preset's name
@@ -68,6 +68,7 @@ def load_slam_config(path: str | Path) -> SlamConfig:
         raise DataError(f"{path}: not valid TOML ({exc})") from None
     except RecursionError:
         raise DataError(f"{path}: nested too deeply to be a configuration") from None
+    check_depth(data, path)
     try:
         return SlamConfig.from_dict(data)
     except SlamError as exc:

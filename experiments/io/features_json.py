@@ -56,13 +56,16 @@ SCHEMA = Table(
 )
 
 
+MAX_FEATURES_BYTES = 1 << 30  # a features JSON is read whole: at most 1 GiB
+
+
 def load_features_json(path: str | Path, n_scans: int, n_beams: int = 0) -> list[Features]:
     """One `Features` per scan (circles only) from a features JSON with exactly n_scans scans
     numbered 0..n_scans - 1 (the scans of the sequence it will drive, of n_beams beams; 0: not
     checked). The whole file is checked against `SCHEMA` first."""
     path = check_input_file(Path(path), "features file")
-    doc = check(SCHEMA, parse_json(read_text_file(path, "features file"), str(path),
-                                   "features JSON file"), str(path))  # fmt: skip
+    text = read_text_file(path, "features file", MAX_FEATURES_BYTES)
+    doc = check(SCHEMA, parse_json(text, str(path), "features JSON file"), str(path))
     method, scans = doc["method"], doc["scans"]
     if len(scans) != n_scans:
         raise DataError(f"{path}: scans: has {len(scans)} scans, the sequence {n_scans}")

@@ -35,7 +35,14 @@ import numpy as np
 from experiments.errors import DataError
 from experiments.io.paths import check_input_file  # noqa: F401  (here before; light there)
 
-__all__ = ["PARSE_ERRORS", "Var", "available_memory", "check_input_file", "read_npz"]
+__all__ = [
+    "PARSE_ERRORS",
+    "Var",
+    "available_memory",
+    "check_input_file",
+    "check_method_name",
+    "read_npz",
+]
 
 log = logging.getLogger(__name__)
 
@@ -71,6 +78,19 @@ class Var:
             if self.shape
             else ("a string" if self.kind == "str" else f"one {_KIND_WORDS[self.kind][:-1]}")
         )
+
+
+def check_method_name(path, key: str, value: str) -> str:
+    """A method's name read from a file (a sequence's `det_method`, a run log's `features` and
+    `association`): words, not blank and not a number written as text ("3.0", "nan": the
+    number a writer put there, turned into a string). `DataError` naming the file and the key."""
+    if not value.strip():
+        raise DataError(f"{path}: {key}: an empty method name")
+    try:
+        float(value)
+    except ValueError:
+        return value
+    raise DataError(f"{path}: {key}: {value!r} is a number, not the name of a method")
 
 
 def available_memory() -> int | None:

@@ -15,7 +15,9 @@ command at a time and listed in their manifest.
   lists (`write_manifest`); a file it does not list is named and the folder kept.
 - `lock_folder`: an advisory lock (`fcntl.flock`) on `.NAME.lock` beside a result folder, held
   by a command from its check to its last write: a second command on the folder is refused at
-  once, naming the holder. The kernel drops the lock of a killed process.
+  once, naming the holder. The kernel drops the lock of a killed process. The lock file is
+  opened without following links (`O_NOFOLLOW`): one that is a symbolic link, a hard link, a
+  FIFO or a folder is refused, naming it, and what it points to is left as it was.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from pathlib import Path
 
 from experiments.bundled import presets_dir, scenes_dir
 from experiments.errors import DataError
-from experiments.io.writers import dumps_json, refuse_non_regular, write_atomic
+from experiments.io.writers import dumps_json, file_kind, refuse_non_regular, write_atomic
 
 try:
     import fcntl
@@ -44,6 +46,7 @@ __all__ = [
     "check_output_file",
     "check_output_folder",
     "check_outputs",
+    "check_path_text",
     "lock_folder",
     "read_manifest",
     "write_manifest",
@@ -120,6 +123,13 @@ def check_outputs(
     into: {option: path} of folders the command writes files into without replacing them.
     A file inside an output folder is allowed (it becomes part of the set: slam's --rerun).
     `DataError` naming the option, the path and what it would overwrite."""
+    for option, p in [*(files or {}).items(), *(folders or {}).items(), *(into or {}).items()]:
+        if p is not None:
+            check_path_text(p, option)
+    inputs = list(inputs)
+    for i in inputs:
+        if isinstance(i, (str, bytes, os.PathLike)):  # (not a package resource)
+            check_path_text(i, "input")
     outs = [_Output(o, p, "file") for o, p in (files or {}).items() if p is not None]
     outs += [_Output(o, p, "folder") for o, p in (folders or {}).items() if p is not None]
     outs += [_Output(o, p, "into") for o, p in (into or {}).items() if p is not None]
@@ -223,9 +233,9 @@ def _refuse_if_held(real: Path, folder: Path, option: str) -> None:
     if fcntl is None or str(lock) in _held:
         return
     try:
-        fd = os.open(lock, os.O_RDONLY | os.O_CLOEXEC)
+        fd = os.open(lock, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW | os.O_NONBLOCK)
     except OSError:
-        return  # no lock file: nobody holds it
+        return  # no lock file (or not one: lock_folder names it): nobody holds it
     try:
         fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
     except BlockingIOError:
@@ -245,10 +255,30 @@ def _refuse_non_folder(path: Path, option: str) -> None:
     refuse_non_regular(path, option, folder=True)
 
 
+def check_path_text(path: Path | str, option: str) -> None:
+    """`DataError` naming `option` when `path` holds a NUL byte (no file has such a name) or
+    bytes that are not UTF-8 (the path is written into the results: summary.json, manifests,
+    the configuration's header, which are UTF-8)."""
+    text = os.fspath(path)
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    if "\0" in text:
+        raise DataError(f"{option} {text!r}: a path cannot hold a NUL byte")
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(text).decode("utf-8", errors="backslashreplace")
+        raise DataError(
+            f"{option} {shown}: the path's bytes are not UTF-8, which the results that name it "
+            "(summary.json, manifest.json) are written in; rename it"
+        ) from None
+
+
 def check_output_file(path: Path | str, option: str) -> Path:
     """An output file path's own checks: absent or a regular file (not a symlink, FIFO or
     device: a rename would replace it), in a folder that exists. `DataError` naming the option
     and the path otherwise. The inputs are `check_outputs`' part."""
+    check_path_text(path, option)
     path = Path(path)
     refuse_non_regular(path, option)
     if not path.parent.is_dir():
@@ -294,6 +324,7 @@ def check_output_folder(path: Path | str, option: str, command: str) -> Path:
     absent, an empty folder, or an earlier output of `trunkslam COMMAND` every file of which
     its manifest.json lists; not a symlink, a file, a FIFO. `DataError` naming the option, the
     path and the reason (the first files it would lose that trunkslam did not write)."""
+    check_path_text(path, option)
     path = Path(path)
     _refuse_non_folder(path, option)
     if not path.exists():
@@ -376,9 +407,44 @@ def _holder(fd: int) -> str:
     return "pid unknown"
 
 
+# a lock file is opened without following a link (O_NOFOLLOW) and without waiting on a FIFO
+_LOCK_FLAGS = os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW | os.O_NONBLOCK
+
+
+def _open_lock(lock: Path, folder: Path, option: str) -> int:
+    """The lock file `lock`, opened (created when missing) for writing without following a
+    link; `DataError` naming it when it is anything but a regular file of one name (a symbolic
+    link, a FIFO, a folder, a device, or a hard link to another file: writing the holder's pid
+    into it would overwrite what it points to)."""
+    refuse = f"{option} {folder}: its lock file {lock}"
+    try:
+        fd = os.open(lock, _LOCK_FLAGS, 0o644)
+    except OSError as exc:
+        try:
+            kind = file_kind(os.lstat(lock).st_mode)
+        except OSError:
+            kind = None
+        if kind is not None and kind != "a regular file":
+            raise DataError(_not_a_lock(refuse, kind)) from None
+        raise DataError(f"{refuse} cannot be opened ({exc.strerror})") from None
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode) or st.st_nlink > 1:
+        os.close(fd)
+        kind = file_kind(st.st_mode) if not stat.S_ISREG(st.st_mode) else "a hard link"
+        raise DataError(_not_a_lock(refuse, kind))
+    return fd
+
+
+def _not_a_lock(refuse: str, kind: str) -> str:
+    return (
+        f"{refuse} exists and is {kind}, not a regular file of its own; refusing to write "
+        "through it (remove it: trunkslam makes it again)"
+    )
+
+
 def _acquire(lock: Path, folder: Path, option: str) -> int:
     for _ in range(100):
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        fd = _open_lock(lock, folder, option)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -20,6 +20,9 @@ __all__ = [
     "DATA_ENV",
     "REPO_ROOT",
     "DEFAULT_DATA_ROOT",
+    "MAX_DEPTH",
+    "MAX_TEXT_BYTES",
+    "check_depth",
     "check_input_file",
     "data_root",
     "how_to_get",
@@ -89,10 +92,25 @@ def victoria_park_dir() -> Path:
     return d
 
 
-def read_text_file(path: Path | Traversable, what: str) -> str:
-    """The UTF-8 text of `path`; `DataError` "<what> not found" or naming why it cannot be read."""
+MAX_TEXT_BYTES = 1 << 20  # a configuration or sweep file: 1 MiB (the largest preset is 4 kB)
+
+
+def read_text_file(path: Path | Traversable, what: str, limit: int = MAX_TEXT_BYTES) -> str:
+    """The UTF-8 text of `path`; `DataError` "<what> not found" or naming why it cannot be read.
+    At most `limit` bytes are read: a longer file (/dev/zero, /dev/urandom, a log given by
+    mistake) is refused naming the limit, before it fills the memory. A FIFO is opened without
+    waiting for a writer."""
     try:
-        return path.read_text(encoding="utf-8")
+        if not isinstance(path, Path):  # a package resource (a preset of an installed wheel)
+            data = path.read_bytes()
+        else:
+            data = _read_at_most(path, limit + 1)
+        if len(data) > limit:
+            raise DataError(
+                f"{path}: larger than {limit // 1024} KiB, too large for a {what} "
+                "(experiments.io.paths.MAX_TEXT_BYTES)"
+            )
+        return data.decode("utf-8")
     except FileNotFoundError:
         raise DataError(f"{what} not found: {path}") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -113,3 +131,42 @@ def check_input_file(path: Path, what: str) -> Path:
         kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
         raise DataError(f"{what} {path} is not a file ({kind})")
     return path
+
+
+def _read_at_most(path: Path, n: int) -> bytes:
+    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC | os.O_NONBLOCK)
+    try:
+        os.set_blocking(fd, True)  # (a FIFO with a writer is then read as a file)
+        chunks, size = [], 0
+        while size < n:
+            chunk = os.read(fd, min(n - size, 1 << 16))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
+
+
+MAX_DEPTH = 64  # tables and lists inside one another in a configuration or sweep file
+
+
+def check_depth(doc, path, limit: int = MAX_DEPTH) -> None:
+    """`DataError` naming the file and the key when the parsed document `doc` (tables and
+    lists) is nested more than `limit` deep: the readers walk it recursively. Walked without
+    recursion itself."""
+    todo = [(doc, ())]
+    while todo:
+        node, keys = todo.pop()
+        if len(keys) > limit:
+            named = [str(k) for k in keys if isinstance(k, str)]
+            shown = ".".join(named[:6]) + (".…" if len(named) > 6 else "")
+            raise DataError(
+                f"{path}: {shown or 'a value'}: nested more than {limit} deep "
+                "(experiments.io.paths.MAX_DEPTH)"
+            )
+        if isinstance(node, dict):
+            todo += [(v, (*keys, k)) for k, v in node.items()]
+        elif isinstance(node, list):
+            todo += [(v, (*keys, i)) for i, v in enumerate(node)]

@@ -45,6 +45,8 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
+import stat
 import tempfile
 from collections import deque
 from collections.abc import Callable, Iterator
@@ -55,7 +57,9 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import ConfigError, DataError
-from slam import Sequence, SlamError
+from experiments.io.writers import file_kind
+from slam import Sequence, SlamConfig, SlamError
+from slam.checks import check_runnable
 
 __all__ = [
     "BASE_FRAMES",
@@ -63,6 +67,7 @@ __all__ = [
     "ODOMETRY_SOURCES",
     "TF_STATIC",
     "RosbagRun",
+    "bag_inputs",
     "bag_topics",
     "local_metres",
     "read_rosbag",
@@ -87,6 +92,7 @@ WGS84_E2 = 6.69437999014e-3
 _SIDEWAYS_MPS = 0.05  # a twist's linear.y beyond this is worth a warning: a unicycle has none
 _STILL_M = 0.1  # odometry that moves less than this over the whole bag counts as standing still
 _TILT_WARN_RAD = math.radians(2.0)
+MAX_MOUNT_M = 100.0  # a given laser pose's |x|, |y| in the robot's frame: a sensor on the robot
 
 
 @dataclass(frozen=True)
@@ -133,9 +139,16 @@ class RosbagRun:
 
 def _bag_paths(path: Path) -> Path:
     """The path rosbags opens: a ROS 1 `.bag` file, or a ROS 2 bag folder (the folder of a
-    `.db3` / `.mcap` file given directly); a bare `.mcap` file is left as it is."""
+    `.db3` / `.mcap` file given directly); a bare `.mcap` file is left as it is. Anything but a
+    regular file or a folder (a FIFO, a device: reading it could wait forever) is refused, and
+    so is a bag folder holding one."""
     if not path.exists():
         raise DataError(f"{path}: no such file or folder")
+    _refuse_special(path)
+    if path.is_dir():
+        with os.scandir(path) as entries:
+            for e in entries:
+                _refuse_special(Path(e.path))
     if path.is_file() and path.suffix in (".db3", ".mcap"):
         if (path.parent / "metadata.yaml").is_file():
             return path.parent
@@ -171,8 +184,10 @@ def _open_bag(path: Path) -> Iterator:
                 bag = stack.enter_context(_mcap_as_bag(bag))
             reader = AnyReader([bag], default_typestore=store)
             reader.open()
-        except _reader_errors() as exc:
-            raise DataError(f"{path}: cannot read the bag: {exc}") from exc
+        except DataError:
+            raise
+        except Exception as exc:  # rosbags' own errors, and whatever a corrupt file provokes
+            raise DataError(f"{path}: cannot read the bag: {_why(exc)}") from exc
         try:
             yield reader
         finally:
@@ -227,6 +242,30 @@ def _mcap_as_bag(path: Path) -> Iterator[Path]:
         yield folder
 
 
+def _refuse_special(path: Path) -> None:
+    """`DataError` when `path` (links followed) is neither a regular file nor a folder."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        raise DataError(f"{path}: cannot be read ({exc.strerror})") from None
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise DataError(
+            f"{path}: is {file_kind(mode)}, not a file or a folder; a bag is read from files "
+            "(copy it to one first)"
+        )
+
+
+def bag_inputs(path: Path | str) -> list[Path]:
+    """The paths `read_rosbag(path)` reads, for the output checks (`check_outputs`): the path,
+    and the bag folder when it is a storage file inside one (its metadata.yaml, its other
+    files)."""
+    path = Path(path)
+    found = [path]
+    if path.suffix in (".db3", ".mcap") and (path.parent / "metadata.yaml").is_file():
+        found.append(path.parent)
+    return found
+
+
 def _reader_errors() -> tuple[type[BaseException], ...]:
     """What rosbags raises for a file it cannot read (a truncated bag, a corrupt database, a
     message that does not deserialise): its own errors, and the file's."""
@@ -248,6 +287,14 @@ def _reader_errors() -> tuple[type[BaseException], ...]:
         OSError,
         EOFError,
     )
+
+
+def _why(exc: Exception) -> str:
+    """A reader's exception in words: its message, with its type when that is not one of the
+    library's own errors (a bare `TypeError: ord() ...` says nothing to a user)."""
+    if isinstance(exc, _reader_errors()):
+        return str(exc)
+    return f"the file is damaged or not what its name says ({type(exc).__name__}: {exc})"
 
 
 def _topic_table(reader) -> dict[str, tuple[str | None, int]]:
@@ -370,6 +417,11 @@ class _Fixes:
         if int(msg.status.status) < 0 or not (math.isfinite(lat) and math.isfinite(lon)):
             self.dropped += 1
             return
+        if abs(lat) > 90.0 or abs(lon) > 180.0:
+            raise DataError(
+                f"{self.topic}: message {k} has latitude {lat!r} deg, longitude {lon!r} deg; "
+                "a fix is within +-90 deg of latitude and +-180 deg of longitude"
+            )
         self.kept.append((stamp, lat, lon, float(msg.altitude)))
 
 
@@ -478,10 +530,19 @@ def read_rosbag(
 def _given_pose(pose) -> tuple[float, float, float]:
     try:
         p = tuple(float(v) for v in pose)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         p = ()
     if len(p) != 3 or not all(map(math.isfinite, p)):
         raise ConfigError(f"laser_pose: expected three finite numbers x, y, yaw, got {pose!r}")
+    if max(abs(p[0]), abs(p[1])) > MAX_MOUNT_M:
+        raise ConfigError(
+            f"laser_pose: the laser at ({p[0]:.6g}, {p[1]:.6g}) m is more than {MAX_MOUNT_M:g} m "
+            "from the robot's frame (MAX_MOUNT_M); give x, y in metres"
+        )
+    if abs(p[2]) > 2 * math.pi:
+        raise ConfigError(
+            f"laser_pose: yaw {p[2]:.6g} rad is beyond +-2 pi; give it in radians, not degrees"
+        )
     return p
 
 
@@ -502,8 +563,10 @@ def _read(reader, collectors: dict, path: Path, progress) -> dict[str, int]:
             counts[conn.topic] = k + 1
             if progress is not None and (done % every == 0 or done == total):
                 progress(desc, done, total)
-    except _reader_errors() as exc:
-        raise DataError(f"{path}: cannot read the bag's messages: {exc}") from exc
+    except DataError:
+        raise
+    except Exception as exc:  # as in `_open_bag`: any error of the reader on a corrupt bag
+        raise DataError(f"{path}: cannot read the bag's messages: {_why(exc)}") from exc
     empty = [t for t, n in counts.items() if n == 0]
     if empty:
         raise DataError(f"{path}: topic {empty[0]} has no messages that could be read")
@@ -512,6 +575,11 @@ def _read(reader, collectors: dict, path: Path, progress) -> dict[str, int]:
 
 def _check_stamps(topic: str, stamps: list[int]) -> None:
     s = np.asarray(stamps, dtype=np.int64)
+    if s.size and s[0] < 0:
+        raise DataError(
+            f"{topic}: the header stamp of message 0 is negative ({int(s[0]) / 1e9:.9f} s); a "
+            "ROS time is counted from 1970"
+        )
     bad = np.flatnonzero(np.diff(s) <= 0)
     if bad.size:
         k = int(bad[0]) + 1
@@ -563,6 +631,7 @@ def _assemble(path: Path, got: dict, counts, laser_pose, odometry: str) -> Rosba
             **reading,
             **gps_fields,
         )
+        check_runnable(seq, SlamConfig())  # convert never writes what slam would refuse
     except SlamError as exc:
         raise DataError(f"{path}: {exc}") from exc
     return RosbagRun(seq, origin, source, counts, dropped)

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import DataError
-from experiments.io.npz import Var, read_npz
+from experiments.io.npz import Var, check_method_name, read_npz
 from experiments.io.writers import write_atomic
 from slam import SlamError, SlamLog
 from slam.smoother import MEAS_TENTATIVE, Problem, problem_from_log
@@ -84,9 +84,7 @@ def read_run_log(path: Path | str, measurements: str = "ekf") -> tuple[Problem, 
     names = {}
     for k in _NAMES:
         if k in data:
-            names[k] = str(data[k])
-            if not names[k].strip():
-                raise DataError(f"{path}: {k}: an empty method name")
+            names[k] = check_method_name(path, k, str(data[k]))
     arrays = {k: data[k] for k in Problem.__dataclass_fields__}
     if np.any(np.diff(arrays["meas_scan"]) < 0):
         raise DataError(f"{path}: meas_scan: must be sorted by scan, as trunkslam slam writes it")

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.errors import DataError
-from experiments.io.npz import Var, read_npz
+from experiments.io.npz import Var, check_method_name, read_npz
 from experiments.io.writers import write_atomic
 from slam import Sequence, SlamError
 from slam.sequence import OPTIONAL, REQUIRED
@@ -96,6 +96,8 @@ def load_sequence(path: str | os.PathLike) -> Sequence:
     values: dict[str, object] = {}
     for k, a in arrays.items():
         values[k] = str(a) if SCHEMA[k].kind == "str" else a
+    if "det_method" in values:  # (names the detections' noise model)
+        check_method_name(path, "det_method", values["det_method"])
     try:
         return Sequence(**values)
     except SlamError as exc:

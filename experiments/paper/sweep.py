@@ -42,7 +42,7 @@ import numpy as np
 from experiments.errors import ConfigError, DataError, ExperimentFailed
 from experiments.exec import Executor, TrialsFailed, make_executor, spawn_seeds
 from experiments.io.outputs import check_output_folder, check_outputs, lock_folder, write_manifest
-from experiments.io.paths import read_text_file
+from experiments.io.paths import check_depth, read_text_file
 from experiments.io.writers import atomic_folder, dumps_json, json_types, write_atomic
 from experiments.paper.runner import experiment_seed
 
@@ -381,6 +381,7 @@ def load_sweep(path: Path | str) -> SweepSpec:
         raise ConfigError(f"{path}: no such sweep file")
     try:
         data = tomllib.loads(read_text_file(path, "sweep file"))
+        check_depth(data, path)
     except DataError as exc:
         raise ConfigError(str(exc)) from None
     except tomllib.TOMLDecodeError as exc:

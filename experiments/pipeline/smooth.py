@@ -13,7 +13,7 @@ from experiments.eval.gps import score_sequence
 from experiments.eval.missing import null_scores
 from experiments.eval.poses import nees, pose_errors
 from experiments.eval.vouched import vouched_for_sequence
-from experiments.io.outputs import add_to_manifest, lock_folder
+from experiments.io.outputs import add_to_manifest, check_output_file, lock_folder
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.run_log import RUN_LOG_NAME, read_run_log
 from experiments.io.sequence_file import load_sequence
@@ -67,6 +67,8 @@ def _smooth_held(run_dir: Path, options, measurements: str, progress) -> dict:
     says the smoothed files beside it are of one smoothing. Before writing, the run is checked
     to be still the one read (the folder and its run log unchanged), in case something other
     than trunkslam replaced it."""
+    for name in SMOOTHED:  # before any work: a link or FIFO planted there is refused
+        check_output_file(run_dir / name, "RUN_DIR")
     read = _identity(run_dir)
     problem, names = read_run_log(run_dir, measurements)
     result = smooth(problem, options, progress)
