@@ -451,7 +451,10 @@ def simulate(
     sensor: Annotated[Sensor, typer.Option(help="sensor preset")] = Sensor.pls200,
     back_to_back: Annotated[bool, typer.Option(help="two sensors back to back (360 deg)")] = False,
     noise: Annotated[
-        float | None, typer.Option(help="range noise sigma, m [default: 0.01 (the preset's)]")
+        float | None,
+        typer.Option(
+            min=0.0, max=100.0, help="range noise sigma, m [default: 0.01 (the preset's)]"
+        ),
     ] = None,
     seed: Annotated[int, typer.Option(min=0, help="random seed")] = 0,
 ) -> None:
@@ -763,6 +766,7 @@ EllipseOption = Annotated[
     typer.Option(
         "--ellipse-scale",
         min=0.01,
+        max=1e6,
         help="covariance ellipses in the recording are drawn this many times their 95% size "
         "(x1: true size)",
     ),

@@ -388,3 +388,21 @@ def test_extract_with_a_configuration_takes_its_extractor_parameters(tmp_path):
     res = runner.invoke(app, ["extract", str(run), "--config", str(cfg), "--out", str(cfg)])
     assert res.exit_code == 1 and "input" in res.output
     assert cfg.read_text() == "[features.extractor]\nshort_trunks = true\n"
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["simulate", "pillar_court", "--pose", "0,0,0", "--noise", "1e300"],
+        ["simulate", "pillar_court", "--pose", "0,0,0", "--noise", "-1"],
+        ["slam", "run.npz", "--ellipse-scale", "inf"],
+    ],
+)
+def test_options_out_of_their_range_are_refused_by_name(args, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2, res.output
+    text = " ".join(res.output.replace("│", " ").split())  # rich's box, its lines joined
+    assert any(f"'{option}'" in text for option in ("--noise", "--ellipse-scale")), text
+    assert "equal to" in text, text  # the allowed range, said
+    assert not list(tmp_path.iterdir())  # nothing written
