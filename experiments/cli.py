@@ -649,15 +649,18 @@ def report(
         typer.Option(help="the snapshot folder the documentation reads (made by report, or new)"),
     ] = Path("docs/results"),
     readme: Annotated[
-        Path | None,
-        typer.Option(help="README whose results-at-a-glance block is rewritten ('' for none)"),
-    ] = Path("README.md"),
-    pages: Annotated[
-        Path | None,
+        str,
         typer.Option(
-            help="the documentation pages whose macros must still resolve ('' to check none)"
+            metavar="PATH", help="README whose results-at-a-glance block is rewritten ('' for none)"
         ),
-    ] = Path("docs"),
+    ] = "README.md",
+    pages: Annotated[
+        str,
+        typer.Option(
+            metavar="PATH",
+            help="the documentation pages whose macros must still resolve ('' to check none)",
+        ),
+    ] = "docs",
 ) -> None:
     """Refresh the documentation's results snapshot (docs/results/) and the README's
     results-at-a-glance table from result folders.
@@ -669,12 +672,12 @@ def report(
     from experiments.io.outputs import check_outputs, lock_folder
     from experiments.render.refresh import refresh_snapshot
 
-    readme = readme if readme is not None and str(readme) else None
-    pages = pages if pages is not None and str(pages) else None
-    check_outputs("report", inputs=results, files={"--readme": readme}, into={"--docs": docs})
+    readme_path = Path(readme) if readme else None  # ('' is none: Path("") would be ".")
+    pages_path = Path(pages) if pages else None
+    check_outputs("report", inputs=results, files={"--readme": readme_path}, into={"--docs": docs})
     with lock_folder(docs, "--docs"):
-        done = refresh_snapshot(results, docs, pages=pages, readme=readme)
-    for line in _refresh_lines(done, docs, readme):
+        done = refresh_snapshot(results, docs, pages=pages_path, readme=readme_path)
+    for line in _refresh_lines(done, docs, readme_path):
         typer.echo(line)
 
 

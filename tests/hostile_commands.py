@@ -8,9 +8,9 @@ Kinds:
   refuse (a negative stamp, odometry after the last scan, a latitude of 95 deg), extreme
   `--laser-pose` values and `--out` paths inside the bag;
 - "links": a symbolic or hard link (or a FIFO) planted at a lock, output or temporary path of
-  every command that writes (slam, smooth, export-reference, extract, convert, simulate,
-  simulate-drive, sweep, reproduce, a benchmark's --out), pointing at a user's file or at the
-  command's own input;
+  every command that writes (slam, smooth, export-reference, export-graph, export-map, extract,
+  convert, simulate, simulate-drive, sweep, reproduce, report, a benchmark's --out), pointing at
+  a user's file or at the command's own input;
 - "options": option extremes and odd paths (`--workers 10**30`, `--trees 10**9`, `--chunks
   2.5`, `--dask bogus://x`, `--config /dev/zero`, a sweep file at /dev/urandom, paths whose
   bytes are not UTF-8, a scene name with a NUL byte, ...);
@@ -598,6 +598,31 @@ def _link_setups() -> dict[tuple[str, str], Callable]:
         out = f / "bench.md"
         return ["bench", "raycast", "--repeats", "1", "--out", out], out, None
 
+    def export_graph(f):
+        run = slam_run(f)
+        out = f / "run.g2o"
+        return ["export-graph", run, "--out", out], out, run / "run_log.npz"
+
+    def export_map(f):
+        run = slam_run(f)
+        out = f / "map.geojson"
+        return ["export-map", run, "--out", out], out, run / "map.csv"
+
+    def report(where):
+        def setup(f):
+            bench = f / "bench_results"
+            bench.mkdir()
+            (bench / "bench_x.md").write_text("A table (a machine)\n\n| a |\n|---|\n| 1 |\n")
+            docs = f / "site" / "results"
+            docs.parent.mkdir()
+            readme = f / "README.md"
+            at = readme if where == "--readme" else _lock(docs)
+            shown = readme if where == "--readme" else ""
+            args = ["report", bench, "--docs", docs, "--readme", shown, "--pages", ""]
+            return args, at, bench / "bench_x.md"
+
+        return setup
+
     return {
         ("slam", "--out lock"): slam("--out lock"),
         ("slam", "--out"): slam("--out"),
@@ -619,6 +644,10 @@ def _link_setups() -> dict[tuple[str, str], Callable]:
         ("reproduce", "--out lock"): reproduce("--out lock"),
         ("reproduce", "--out"): reproduce("--out"),
         ("bench raycast", "--out"): bench,
+        ("export-graph", "--out"): export_graph,
+        ("export-map", "--out"): export_map,
+        ("report", "--docs lock"): report("--docs lock"),
+        ("report", "--readme"): report("--readme"),
     }
 
 

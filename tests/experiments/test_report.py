@@ -119,6 +119,19 @@ def test_a_reproduce_run_replaces_its_files_and_keeps_the_others(project, tmp_pa
             assert not MACRO.search(out)
 
 
+def test_an_empty_readme_option_means_no_readme(project, tmp_path):
+    src = reproduce_sized(project, tmp_path)
+    before = (project / "README.md").read_bytes()
+    res = CliRunner().invoke(
+        app,
+        ["report", str(src), "--docs", str(project / "docs" / "results"), "--readme", ""]
+        + ["--pages", str(project / "docs")],
+    )
+    assert res.exit_code == 0, res.output
+    assert "results at a glance" not in res.output
+    assert (project / "README.md").read_bytes() == before
+
+
 def test_the_readmes_run_time_follows_the_new_manifest(project, tmp_path):
     src = reproduce_sized(project, tmp_path)
     manifest = json.loads((src / "manifest.json").read_text())
