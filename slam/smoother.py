@@ -680,6 +680,7 @@ def _check_method(method: str, chunk_poses: int) -> None:
         raise SlamError(f"chunk_poses: expected an integer >= 1, got {chunk_poses!r}")
 
 
+@_gtsam_errors
 def solve_pose_graph(
     pg: PoseGraph2D,
     method: str = "batch",

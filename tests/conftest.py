@@ -70,9 +70,16 @@ def _warm_shared_cache(config: pytest.Config) -> None:
     folder = _cache_folder(config, "warm")
     folder.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "NUMBA_CACHE_DIR": str(folder), "OMP_NUM_THREADS": "1"}
-    done = subprocess.run(  # its two lines show at once: a cold warm-up takes a minute
-        [sys.executable, "-m", "experiments.bench.warm"], env=env, cwd=config.rootpath, timeout=1800
-    )
+    try:  # its two lines show at once: a cold warm-up takes a minute
+        done = subprocess.run(
+            [sys.executable, "-m", "experiments.bench.warm"],
+            env=env,
+            cwd=config.rootpath,
+            timeout=1800,
+        )
+    except (OSError, subprocess.SubprocessError) as exc:
+        sys.stderr.write(f"numba warm-up failed ({exc}); each worker compiles its own kernels\n")
+        return
     if done.returncode != 0:
         sys.stderr.write("numba warm-up failed (above); each worker compiles its own kernels\n")
         return

@@ -75,10 +75,13 @@ def _timed(args: list[str], cwd: Path, env: dict, log: Path) -> tuple[float, flo
     `log`; `DataError` with the log's tail when it fails."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    with open(log, "w") as fh:
-        done = subprocess.run(
-            args, cwd=cwd, env=env, stdout=fh, stderr=subprocess.STDOUT, timeout=TIMEOUT_S
-        )
+    try:
+        with open(log, "w") as fh:
+            done = subprocess.run(
+                args, cwd=cwd, env=env, stdout=fh, stderr=subprocess.STDOUT, timeout=TIMEOUT_S
+            )
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise DataError(f"bench cold: `{' '.join(args)}` in {cwd}: {exc}") from None
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -101,7 +104,17 @@ def bench_cold(
     rows = []
     with tempfile.TemporaryDirectory(prefix="trunkslam-cold-") as tmp:
         clone = Path(tmp) / "trunkslam"
-        subprocess.run(["git", "clone", "--quiet", str(repo), str(clone)], check=True, timeout=600)
+        try:
+            subprocess.run(
+                ["git", "clone", "--quiet", str(repo), str(clone)],
+                check=True,
+                timeout=600,
+                capture_output=True,
+                text=True,
+            )
+        except (OSError, subprocess.SubprocessError) as exc:
+            why = getattr(exc, "stderr", None) or exc
+            raise DataError(f"bench cold: cannot clone {repo}: {why}") from None
         steps = [("install", "-", ["make", "install"])]
         for n in names:
             steps += [(n, "cold", COMMANDS[n]), (n, "warm", COMMANDS[n])]

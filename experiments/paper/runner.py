@@ -123,7 +123,7 @@ EXPERIMENTS: dict[str, Experiment] = {
     "victoria-park-rfs": Experiment(
         "experiments.paper.victoria_park_rfs:run",
         about="the full run under the published RFS protocol, exactly: 100 clutter draws "
-        "(needs the data; an hour or more on two cores; --quick: 10 draws; only when named)",
+        "(needs the data; --quick: 10 draws; only when named)",
         default=False,
     ),
     "smoother": Experiment(

@@ -39,13 +39,15 @@ class _Clock:
         self.lock = threading.Lock()
 
     def on_start(self) -> None:
+        say = None
         with self.lock:
             if self.depth == 0:
                 self.started = time.perf_counter()
                 if not self.said and self.say is not None:
-                    self.said = True
-                    self.say(COMPILING_NOTICE)
+                    self.said, say = True, self.say
             self.depth += 1
+        if say is not None:  # outside the lock: `say` takes the progress display's lock, whose
+            say(COMPILING_NOTICE)  # heartbeat thread may be waiting here for `seconds`
 
     def on_end(self) -> None:
         with self.lock:

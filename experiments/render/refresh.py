@@ -299,7 +299,7 @@ def check_glance_columns(folder: Path, where=lambda name: name) -> None:
                     continue
                 v = r[column]
                 bad = isinstance(v, str) or (
-                    kind == "count" and isinstance(v, float) and math.isfinite(v)
+                    kind == "count" and isinstance(v, float) and math.isfinite(v) and v != int(v)
                 )
                 if bad:
                     want = "a whole number" if kind == "count" else "a number"
