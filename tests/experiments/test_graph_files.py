@@ -254,3 +254,17 @@ def test_readG2o_reads_no_factor_after_a_comment(tmp_path):
     graph, values = gtsam.readG2o(str(path), False)
     assert (graph.size(), values.size()) == (1, 3)
     assert read_g2o(path).graph.n_factors == 2
+
+
+def test_a_graph_gtsam_cannot_solve_is_a_clear_error(tmp_path):
+    """A landmark vertex no factor uses: GTSAM's iSAM2 raises (a key missing from its values);
+    the command says so in one `error:` line, exit 1, no traceback."""
+    path = tmp_path / "g.g2o"
+    path.write_text(
+        "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nVERTEX_XY 7 5 5\n"
+        "EDGE_SE2 0 1 1 0 0 100 0 0 100 0 100\n"
+    )
+    res = CliRunner().invoke(app, ["smooth", str(path), "--solver", "isam2"])
+    assert res.exit_code == 1, res.output
+    assert "GTSAM could not solve the problem" in res.output
+    assert res.exception is None or isinstance(res.exception, SystemExit)
