@@ -6,6 +6,8 @@ gps.tum          the GPS fixes a run over the sequence is scored against, those 
 gps_clean.tum    the same without the fixes flagged as jumps (flagged among those fixes, as the
                  scorer flags them)
 truth.tum        the true rear-axle pose at its samples (simulated runs)
+trees.csv        the true trees' centres, `x_m,y_m` (simulated runs): the reference map that
+                 `trunkslam slam --reference-map` scores a run's map against (GOSPA, OSPA)
 
 Compare gps.tum with a run's trajectory_gps_antenna.tum, and truth.tum with its trajectory.tum:
 
@@ -104,6 +106,11 @@ def _export(input_path: Path | str, out: Path) -> ReferenceExport:
         if seq.truth_t is not None:
             write_atomic(stage / "truth.tum", trajectory_tum(seq.truth_t, seq.truth_pose))
             names.append("truth.tum")
+        if seq.truth_landmarks is not None and len(seq.truth_landmarks):
+            xy = np.asarray(seq.truth_landmarks, dtype=np.float64)[:, :2]
+            rows = "".join(f"{float(x)!r},{float(y)!r}\n" for x, y in xy)
+            write_atomic(stage / "trees.csv", "x_m,y_m\n" + rows)
+            names.append("trees.csv")
         write_manifest(stage, "export-reference")  # last: the set is complete
     n_fixes = 0 if inside is None else int(inside.sum())
     files = [out / n for n in names]

@@ -143,3 +143,23 @@ def test_the_25_ms_rule_chooses_fixes_by_the_scans_own_stamps():
     assert by_stamp.all_rmse == by_pose.all_rmse  # the pairing of fixes to poses is unchanged
     with pytest.raises(ValueError, match="stamps"):
         score_against_gps(pose_t, pose, gps_t, gps, np.zeros(3), 5, stamps=stamps[:-1])
+
+
+def test_a_simulated_runs_true_trees_are_its_reference_map(tmp_path):
+    """export-reference writes the true trees as trees.csv, which `slam --reference-map` reads:
+    the map's GOSPA against them is in summary.json, its count of trees the scene's."""
+    from experiments.io.reference_map import read_reference_map
+    from experiments.io.sequence_file import load_sequence
+
+    run = tmp_path / "run.npz"
+    assert runner.invoke(app, ["simulate-drive", "--scans", "30", "--out", str(run)]).exit_code == 0
+    res = runner.invoke(app, ["export-reference", str(run), "--out", str(tmp_path / "ref")])
+    assert res.exit_code == 0, res.output
+    trees = read_reference_map(tmp_path / "ref" / "trees.csv")
+    np.testing.assert_array_equal(trees, load_sequence(run).truth_landmarks[:, :2])
+    out = tmp_path / "out"
+    args = ["slam", str(run), "--reference-map", str(tmp_path / "ref" / "trees.csv")]
+    res = runner.invoke(app, [*args, "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    scores = json.loads((out / "summary.json").read_text())["reference_map"]
+    assert scores["gospa_20m"]["distance"] > 0 and "GOSPA" in res.output
