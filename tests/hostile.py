@@ -508,7 +508,7 @@ SEQUENCE_VALID = {
     # optional variables, absent: not known
     *[(k, "removed") for k in ("scan_max_range", "name", "gps_pose", "truth_landmarks",
                                 "scan_labels", "det_cov", "det_method", "vehicle",
-                                "scan_n_beams")],
+                                "scan_n_beams", "gps_origin")],
     ("name", "an empty string"), ("name", "a number as text"),  # free text
     ("truth_landmarks", "a row short"),  # any number of landmarks
     ("det_scan", "reversed"),  # the drive's: all in order
