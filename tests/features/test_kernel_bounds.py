@@ -172,15 +172,16 @@ def teardown_module() -> None:
 
 @pytest.fixture(scope="module")
 def dense_drive(tmp_path_factory):
-    """20 scans of the tree park drive, each resimulated with 99,001 beams over 180 deg (the
-    sequence file's largest scans): the command spends its time in the extractor's kernels."""
+    """60 scans of the tree park drive, each resimulated with 99,001 beams over 180 deg (the
+    sequence file's largest scans): the command spends its time in the extractor's kernels,
+    seconds after its first progress line (at 10 scans)."""
     from experiments.io.sequence_file import save_sequence
     from experiments.sim import CycabParams, simulate_cycab_run
     from experiments.sim.scene import load_scene
     from experiments.sim.simulate import sensor_preset, simulate_scan
 
     rng = np.random.default_rng(7)
-    seq = simulate_cycab_run(rng, "tree_park", CycabParams(n_scans=20))
+    seq = simulate_cycab_run(rng, "tree_park", CycabParams(n_scans=60))
     sensor = sensor_preset("lms200", angle_increment_rad=math.pi / 99_000)
     scene = load_scene("tree_park")
     at_scans = seq.truth_pose[np.searchsorted(seq.truth_t, seq.scan_t)]  # truth at odometry rate
