@@ -823,7 +823,7 @@ def option_cases() -> list[CommandCase]:
              ok_if_runs=True),
         _opt("simulate-drive --scans 10**30", "n_scans", lambda f: [
             "simulate-drive", "--scans", BIG, "--out", f / "s.npz"]),
-        _opt("simulate --noise nan", "range_sigma_m", lambda f: [
+        _opt("simulate --noise nan", "--noise", lambda f: [
             "simulate", "test_yard", "--pose", "0,0,0", "--noise", "nan", "--out", f / "s.npz"]),
         _opt("simulate --pose 1e300,0,0", "pose", lambda f: [
             "simulate", "test_yard", "--pose", "1e300,0,0", "--out", f / "s.npz"]),
