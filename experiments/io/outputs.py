@@ -45,6 +45,7 @@ __all__ = [
     "add_to_manifest",
     "check_output_file",
     "check_output_folder",
+    "check_run_export",
     "check_outputs",
     "check_path_text",
     "lock_folder",
@@ -284,6 +285,17 @@ def check_output_file(path: Path | str, option: str) -> Path:
     if not path.parent.is_dir():
         raise DataError(f"{option} {path}: folder {path.parent} does not exist")
     return path
+
+
+def check_run_export(command: str, run_dir: Path | str, out: Path | str) -> tuple[Path, Path]:
+    """(run_dir, out) as paths, for a command that writes one file `out` from the output folder
+    of `trunkslam slam` `run_dir` (export-graph, export-map): `DataError` when run_dir is not a
+    folder, or when `out` fails `check_outputs` (an input, a place inside the run, a link)."""
+    run_dir, out = Path(run_dir), Path(out)
+    if not run_dir.is_dir():
+        raise DataError(f"{run_dir}: not a folder (expected the output folder of trunkslam slam)")
+    check_outputs(command, inputs=[run_dir], files={"--out": out})
+    return run_dir, out
 
 
 def read_manifest(folder: Path | str) -> dict:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from experiments.errors import DataError
 from experiments.io.map_export import check_origin, map_export_csv, map_geojson, read_map_csv
-from experiments.io.outputs import check_outputs
+from experiments.io.outputs import check_run_export
 from experiments.io.writers import write_atomic
 
 __all__ = ["MAP_FORMATS", "export_map"]
@@ -36,10 +36,7 @@ def export_map(
     Atomic; a symlink at `out` or a place inside the run is refused."""
     if fmt not in MAP_FORMATS:
         raise DataError(f"--format: expected one of {list(MAP_FORMATS)}, got {fmt!r}")
-    run_dir, out = Path(run_dir), Path(out)
-    if not run_dir.is_dir():
-        raise DataError(f"{run_dir}: not a folder (expected the output folder of trunkslam slam)")
-    check_outputs("export-map", inputs=[run_dir], files={"--out": out})
+    run_dir, out = check_run_export("export-map", run_dir, out)
     name = "map_smoothed.csv" if smoothed else "map.csv"
     m = read_map_csv(run_dir / name)
     about = {"run": str(run_dir), "map": name}

@@ -11,7 +11,7 @@ import numpy as np
 
 from experiments.errors import DataError
 from experiments.io.g2o import g2o_text, read_g2o
-from experiments.io.outputs import check_outputs
+from experiments.io.outputs import check_outputs, check_run_export
 from experiments.io.run_log import read_run_log
 from experiments.io.writers import write_atomic
 from slam.graph import PoseGraph2D, graph_of_problem
@@ -46,10 +46,7 @@ def export_graph(
     symlink or other non-regular file at `out` is refused, as is a place inside the run."""
     if fmt not in GRAPH_FORMATS:
         raise DataError(f"--format: expected one of {list(GRAPH_FORMATS)}, got {fmt!r}")
-    run_dir, out = Path(run_dir), Path(out)
-    if not run_dir.is_dir():
-        raise DataError(f"{run_dir}: not a folder (expected the output folder of trunkslam slam)")
-    check_outputs("export-graph", inputs=[run_dir], files={"--out": out})
+    run_dir, out = check_run_export("export-graph", run_dir, out)
     problem, _ = read_run_log(run_dir, measurements)
     graph, correlated = graph_of_problem(problem)
     write_atomic(out, g2o_text(graph))
