@@ -304,6 +304,16 @@ def _terminal() -> bool:
     return CONSOLE.is_terminal
 
 
+RerunOption = Annotated[  # `experiments.render.rerun_sink.rerun_target` reads it
+    str | None,
+    typer.Option(
+        help="also make a rerun recording: a file (.rrd), `spawn` (start a viewer and stream to "
+        "it live) or `connect[=HOST:PORT]` (stream to a running viewer; default 127.0.0.1:9876) "
+        "[default: none]"
+    ),
+]
+
+
 @app.command()
 @handle_errors
 def extract(
@@ -320,9 +330,7 @@ def extract(
         LineTest | None,
         typer.Option(help="line test: lrt or paper (eq. 5); paper/geometric only [default: lrt]"),
     ] = None,
-    rerun: Annotated[
-        Path | None, typer.Option(help="also write a rerun recording (.rrd) [default: none]")
-    ] = None,
+    rerun: RerunOption = None,
     config: Annotated[
         str | None,
         typer.Option(
@@ -337,6 +345,7 @@ def extract(
     _check_input(input, "sequence file")
     from experiments.pipeline.extract import run_extract
     from experiments.render.progress import Progress
+    from experiments.render.rerun_sink import rerun_target
 
     features = None
     if config is not None:
@@ -350,7 +359,7 @@ def extract(
             method.value,
             sigma_r_m=sigma_r,
             line_test=None if line_test is None else line_test.value,
-            rerun_path=rerun,
+            rerun_path=rerun_target(rerun),
             progress=progress,
             features=features,
             config_file=None if config is None else Path(config),
@@ -792,9 +801,7 @@ def slam_cmd(
         bool, typer.Option(help="print the resolved settings as TOML and exit")
     ] = False,
     out: Annotated[Path, typer.Option(help="output folder")] = Path("slam_out"),
-    rerun: Annotated[
-        Path | None, typer.Option(help="also write a rerun recording (.rrd) [default: none]")
-    ] = None,
+    rerun: RerunOption = None,
     ellipse_scale: EllipseOption = 10.0,
     smooth: Annotated[
         bool, typer.Option(help="then re-solve the run with the GTSAM smoother (batch)")
@@ -815,6 +822,7 @@ def slam_cmd(
     from experiments.io.config_file import config_toml, load_slam_config
     from experiments.pipeline.slam import run_slam_file
     from experiments.render.progress import Progress
+    from experiments.render.rerun_sink import rerun_target
     from slam import SlamConfig
 
     cfg = load_slam_config(config) if config is not None else SlamConfig()
@@ -838,7 +846,7 @@ def slam_cmd(
                 input,
                 cfg,
                 out,
-                rerun_path=rerun,
+                rerun_path=rerun_target(rerun),
                 progress=lambda done, total: (
                     progress("slam", done, total) if done % 10 == 0 or done == total else None
                 ),

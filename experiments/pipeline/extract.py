@@ -10,6 +10,7 @@ from experiments.errors import ConfigError
 from experiments.io.outputs import check_outputs
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import FEATURES_SCHEMA, dumps_json, features_to_dict, write_atomic
+from experiments.render.rerun_sink import recording_file
 from experiments.render.viz import open_recording
 from features import ExtractorParams, extract_features
 from features.bailey import BaileyParams
@@ -40,7 +41,8 @@ def run_extract(
     config_file: Path | str | None = None,
 ) -> dict:
     """Extract features from every scan of `input_path` and write the features JSON to `out`
-    (format: docs/formats.md); optionally a rerun recording. Returns a summary: scans,
+    (format: docs/formats.md); optionally a rerun recording (rerun_path: a file, or a live
+    viewer, `experiments.render.rerun_sink.Viewer`). Returns a summary: scans,
     circles, the output path. Both outputs are written atomically (temporary file, rename);
     an output path that is the input, or not a regular file, is refused before any work.
     features: a `slam.config.FeaturesConfig` whose extractor parameters ([features.extractor],
@@ -62,7 +64,9 @@ def run_extract(
     else:
         resolved = ExtractorParams.from_kwargs(**params).to_dict()
     check_outputs(
-        "extract", inputs=[input_path, config_file], files={"--out": out, "--rerun": rerun_path}
+        "extract",
+        inputs=[input_path, config_file],
+        files={"--out": out, "--rerun": recording_file(rerun_path)},
     )
     seq = load_sequence(input_path)
     scans = []

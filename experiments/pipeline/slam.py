@@ -23,6 +23,7 @@ from experiments.io.run_log import RUN_LOG_NAME, write_run_log
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import atomic_folder, dumps_json, json_types, write_atomic
 from experiments.render.compiling import compile_seconds, watch_compiles
+from experiments.render.rerun_sink import recording_file
 from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, run_slam, se2
 from slam.closure import closure_counts
@@ -62,7 +63,8 @@ def run_slam_file(
                      map's GOSPA against `reference_map` when given (`reference_map_scores`)
     manifest.json    every file of the set (`experiments.io.outputs.write_manifest`)
     Returns the summary. rerun_path: also write a recording (`experiments.render.viz`, kind
-    "slam"; simulated truth trees and path when the sequence has them), its covariance
+    "slam"; simulated truth trees and path when the sequence has them), or stream it to a live
+    viewer (an `experiments.render.rerun_sink.Viewer`), its covariance
     ellipses drawn `ellipse_scale` times their 95% size. reference_map: a CSV of x,y (m, the
     run's world frame; `experiments.io.reference_map`), read and checked before the run.
 
@@ -81,10 +83,10 @@ def run_slam_file(
     check_outputs(
         "slam",
         inputs=[input_path, features_file, reference_map, *inputs],
-        files={"--rerun": rerun_path},
+        files={"--rerun": recording_file(rerun_path)},
         folders={"--out": out},
     )
-    rerun_in_out = _recording_place(rerun_path, out)
+    rerun_in_out = _recording_place(recording_file(rerun_path), out)
     reference = (
         None if reference_map is None else (reference_map, read_reference_map(reference_map))
     )

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import logging
 import os
 import shutil
 import tempfile
@@ -51,15 +52,17 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from experiments.errors import DataError, WriteError
+from experiments.errors import ConfigError, DataError, WriteError
 from experiments.io.outputs import check_output_file
 from experiments.io.writers import interruption_point
+from experiments.render.rerun_sink import Viewer, viewer_program
 from experiments.render.shapes import circle_polyline, ellipse_polyline
 from features.types import Features, Scan
 from slam import se2
 
 __all__ = [
     "KINDS",
+    "LiveRecorder",
     "RECORDING_MIN_FREE_BYTES",
     "MemoryRecorder",
     "NullRecorder",
@@ -83,6 +86,7 @@ _FULL_BYTES = 1024 * 1024  # a write error with less free than this: the disk is
 # rerun also does when it is garbage-collected and at exit, waits forever. They are kept here,
 # and a command that made one ends at once (`writer_stopped`).
 _STOPPED: list = []
+log = logging.getLogger(__name__)
 
 
 def writer_stopped() -> bool:
@@ -282,15 +286,8 @@ class Recorder(NullRecorder):
         Victoria Park run at 1 would be gigabytes. ellipse_scale: covariance ellipses are drawn
         this many times their 95% size (true size is invisible at map scale); the map views
         say so in their titles. series: (name, title) of the time series panels."""
-        if ellipse_scale <= 0:
-            raise ValueError(f"ellipse_scale: must be > 0, got {ellipse_scale!r}")
+        self._settings(kind, decimate, ellipse_scale)
         self.path = Path(path)
-        self.kind = kind
-        self.decimate = max(int(decimate), 1)
-        self.ellipse_scale = float(ellipse_scale)
-        self._k = 0
-        self._est_path: list[np.ndarray] = []
-        self._truth_path: list[np.ndarray] = []
         self.path.parent.mkdir(parents=True, exist_ok=True)
         check_output_file(self.path, "recording")
         self._check_space(
@@ -310,14 +307,31 @@ class Recorder(NullRecorder):
             self.rec.save(
                 str(self._tmp), default_blueprint=blueprint(kind, list(series), self.ellipse_scale)
             )
-            for frame in _VIEW_FRAMES[kind]:
-                self.rec.log(_y_up(frame), rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
+            self._log_frames()
         except RuntimeError as exc:  # rerun's error when it cannot create the file
             self._tmp.unlink(missing_ok=True)
             raise DataError(f"recording {self.path}: cannot be written ({exc})") from None
         except BaseException:  # interrupted while opening: leave nothing behind
             self._tmp.unlink(missing_ok=True)
             raise
+
+    def _settings(self, kind: str, decimate: int, ellipse_scale: float) -> None:
+        """What every recording keeps, whatever its sink (see `__init__`)."""
+        if kind not in KINDS:
+            raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
+        if ellipse_scale <= 0:
+            raise ValueError(f"ellipse_scale: must be > 0, got {ellipse_scale!r}")
+        self.kind = kind
+        self.decimate = max(int(decimate), 1)
+        self.ellipse_scale = float(ellipse_scale)
+        self._k = 0
+        self._est_path: list[np.ndarray] = []
+        self._truth_path: list[np.ndarray] = []
+
+    def _log_frames(self) -> None:
+        """The static y mirrors under the views' frames (`_y_up`)."""
+        for frame in _VIEW_FRAMES[self.kind]:
+            self.rec.log(_y_up(frame), rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
 
     def _check_space(self, least: int, rule: str) -> None:
         """`WriteError` (no space left) when the recording's file system has less than `least`
@@ -735,18 +749,89 @@ class MemoryRecorder(Recorder):
         shutil.rmtree(self._dir, ignore_errors=True)
 
 
+def _spawn(rec: rr.RecordingStream, viewer: Viewer, layout: rrb.Blueprint) -> None:
+    """Start a rerun viewer on `viewer.port` (or use one listening there) and stream `rec` to
+    it (`rr.spawn`); the one place a window may open (tests replace it)."""
+    rr.spawn(
+        port=viewer.port, executable_path=viewer_program(), default_blueprint=layout, recording=rec
+    )
+
+
+class LiveRecorder(Recorder):
+    """A `Recorder` that streams to a live viewer (`experiments.render.rerun_sink.Viewer`:
+    `--rerun spawn` or `connect[=ADDR]`) instead of writing a file: the same entities, the same
+    layout (the blueprint goes to the viewer as the recording's default). Nothing is written
+    on this machine, so there is no staging and no free-space check. The viewer's address was
+    checked before the run (`rerun_sink.rerun_target`); one that stops answering during the
+    run loses the rest of the stream, and `close` says so as a warning, not an error: the run's
+    own files are still written."""
+
+    def __init__(
+        self,
+        viewer: Viewer,
+        kind: str = "slam",
+        *,
+        app_id: str | None = None,
+        decimate: int = 1,
+        ellipse_scale: float = 10.0,
+        series: list[tuple[str, str]] = (),
+    ):
+        self._settings(kind, decimate, ellipse_scale)
+        self.viewer = viewer
+        self.path = None
+        self._tmp = None
+        self._live = False
+        self.rec = rr.RecordingStream(app_id or f"trunkslam_{kind}")
+        layout = blueprint(kind, list(series), self.ellipse_scale)
+        try:
+            if viewer.mode == "spawn":
+                _spawn(self.rec, viewer, layout)
+            else:
+                self.rec.connect_grpc(viewer.url, default_blueprint=layout)
+        except RuntimeError as exc:  # rerun's error: no viewer program, a bad address
+            raise ConfigError(f"{viewer}: the viewer cannot be reached ({exc})") from None
+        self._live = True
+        self._log_frames()
+
+    def close(self) -> None:
+        """Send what is left and close the stream (waits at most FLUSH_TIMEOUT_S)."""
+        if not self._live:
+            return
+        self._live = False
+        try:
+            self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except RuntimeError as exc:
+            log.warning(
+                "%s: the viewer at %s stopped answering (%s)", self.viewer, self.viewer.url, exc
+            )
+        with contextlib.suppress(Exception):
+            self.rec.disconnect()
+
+    def abort(self) -> None:
+        """Close the stream without waiting for what is not yet sent."""
+        if not self._live:
+            return
+        self._live = False
+        with contextlib.suppress(Exception):
+            self.rec.disconnect()
+
+
 def open_recording(
-    path: Path | str | None,
+    target: Path | str | Viewer | None,
     kind: str = "slam",
     *,
     decimate: int = 1,
     ellipse_scale: float = 10.0,
     series: list[tuple[str, str]] = (),
 ) -> NullRecorder:
-    """A Recorder writing to `path` (see `Recorder`), or a NullRecorder when path is None."""
-    if path is None:
+    """A Recorder writing to the file `target` (see `Recorder`), a LiveRecorder streaming to
+    the viewer `target` (`rerun_sink.Viewer`), or a NullRecorder when target is None."""
+    if target is None:
         return NullRecorder()
-    return Recorder(path, kind, decimate=decimate, ellipse_scale=ellipse_scale, series=list(series))
+    settings = {"decimate": decimate, "ellipse_scale": ellipse_scale, "series": list(series)}
+    if isinstance(target, Viewer):
+        return LiveRecorder(target, kind, **settings)
+    return Recorder(target, kind, **settings)
 
 
 def _scan_columns(k: np.ndarray, scan_t: np.ndarray) -> list:
