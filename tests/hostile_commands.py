@@ -809,6 +809,16 @@ def option_cases() -> list[CommandCase]:
         _opt("smooth --isam2-every 10**30", "isam2_every", lambda f: [
             "smooth", slam_run(f), "--solver", "isam2", "--isam2-every", BIG]),
         _opt("slam --window 10**30", "--window", _with_drive(*S, "--window", BIG)),
+        _opt("slam --rerun connect=127.0.0.1:1 (nobody answers)", "127.0.0.1:1", _with_drive(
+            *S, "--rerun", "connect=127.0.0.1:1")),
+        _opt("slam --rerun connect=rerun+http://x:1/y (not /proxy)", "connect=rerun+http://x:1/y",
+             _with_drive(*S, "--rerun", "connect=rerun+http://x:1/y")),
+        _opt("slam --rerun connect=h:99999 (port out of range)", "connect=h:99999", _with_drive(
+            *S, "--rerun", "connect=h:99999")),
+        _opt("extract --rerun connect=ftp://h:1/proxy (scheme)", "ftp", _with_drive(
+            "extract", "DRIVE", "--out", "OUT", "--rerun", "connect=ftp://h:1/proxy")),
+        _opt("extract --rerun connect= (no address)", "no address", _with_drive(
+            "extract", "DRIVE", "--out", "OUT", "--rerun", "connect=")),
         _opt("slam --ellipse-scale nan", "--ellipse-scale", _with_drive(
             *S, "--ellipse-scale", "nan")),
         _opt("slam --initial-heading inf", "initial", _with_drive(

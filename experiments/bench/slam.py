@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import itertools
 import os
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -63,9 +65,10 @@ def bench_victoria_park(
 ) -> list[dict]:
     """The full Victoria Park run (7249 scans, published detections, preset victoria_park_ute):
     the same rows, and the whole run's seconds (of a second run: the first loads the caches), at
-    this process's threads (`trunkslam --threads`, default 1), with loop closure on (`[closure]
-    enabled`), and once more without it with the BLAS at every core, the library's own
-    default before commands set it."""
+    this process's threads (`trunkslam --threads`, default 1), once more with a rerun recording
+    of every scan (`_recorded_row`: its time against the plain run's), with loop closure on
+    (`[closure] enabled`), and once more without it with the BLAS at every core, the library's
+    own default before commands set it."""
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_victoria_park
 
@@ -78,6 +81,7 @@ def bench_victoria_park(
     t0 = time.perf_counter()
     log = run_slam(seq, cfg, progress=_scans(progress, "slam, Victoria Park"))
     rows = _rows(log, time.perf_counter() - t0, bins, "Victoria Park")
+    rows.append(_recorded_row(seq, cfg, rows[-1]["run seconds"], bins, progress))
     from threadpoolctl import threadpool_limits
 
     t0 = time.perf_counter()
@@ -90,6 +94,29 @@ def bench_victoria_park(
         wall = time.perf_counter() - t0
     rows += _rows(log, wall, bins, f"Victoria Park, {cores} BLAS threads")[-1:]
     return rows
+
+
+def _recorded_row(seq, cfg, plain_s: float, bins, progress) -> dict:
+    """The whole-run row of the same run recorded as `trunkslam slam --rerun FILE` records it
+    (`experiments.render.viz.Recorder`, every scan, the time series at the end, the file
+    closed), its seconds against the run's without a recording (`plain_s`): "recording
+    ratio", and the file's size."""
+    from experiments.eval.series import slam_panels, slam_series
+    from experiments.render.viz import open_recording
+
+    with tempfile.TemporaryDirectory(prefix="trunkslam-bench-") as tmp:
+        path = Path(tmp) / "victoria_park.rrd"
+        t0 = time.perf_counter()
+        with open_recording(path, "slam", series=slam_panels(False)) as rec:
+            desc = "slam, Victoria Park, recorded"
+            log = run_slam(seq, cfg, visualiser=rec, progress=_scans(progress, desc))
+            rec.log_series(log.scan_t, slam_series(log, seq.truth_t, seq.truth_pose))
+        wall = time.perf_counter() - t0
+        size = path.stat().st_size
+    row = _rows(log, wall, bins, "Victoria Park, with a recording")[-1]
+    row["recording ratio"] = round(wall / plain_s, 2)
+    row["recording MiB"] = round(size / 2**20, 1)
+    return row
 
 
 def _rows(log, wall: float, bins, label: str) -> list[dict]:

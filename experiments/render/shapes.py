@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["circle_polyline", "ellipse_polyline"]
+__all__ = ["circle_polyline", "ellipse_polyline", "ellipse_polylines"]
 
 
 def circle_polyline(cx: float, cy: float, r: float, n: int = 48) -> np.ndarray:
@@ -19,3 +19,15 @@ def ellipse_polyline(center_xy, cov_2x2, n_sigma: float = 2.4477, n: int = 40) -
     t = np.linspace(0.0, 2.0 * np.pi, n + 1)
     circle = np.stack([np.cos(t), np.sin(t)], axis=1) * (n_sigma * np.sqrt(np.maximum(w, 0.0)))
     return np.asarray(center_xy, float) + circle @ v.T
+
+
+def ellipse_polylines(centers_xy, covs_2x2, n_sigma: float = 2.4477, n: int = 40) -> np.ndarray:
+    """(m, n + 1, 2) the `ellipse_polyline` of each of m Gaussians, centres (m, 2) and
+    covariances (m, 2, 2), at once (a recording draws every landmark's at every scan)."""
+    centers = np.asarray(centers_xy, float).reshape(-1, 2)
+    covs = np.asarray(covs_2x2, float).reshape(-1, 2, 2)
+    w, v = np.linalg.eigh(0.5 * (covs + np.swapaxes(covs, 1, 2)))
+    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    unit = np.stack([np.cos(t), np.sin(t)], axis=1)  # (n + 1, 2)
+    circle = unit[None] * (n_sigma * np.sqrt(np.maximum(w, 0.0)))[:, None, :]
+    return centers[:, None, :] + circle @ np.swapaxes(v, 1, 2)

@@ -56,7 +56,7 @@ from experiments.errors import ConfigError, DataError, WriteError
 from experiments.io.outputs import check_output_file
 from experiments.io.writers import interruption_point
 from experiments.render.rerun_sink import Viewer, viewer_program
-from experiments.render.shapes import circle_polyline, ellipse_polyline
+from experiments.render.shapes import circle_polyline, ellipse_polyline, ellipse_polylines
 from features.types import Features, Scan
 from slam import se2
 
@@ -221,6 +221,25 @@ def blueprint(
     return rrb.Blueprint(body, rrb.TimePanel(timeline="time"), *collapsed)
 
 
+class _Track:
+    """A path that grows a point at a time: (n, 2) `xy` without copying it all at each point
+    (a recording logs the path so far at every scan)."""
+
+    def __init__(self) -> None:
+        self._xy = np.empty((256, 2))
+        self._n = 0
+
+    def append(self, xy) -> None:
+        if self._n == len(self._xy):
+            self._xy = np.concatenate([self._xy, np.empty_like(self._xy)])
+        self._xy[self._n] = xy
+        self._n += 1
+
+    @property
+    def xy(self) -> np.ndarray:
+        return self._xy[: self._n]
+
+
 class NullRecorder:
     """Does nothing: the default visualiser, so algorithms and loops never need rerun."""
 
@@ -325,8 +344,8 @@ class Recorder(NullRecorder):
         self.decimate = max(int(decimate), 1)
         self.ellipse_scale = float(ellipse_scale)
         self._k = 0
-        self._est_path: list[np.ndarray] = []
-        self._truth_path: list[np.ndarray] = []
+        self._est_path = _Track()
+        self._truth_path = _Track()
 
     def _log_frames(self) -> None:
         """The static y mirrors under the views' frames (`_y_up`)."""
@@ -486,7 +505,7 @@ class Recorder(NullRecorder):
         """Estimated pose (frame entity and arrow), 95% position ellipse and the path so far."""
         pose = np.asarray(pose, float)
         cov = np.asarray(cov, float)
-        self._est_path.append(pose[:2].copy())
+        self._est_path.append(pose[:2])
         if self._skip():
             return
         sig_th = float(np.sqrt(max(cov[2, 2], 0.0)))
@@ -516,7 +535,7 @@ class Recorder(NullRecorder):
         self.rec.log(
             "world/path",
             rr.LineStrips2D(
-                [np.array(self._est_path)], colors=[[255, 80, 80]], radii=rr.Radius.ui_points(1.5)
+                [self._est_path.xy], colors=[[255, 80, 80]], radii=rr.Radius.ui_points(1.5)
             ),
         )
 
@@ -537,9 +556,7 @@ class Recorder(NullRecorder):
         self.rec.log(
             "world/landmarks/ellipses",
             rr.LineStrips2D(
-                [ellipse_polyline(c, P) for c, P in zip(xy, cov)],
-                colors=[[40, 200, 90]],
-                radii=rr.Radius.ui_points(1.0),
+                ellipse_polylines(xy, cov), colors=[[40, 200, 90]], radii=rr.Radius.ui_points(1.0)
             ),
         )
 
@@ -599,7 +616,7 @@ class Recorder(NullRecorder):
     def log_truth(self, pose) -> None:
         """True pose (arrow) and path so far."""
         pose = np.asarray(pose, float)
-        self._truth_path.append(pose[:2].copy())
+        self._truth_path.append(pose[:2])
         if self._skip():
             return
         self.rec.log(
@@ -614,9 +631,7 @@ class Recorder(NullRecorder):
         self.rec.log(
             "world/truth/path",
             rr.LineStrips2D(
-                [np.array(self._truth_path)],
-                colors=[[255, 255, 255]],
-                radii=rr.Radius.ui_points(1.0),
+                [self._truth_path.xy], colors=[[255, 255, 255]], radii=rr.Radius.ui_points(1.0)
             ),
         )
 

@@ -229,3 +229,32 @@ def test_extract_streams_to_a_viewer(run_file, sink, tmp_path):
     got = read_recording(sink.received())
     assert {"laser/scan", "laser/features/circles", "series/circles_per_scan"} <= got["entities"]
     assert [v[1] for v in got["views"] if v[0] == "2D"] == ["laser/y_up"]
+
+
+def test_ellipses_drawn_at_once_are_those_drawn_one_by_one():
+    """The recording draws every landmark's ellipse each scan with one call; the outlines are
+    those of `ellipse_polyline`, bit for bit (the same eigh and products per matrix)."""
+    from experiments.render.shapes import ellipse_polyline, ellipse_polylines
+
+    rng = np.random.default_rng(0)
+    centers = rng.normal(size=(30, 2)) * 50
+    a = rng.normal(size=(30, 2, 2))
+    covs = a @ a.transpose(0, 2, 1)
+    covs[0] = [[1.0, 0.0], [0.0, 0.0]]  # degenerate: a segment
+    one_by_one = np.array([ellipse_polyline(c, p) for c, p in zip(centers, covs)])
+    assert np.array_equal(ellipse_polylines(centers, covs), one_by_one)
+    assert ellipse_polylines(np.zeros((0, 2)), np.zeros((0, 2, 2))).shape == (0, 41, 2)
+
+
+def test_bench_slam_row_of_a_recorded_run(run_file):
+    """`bench slam`'s recorded row: the run recorded as `slam --rerun FILE` records it, its
+    seconds against the plain run's given ("recording ratio") and the file's size."""
+    from experiments.bench.slam import BINS, _recorded_row
+    from experiments.io.sequence_file import load_sequence
+
+    seq = load_sequence(run_file)
+    row = _recorded_row(seq, CFG, 0.5, BINS, None)
+    assert row["map size"] == "whole run (Victoria Park, with a recording)"
+    assert row["scans"] == seq.n_scans
+    assert row["recording ratio"] == round(row["run seconds"] / 0.5, 2)
+    assert 0 < row["recording MiB"] < 50
