@@ -24,7 +24,7 @@ from experiments.io.writers import markdown_table
 from experiments.sim.landmarks import avenue
 from slam import TIMING_KEYS, SlamConfig, run_slam
 
-__all__ = ["bench", "bench_victoria_park", "format_table", "records_table"]
+__all__ = ["bench", "bench_victoria_park", "format_table", "recorded_row", "records_table"]
 
 
 BINS = (0, 25, 50, 100, 200, 300, 400, 600, 800, 1200)
@@ -66,7 +66,7 @@ def bench_victoria_park(
     """The full Victoria Park run (7249 scans, published detections, preset victoria_park_ute):
     the same rows, and the whole run's seconds (of a second run: the first loads the caches), at
     this process's threads (`trunkslam --threads`, default 1), once more with a rerun recording
-    of every scan (`_recorded_row`: its time against the plain run's), with loop closure on
+    of every scan (`recorded_row`: its time against the plain run's), with loop closure on
     (`[closure] enabled`), and once more without it with the BLAS at every core, the library's
     own default before commands set it."""
     from experiments.io.config_file import load_slam_config
@@ -81,7 +81,7 @@ def bench_victoria_park(
     t0 = time.perf_counter()
     log = run_slam(seq, cfg, progress=_scans(progress, "slam, Victoria Park"))
     rows = _rows(log, time.perf_counter() - t0, bins, "Victoria Park")
-    rows.append(_recorded_row(seq, cfg, rows[-1]["run seconds"], bins, progress))
+    rows.append(recorded_row(seq, cfg, rows[-1]["run seconds"], bins, progress))
     from threadpoolctl import threadpool_limits
 
     t0 = time.perf_counter()
@@ -96,7 +96,7 @@ def bench_victoria_park(
     return rows
 
 
-def _recorded_row(seq, cfg, plain_s: float, bins, progress) -> dict:
+def recorded_row(seq, cfg, plain_s: float, bins, progress) -> dict:
     """The whole-run row of the same run recorded as `trunkslam slam --rerun FILE` records it
     (`experiments.render.viz.Recorder`, every scan, the time series at the end, the file
     closed), its seconds against the run's without a recording (`plain_s`): "recording

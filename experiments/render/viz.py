@@ -23,7 +23,9 @@ Entities. A frame entity carries a 2D pose as a rerun transform; its children ar
 SLAM runs (slam.run_slam's visualiser interface):
   world/vehicle              estimated pose (frame entity) with its arrow (`world/vehicle/arrow`)
   world/vehicle_ellipse      95% position ellipse, drawn `ellipse_scale` times its size
-  world/path                 estimated path so far
+  world/path                 estimated path so far: a piece a scan (the points since the last
+                             logged scan), drawn whole up to the time cursor (a trail: the map
+                             views' visible time range on it, `TRAILS`); so is world/truth/path
   world/follow               the vehicle's position without its heading, y mirrored (the
                              following map view's origin; rerun draws 2D views y down)
   .../y_up                   static y mirror under each view's frame: every view reads y up
@@ -49,6 +51,7 @@ try:
 except ImportError:  # pragma: no cover  (not POSIX)
     resource = None
 import numpy as np
+import pyarrow as pa  # rerun's own dependency: its columns are arrow arrays
 import rerun as rr
 import rerun.blueprint as rrb
 
@@ -80,6 +83,11 @@ KINDS = ("slam", "features", "circles")
 RECORDING_MIN_FREE_BYTES = 16 * 1024 * 1024
 RECORDING_STOP_FREE_BYTES = 1024 * 1024
 FLUSH_TIMEOUT_S = 120.0
+# The scene's rows are sent in batches (`_Batch`) of this many scans, or of what this many
+# seconds brought (a live viewer is behind the run by at most that); 1: each row as it comes.
+BATCH_SCANS = 64
+BATCH_S = 0.25
+_NO_SCAN = object()
 FLUSH_STEP_S = 1.0
 _FULL_BYTES = 1024 * 1024  # a write error with less free than this: the disk is full
 # Recordings whose file writer a write error stopped (rerun 0.41): disconnecting one, which
@@ -148,6 +156,22 @@ _VIEW_FRAMES = {
 }
 
 
+# Paths logged a piece a scan (the points since the last logged scan), drawn whole up to the time
+# cursor by a visible time range on the entity (rerun's trails): the path so far at every scan
+# without logging it all again at each one.
+TRAILS = ("world/path", "world/truth/path")
+_TRAIL = rrb.VisibleTimeRanges(
+    [
+        rrb.VisibleTimeRange(
+            timeline,
+            start=rrb.TimeRangeBoundary.infinite(),
+            end=rrb.TimeRangeBoundary.cursor_relative(),
+        )
+        for timeline in ("scan", "time")
+    ]
+)
+
+
 def _series_view(name: str, title: str) -> rrb.TimeSeriesView:
     return rrb.TimeSeriesView(origin=f"series/{name}", name=title)
 
@@ -191,8 +215,9 @@ def blueprint(
         return rrb.Blueprint(
             rrb.Horizontal(court, figs), rrb.TimePanel(timeline="scan"), *collapsed
         )
-    hide_feature_labels = {
-        "world/laser/features/circles": rr.LineStrips2D.from_fields(show_labels=False)
+    map_overrides = {
+        "world/laser/features/circles": rr.LineStrips2D.from_fields(show_labels=False),
+        **{path: _TRAIL for path in TRAILS},
     }
     scale = f"ellipses 95%, drawn x{ellipse_scale:g}"
     h = FOLLOW_HALF_WIDTH_M
@@ -201,13 +226,13 @@ def blueprint(
         contents="/world/**",
         name=f"map following the vehicle (m; {scale})",
         visual_bounds=rrb.VisualBounds2D(x_range=[-h, h], y_range=[-h, h]),
-        overrides=hide_feature_labels,
+        overrides=map_overrides,
     )
     whole = rrb.Spatial2DView(
         origin=_y_up("world"),
         contents="/world/**",
         name=f"whole map (m; {scale})",
-        overrides=hide_feature_labels,
+        overrides=map_overrides,
     )
     scan = rrb.Spatial2DView(
         origin=_y_up("world/laser"),
@@ -222,12 +247,12 @@ def blueprint(
 
 
 class _Track:
-    """A path that grows a point at a time: (n, 2) `xy` without copying it all at each point
-    (a recording logs the path so far at every scan)."""
+    """A path that grows a point at a time, logged a piece at a time (`piece`)."""
 
     def __init__(self) -> None:
         self._xy = np.empty((256, 2))
         self._n = 0
+        self._mark = 0  # points already in a piece
 
     def append(self, xy) -> None:
         if self._n == len(self._xy):
@@ -238,6 +263,80 @@ class _Track:
     @property
     def xy(self) -> np.ndarray:
         return self._xy[: self._n]
+
+    def piece(self) -> np.ndarray:
+        """The points added since the last piece, after that piece's last point: the next
+        piece of the path as a trail draws it (the first piece: the first point alone)."""
+        part = self._xy[max(self._mark - 1, 0) : self._n]
+        self._mark = self._n
+        return part
+
+
+class _Described:
+    """An arrow array with its component's descriptor (what `rr.ComponentColumn` reads)."""
+
+    def __init__(self, descriptor, array) -> None:
+        self._descriptor = descriptor
+        self._array = array
+
+    def as_arrow_array(self):
+        return self._array
+
+    def component_descriptor(self):
+        return self._descriptor
+
+
+class _Batch:
+    """The scene's rows of the last scans, kept until BATCH_SCANS scans or BATCH_S seconds have
+    passed and then sent with one `send_columns` an entity: rerun's cost of a logged row is
+    mostly that of the call (a chunk each), and a Victoria Park run logs some 15 entities at
+    each of 7,249 scans. The rows are those `rec.log` would have logged, at the same times
+    (`tests/experiments/test_live_viewer.py` compares the two row for row)."""
+
+    def __init__(self, rec: rr.RecordingStream, scans: int) -> None:
+        self.rec = rec
+        self.scans = scans
+        self.rows: dict[str, list] = {}
+        self._n = 0
+        self._since = time.monotonic()
+
+    def add(self, path: str, k: int, stamp_s: float | None, archetype) -> None:
+        self.rows.setdefault(path, []).append((k, stamp_s, archetype.as_component_batches()))
+
+    def next_scan(self) -> None:
+        """A scan is complete: send the batch when it is full or old."""
+        self._n += 1
+        if self._n >= self.scans or time.monotonic() - self._since > BATCH_S:
+            self.send()
+
+    def send(self) -> None:
+        rows, self.rows = self.rows, {}
+        self._n, self._since = 0, time.monotonic()
+        for path, entity_rows in rows.items():
+            self._send(path, entity_rows)
+
+    def _send(self, path: str, rows: list) -> None:
+        stamps = [s for _, s, _ in rows]
+        columns: dict = {}
+        for _, _, batches in rows:
+            for b in batches:
+                columns.setdefault(b.component_descriptor(), []).append(b.as_arrow_array())
+        same = all(len(a) == len(rows) for a in columns.values())
+        if not same or (None in stamps and any(s is not None for s in stamps)):
+            for k, stamp_s, batches in rows:  # rows unlike each other: one at a time
+                self.rec.set_time("scan", sequence=k)
+                if stamp_s is not None:
+                    self.rec.set_time("time", duration=stamp_s)
+                self.rec.log(path, batches)
+            return
+        indexes = [rr.TimeColumn("scan", sequence=[k for k, _, _ in rows])]
+        if None not in stamps:
+            indexes.append(rr.TimeColumn("time", duration=stamps))
+        cols = [
+            rr.ComponentColumn(d, _Described(d, pa.concat_arrays(a)), lengths=[len(x) for x in a])
+            for d, a in columns.items()
+        ]
+        self.rec.send_columns(path, indexes=indexes, columns=cols)
 
 
 class NullRecorder:
@@ -299,13 +398,16 @@ class Recorder(NullRecorder):
         decimate: int = 1,
         ellipse_scale: float = 10.0,
         series: list[tuple[str, str]] = (),
+        batch_scans: int = 0,
     ):
         """kind: "slam", "features" or "circles" (the blueprint). decimate: log the scene of
         every this-many scans only (paths and time series still get every scan); a whole
         Victoria Park run at 1 would be gigabytes. ellipse_scale: covariance ellipses are drawn
         this many times their 95% size (true size is invisible at map scale); the map views
-        say so in their titles. series: (name, title) of the time series panels."""
-        self._settings(kind, decimate, ellipse_scale)
+        say so in their titles. series: (name, title) of the time series panels. batch_scans:
+        the scene's rows are sent this many scans at a time (`_Batch`; 0: BATCH_SCANS, 1: each
+        as it comes)."""
+        self._settings(kind, decimate, ellipse_scale, batch_scans)
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         check_output_file(self.path, "recording")
@@ -334,7 +436,9 @@ class Recorder(NullRecorder):
             self._tmp.unlink(missing_ok=True)
             raise
 
-    def _settings(self, kind: str, decimate: int, ellipse_scale: float) -> None:
+    def _settings(
+        self, kind: str, decimate: int, ellipse_scale: float, batch_scans: int = 0
+    ) -> None:
         """What every recording keeps, whatever its sink (see `__init__`)."""
         if kind not in KINDS:
             raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
@@ -344,13 +448,23 @@ class Recorder(NullRecorder):
         self.decimate = max(int(decimate), 1)
         self.ellipse_scale = float(ellipse_scale)
         self._k = 0
+        self._posed = None  # (scan, frame, pose) last logged by _log_pose
+        self._stamp = _NO_SCAN  # the current scan's time, s (None: none); _NO_SCAN: no scan yet
+        self._batch = None
+        self._batch_scans = BATCH_SCANS if batch_scans == 0 else int(batch_scans)
         self._est_path = _Track()
         self._truth_path = _Track()
 
     def _log_frames(self) -> None:
-        """The static y mirrors under the views' frames (`_y_up`)."""
+        """The static y mirrors under the views' frames (`_y_up`); the batch starts."""
         for frame in _VIEW_FRAMES[self.kind]:
             self.rec.log(_y_up(frame), rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
+        if self._batch_scans > 1:
+            self._batch = _Batch(self.rec, self._batch_scans)
+
+    def _send_batch(self) -> None:
+        if self._batch is not None:
+            self._batch.send()
 
     def _check_space(self, least: int, rule: str) -> None:
         """`WriteError` (no space left) when the recording's file system has less than `least`
@@ -420,19 +534,38 @@ class Recorder(NullRecorder):
                 self.abort()
                 raise
         interruption_point("recording-scan")  # the interruption tests' Ctrl-C, mid-recording
+        if self._batch is not None and self._stamp is not _NO_SCAN:
+            self._batch.next_scan()
+        self._stamp = None if stamp_s is None else float(stamp_s)
         self.rec.set_time("scan", sequence=int(k))
         if stamp_s is not None:
             self.rec.set_time("time", duration=float(stamp_s))
+
+    def _log(self, path: str, archetype, static: bool = False) -> None:
+        """Log `archetype` at `path` at this scan (into the batch, `_Batch`), or for all
+        times (static), or now when no scan is set or batching is off."""
+        if static or self._batch is None or self._stamp is _NO_SCAN:
+            self.rec.log(path, archetype, static=static)
+        else:
+            self._batch.add(path, self._k, self._stamp, archetype)
+
+    def _log_pose(self, frame: str, pose) -> None:
+        """The frame entity's pose at this scan, once (a scan and its features share it)."""
+        if pose is None:
+            return
+        key = (self._k, frame, tuple(float(v) for v in pose))
+        if key != self._posed:
+            self._posed = key
+            self._log(frame, _pose_transform(pose))
 
     def log_scan(self, scan: Scan, pose=None, path: str = "world/laser/scan") -> None:
         """Scan points in the laser frame at `path`. With `pose` (the laser's world pose), the
         parent of `path` is the laser's frame entity and gets the pose."""
         if self._skip():
             return
-        if pose is not None:
-            self.rec.log(_parent(path), _pose_transform(pose))
+        self._log_pose(_parent(path), pose)
         pts = scan.points_xy[scan.valid]
-        self.rec.log(
+        self._log(
             path, rr.Points2D(pts, radii=rr.Radius.ui_points(SCAN_POINT_PX), colors=[200, 200, 200])
         )
 
@@ -441,25 +574,24 @@ class Recorder(NullRecorder):
         `log_scan` (the parent of `path` gets the laser's world pose)."""
         if self._skip():
             return
-        if pose is not None:
-            self.rec.log(_parent(path), _pose_transform(pose))
+        self._log_pose(_parent(path), pose)
         pts = scan.points_xy
         strips, colors = [], []
         for (a, b), k in zip(features.segment_beams, features.segment_kind):
             strips.append(pts[features.beams(a, b)])
             colors.append(KIND_COLORS[int(k)])
-        self.rec.log(
+        self._log(
             f"{path}/segments",
             rr.LineStrips2D(strips, colors=colors, radii=rr.Radius.ui_points(1.5)),
         )
         self.log_circles(f"{path}/circles", features.circle_params, None, features.method)
-        self.rec.log(
+        self._log(
             f"{path}/lines",
             rr.LineStrips2D(
                 list(features.line_endpoints), colors=[60, 120, 255], radii=rr.Radius.ui_points(2)
             ),
         )
-        self.rec.log(
+        self._log(
             f"{path}/edges",
             rr.Points2D(features.edge_xy, radii=rr.Radius.ui_points(4.0), colors=[255, 40, 40]),
         )
@@ -475,7 +607,7 @@ class Recorder(NullRecorder):
             labels = [f"r={c[2]:.2f} m" for c in circles_xyr]
         elif len(labels) == 0:
             labels = None
-        self.rec.log(
+        self._log(
             path,
             rr.LineStrips2D(
                 strips,
@@ -509,12 +641,12 @@ class Recorder(NullRecorder):
         if self._skip():
             return
         sig_th = float(np.sqrt(max(cov[2, 2], 0.0)))
-        self.rec.log("world/vehicle", _pose_transform(pose))
-        self.rec.log(  # y mirrored: see _y_up
+        self._log("world/vehicle", _pose_transform(pose))
+        self._log(  # y mirrored: see _y_up
             "world/follow",
             rr.Transform3D(translation=[pose[0], pose[1], 0.0], scale=[1.0, -1.0, 1.0]),
         )
-        self.rec.log(
+        self._log(
             "world/vehicle/arrow",
             rr.Arrows2D(
                 origins=[[0.0, 0.0]],
@@ -524,7 +656,7 @@ class Recorder(NullRecorder):
                 labels=[f"heading +-{np.degrees(3 * sig_th):.2f} deg (3 sigma)"],
             ),
         )
-        self.rec.log(
+        self._log(
             "world/vehicle_ellipse",
             rr.LineStrips2D(
                 [ellipse_polyline(pose[:2], cov[:2, :2] * self.ellipse_scale**2)],
@@ -532,10 +664,10 @@ class Recorder(NullRecorder):
                 radii=rr.Radius.ui_points(1.0),
             ),
         )
-        self.rec.log(
+        self._log(
             "world/path",
             rr.LineStrips2D(
-                [self._est_path.xy], colors=[[255, 80, 80]], radii=rr.Radius.ui_points(1.5)
+                [self._est_path.piece()], colors=[[255, 80, 80]], radii=rr.Radius.ui_points(1.5)
             ),
         )
 
@@ -544,7 +676,7 @@ class Recorder(NullRecorder):
             return
         xy = np.asarray(xy, float).reshape(-1, 2)
         cov = np.asarray(cov, float).reshape(-1, 2, 2) * self.ellipse_scale**2
-        self.rec.log(
+        self._log(
             "world/landmarks",
             rr.Points2D(
                 xy,
@@ -553,7 +685,7 @@ class Recorder(NullRecorder):
                 labels=[f"L{int(i)}" for i in ids],
             ),
         )
-        self.rec.log(
+        self._log(
             "world/landmarks/ellipses",
             rr.LineStrips2D(
                 ellipse_polylines(xy, cov), colors=[[40, 200, 90]], radii=rr.Radius.ui_points(1.0)
@@ -564,7 +696,7 @@ class Recorder(NullRecorder):
         if self._skip():
             return
         xy = np.asarray(xy, float).reshape(-1, 2)
-        self.rec.log(
+        self._log(
             "world/tentative",
             rr.Points2D(xy, radii=rr.Radius.ui_points(3.0), colors=[[255, 200, 0]]),
         )
@@ -574,7 +706,7 @@ class Recorder(NullRecorder):
             return
         a = np.asarray(from_xy, float).reshape(-1, 2)
         b = np.asarray(to_xy, float).reshape(-1, 2)
-        self.rec.log(
+        self._log(
             "world/associations",
             rr.LineStrips2D(
                 [np.stack([p, q]) for p, q in zip(a, b)],
@@ -619,7 +751,7 @@ class Recorder(NullRecorder):
         self._truth_path.append(pose[:2])
         if self._skip():
             return
-        self.rec.log(
+        self._log(
             "world/truth/vehicle",
             rr.Arrows2D(
                 origins=[pose[:2]],
@@ -628,10 +760,10 @@ class Recorder(NullRecorder):
                 radii=rr.Radius.ui_points(1.5),
             ),
         )
-        self.rec.log(
+        self._log(
             "world/truth/path",
             rr.LineStrips2D(
-                [self._truth_path.xy], colors=[[255, 255, 255]], radii=rr.Radius.ui_points(1.0)
+                [self._truth_path.piece()], colors=[[255, 255, 255]], radii=rr.Radius.ui_points(1.0)
             ),
         )
 
@@ -639,7 +771,7 @@ class Recorder(NullRecorder):
 
     def log_scalars(self, name: str, values: dict[str, float]) -> None:
         """One row of the series `series/<name>` at the current scan, one curve per key."""
-        self.rec.log(f"series/{name}", rr.Scalars([float(v) for v in values.values()]))
+        self._log(f"series/{name}", rr.Scalars([float(v) for v in values.values()]))
         if name not in self.__dict__.setdefault("_styled", set()):
             self._styled.add(name)
             self._style(name, tuple(values), points=False)
@@ -695,6 +827,7 @@ class Recorder(NullRecorder):
             self.abort()
             raise WriteError(self.path, why)
         try:
+            self._send_batch()
             self._flush()
             self.rec.disconnect()  # closes the file sink
             fd = os.open(self._tmp, os.O_RDONLY)
@@ -790,8 +923,9 @@ class LiveRecorder(Recorder):
         decimate: int = 1,
         ellipse_scale: float = 10.0,
         series: list[tuple[str, str]] = (),
+        batch_scans: int = 0,
     ):
-        self._settings(kind, decimate, ellipse_scale)
+        self._settings(kind, decimate, ellipse_scale, batch_scans)
         self.viewer = viewer
         self.path = None
         self._tmp = None
@@ -814,6 +948,7 @@ class LiveRecorder(Recorder):
             return
         self._live = False
         try:
+            self._send_batch()
             self.rec.flush(timeout_sec=FLUSH_TIMEOUT_S)
         except RuntimeError as exc:
             log.warning(

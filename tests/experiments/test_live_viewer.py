@@ -249,12 +249,84 @@ def test_ellipses_drawn_at_once_are_those_drawn_one_by_one():
 def test_bench_slam_row_of_a_recorded_run(run_file):
     """`bench slam`'s recorded row: the run recorded as `slam --rerun FILE` records it, its
     seconds against the plain run's given ("recording ratio") and the file's size."""
-    from experiments.bench.slam import BINS, _recorded_row
+    from experiments.bench.slam import BINS, recorded_row
     from experiments.io.sequence_file import load_sequence
 
     seq = load_sequence(run_file)
-    row = _recorded_row(seq, CFG, 0.5, BINS, None)
+    row = recorded_row(seq, CFG, 0.5, BINS, None)
     assert row["map size"] == "whole run (Victoria Park, with a recording)"
     assert row["scans"] == seq.n_scans
     assert row["recording ratio"] == round(row["run seconds"] / 0.5, 2)
     assert 0 < row["recording MiB"] < 50
+
+
+def test_the_path_is_a_trail_of_pieces_that_make_the_whole_path(run_file, tmp_path):
+    """world/path is logged a piece a scan (its points since the last scan), and both map
+    views draw every piece up to the time cursor (a visible time range on the entity, for
+    both timelines): the path so far, as when the whole path was logged at each scan."""
+    from rerun.chunk import RrdReader
+
+    run_slam_file(run_file, CFG, tmp_path / "o", rerun_path=tmp_path / "r.rrd")
+    reader = RrdReader(tmp_path / "r.rrd")
+    pieces = {}
+    for chunk in reader.store().stream().to_chunks():
+        if str(chunk.entity_path) == "/world/path":
+            d = chunk.to_record_batch().to_pydict()
+            for k, strips in zip(d["scan"], d["LineStrips2D:strips"]):
+                pieces[k] = np.array(strips[0])
+    traj = np.loadtxt(tmp_path / "o" / "trajectory.tum")[:, 1:3]
+    assert sorted(pieces) == list(range(len(traj)))
+    assert len(pieces[0]) == 1 and all(len(pieces[k]) == 2 for k in range(1, len(traj)))
+    for k in range(1, len(traj)):
+        assert np.array_equal(pieces[k][0], pieces[k - 1][-1])  # the pieces join
+    whole = np.array([pieces[0][0]] + [pieces[k][1] for k in range(1, len(traj))])
+    assert np.allclose(whole, traj, atol=1e-4)  # float32 in the recording
+    trails = {}
+    for store in reader.blueprints():
+        for chunk in reader.store(store=store).stream().to_chunks():
+            path = str(chunk.entity_path)
+            d = chunk.to_record_batch().to_pydict()
+            if "VisibleTimeRanges:ranges" in d:
+                entity = path.split("/overrides/")[1].removesuffix("/visualizers")
+                trails.setdefault(entity, []).append(d["VisibleTimeRanges:ranges"][-1])
+    assert set(trails) == {"world/path", "world/truth/path"}
+    for ranges in trails["world/path"]:
+        assert {r["timeline"] for r in ranges} == {"scan", "time"}
+        for r in ranges:  # from the start (infinite: a null) to the cursor (relative 0)
+            assert r["range"] == {"start": None, "end": 0}
+    assert len(trails["world/path"]) == 2  # both map views
+
+
+class _Tee:
+    """A visualiser that hands every call to each of `recorders` (one run, several files)."""
+
+    def __init__(self, *recorders):
+        self.recorders = recorders
+
+    def __getattr__(self, name):
+        def each(*args, **kwargs):
+            for r in self.recorders:
+                getattr(r, name)(*args, **kwargs)
+
+        return each
+
+
+@pytest.mark.parametrize("batch", [3, 64])
+def test_batched_rows_are_the_rows_logged_one_by_one(batch, tmp_path):
+    """The scene sent a batch of scans at a time (`send_columns`) holds exactly the rows that
+    logging each as it comes (`rr.log`, batch_scans=1) holds, at the same scans and times."""
+    from experiments.eval.series import slam_panels, slam_series
+    from slam import run_slam
+
+    seq = simulate_cycab_run(np.random.default_rng(5), "tree_park", CycabParams(n_scans=30))
+    one = viz.Recorder(tmp_path / "one.rrd", series=slam_panels(True), batch_scans=1)
+    many = viz.Recorder(tmp_path / "many.rrd", series=slam_panels(True), batch_scans=batch)
+    assert one._batch is None and many._batch is not None
+    rec = _Tee(one, many)
+    rec.log_truth_trees(seq.truth_landmarks)
+    lg = run_slam(seq, CFG, visualiser=rec)
+    rec.log_series(lg.scan_t, slam_series(lg, seq.truth_t, seq.truth_pose))
+    rec.close()
+    a, b = recording_rows(tmp_path / "one.rrd"), recording_rows(tmp_path / "many.rrd")
+    assert a.keys() == b.keys() and len(a["/world/landmarks"]) == seq.n_scans
+    assert a == b
