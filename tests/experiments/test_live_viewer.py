@@ -58,6 +58,7 @@ class Sink:
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
             env=env,
+            start_new_session=True,
         )
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:
@@ -70,14 +71,23 @@ class Sink:
         raise AssertionError("the rerun sink did not start listening")
 
     def stop(self) -> None:
-        """End the sink; its file then holds what arrived."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
+        """End the sink (its own process group: `.venv/bin/rerun` is a wrapper that starts
+        rerun's binary as a child), and wait until every process of it has ended; its file then
+        holds what arrived."""
+        for sig in (signal.SIGTERM, signal.SIGKILL):
             try:
-                self.proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+                os.killpg(self.proc.pid, sig)
+            except ProcessLookupError:
+                break
+            deadline = time.monotonic() + 30
+            while time.monotonic() < deadline:
+                self.proc.poll()  # (reaps the wrapper once it ends)
+                try:
+                    os.killpg(self.proc.pid, 0)
+                except ProcessLookupError:
+                    return
+                time.sleep(0.1)
+        self.proc.wait()
 
     def received(self) -> Path:
         """End the sink, and what it received as a file the SDK's reader reads (the sink's own
