@@ -407,10 +407,12 @@ def test_a_full_disk_is_an_error_naming_the_path_and_leaves_nothing(
 @pytest.mark.slow
 @pytest.mark.parametrize("stop", ["free-space check", "write error"])
 def test_a_disk_that_fills_during_the_recording(tmp_path, mechanism, stop):
-    """Room enough to start, not to finish (64 KiB; a 40-scan drive records more): the
-    recording is stopped by the free-space check at the next scan, or (that check off) by the
-    write error of rerun's file writer; exit 1 naming it, nothing left. The free-space minimum
-    to start (16 MiB) is lowered to 0 in the command's process, as a 64 KiB test disk needs."""
+    """Room enough to start, not to finish (128 KiB: the recording's start, its layout, is
+    some 66 KiB, and rerun's save waits forever when that does not fit; a 40-scan drive records
+    more): the recording is stopped by the free-space check at the next scan, or (that check
+    off) by the write error of rerun's file writer; exit 1 naming it, nothing left. The
+    free-space minimum to start (16 MiB) is lowered to 0 in the command's process, as a 128 KiB
+    test disk needs."""
     if mechanism == "fsize":
         pytest.skip("the file-size limit case is the test above")
     invoke("simulate-drive", "--scans", "40", "--seed", "3", "--out", tmp_path / "drive.npz")
@@ -418,6 +420,6 @@ def test_a_disk_that_fills_during_the_recording(tmp_path, mechanism, stop):
     if stop == "write error":
         prelude += "\nviz.RECORDING_STOP_FREE_BYTES = 0"
     args = ["slam", "drive.npz", "--out", "o1", "--rerun", "FULL/s.rrd"]
-    proc, left = _on_full_fs(tmp_path, mechanism, args, keep=65536, prelude=prelude)
+    proc, left = _on_full_fs(tmp_path, mechanism, args, keep=131072, prelude=prelude)
     line = error_line(proc, "s.rrd", "No space left")
     assert left == [] and not (tmp_path / "o1").exists(), (line, left)
