@@ -9,6 +9,7 @@ notebook's recording goes.
 
 from __future__ import annotations
 
+import importlib.util
 import re
 import runpy
 import shutil
@@ -116,3 +117,32 @@ def test_the_tutorial_runs_and_scores_as_the_cli(tmp_path, monkeypatch):
     chi2 = re.search(r"chi2 ([\d.]+) at the EKF's estimate -> ([\d.]+)", out)
     assert float(chi2[2]) < float(chi2[1])  # Levenberg-Marquardt never raises the cost
     assert float(chi2[2]) == pytest.approx(sm.chi2, abs=0.05)
+
+
+def _notebook_hook():
+    spec = importlib.util.spec_from_file_location("notebook_hook", REPO / "docs/hooks/notebook.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_docs_page_drops_the_widget_for_a_note():
+    """docs/hooks/notebook.py: the widget's loader and state go, its view becomes the note,
+    the rest stays; a page without exactly one of each is an error naming what is missing."""
+    from mkdocs.exceptions import PluginError
+
+    hook = _notebook_hook()
+    loader = (
+        "<script>\n(function() {\n  function addWidgetsRenderer() {\n"
+        "    var s = 'https://unpkg.com/@jupyter-widgets/html-manager@*/dist/embed-amd.js';\n"
+        "  }\n}());\n</script>"
+    )
+    state = '<script type="application/vnd.jupyter.widget-state+json">{"state": {}}</script>'
+    view = '<script type="application/vnd.jupyter.widget-view+json">{"model_id": "x"}</script>'
+    kept = "<pre>EKF      ATE 0.0250 m</pre>"
+    html = f"{loader}<p>a</p>{kept}<div>{view}</div>{state}"
+    assert hook.without_widgets(html) == f"<p>a</p>{kept}<div>{hook.VIEWER_NOTE}</div>"
+    with pytest.raises(PluginError, match="expected one widget view, found 0"):
+        hook.without_widgets(f"{loader}{kept}{state}")
+    with pytest.raises(PluginError, match="expected one widget state, found 2"):
+        hook.without_widgets(f"{loader}{state}{state}{view}")
