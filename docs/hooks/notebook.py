@@ -13,11 +13,18 @@ from rerun's site, to show an empty viewer: the site opens from disk and loads n
 network (tests/test_docs_offline.py). So the page keeps the cell's code and its printed lines,
 and the widget's loader, state and view are replaced by a note. A page that does not hold
 exactly one of each fails the build (the template changed: look again).
+
+The notebook writes its recording into a new temporary folder; while the site is built, the
+kernel's temporary folders go into one the build removes at its end (TMPDIR, which the kernel
+inherits), so that builds leave nothing behind.
 """
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
+import tempfile
 from pathlib import Path
 
 from mkdocs.exceptions import PluginError
@@ -40,6 +47,34 @@ VIEWER_NOTE = (
     " recording from the running kernel, is not on it. The views it opens with are listed in"
     ' the <a href="rerun.html">rerun guide</a>.</p></div>'
 )
+
+
+_build_tmp: dict[str, str | None] = {}  # "dir": the build's TMPDIR, "saved": the one before
+
+
+def on_pre_build(config):
+    _build_tmp["saved"] = os.environ.get("TMPDIR")
+    _build_tmp["dir"] = tempfile.mkdtemp(prefix="trunkslam-docs-")
+    os.environ["TMPDIR"] = _build_tmp["dir"]
+
+
+def _end_build() -> None:
+    if "dir" not in _build_tmp:
+        return
+    shutil.rmtree(_build_tmp.pop("dir"), ignore_errors=True)
+    saved = _build_tmp.pop("saved")
+    if saved is None:
+        os.environ.pop("TMPDIR", None)
+    else:
+        os.environ["TMPDIR"] = saved
+
+
+def on_post_build(config):
+    _end_build()
+
+
+def on_build_error(error):
+    _end_build()
 
 
 @event_priority(100)  # before mkdocs-jupyter's own on_files, which picks the pages it renders
