@@ -117,11 +117,11 @@ EXPERIMENTS: dict[str, Experiment] = {
         "experiments.paper.association:run", about="IHGR, JCBB and NN: rates and optimality"
     ),
     "victoria-park": Experiment(
-        "experiments.paper.victoria_park:run",
+        "experiments.paper.victoria_park.real_run:run",
         about="EKF-SLAM on the real run against GPS (needs the data; skipped without)",
     ),
     "victoria-park-rfs": Experiment(
-        "experiments.paper.victoria_park_rfs:run",
+        "experiments.paper.victoria_park.rfs:run",
         about="the full run under the published RFS protocol, exactly: 100 clutter draws "
         "(needs the data; --quick: 10 draws; only when named)",
         default=False,
@@ -134,12 +134,12 @@ EXPERIMENTS: dict[str, Experiment] = {
         "experiments.paper.calibration:run", about="fit of the constant measurement-noise model"
     ),
     "victoria-park-calibration": Experiment(
-        "experiments.paper.vp_calibration:run",
+        "experiments.paper.victoria_park.calibration:run",
         about="the ute's noise and laser yaw from scans 1-2000 (not in the default run)",
         default=False,
     ),
     "victoria-park-map-policy": Experiment(
-        "experiments.paper.vp_map_policy:run",
+        "experiments.paper.victoria_park.map_policy:run",
         about="the map policy's confirm_scans and pruning settings from scans 1-2000 (only when "
         "named)",
         default=False,

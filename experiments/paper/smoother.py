@@ -149,7 +149,7 @@ def run(ctx) -> None:
 
 
 def _victoria_park(quick: bool, closure: bool = False) -> dict:
-    from experiments.paper.victoria_park import GPS_GAP_S, head
+    from experiments.paper.victoria_park.real_run import GPS_GAP_S, head
     from experiments.render import plots
 
     full = load_victoria_park(full=True)

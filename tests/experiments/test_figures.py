@@ -275,7 +275,7 @@ class _Ctx:
 
 
 def _vp_rows() -> list[dict]:
-    from experiments.paper.victoria_park import COLUMNS
+    from experiments.paper.victoria_park.real_run import COLUMNS
 
     rows = []
     for i, run in enumerate(("full run, published detections, ihgr", "scans 1-2000, bailey")):
@@ -292,7 +292,7 @@ def test_victoria_park_markdown_is_narrow_tables_each_a_pivot_of_the_csv(tmp_pat
 
     from experiments.io.writers import read_tidy_csv
     from experiments.paper import products
-    from experiments.paper import victoria_park as vp
+    from experiments.paper.victoria_park import real_run as vp
 
     products.tables(_Ctx(tmp_path), [vp.TABLE], _vp_rows())
     assert assert_tidy_tables(tmp_path) == {"victoria_park.csv"}
@@ -316,7 +316,7 @@ def test_published_rows_are_one_table_each_with_its_source(tmp_path):
     without a source are gone and the course project is not called Zamora et al.'s."""
     from experiments.io.writers import read_tidy_csv
     from experiments.paper import products
-    from experiments.paper import victoria_park as vp
+    from experiments.paper.victoria_park import real_run as vp
 
     products.tables(_Ctx(tmp_path), [vp.TABLE, vp.PUBLISHED_TABLE], _vp_rows())
     assert assert_tidy_tables(tmp_path) == {"victoria_park.csv", "victoria_park_published.csv"}
@@ -340,7 +340,7 @@ def test_published_rows_are_one_table_each_with_its_source(tmp_path):
 
 def test_the_tidy_check_fails_on_a_narrow_table_that_is_not_the_pivot(tmp_path):
     from experiments.paper import products
-    from experiments.paper import victoria_park as vp
+    from experiments.paper.victoria_park import real_run as vp
 
     products.tables(_Ctx(tmp_path), [vp.TABLE], _vp_rows())
     md = tmp_path / "victoria_park.md"

@@ -43,7 +43,7 @@ from experiments.io.writers import json_types
 from experiments.paper import products
 from experiments.paper.products import TableSpec
 from experiments.paper.runner import experiment_seed
-from experiments.paper.victoria_park import PRESET, run_config
+from experiments.paper.victoria_park.real_run import PRESET, run_config
 from slam import run_slam, se2
 
 __all__ = [
