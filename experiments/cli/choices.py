@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from enum import StrEnum
 
+from experiments.paper.registry import declared  # light: reads the declarations
+
 
 class ExtractMethod(StrEnum):
     paper = "paper"
@@ -67,21 +69,8 @@ class RosOdometry(StrEnum):  # experiments.io.rosbag.ODOMETRY_SOURCES
     pose = "pose"
 
 
-class ExperimentName(StrEnum):
-    features = "features"
-    table1 = "table1"
-    table2 = "table2"
-    circle_sweep = "circle-sweep"
-    table3 = "table3"
-    table4 = "table4"
-    association = "association"
-    victoria_park = "victoria-park"
-    victoria_park_rfs = "victoria-park-rfs"
-    smoother = "smoother"
-    noise_calibration = "noise-calibration"
-    victoria_park_calibration = "victoria-park-calibration"
-    victoria_park_map_policy = "victoria-park-map-policy"
-    loop_closure = "loop-closure"
+# the registered experiments (`experiments.paper.registry`, read without importing them)
+ExperimentName = StrEnum("ExperimentName", [(name.replace("-", "_"), name) for name in declared()])
 
 
 class Study(StrEnum):

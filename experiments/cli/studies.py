@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Annotated
 
@@ -9,6 +10,7 @@ import typer
 
 from experiments.cli.base import MAX_WORKERS, app, dask_address, handle_errors
 from experiments.cli.choices import ExperimentName, Study
+from experiments.paper.registry import help_lines  # light: reads the declarations
 
 
 @app.command()
@@ -49,33 +51,7 @@ def reproduce(
 
     Experiments (NAMES; several may be given, none means all but the two calibrations):
 
-    - features: classification of simulated trunks, the Victoria Park scan figure, features.rrd
-
-    - table1, table2: circle-centre and radius accuracy on the pillar court (one run), circles.rrd
-
-    - circle-sweep: CE and RE against range, radius and noise, with the Cramer-Rao bound
-
-    - table3, table4: EKF-SLAM Monte Carlo on the simulated tree park (one run), with the GTSAM
-    smoother's columns, slam.rrd
-
-    - association: IHGR, JCBB and NN side by side
-
-    - victoria-park: EKF-SLAM on the real run against GPS (needs the data), victoria_park.rrd
-
-    - victoria-park-rfs: the full run under the published RFS protocol, exactly (100 clutter
-    draws; only when named)
-
-    - smoother: GTSAM's Victoria Park graph solved; the full run's EKF against its smoother
-
-    - noise-calibration: measurement-noise model of each extractor
-
-    - victoria-park-calibration: the ute's noise and laser yaw (only when named)
-
-    - victoria-park-map-policy: the map policy's confirm_scans and pruning settings from scans
-    1-2000 (only when named)
-
-    - loop-closure: simulated loops in a park and an orchard, loop closure off and on
-    (only when named)
+    EXPERIMENTS (each experiment's line, from `experiments.paper.registry`)
 
     Run times: docs/performance.md (from the manifest of the run behind the docs)
     """
@@ -89,6 +65,12 @@ def reproduce(
             chosen, out, quick=quick, seed=seed, progress=progress, executor=executor
         )
     typer.echo(f"{len(written)} files in {out}/ (see {out}/manifest.json)")
+
+
+reproduce.__doc__ = reproduce.__doc__.replace(
+    "    EXPERIMENTS (each experiment's line, from `experiments.paper.registry`)",
+    textwrap.indent(help_lines(), "    "),
+)
 
 
 @app.command()

@@ -34,6 +34,7 @@ from experiments.exec import SerialExecutor
 from experiments.io.writers import markdown_table, write_atomic
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.render import plots
 from experiments.sim.landmarks import LandmarkScan, LandmarkSimConfig, simulate_landmark_scans
 
@@ -531,6 +532,7 @@ def _sizes(quick: bool) -> tuple[int, dict, dict[str, int]]:
     return 2, sweeps, {fam: n for fam, (n, _) in OPTIMALITY_INSTANCES.items()}
 
 
+@experiment("association", order=50, page="association.md", help="IHGR, JCBB and NN side by side")
 def run(ctx) -> None:
     """The registered experiment `association`: the rate study and its figure, the methods in
     the SLAM loop (a section of association.md), then the optimality study."""

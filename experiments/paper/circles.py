@@ -32,6 +32,7 @@ from experiments.eval.detections import assign_circles
 from experiments.exec import SerialExecutor, spawn_seeds
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.render import plots
 from experiments.sim import load_scene, scene_from_dict, sensor_preset, simulate_scan
 from features import extract_features
@@ -479,6 +480,13 @@ PILLAR_TABLES = (
 )
 
 
+@experiment(
+    "table1",
+    "table2",
+    order=20,
+    page="circles.md",
+    help="circle-centre and radius accuracy on the pillar court (one run), circles.rrd",
+)
 def run_tables(ctx) -> None:
     """Tables 1 and 2 (and their all-pillar versions), the bias and efficiency tables, figures."""
     n = 20 if ctx.quick else 200
@@ -654,6 +662,12 @@ SWEEP_TABLE = TableSpec(
 )
 
 
+@experiment(
+    "circle-sweep",
+    order=30,
+    page="circles.md",
+    help="CE and RE against range, radius and noise, with the Cramer-Rao bound",
+)
 def run_sweep(ctx) -> None:
     n = 10 if ctx.quick else 100
     ctx.config.setdefault("circle-sweep", {}).update(

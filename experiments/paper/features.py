@@ -18,6 +18,7 @@ from experiments.errors import MissingDataError
 from experiments.io.writers import write_tidy_table
 from experiments.paper import products
 from experiments.paper.classification import RADII_M, RANGES_M, classification_study
+from experiments.paper.registry import experiment
 from experiments.render import plots
 from features import extract_features
 
@@ -144,6 +145,12 @@ def victoria_park_scans(quick: bool, rec) -> tuple[dict | str, bytes | None]:
     return {"scan_index": best_k, "scans_logged": n}, figure
 
 
+@experiment(
+    "features",
+    order=10,
+    page="features.md",
+    help="classification of simulated trunks, the Victoria Park scan figure, features.rrd",
+)
 def run(ctx) -> None:
     from dataclasses import asdict
 

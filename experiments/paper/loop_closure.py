@@ -29,6 +29,7 @@ from scipy.stats import chi2
 from experiments.eval.series import slam_panels, slam_series
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.paper.slam import CYCAB_SLAM, extractor_params
 from experiments.render import plots
 from experiments.sim.loops import loop_drive, loop_params
@@ -253,6 +254,13 @@ TABLE = TableSpec(
 )
 
 
+@experiment(
+    "loop-closure",
+    order=120,
+    page="loop-closure.md",
+    help="simulated loops in a park and an orchard, loop closure off and on (only when named)",
+    default=False,
+)
 def run(ctx) -> None:
     """The registered experiment `loop-closure` (only when named)."""
     jobs = [(kind, i) for kind, n in RUNS.items() for i in range(QUICK_RUNS if ctx.quick else n)]

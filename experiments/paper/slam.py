@@ -63,6 +63,7 @@ from experiments.io.config_file import config_toml
 from experiments.io.writers import dumps_json, json_types, write_atomic
 from experiments.paper import products
 from experiments.paper.products import FigureSpec, TableSpec
+from experiments.paper.registry import experiment
 from experiments.sim import sensor_preset
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
@@ -872,6 +873,14 @@ def recording_trial(cfg: Exp2Config, seed) -> dict[str, bytes]:
 # ---- the registered experiment ------------------------------------------------------------------
 
 
+@experiment(
+    "table3",
+    "table4",
+    order=40,
+    page="slam.md",
+    help="EKF-SLAM Monte Carlo on the simulated tree park (one run), with the GTSAM "
+    "smoother's columns, slam.rrd",
+)
 def run(ctx, cfg: Exp2Config | None = None) -> Exp2Results:
     """Experiment 2 (registered as `table3` and `table4`, one run for both): Tables 3 and 4,
     Figs. 7, 10, 11, NEES/NIS and slam.rrd into ctx.out_dir."""

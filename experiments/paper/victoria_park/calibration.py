@@ -88,6 +88,7 @@ from experiments.io.victoria_park import load_ss2002_reference, load_victoria_pa
 from experiments.io.writers import write_atomic
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.paper.victoria_park import map_policy as vp_map_policy
 from experiments.paper.victoria_park import start as vp_start
 from experiments.paper.victoria_park import steering as vp_steering
@@ -561,6 +562,13 @@ def _start_notes(st: VpCalibration) -> str:
     )
 
 
+@experiment(
+    "victoria-park-calibration",
+    order=100,
+    page="victoria-park.md",
+    help="the ute's noise and laser yaw (only when named)",
+    default=False,
+)
 def run(ctx) -> None:
     """The registered experiment `victoria-park-calibration`."""
     try:

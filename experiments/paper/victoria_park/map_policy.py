@@ -45,6 +45,7 @@ from experiments.errors import DataError, MissingDataError
 from experiments.io.config_file import load_slam_config, preset_path
 from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 from experiments.io.writers import write_tidy_table
+from experiments.paper.registry import experiment
 from experiments.paper.victoria_park.real_run import HALVES, reference_match
 from slam import SlamConfig, SlamLog, run_slam, se2
 
@@ -186,6 +187,13 @@ def derive(rates: dict[str, np.ndarray], min_rate: float = 0.5, risk: float = 0.
     }
 
 
+@experiment(
+    "victoria-park-map-policy",
+    order=110,
+    page="victoria-park.md",
+    help="the map policy's confirm_scans and pruning settings from scans 1-2000 (only when named)",
+    default=False,
+)
 def run(ctx) -> None:
     """The registered experiment `victoria-park-map-policy`: the confirm_scans sweep and the
     pruning's detection rates, each with its table; the derived settings go to the manifest."""

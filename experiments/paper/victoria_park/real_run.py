@@ -57,6 +57,7 @@ from experiments.io.victoria_park import (
 from experiments.io.writers import json_types, write_atomic
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from slam import SlamConfig, SlamLog, run_slam, se2
 from slam.closure import closure_counts
 from slam.log import OUT_OF_RANGE, SKIPPED
@@ -350,6 +351,12 @@ def vp_trial(job: tuple, seed=None) -> tuple[dict, dict[str, bytes]]:
     return row, {"victoria_park.rrd": rec.data, **_figures(label, lg, sc, seq)}
 
 
+@experiment(
+    "victoria-park",
+    order=60,
+    page="victoria-park.md",
+    help="EKF-SLAM on the real run against GPS (needs the data), victoria_park.rrd",
+)
 def run(ctx) -> None:
     """The registered experiment `victoria-park`: its seven runs are trials (`vp_trial`); the
     first also makes the recording and the figures. The table is written after the other
