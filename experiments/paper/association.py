@@ -32,10 +32,9 @@ from association.inputs import prepare
 from association.single import single_scan_problem
 from experiments.exec import SerialExecutor
 from experiments.io.writers import markdown_table, write_atomic
-from experiments.paper import products
+from experiments.paper import association_figures, products
 from experiments.paper.products import TableSpec
 from experiments.paper.registry import experiment
-from experiments.render import plots
 from experiments.sim.landmarks import LandmarkScan, LandmarkSimConfig, simulate_landmark_scans
 
 log = logging.getLogger(__name__)
@@ -573,7 +572,7 @@ def run(ctx) -> None:
     labels = {k: lab for k, (_, lab, _) in SWEEPS.items()}
     spec = (
         "association.png",
-        plots.plot_association,
+        association_figures.plot_association,
         (rows,),
         {"method_labels": METHOD_LABELS, "sweep_xlabels": labels},
     )

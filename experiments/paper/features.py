@@ -16,7 +16,7 @@ import logging
 
 from experiments.errors import MissingDataError
 from experiments.io.writers import write_tidy_table
-from experiments.paper import products
+from experiments.paper import features_figures, products
 from experiments.paper.classification import RADII_M, RANGES_M, classification_study
 from experiments.paper.registry import experiment
 from experiments.render import plots
@@ -83,7 +83,7 @@ def classification(ctx) -> None:
         f"Simulated trunks ahead of a PLS200 (0.5 deg beams), {100 * sigma:g} cm range noise, "
         f"1 cm quantisation, {n} trials per point"
     )
-    spec = ("classification.png", plots.plot_circle_rates, (res,), {"setup": setup})
+    spec = ("classification.png", features_figures.plot_circle_rates, (res,), {"setup": setup})
     products.figures(ctx, [spec], desc="classification figure")
 
 

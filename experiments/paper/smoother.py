@@ -156,8 +156,8 @@ def run(ctx) -> None:
 
 
 def _victoria_park(quick: bool, closure: bool = False) -> dict:
+    from experiments.paper.victoria_park import figures
     from experiments.paper.victoria_park.real_run import GPS_GAP_S, head
-    from experiments.render import plots
 
     full = load_victoria_park(full=True)
     cfg = load_slam_config(PRESET)
@@ -206,10 +206,10 @@ def _victoria_park(quick: bool, closure: bool = False) -> dict:
     title = "Victoria Park: EKF and smoothed antenna paths over the GPS fixes (smoothed map)"
     files = {
         "vp_smoother_map.png": products.png(
-            plots.plot_vp_map, full.gps_xy, ant, sm.landmark_xy, title
+            figures.plot_vp_map, full.gps_xy, ant, sm.landmark_xy, title
         ),
         "vp_smoother_errors.png": products.png(
-            plots.plot_gps_errors,
+            figures.plot_gps_errors,
             errors,
             sc_e.jump,
             "Victoria Park: distance to the GPS fixes (jumps marked x)",
