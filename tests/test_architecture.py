@@ -5,7 +5,8 @@
 - rooms of `experiments`: a room imports only rooms below it (`errors` and `bundled`, the
   package data's folders, at the bottom; `io`, `sim`, `eval` and `exec` never import `paper`,
   `bench`, `pipeline`, `render` or `cli`);
-- third-party packages confined to one module (gtsam, rerun, matplotlib, dask, rosbags);
+- third-party packages confined to one module (gtsam, rerun, dask, rosbags), matplotlib to the
+  figure modules (`experiments/render/plots.py`, `experiments/paper/**/*figures.py`);
 - no private name (`_x`) or private module imported from another module;
 - STYLE.md section 4b's signs of a missing name: no function over 80 lines (numba kernels
   aside) and no call with more than five positional arguments (calls of numba kernels, of a
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import ast
 import builtins
+import re
 from pathlib import Path
 
 import pytest
@@ -43,11 +45,12 @@ ROOMS = {
     "cli": {"errors", "bundled", "io", "sim", "eval", "render", "exec"}
     | {"paper", "bench", "pipeline"},
 }
+# matplotlib: the figure modules (each experiment's, beside it) and their shared helpers
+FIGURE_MODULES = re.compile(r"experiments/(render/plots|paper/(\w+/)?(\w+_)?figures)\.py")
 # third-party packages confined to one module
 CONFINED = {
     "gtsam": "slam/smoother.py",
     "rerun": "experiments/render/viz.py",
-    "matplotlib": "experiments/render/plots.py",
     "dask": "experiments/exec/cluster.py",
     "distributed": "experiments/exec/cluster.py",
     "rosbags": "experiments/io/rosbag.py",
@@ -91,6 +94,8 @@ def test_imports_flow_one_way(path):
     for lib, home in CONFINED.items():
         if lib in top_level(path):
             assert rel == home, f"{rel} imports {lib}; only {home} may"
+    if "matplotlib" in top_level(path):
+        assert FIGURE_MODULES.fullmatch(rel), f"{rel} imports matplotlib; only figure modules may"
 
 
 @pytest.mark.parametrize("path", EXPERIMENTS, ids=lambda p: str(p.relative_to(ROOT)))

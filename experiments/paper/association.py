@@ -32,9 +32,9 @@ from association.inputs import prepare
 from association.single import single_scan_problem
 from experiments.exec import SerialExecutor
 from experiments.io.writers import markdown_table, write_atomic
-from experiments.paper import products
+from experiments.paper import association_figures, products
 from experiments.paper.products import TableSpec
-from experiments.render import plots
+from experiments.paper.registry import experiment
 from experiments.sim.landmarks import LandmarkScan, LandmarkSimConfig, simulate_landmark_scans
 
 log = logging.getLogger(__name__)
@@ -531,6 +531,7 @@ def _sizes(quick: bool) -> tuple[int, dict, dict[str, int]]:
     return 2, sweeps, {fam: n for fam, (n, _) in OPTIMALITY_INSTANCES.items()}
 
 
+@experiment("association", order=50, page="association.md", help="IHGR, JCBB and NN side by side")
 def run(ctx) -> None:
     """The registered experiment `association`: the rate study and its figure, the methods in
     the SLAM loop (a section of association.md), then the optimality study."""
@@ -571,7 +572,7 @@ def run(ctx) -> None:
     labels = {k: lab for k, (_, lab, _) in SWEEPS.items()}
     spec = (
         "association.png",
-        plots.plot_association,
+        association_figures.plot_association,
         (rows,),
         {"method_labels": METHOD_LABELS, "sweep_xlabels": labels},
     )

@@ -249,7 +249,7 @@ def victoria_park_trial(job: tuple, seed=None) -> dict:
     from experiments.eval.vouched import vouched_for_sequence
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
-    from experiments.paper.victoria_park import PRESET, head
+    from experiments.paper.victoria_park.real_run import PRESET, head
 
     n_scans, (label, assoc, K) = job
     full = load_victoria_park(full=True)

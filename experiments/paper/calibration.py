@@ -25,6 +25,7 @@ from experiments.eval.detections import dominant_label, run_labels
 from experiments.exec import SerialExecutor
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.paper.slam import METHODS, extractor_params
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
@@ -362,6 +363,12 @@ TABLES = (
 )
 
 
+@experiment(
+    "noise-calibration",
+    order=90,
+    page="consistency.md",
+    help="measurement-noise model of each extractor",
+)
 def run(ctx) -> None:
     """The registered experiment `noise-calibration`: the fits beside the values in use."""
     fits = calibrate_measurement_noise(executor=ctx.executor)

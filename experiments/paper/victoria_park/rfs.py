@@ -42,8 +42,9 @@ from experiments.exec import spawn_seeds
 from experiments.io.writers import json_types
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.paper.runner import experiment_seed
-from experiments.paper.victoria_park import PRESET, run_config
+from experiments.paper.victoria_park.real_run import PRESET, run_config
 from slam import run_slam, se2
 
 __all__ = [
@@ -318,6 +319,14 @@ DRAWS = TableSpec(
 )
 
 
+@experiment(
+    "victoria-park-rfs",
+    order=70,
+    page="victoria-park-rfs.md",
+    help="the full run under the published RFS protocol, exactly (100 clutter draws; only "
+    "when named)",
+    default=False,
+)
 def run(ctx) -> None:
     """The registered experiment `victoria-park-rfs`: each run a trial on the executor (the
     clutter draws with seeds spawned from the experiment's); the tables are written after the
