@@ -116,6 +116,8 @@ class ExperimentName(StrEnum):
     victoria_park_calibration = "victoria-park-calibration"
     victoria_park_map_policy = "victoria-park-map-policy"
     loop_closure = "loop-closure"
+    sim_clutter = "sim-clutter"
+    victoria_park_split_half = "victoria-park-split-half"
 
 
 def project_errors() -> tuple[type[BaseException], ...]:
@@ -563,6 +565,10 @@ def reproduce(
 
     - loop-closure: simulated loops in a park and an orchard, loop closure off and on
     (only when named)
+
+    - sim-clutter: the map by object class in a simulated park with clutter (only when named)
+
+    - victoria-park-split-half: map figures judged on a half no setting saw (only when named)
 
     Run times: docs/performance.md (from the manifest of the run behind the docs)
     """

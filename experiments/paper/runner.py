@@ -149,6 +149,18 @@ EXPERIMENTS: dict[str, Experiment] = {
         about="simulated loops in a park and an orchard, loop closure off and on (only when named)",
         default=False,
     ),
+    "sim-clutter": Experiment(
+        "experiments.paper.sim_clutter:run",
+        about="the map by object class in a simulated park with posts, cars, bushes and people "
+        "(only when named)",
+        default=False,
+    ),
+    "victoria-park-split-half": Experiment(
+        "experiments.paper.vp_split_half:run",
+        about="Victoria Park map figures judged on a half of scans 1-2000 no setting saw (needs "
+        "the data; only when named)",
+        default=False,
+    ),
 }
 DEFAULT_EXPERIMENTS = tuple(name for name, e in EXPERIMENTS.items() if e.default)
 
