@@ -152,13 +152,22 @@ def summary_records(rows: list[dict]) -> list[dict]:
     return out
 
 
+_PLURAL = {
+    "trunk": "trunks",
+    "post": "posts",
+    "car": "cars",
+    "bush": "bushes",
+    "person": "people's legs",
+    "wall": "walls",
+    "none": "nothing labelled",
+}
 LABELS = {
     "runs": "runs",
     "precision": "precision",
     "recall": "recall",
     "landmarks_mean": "landmarks, mean",
-    **{f"landmarks_{c}_mean": f"landmarks on a {c}, mean" for c in CLASSES},
-    **{f"mapped_{c}": f"{c}s mapped (share)" for c in CLASSES},
+    **{f"landmarks_{c}_mean": f"on {p}, mean" for c, p in _PLURAL.items()},
+    **{f"mapped_{c}": f"{p} held (share)" for c, p in _PLURAL.items() if c != "none"},
 }
 PARTS = (
     ("Precision and recall", ("runs", "precision", "recall", "landmarks_mean")),
@@ -166,7 +175,7 @@ PARTS = (
         "Landmarks by the class of what their beams hit",
         tuple(f"landmarks_{c}_mean" for c in CLASSES),
     ),
-    ("Objects of each class held by a landmark", tuple(f"mapped_{c}" for c in CLASSES)),
+    ("Objects of each class held by a landmark", tuple(f"mapped_{c}" for c in CLASSES[:-1])),
 )
 TABLE = TableSpec(
     "sim_clutter",
