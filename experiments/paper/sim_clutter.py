@@ -143,8 +143,9 @@ def summary_records(rows: list[dict]) -> list[dict]:
                 "landmarks_mean": total / len(rs),
             }
             for c in CLASSES:
-                n_obj = sum(r[f"objects_{c}"] for r in rs)
                 rec[f"landmarks_{c}_mean"] = sum(r[f"landmarks_{c}"] for r in rs) / len(rs)
+            for c in CLASSES[:-1]:  # "none" is no object
+                n_obj = sum(r[f"objects_{c}"] for r in rs)
                 rec[f"mapped_{c}"] = (
                     sum(r[f"mapped_{c}"] for r in rs) / n_obj if n_obj else float("nan")
                 )

@@ -117,3 +117,19 @@ def test_the_summary_pools_precision_and_recall_over_the_runs():
     assert s["precision"] == 15 / 18 and s["recall"] == 14 / 16 and s["landmarks_mean"] == 9
     assert s["landmarks_post_mean"] == 1.5 and s["mapped_post"] == 3 / 12
     assert math.isnan(s["mapped_car"])  # no car in these rows
+    assert "mapped_none" not in s
+
+
+def test_the_table_is_written_from_the_runs(tmp_path):
+    from experiments.paper.sim_clutter import TABLE
+
+    rows = [
+        {f"{k}_{c}": 0 for k in ("landmarks", "objects", "mapped") for c in CLASSES}
+        | {"scene": scene, "method": "paper", "run": 0, "landmarks": 9, "right": 8}
+        | {"trunks": 8, "trunks_found": 8, "landmarks_trunk": 8, "landmarks_bush": 1}
+        for scene in ("tree_park", "tree_park_clutter")
+    ]
+    md, csv_path = TABLE.write(tmp_path, rows)
+    text = md.read_text()
+    assert "on bushes, mean" in text and "nothing labelled held" not in text
+    assert csv_path.read_text().count("\n") == 3  # a header and one row per scene
