@@ -59,3 +59,12 @@ def test_every_extractor_is_judged_on_the_half_its_setting_never_saw():
     # extractors without records (bailey, paper here) get rows of NaN figures, not errors
     assert {r["extractor"] for r in out} == set(EXTRACTORS)
     assert all(math.isnan(r["precision"]) for r in out if r["extractor"] == "bailey")
+
+
+def test_the_table_is_written_with_a_row_per_extractor_and_protocol(tmp_path):
+    from experiments.paper.vp_split_half import TABLE
+
+    rows = split_half_rows(_records(), {"1_1000": 3, "1001_2000": 5}, preset_confirm=4)
+    md, csv_path = TABLE.write(tmp_path, rows)
+    assert csv_path.read_text().count("\n") == 1 + 3 * len(EXTRACTORS)
+    assert "scans 1-2000 (in-sample)" in md.read_text()
