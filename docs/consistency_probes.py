@@ -52,7 +52,7 @@ from experiments.exec.trials import spawn_seeds
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import run_slam, se2
-from slam.measurement import DEFAULT_RANGE_BIAS
+from slam.config import DEFAULT_RANGE_BIAS
 
 METHODS = ("paper", "geometric", "bailey")
 

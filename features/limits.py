@@ -17,14 +17,15 @@ PARAM_LIMIT = 1e9  # no extractor parameter is larger in size (metres, counts, t
 PARAM_TINY = 1e-150  # nor smaller, 0 apart: (1e-150)^2 > 2.2e-308, the least normal double
 
 
-def magnitude_problem(v, positive: bool = False) -> str | None:
+def magnitude_problem(v, positive: bool = False, *, limit: float = PARAM_LIMIT) -> str | None:
     """What is wrong with `v` as a parameter's value (None: nothing): not a finite real number,
-    or a size outside {0} and [PARAM_TINY, PARAM_LIMIT]. positive: the parameter must be > 0
-    (the message then leaves 0 out; the caller refuses 0 and negative values)."""
+    or a size outside {0} and [PARAM_TINY, limit]. positive: the parameter must be > 0 (the
+    message then leaves 0 out; the caller refuses 0 and negative values). The project's one
+    range check: `slam.validators.setting` is built on it (with the settings' own limit)."""
     if isinstance(v, bool) or not isinstance(v, numbers.Real) or not math.isfinite(v):
         return f"must be a finite number, got {v!r}"
-    if abs(v) > PARAM_LIMIT:  # squares and int64 kernels must not overflow
-        return f"must be at most {PARAM_LIMIT:g} in size, got {v!r}"
+    if abs(v) > limit:  # squares and int64 kernels must not overflow
+        return f"must be at most {limit:g} in size, got {v!r}"
     if v != 0 and abs(v) < PARAM_TINY:  # its square would underflow
         least = "" if positive else "0 or "
         return f"must be {least}at least {PARAM_TINY:g} in size, got {v!r}"

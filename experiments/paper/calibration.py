@@ -29,7 +29,8 @@ from experiments.paper.slam import METHODS, extractor_params
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import DEFAULT_CONSTANT_NOISE, SlamConfig, interpolate_poses, se2, wrap_angle
-from slam.measurement import DEFAULT_FIT_FLOOR, measurements_from_features
+from slam.config import DEFAULT_FIT_FLOOR
+from slam.measurement import measurements_from_features
 
 __all__ = [
     "FLOOR_QUANTITIES",

@@ -29,7 +29,7 @@ from scipy.optimize import minimize
 from experiments.errors import DataError
 from experiments.eval.gps import flag_jumps, top_speed
 from slam import AckermannModel, Odometry, SteeringCalibration, se2
-from slam.start import procrustes_2d
+from slam.se2 import procrustes_2d
 from slam.vehicle import integrate
 
 __all__ = ["STRETCH_S", "SteeringFit", "dead_reckoning_mse", "fit_steering", "stretches"]
