@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import math
 import numbers
+from dataclasses import field
 
-__all__ = ["PARAM_LIMIT", "PARAM_TINY", "magnitude_problem"]
+__all__ = ["PARAM_LIMIT", "PARAM_TINY", "magnitude_problem", "sourced"]
 
 PARAM_LIMIT = 1e9  # no extractor parameter is larger in size (metres, counts, thresholds)
 PARAM_TINY = 1e-150  # nor smaller, 0 apart: (1e-150)^2 > 2.2e-308, the least normal double
@@ -30,3 +31,10 @@ def magnitude_problem(v, positive: bool = False, *, limit: float = PARAM_LIMIT) 
         least = "" if positive else "0 or "
         return f"must be {least}at least {PARAM_TINY:g} in size, got {v!r}"
     return None
+
+
+def sourced(value, source: str):
+    """A parameter's default with where it comes from, in one line ("paper: ...", "design: ...",
+    ...), as `slam.config.default` does for the run's settings (`slam.config.setting_sources`
+    lists both)."""
+    return field(default=value, metadata={"source": source})
