@@ -701,6 +701,28 @@ def _resolve(params: dict, method: str, scan: Scan) -> tuple[ExtractorParams, tu
     return _cached_resolve(items, method, gamma, n_beams)
 
 
+def _resolve_params(
+    params: ExtractorParams, overrides: dict, method: str, scan: Scan
+) -> tuple[ExtractorParams, tuple]:
+    """`_resolve` of an `ExtractorParams` (its fields the cache key, as keyword arguments')
+    with `overrides` replacing some of its fields."""
+    if overrides:
+        names = {f.name for f in fields(ExtractorParams)}
+        unknown = sorted(set(overrides) - names)
+        if unknown:
+            raise FeaturesError(f"unknown extractor parameter(s) {unknown}; known: {sorted(names)}")
+        return _resolve({**params.to_dict(), **overrides}, method, scan)
+    gamma, n_beams = scan.angle_increment_rad, scan.n_beams
+    return _cached_params(params, method, gamma, n_beams)
+
+
+@lru_cache(maxsize=64)
+def _cached_params(p: ExtractorParams, method: str, gamma: float, n_beams: int):
+    """The kernel's settings of a (validated, frozen) `ExtractorParams`: the same as
+    `_cached_resolve` of its fields as keyword arguments."""
+    return p, _settings(p, method, gamma, n_beams)
+
+
 def _items(params: dict) -> tuple | None:
     """The cache key of keyword arguments, None when a value is unhashable."""
     # the value's type is part of the key: 1 == True and 0.5 == Fraction(1, 2) hash alike
@@ -814,21 +836,32 @@ def _extract_bailey(scan: Scan, params: dict) -> Features:
     return extract_bailey(scan, **params)
 
 
-def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
+def extract_features(scan: Scan, method: str = "paper", params=None, **overrides) -> Features:
     """Extract segments, edges, lines, circles and clutter from one scan (laser frame).
 
     method: "paper" (modified Gauss-Newton, eq. 6-9), "geometric" (orthogonal-distance LM with
-        covariance), "kasa", "taubin", or "bailey" (the Victoria Park detector; `params` then go
-        to `features.bailey.extract_bailey`).
-    params: fields of `ExtractorParams` (e.g. sigma_r_m=0.01, line_test="paper").
+        covariance), "kasa", "taubin", or "bailey" (the Victoria Park detector).
+    params: the `ExtractorParams` (None: the defaults), which reach the kernel as they are; for
+        "bailey" the detector's `features.bailey.BaileyParams` (`extract_bailey`'s `params`).
+    overrides: fields of `ExtractorParams` replacing those of `params` (e.g. sigma_r_m=0.01,
+        line_test="paper"); for "bailey" the options of `features.bailey.extract_bailey`.
     """
     if not isinstance(scan, Scan):
         raise FeaturesError(f"scan: expected a features.Scan, got {type(scan).__name__}")
     if method == "bailey":
-        return _extract_bailey(scan, params)
+        return _extract_bailey(
+            scan, overrides if params is None else {**overrides, "params": params}
+        )
     if method not in _METHOD_CODE:
         raise FeaturesError(f"method: must be one of {list(METHODS)}, got {method!r}")
-    p, settings = _resolve(params, method, scan)
+    if params is not None and not isinstance(params, ExtractorParams):
+        raise FeaturesError(
+            f"params: expected a features.ExtractorParams, got {type(params).__name__}"
+        )
+    if params is None:
+        p, settings = _resolve(overrides, method, scan)
+    else:
+        p, settings = _resolve_params(params, overrides, method, scan)
     beams = _kernel_beams(scan)
     found = _Found._make(_extract_kernel(tuple(beams), settings))
     if beams.shift:

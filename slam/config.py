@@ -542,6 +542,16 @@ class FeaturesConfig:
     def __post_init__(self) -> None:
         _choice("features", "method", self.method, FEATURE_METHODS)
 
+    def extractor_args(self) -> tuple:
+        """(params, options) of `features.extract_features(scan, self.method, params,
+        **options)`: the `ExtractorParams` itself (the Bailey detector's `BaileyParams` and its
+        noise model's sigmas for "bailey"), so a setting keeps its form to the kernel."""
+        if self.method == "bailey":
+            b = self.bailey
+            sigmas = ("range_sigma_m", "range_sigma_per_m", "bearing_sigma_rad", "radius_sigma_m")
+            return b.detector, {name: getattr(b, name) for name in sigmas}
+        return self.extractor, {}
+
     def extractor_kwargs(self) -> dict:
         """The keyword arguments of `features.extract_features(scan, self.method, **kwargs)`."""
         if self.method == "bailey":

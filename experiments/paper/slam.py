@@ -320,8 +320,8 @@ def slam_trial(job: tuple[Exp2Config, int, bool], seed) -> dict:
     feats: dict[str, list] = {}
     for m in sorted({v[1] for v in variants}):
         t0 = time.perf_counter()
-        params = run_config(cfg, m).features.extractor_kwargs()
-        feats[m] = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
+        params, options = run_config(cfg, m).features.extractor_args()
+        feats[m] = [extract_features(seq.scan(k), m, params, **options) for k in range(seq.n_scans)]
         out["time_extract"][m] = (time.perf_counter() - t0) / seq.n_scans
     noise_rng = rng.spawn(1)[0]
     for name, m, overrides, kind in variants:
