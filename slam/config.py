@@ -32,7 +32,6 @@ import math
 import types
 import typing
 from collections.abc import Mapping
-from dataclasses import MISSING as dataclasses_MISSING
 from dataclasses import dataclass, field, fields, is_dataclass
 
 import numpy as np
@@ -99,19 +98,19 @@ def default(value, source: str, *, factory: bool = False):
     return field(default=value, metadata=meta)
 
 
-def setting_sources(cls=None, path: str = "") -> list[tuple[str, object, str]]:
-    """(dotted path, default, source) of every setting of `cls` (default `SlamConfig`), nested
-    sections expanded: the configuration reference (docs/configuration.md) shows this list."""
-    cls = cls or SlamConfig
+def setting_sources(obj=None, path: str = "") -> list[tuple[str, object, str]]:
+    """(dotted path, default, source) of every setting of `obj` (default `SlamConfig()`, the
+    built-in settings as they take effect), nested sections expanded: the configuration
+    reference (docs/configuration.md) shows this list."""
+    obj = SlamConfig() if obj is None else obj
     out = []
-    hints = typing.get_type_hints(cls)
-    for f in fields(cls):
+    for f in fields(obj):
         where = f"{path}.{f.name}" if path else f.name
-        if is_dataclass(hints[f.name]):
-            out += setting_sources(hints[f.name], where)
-            continue
-        value = f.default if f.default_factory is dataclasses_MISSING else f.default_factory()
-        out.append((where, _plain(value), f.metadata.get("source", "")))
+        value = getattr(obj, f.name)
+        if is_dataclass(value):
+            out += setting_sources(value, where)
+        else:
+            out.append((where, _plain(value), f.metadata.get("source", "")))
     return out
 
 

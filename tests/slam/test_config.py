@@ -248,3 +248,24 @@ def test_gate_prob_has_one_default():
         param = inspect.signature(fn).parameters["gate_prob"]
         assert param.default is inspect.Parameter.empty, fn
     assert AssociationConfig().gate_prob == 0.999
+
+
+BEGIN, END = "<!-- settings: begin -->", "<!-- settings: end -->"
+
+
+def settings_table() -> str:
+    """The configuration reference's table: every setting, its default and its source."""
+    rows = ["| setting | default | source |", "|---|---|---|"]
+    for path, value, source in setting_sources():
+        shown = repr(value) if isinstance(value, str) else str(value).replace("|", "\\|")
+        rows.append(f"| `{path}` | `{shown}` | {source} |")
+    return "\n".join(rows)
+
+
+def test_the_configuration_page_shows_every_default_and_its_source():
+    page = Path(__file__).resolve().parents[2] / "docs" / "configuration.md"
+    text = page.read_text()
+    shown = text.split(BEGIN)[1].split(END)[0].strip()
+    assert shown == settings_table(), (
+        "regenerate the table: tests/slam/test_config.py settings_table()"
+    )
