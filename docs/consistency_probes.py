@@ -225,7 +225,7 @@ def by_beams(roots=(1000, 1001, 1002, 1003)) -> None:
 
 
 # paper's range-bias line under the constant model (noise-calibration before the filter took
-# the fit's own covariance for paper circles; `slam.measurement.DEFAULT_RANGE_BIAS` notes it)
+# the fit's own covariance for paper circles; `slam.config.DEFAULT_RANGE_BIAS` notes it)
 CONSTANT_MODEL_PAPER_BIAS = (-0.0107, 0.00067)
 
 

@@ -14,8 +14,8 @@ a result (`config.toml`), it reproduces the run to the bit.
     [vehicle]       odometry_noise, steering, laser_pose, laser_latency_s, gps_antenna,
                     max_odometry_gap_s, min_travel_m
     [start]         initial_pose_sigma, initial_heading_rad, GPS start fit
-    [map_policy]    `slam.mapping.MapPolicy`
-    [closure]       `slam.closure.ClosureConfig` (loop closure; off by default)
+    [map_policy]    `MapPolicy`
+    [closure]       `ClosureConfig` (loop closure; off by default)
     [filter]        first_estimates_jacobians
 
 `SlamConfig.from_dict(d)` refuses unknown keys (with a "did you mean" and, for the keys of the
@@ -294,7 +294,7 @@ class UnicycleNoise:
     v sigma_alpha / L = 2 degrees per second (`experiments.sim.trajectory.CycabParams`); a
     robot's own figures replace them.
     floor_xy_m_per_sqrt_s, floor_theta_rad_per_sqrt_s: a small white pose noise per second,
-    which keeps the covariance non-singular at rest (as `slam.vehicle.OdometryNoise`'s).
+    which keeps the covariance non-singular at rest (as `OdometryNoise`'s).
     """
 
     speed_sigma_mps: float = default(
@@ -648,7 +648,7 @@ class MeasurementConfig:
     fit_floor_range_m, fit_floor_bearing_rad: added in quadrature to a fit's covariance (model
         error the fit cannot see: range quantisation, mixed returns); the defaults are the
         maximum-likelihood floors of the `geometric` fit in the simulated tree park
-        (`slam.measurement.DEFAULT_FIT_FLOOR`, calibration seeds 1000-1003).
+        (`DEFAULT_FIT_FLOOR`, calibration seeds 1000-1003).
     range_bias: known mean range error a + b r of each extractor's centres, by method name, as
         (a_m, b_per_m), subtracted from its ranges; methods not given keep their
         `DEFAULT_RANGE_BIAS` entry ((0, 0) when it has none).
@@ -755,13 +755,13 @@ class VehicleConfig:
     forward, y left).
 
     odometry_noise: sigma of each odometry sample's speed and steering readings, for an
-        "ackermann" car (`slam.vehicle.OdometryNoise`, with its pose floor for slip).
+        "ackermann" car (`OdometryNoise`, with its pose floor for slip).
     unicycle_noise: the same for a "unicycle" vehicle's speed and yaw-rate samples
-        (`slam.motion.UnicycleNoise`).
+        (`UnicycleNoise`).
     increment_noise: the noise of a "pose-increment" vehicle's odometry increments, per metre
-        and per radian (`slam.motion.IncrementNoise`). The sequence's vehicle says which of the
+        and per radian (`IncrementNoise`). The sequence's vehicle says which of the
         three its odometry is.
-    steering: the front-wheel angle from the steering reading (`slam.vehicle.SteeringCalibration`,
+    steering: the front-wheel angle from the steering reading (`SteeringCalibration`,
         offset + gain r + cubic r^3; the identity by default).
     laser_pose: (x_m, y_m, theta_rad) of the laser, replacing the sequence's (a calibrated
         mounting); None keeps the sequence's.

@@ -5,9 +5,9 @@ Two noise models (`SlamConfig.measurement_noise`):
   carried from the laser's x-y frame to range and bearing to first order (`polar_cov_from_xy`),
   plus an optional floor for model error the fit cannot see;
 - "constant": sigma_range = a + b range, sigma_bearing^2 = c^2 + (t / range)^2, with per-method
-  values (`DEFAULT_CONSTANT_NOISE`) for extractors that give no covariance.
-A known mean range error of an extractor (`DEFAULT_RANGE_BIAS`, `SlamConfig.range_bias`) is
-subtracted from its ranges before either model is applied.
+  values (`slam.config.DEFAULT_CONSTANT_NOISE`) for extractors that give no covariance.
+A known mean range error of an extractor (`slam.config.DEFAULT_RANGE_BIAS`,
+`SlamConfig.measurement.range_bias`) is subtracted from its ranges before either model is applied.
 """
 
 from __future__ import annotations

@@ -6,9 +6,9 @@ as in experiment 2 (`experiments.sim.trajectory.MONTE_CARLO_PATH`: runs along on
 four copies of one geometry, and the extractors' errors are fixed by it), extracts circles with
 each method, and fits sigma_range = a + b r and sigma_bearing^2 = c^2 + (t / r)^2 to the centre
 errors of the circles found on trunks by maximum likelihood. Writes noise_calibration.md/.csv.
-The values in `slam.measurement.DEFAULT_CONSTANT_NOISE` are these fits rounded up to two digits.
+The values in `slam.config.DEFAULT_CONSTANT_NOISE` are these fits rounded up to two digits.
 It also fits each extractor's mean range error a + b r by maximum likelihood under the sigmas
-the filter gives its circles (`range_bias_line`; `slam.measurement.DEFAULT_RANGE_BIAS`), and
+the filter gives its circles (`range_bias_line`; `slam.config.DEFAULT_RANGE_BIAS`), and
 the floors of the geometric fit's covariance (`calibrate_fit_floor`, noise_calibration_floor).
 """
 
