@@ -6,6 +6,12 @@ A run is its configuration: the features (extractor and its parameters), the ass
 calibration, laser and antenna poses), the start, the map policy and the filter. Written beside
 a result (`config.toml`), it reproduces the run to the bit.
 
+Every default of a run's settings is set here, once, with its source in one line (`default`:
+the paper, the simulator, a sensor model, a named calibration, or a design choice with its
+reason); `setting_sources()` lists them (the configuration reference shows that list). The
+extractors' parameters keep theirs in `features` (`ExtractorParams`, `BaileyParams`, each field
+with its source), since `features` imports nothing of `slam`.
+
     [features]      method, [features.extractor] (`features.ExtractorParams`),
                     [features.bailey] (the Bailey detector's noise model and constants)
     [association]   method, gate_prob, new_feature_gate_prob, window_scans, view margins, params

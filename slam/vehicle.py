@@ -19,7 +19,7 @@ form (no Euler error), so exact odometry reproduces a path built by the same hol
 
 with sinc(h) = sin(h) / h (1 at h = 0). Noise: each odometry sample's speed and steering
 readings carry independent zero-mean errors of covariance Q_u = diag(sigma_v^2, sigma_alpha^2)
-(`OdometryNoise`; the sigmas may grow with the speed and the lateral acceleration of the
+(`slam.config.OdometryNoise`; the sigmas may grow with the speed and the lateral acceleration of the
 sample); they enter the pose through the analytic Jacobian G = d pose1 / d(v_e, alpha), and the
 pose's own uncertainty through F = d pose1 / d pose.
 """
