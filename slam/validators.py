@@ -12,7 +12,7 @@ from dataclasses import fields
 
 import numpy as np
 
-from features.limits import PARAM_TINY, magnitude_problem
+from features.limits import PARAM_TINY, in_range, is_real
 from slam.errors import SlamError
 
 __all__ = [
@@ -37,14 +37,18 @@ SIGMA_LIMIT = 1e8  # m, rad, m/s, ...: sqrt(slam.sequence.MAX_VARIANCE), the fil
 
 def setting(path: str, v, *, signed: bool = False, limit: float = SIGMA_LIMIT) -> None:
     """`v` a setting that feeds a kernel: a real number whose size is 0 or within
-    [SETTING_TINY, limit] (`features.limits.magnitude_problem`, the one range check of the
-    project's settings and parameters), and >= 0 unless `signed`; a `SlamError` naming `path`
-    and what is wrong otherwise."""
-    problem = magnitude_problem(v, limit=limit)
-    if problem is None and not signed and v < 0:
-        problem = f"must be a finite number >= 0, got {v!r}"
-    if problem is not None:
-        raise SlamError(f"{path}: {problem}")
+    [SETTING_TINY, limit] (`features.limits.in_range`, the one range check of the project's
+    settings and parameters), and >= 0 unless `signed`; a `SlamError` naming `path` and the
+    allowed range otherwise."""
+    if not isinstance(v, (int, float)) or not is_real(v):  # a Python number, as a file gives
+        raise SlamError(f"{path}: must be a finite number, got {v!r}")
+    if not signed and v < 0:
+        raise SlamError(f"{path}: must be a finite number >= 0, got {v!r}")
+    if not in_range(v, limit):
+        size = "of size " if signed else ""
+        raise SlamError(
+            f"{path}: must be 0 or a number {size}in [{SETTING_TINY:g}, {limit:g}], got {v!r}"
+        )
 
 
 def nonnegative_fields(owner: str, obj) -> None:
