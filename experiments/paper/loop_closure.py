@@ -77,8 +77,10 @@ def loop_config(
 def drive_features(seed: int, kind: str) -> tuple:
     """(sequence, its paper-faithful features per scan) of `loop_drive(seed, kind)`."""
     seq = loop_drive(seed, kind, NOISE_SCALE)
-    kw = loop_config(False).features.extractor_kwargs()
-    return seq, [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
+    params, options = loop_config(False).features.extractor_args()
+    return seq, [
+        extract_features(seq.scan(k), "paper", params, **options) for k in range(seq.n_scans)
+    ]
 
 
 def _identities(lg, seq, feats) -> dict[int, int]:

@@ -158,7 +158,7 @@ class Exp2Config:
 
 
 # Consistency variants: (name, method, SlamConfig overrides, kind). They explain the NEES figures:
-# each switches off one part of the measurement model (`slam.measurement.DEFAULT_RANGE_BIAS`,
+# each switches off one part of the measurement model (`slam.config.DEFAULT_RANGE_BIAS`,
 # `DEFAULT_FIT_FLOOR`) or changes the detections. kind "synthetic": the method's circles on
 # trunks only, each centre replaced by the truth plus Gaussian noise drawn from the method's
 # constant noise model (same detections, ideal errors, no bias to correct); "": as extracted.
@@ -321,8 +321,8 @@ def slam_trial(job: tuple[Exp2Config, int, bool], seed) -> dict:
     feats: dict[str, list] = {}
     for m in sorted({v[1] for v in variants}):
         t0 = time.perf_counter()
-        params = run_config(cfg, m).features.extractor_kwargs()
-        feats[m] = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
+        params, options = run_config(cfg, m).features.extractor_args()
+        feats[m] = [extract_features(seq.scan(k), m, params, **options) for k in range(seq.n_scans)]
         out["time_extract"][m] = (time.perf_counter() - t0) / seq.n_scans
     noise_rng = rng.spawn(1)[0]
     for name, m, overrides, kind in variants:

@@ -157,9 +157,9 @@ def test_noise_calibration_in_use_values_are_slams(quick_tables):
 
 @pytest.mark.slow
 def test_range_biases_in_use_are_the_calibrations_lines(quick_tables):
-    """slam.measurement.DEFAULT_RANGE_BIAS holds the calibration's maximum-likelihood lines,
+    """slam.config.DEFAULT_RANGE_BIAS holds the calibration's maximum-likelihood lines,
     rounded to 0.1 mm and 0.01 mm per m, for every extractor."""
-    from slam.measurement import DEFAULT_RANGE_BIAS
+    from slam.config import DEFAULT_RANGE_BIAS
 
     rows = read_tidy_csv(quick_tables / "noise_calibration.csv")
 

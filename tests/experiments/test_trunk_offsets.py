@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from experiments.eval.trunk_offsets import view_offset
-from slam.closure import ClosureConfig
+from slam.config import ClosureConfig
 
 LASER = np.array([0.5, 0.2, 0.01])
 

@@ -83,7 +83,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from experiments.errors import ConfigError, MissingDataError
-from experiments.io.config_file import config_toml
+from experiments.io.config_file import preset_toml
 from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 from experiments.io.writers import write_atomic
 from experiments.paper import products
@@ -583,7 +583,7 @@ def run(ctx) -> None:
     ctx.config["victoria-park-calibration"] = _manifest_entry(st)
     products.tables(ctx, TABLES, st)
     ctx.outputs.append(
-        write_atomic(ctx.path("victoria_park_ute.toml"), config_toml(st.preset(), PRESET_HEADER))
+        write_atomic(ctx.path("victoria_park_ute.toml"), preset_toml(st.preset(), PRESET_HEADER))
     )
 
 

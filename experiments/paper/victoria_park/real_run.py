@@ -338,8 +338,10 @@ def vp_trial(job: tuple, seed=None) -> tuple[dict, dict[str, bytes]]:
     if features != "detections":
         from features import extract_features
 
-        kwargs = cfg.features.extractor_kwargs()
-        given = [extract_features(seq.scan(k), features, **kwargs) for k in range(seq.n_scans)]
+        params, options = cfg.features.extractor_args()
+        given = [
+            extract_features(seq.scan(k), features, params, **options) for k in range(seq.n_scans)
+        ]
     if not keep:
         row, lg, _ = _one(label, seq, cfg, ref, given)
         return row, {} if lg.closures is None else {"vp_closures.png": _closure_map(lg, seq)}

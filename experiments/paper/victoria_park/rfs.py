@@ -96,10 +96,10 @@ def protocol_input(full, raw, cfg, protocol: RfsProtocol = PROTOCOL) -> Protocol
     n_raw = min(raw.n_scans, full.n_scans)
     if not np.array_equal(raw.scan_t[:n_raw], full.scan_t[:n_raw]):
         raise MissingDataError("Victoria Park: the raw scans' times differ from the full run's")
-    kwargs = cfg.with_(**{"features.method": "bailey"}).features.extractor_kwargs()
+    params, options = cfg.with_(**{"features.method": "bailey"}).features.extractor_args()
     scan, rng_m, bearing, radius = [], [], [], []
     for k in range(n_raw):
-        c = extract_features(raw.scan(k), "bailey", **kwargs).circle_params
+        c = extract_features(raw.scan(k), "bailey", params, **options).circle_params
         scan.append(np.full(c.shape[0], k))
         rng_m.append(np.hypot(c[:, 0], c[:, 1]))
         bearing.append(np.arctan2(c[:, 1], c[:, 0]))
