@@ -206,7 +206,7 @@ class OdometryNoise:
         sample's lateral acceleration a = v_c^2 |tan(alpha)| / L (the tyres' slip angles grow
         with the cornering force): sigma_alpha = steer_sigma_rad + this * a.
     Both 0 by default (the simulated Cycab's readings carry constant noise); the Victoria Park
-    preset's values are fitted (experiments/paper/vp_calibration.py).
+    preset's values are fitted (experiments/paper/victoria_park/calibration.py).
     """
 
     speed_sigma_mps: float = default(
@@ -255,8 +255,8 @@ class SteeringCalibration:
     wheel stands for two that turn by different angles, so the angle that sets the turn rate
     v tan(alpha) / L need not be the reading itself. The identity by default (the simulated
     Cycab's readings are the model's angle); the Victoria Park preset's gain and cubic term are
-    fitted (experiments/paper/vp_calibration.py). The odometry noise (`OdometryNoise`) applies to
-    the calibrated angle.
+    fitted (experiments/paper/victoria_park/calibration.py). The odometry noise (`OdometryNoise`)
+    applies to the calibrated angle.
     """
 
     offset_rad: float = default(
@@ -775,7 +775,7 @@ class VehicleConfig:
         pose of its stamp minus this (`SlamLog.scan_t` holds those times; the sequence's own
         stamps stay the scans', e.g. for choosing the GPS fixes within 25 ms of a scan). 0
         (default): at its stamp. Derived for the ute by the calibration's J on scans 1-2000
-        (`experiments.paper.vp_calibration.latency_profile`), a sensor property, never a
+        (`experiments.paper.victoria_park.calibration.latency_profile`), a sensor property, never a
         GPS error; a magnitude of a second or more is an error.
     gps_antenna: (x_m, y_m) of the GPS antenna, replacing the sequence's; None keeps the
         sequence's (the laser's position when it has none).
