@@ -12,10 +12,10 @@ from slam.checks import check_fit, check_runnable, check_types
 from slam.config import SlamConfig
 from slam.errors import SlamError
 from slam.maps import View
-from slam.motion import IncrementMotion, UnicycleMotion
+from slam.motion import AckermannMotion, IncrementMotion, UnicycleMotion
 from slam.sequence import Sequence
 from slam.sources import make_source
-from slam.vehicle import AckermannModel, Motion, Odometry
+from slam.vehicle import AckermannModel, Odometry
 
 __all__ = ["Components", "components", "laser_pose", "make_motion"]
 
@@ -81,7 +81,7 @@ def _associator(cfg: SlamConfig, given=None):
 
     method = "ihgr" if cfg.association.windowed else cfg.association.method
 
-    def call(z, R, z_hat, H, P, gate_prob=0.99, **params):
+    def call(z, R, z_hat, H, P, *, gate_prob, **params):
         # The loop's inputs are valid by construction (finite, P symmetric PSD as the filter
         # keeps it): the trusted path, without the checks that would cost more than the solve.
         return associate(
@@ -103,7 +103,7 @@ def make_motion(seq: Sequence, cfg: SlamConfig, steer=None):
         )
     if model == "pose-increment":
         return IncrementMotion(odo.t_s, odo.pose, cfg.vehicle.increment_noise)
-    return Motion(
+    return AckermannMotion(
         AckermannModel.from_vehicle(seq.vehicle),
         Odometry(odo.t_s, odo.speed_mps, odo.steer_rad if steer is None else steer),
         cfg.vehicle.odometry_noise,

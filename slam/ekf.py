@@ -44,8 +44,7 @@ from numba import njit
 from scipy.linalg import blas
 
 from slam.errors import SlamError
-from slam.se2 import inverse_observe, observe, wrap_angle
-from slam.start import procrustes_2d
+from slam.se2 import inverse_observe, observe, procrustes_2d, wrap_angle
 
 __all__ = [
     "EkfState",
