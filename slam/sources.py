@@ -32,7 +32,8 @@ class Measurements:
 
     scan: the `features.Scan` (None without raw ranges); features: its `Features` (for the
     log and the visualiser); z (m, 2) [range m, bearing rad] and R (m, 2, 2) from the source's
-    measurement model; status (m,) int64, filled in by the loop (`slam.log` codes)."""
+    measurement model; status (m,) int64 as measured: NEW_TENTATIVE, or OUT_OF_RANGE beyond
+    the usable range (`slam.log` codes; the scan's final status is `slam.loop.ScanResult`)."""
 
     k: int
     scan: object
