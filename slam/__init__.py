@@ -13,10 +13,10 @@ from slam.ekf import EkfState, add_landmark, initial_state, predict, update
 from slam.errors import SlamError
 from slam.log import TIMING_KEYS, SlamLog
 from slam.loop import run_slam
-from slam.mapping import MapPolicy, Tentatives
 from slam.measurement import DEFAULT_CONSTANT_NOISE, measurements_from_features
 from slam.se2 import interpolate_poses, observe, wrap_angle
 from slam.sequence import Sequence
+from slam.tentatives import MapPolicy, Tentatives
 from slam.vehicle import AckermannModel, Odometry, OdometryNoise, SteeringCalibration, integrate
 from slam.visual import NullVisualiser
 

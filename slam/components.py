@@ -1,8 +1,9 @@
 """The components of a run, chosen once from its configuration (kiss-icp's `get_*` factories):
 the source of its measurements (`slam.sources`), the associator, the vehicle's motion
-(`slam.vehicle.Motion`), the laser's mounting and what the laser sees (`slam.maps.View`), and
-the sections the loop builds its per-run parts from (map manager, pruning, loop closure): the
-loop (`slam.loop.Slam`) reads these, never the whole configuration."""
+(`slam.vehicle.Motion`), the laser's mounting and what the laser sees
+(`slam.map_managers.View`), and the sections the loop builds its per-run parts from (map
+manager, pruning, loop closure): the loop (`slam.loop.Slam`) reads these, never the whole
+configuration."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 from slam.checks import check_fit, check_runnable, check_types
 from slam.config import AssociationConfig, ClosureConfig, MapPolicy, SlamConfig
 from slam.errors import SlamError
-from slam.maps import View
+from slam.map_managers import View
 from slam.motion import IncrementMotion, UnicycleMotion
 from slam.sequence import Sequence
 from slam.sources import make_source

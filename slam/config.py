@@ -14,7 +14,7 @@ a result (`config.toml`), it reproduces the run to the bit.
     [vehicle]       odometry_noise, steering, laser_pose, laser_latency_s, gps_antenna,
                     max_odometry_gap_s, min_travel_m
     [start]         initial_pose_sigma, initial_heading_rad, GPS start fit
-    [map_policy]    `slam.mapping.MapPolicy`
+    [map_policy]    `slam.tentatives.MapPolicy`
     [closure]       `slam.closure.ClosureConfig` (loop closure; off by default)
     [filter]        first_estimates_jacobians
 
@@ -39,7 +39,6 @@ from features.bailey import BaileyParams
 from slam.checks import SETTING_TINY, setting
 from slam.closure import ClosureConfig
 from slam.errors import SlamError
-from slam.mapping import MapPolicy
 from slam.measurement import (
     DEFAULT_CONSTANT_NOISE,
     DEFAULT_FIT_FLOOR,
@@ -49,6 +48,7 @@ from slam.measurement import (
 )
 from slam.motion import IncrementNoise, UnicycleNoise
 from slam.sequence import MAX_ANGLE_RAD, MAX_COORDINATE_M
+from slam.tentatives import MapPolicy
 from slam.vehicle import OdometryNoise, SteeringCalibration
 
 __all__ = [

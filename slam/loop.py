@@ -4,13 +4,13 @@
 1. predict: integrate the odometry from the previous scan (zero-order hold, `slam.vehicle`);
 2. measure: the scan's circles as range-bearing measurements of their centres (the source,
    `slam.sources`: an extractor, the sequence's detections, or given features);
-3. associate, 5. manage: the map manager (`slam.maps`: tentatives with a single-scan
+3. associate, 5. manage: the map manager (`slam.map_managers`: tentatives with a single-scan
    associator, or the K-scan IHGR window) pairs measurements with landmarks and decides what
    joins the map;
 4. update: all measurements paired with landmarks at once (Joseph form, `slam.ekf.Filter`).
 A scan after which the odometry has moved the vehicle less than `vehicle.min_travel_m` since
 the last scan used is predicted only: its measurements are logged with status SKIPPED.
-Pruning (`slam.maps.Pruner`) follows map management when the map policy asks for it, and
+Pruning (`slam.map_managers.Pruner`) follows map management when the map policy asks for it, and
 loop closure (`slam.closure.LoopCloser`) when `[closure] enabled`.
 
 The components are built once from the configuration (`Slam.__init__`); the start pose comes
@@ -40,7 +40,7 @@ from slam.ekf import Filter, initial_state
 from slam.errors import SlamError
 from slam.history import RunHistory
 from slam.log import NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED, LogBuilder, SlamLog
-from slam.maps import MapDecisions, Pruner, ScanAssociation, make_map_manager
+from slam.map_managers import MapDecisions, Pruner, ScanAssociation, make_map_manager
 from slam.sequence import Sequence
 from slam.sources import Measurements
 from slam.start import first_pass_wanted, initial_pose

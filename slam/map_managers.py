@@ -6,7 +6,7 @@ run, chosen once from the configuration (`make_map_manager`), with the same two 
   start landmarks-to-be, confirmed ones join the filter's state; returns how many are pending.
 
 `TentativeMap` (association "ihgr", "jcbb", "nn") keeps new features as tentatives outside the
-state until they have been associated in `MapPolicy.confirm_scans` scans (`slam.mapping`).
+state until they have been associated in `MapPolicy.confirm_scans` scans (`slam.tentatives`).
 `WindowMap` ("ihgr-window") gives that job to the K-scan `association.SlidingWindowAssociator`:
 every scan it is offered the landmarks in view and the laser's world pose with the odometry
 drift over the window as its relative uncertainty; it commits the newest scan's pairings and
@@ -30,8 +30,8 @@ from slam import se2
 from slam.ekf import Filter, landmark_columns
 from slam.errors import SlamError
 from slam.log import AMBIGUOUS, CONFIRMED, OUT_OF_RANGE, TENTATIVE_HIT
-from slam.mapping import MapPolicy, Tentatives, sighting
 from slam.sources import Measurements
+from slam.tentatives import MapPolicy, Tentatives, sighting
 
 log = logging.getLogger(__name__)
 

@@ -21,7 +21,7 @@ from slam.closure import (
 from slam.ekf import Filter, initial_state
 from slam.errors import SlamError
 from slam.history import RunHistory
-from slam.maps import View
+from slam.map_managers import View
 
 LASER = np.array([0.0, 0.0, 0.0])
 R_TINY = np.diag([1e-4, 1e-8])

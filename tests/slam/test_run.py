@@ -23,8 +23,8 @@ from slam import (
 )
 from slam.config import AssociationConfig, MeasurementConfig, StartConfig, VehicleConfig
 from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT
-from slam.mapping import Tentatives
 from slam.measurement import DEFAULT_CONSTANT_NOISE, DEFAULT_FIT_FLOOR, NoiseModel
+from slam.tentatives import Tentatives
 from slam.vehicle import AckermannModel, Motion, Odometry, OdometryNoise, integrate
 
 CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
@@ -518,7 +518,7 @@ def test_warm_up_takes_the_first_call_costs_out_of_the_timed_loop(monkeypatch):
     timing carries that cost; without it scan 0 does. The estimate is the same either way."""
     import importlib
 
-    from slam.maps import TentativeMap
+    from slam.map_managers import TentativeMap
 
     mod = importlib.import_module("slam.loop")  # its clock: the steps' timing
     clock = SimpleNamespace(t=0.0, seen=set())
