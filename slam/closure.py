@@ -384,11 +384,10 @@ class LoopCloser:
         xy, ids = state.landmarks_xy, state.landmark_ids
         d, j = cKDTree(xy).query(xy[pos], k=min(NEIGHBOURS, ids.size))
         other = d > self.cfg.match_m
-        for r, c in enumerate(pos):
-            close = other[r] & (d[r] <= SAME_TREE_M)
-            if close.any():
-                together = self._together.get(int(ids[c]), ())
-                other[r, close] = [int(ids[q]) in together for q in j[r, close]]
+        close = other & (d <= SAME_TREE_M)
+        for r in np.flatnonzero(close.any(axis=1)).tolist():
+            together = self._together.get(int(ids[pos[r]]), ())
+            other[r, close[r]] = [int(ids[q]) in together for q in j[r, close[r]]]
         return np.where(other, d, np.inf).min(axis=1)
 
     def seen_together(self, state, updated: np.ndarray) -> None:

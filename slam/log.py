@@ -151,17 +151,18 @@ class LogBuilder:
             k: np.zeros(n, np.int64) for k in ("n_features", "n_associated", "n_tentative", "n_map")
         }
         self.timing = {k: np.zeros(n) for k in TIMING_KEYS}
+        # one array per scan (a block of rows), joined by `build`
         self.obs: dict[str, list] = {
             k: [] for k in ("scan", "feature", "landmark", "z", "innov", "S")
         }
         self.meas: dict[str, list] = {
             k: [] for k in ("scan", "feature", "z", "R", "status", "track", "radius")
         }
+        self._block_of: dict[int, int] = {}  # scan -> its block in self.meas
         self.start_pose = np.zeros(3)
         self.start_cov = np.zeros((3, 3))
         self.laser_pose = np.zeros(3)
         self.antenna_pose = np.zeros(3)
-        self._meas_row0 = np.zeros(n, np.int64)  # first measurement row of each scan
 
     def started(self, pose: np.ndarray, cov: np.ndarray, laser_pose, antenna_pose) -> None:
         """The filter's prior at the first scan, the laser and antenna poses used."""
@@ -170,15 +171,18 @@ class LogBuilder:
         self.laser_pose = np.array(laser_pose, dtype=np.float64)
         self.antenna_pose = np.array(antenna_pose, dtype=np.float64)
 
-    def observation(self, k: int, feature: int, landmark: int, *, z, innov, S) -> None:
-        """One measurement used in scan k's update: z (2,), its innovation (2,) and the
-        innovation covariance S (2, 2)."""
-        self.obs["scan"].append(k)
-        self.obs["feature"].append(feature)
-        self.obs["landmark"].append(landmark)
-        self.obs["z"].append(z)
-        self.obs["innov"].append(innov)
-        self.obs["S"].append(S)
+    def observations(self, k: int, features, landmarks, *, z, innov, S) -> None:
+        """The q measurements used in scan k's update: their indices in the scan (q,), the
+        landmark ids they updated (q,), z (q, 2), the innovations (q, 2) and the joint
+        innovation covariance S (2q, 2q), of which each one's (2, 2) block is kept."""
+        q = len(features)
+        self.obs["scan"].append(np.full(q, k, np.int64))
+        self.obs["feature"].append(np.asarray(features, np.int64))
+        self.obs["landmark"].append(np.asarray(landmarks, np.int64))
+        self.obs["z"].append(np.array(z).reshape(q, 2))
+        self.obs["innov"].append(np.array(innov).reshape(q, 2))
+        j = np.arange(q)
+        self.obs["S"].append(S.reshape(q, 2, q, 2)[j, :, j, :])
 
     def scan_done(self, result, state, times: list[float]) -> None:
         """Scan k's estimate, counts, measurements with their status, track and circle radius
@@ -191,21 +195,19 @@ class LogBuilder:
         self.nis[k] = result.nis
         self.nis_dof[k] = 2 * result.n_used
         m = z.shape[0]
-        self._meas_row0[k] = len(self.meas["scan"])
         self.counts["n_features"][k] = m
         self.counts["n_associated"][k] = result.n_used
         self.counts["n_tentative"][k] = result.n_pending
         self.counts["n_map"][k] = state.n_landmarks
-        radius = meas.radius_m
-        status, track = result.status, result.track
-        for i in range(m):
-            self.meas["scan"].append(k)
-            self.meas["feature"].append(i)
-            self.meas["z"].append(z[i])
-            self.meas["R"].append(meas.R[i])
-            self.meas["status"].append(int(status[i]))
-            self.meas["track"].append(int(track[i]))
-            self.meas["radius"].append(float(radius[i]))
+        rows = self.meas
+        self._block_of[k] = len(rows["scan"])
+        rows["scan"].append(np.full(m, k, np.int64))
+        rows["feature"].append(np.arange(m, dtype=np.int64))
+        rows["z"].append(np.array(z).reshape(m, 2))
+        rows["R"].append(np.array(meas.R).reshape(m, 2, 2))
+        rows["status"].append(np.array(result.status, dtype=np.int64))
+        rows["track"].append(np.array(result.track, dtype=np.int64))
+        rows["radius"].append(np.array(meas.radius_m, dtype=np.float64))
         for key, a, b in zip(TIMING_KEYS[:5], times[:-1], times[1:]):
             self.timing[key][k] = b - a
         self.timing["total"][k] = times[-1] - times[0]
@@ -213,7 +215,7 @@ class LogBuilder:
     def retrack(self, k: int, feature: int, track: int) -> None:
         """Give measurement `feature` of the already logged scan k the track id `track` (a
         window's new landmark: its earlier sightings)."""
-        self.meas["track"][int(self._meas_row0[k]) + int(feature)] = int(track)
+        self.meas["track"][self._block_of[k]][int(feature)] = int(track)
 
     def build(
         self,
@@ -229,7 +231,7 @@ class LogBuilder:
         closure_duplicates: list | None = None,
     ) -> SlamLog:
         ids = state.landmark_ids
-        obs, meas, h = self.obs, self.meas, history
+        obs, meas, h = _joined(self.obs, _OBS_SHAPES), _joined(self.meas, _MEAS_SHAPES), history
         return SlamLog(
             scan_t=self.scan_t,
             pose=self.pose,
@@ -241,19 +243,19 @@ class LogBuilder:
             landmark_id=ids.copy(),
             landmark_first_scan=np.array([h.first_scan.get(int(i), -1) for i in ids], np.int64),
             landmark_n_obs=np.array([h.n_obs.get(int(i), 0) for i in ids], np.int64),
-            obs_scan=np.array(obs["scan"], np.int64),
-            obs_feature=np.array(obs["feature"], np.int64),
+            obs_scan=obs["scan"],
+            obs_feature=obs["feature"],
             obs_landmark=h.resolved(obs["landmark"]),
-            obs_z=np.array(obs["z"]).reshape(-1, 2),
-            obs_innov=np.array(obs["innov"]).reshape(-1, 2),
-            obs_innov_cov=np.array(obs["S"]).reshape(-1, 2, 2),
-            meas_scan=np.array(meas["scan"], np.int64),
-            meas_feature=np.array(meas["feature"], np.int64),
-            meas_z=np.array(meas["z"]).reshape(-1, 2),
-            meas_R=np.array(meas["R"]).reshape(-1, 2, 2),
+            obs_z=obs["z"],
+            obs_innov=obs["innov"],
+            obs_innov_cov=obs["S"],
+            meas_scan=meas["scan"],
+            meas_feature=meas["feature"],
+            meas_z=meas["z"],
+            meas_R=meas["R"],
             meas_status=h.resolved(meas["status"]),
             meas_track=h.resolved(meas["track"]),
-            meas_radius_m=np.array(meas["radius"], np.float64),
+            meas_radius_m=meas["radius"],
             scan_nis=self.nis,
             scan_nis_dof=self.nis_dof,
             scan_logdet=self.logdet,
@@ -275,5 +277,32 @@ class LogBuilder:
             antenna_pose=self.antenna_pose,
             closures=closures,
             closure_duplicates=closure_duplicates,
-            meas_track_unmerged=np.array(meas["track"], np.int64) if h.alias else None,
+            meas_track_unmerged=meas["track"].copy() if h.alias else None,
         )
+
+
+_OBS_SHAPES = {
+    "scan": ((), np.int64),
+    "feature": ((), np.int64),
+    "landmark": ((), np.int64),
+    "z": ((2,), np.float64),
+    "innov": ((2,), np.float64),
+    "S": ((2, 2), np.float64),
+}
+_MEAS_SHAPES = {
+    "scan": ((), np.int64),
+    "feature": ((), np.int64),
+    "z": ((2,), np.float64),
+    "R": ((2, 2), np.float64),
+    "status": ((), np.int64),
+    "track": ((), np.int64),
+    "radius": ((), np.float64),
+}
+
+
+def _joined(blocks: dict[str, list], shapes: dict) -> dict[str, np.ndarray]:
+    """Each column's blocks of rows as one array (empty, of its row shape, when none)."""
+    return {
+        k: np.concatenate(v) if v else np.zeros((0, *shapes[k][0]), shapes[k][1])
+        for k, v in blocks.items()
+    }

@@ -233,12 +233,11 @@ class Slam:
         pos = a.lm_idx[a.assign[to_map]]
         res = self.state.update(pos, meas.z[to_map], meas.R[to_map], self.laser)
         self.log.logdet[meas.k] = res.logdet
-        for j, i in enumerate(to_map):
-            lid = int(self.state.landmark_ids[pos[j]])
-            paired[i] = lid
-            S_j = res.S[2 * j : 2 * j + 2, 2 * j : 2 * j + 2]
+        ids = self.state.landmark_ids[pos]
+        paired[to_map] = ids
+        for lid in ids.tolist():
             self.history.observed(lid)
-            self.log.observation(meas.k, int(i), lid, z=meas.z[i], innov=res.innovation[j], S=S_j)
+        self.log.observations(meas.k, to_map, ids, z=meas.z[to_map], innov=res.innovation, S=res.S)
         return res.nis, paired
 
     def _record(self, k: int, decisions: MapDecisions) -> None:
