@@ -290,30 +290,10 @@ class LoopCloser:
         self.hold_frame = bool(hold_frame)
         self.scan_t = history.scan_t
         self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
-        self._seen = np.full(256, np.nan)  # by landmark id: the time of its last update
         self.events: list[ClosureEvent] = []
         self._together: dict[int, set] = {}  # id -> ids within SAME_TREE_M seen in one scan
         self._frame = None  # after a re-registration: (ids, positions) of the old map held
         self.duplicates: list[tuple[int, int, int]] = []  # (kept id, dropped id, scan)
-
-    def mark_seen(self, ids, t: float, only_new: bool = False) -> None:
-        """Landmarks `ids` were updated at time t (only_new: those not seen before)."""
-        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-        if ids.size and ids.max() >= self._seen.size:
-            grown = np.full(max(2 * self._seen.size, int(ids.max()) + 1), np.nan)
-            grown[: self._seen.size] = self._seen
-            self._seen = grown
-        if only_new:
-            ids = ids[np.isnan(self._seen[ids])]
-        self._seen[ids] = t
-
-    def seen_at(self, ids, default: float) -> np.ndarray:
-        """The time each landmark of `ids` was last updated (`default` if never)."""
-        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-        out = np.full(ids.size, default)
-        known = ids < self._seen.size
-        out[known] = self._seen[ids[known]]
-        return np.where(np.isnan(out), default, out)
 
     def close(self, state, k: int, updated: np.ndarray, revisit: Revisit) -> ClosureDecision:
         """After scan k's map management: `updated` the ids of the landmarks the scan updated,
@@ -325,8 +305,8 @@ class LoopCloser:
 
     def _close(self, state, k: int, updated: np.ndarray, n_hidden: int) -> ClosureEvent | None:
         t = float(self.scan_t[k])
-        self.mark_seen(updated, t)
-        self.mark_seen(state.landmark_ids, t, only_new=True)  # joined this scan: seen now
+        self.history.mark_seen(updated, t)
+        self.history.mark_seen(state.landmark_ids, t, only_new=True)  # joined this scan: seen now
         self.seen_together(state, updated)
         if self._frame is not None:
             self._hold_frame(state, self._frame, tol_m=HOLD_TOL_M)
@@ -359,7 +339,7 @@ class LoopCloser:
         ids = state.landmark_ids
         if ids.size < 2:
             return Revisit()
-        cand = np.flatnonzero(self.seen_at(ids, t) < t - self.cfg.old_s)
+        cand = np.flatnonzero(self.history.seen_at(ids, t) < t - self.cfg.old_s)
         if not cand.size:
             return Revisit()
         z_hat, H5 = se2.observe(state.pose, state.landmarks_xy[cand], self.laser)
@@ -409,7 +389,7 @@ class LoopCloser:
         that the constellation match allows): the per-scan association passes them by and
         maps their trees again."""
         cfg, ids, xy = self.cfg, state.landmark_ids, state.landmarks_xy
-        stale = np.flatnonzero(self.seen_at(ids, t) < t - cfg.recent_s)
+        stale = np.flatnonzero(self.history.seen_at(ids, t) < t - cfg.recent_s)
         young = np.flatnonzero(self._joined_at(ids) >= t - cfg.recent_s)
         if stale.size < cfg.min_pairs or young.size < cfg.min_pairs:
             return np.zeros(0, np.int64)
@@ -435,7 +415,7 @@ class LoopCloser:
         passed_by: positions that count as old too."""
         cfg, ids = self.cfg, state.landmark_ids
         t_joined = self._joined_at(ids)
-        seen = self.seen_at(ids, t)
+        seen = self.history.seen_at(ids, t)
         old = seen < t - cfg.old_s
         if since is not None:
             old |= seen <= since
@@ -490,7 +470,7 @@ class LoopCloser:
             return ClosureEvent(**common, outcome="too few")
         keep = state.landmark_ids[old[pairs[:, 1]]].copy()
         drop = state.landmark_ids[recent[pairs[:, 0]]].copy()
-        t_from = float(self.seen_at(keep, math.nan).max())  # the excursion began
+        t_from = float(self.history.seen_at(keep, math.nan).max())  # the excursion began
         common["nis"] = rigid.same_landmarks_nis(state, keep, drop)
         common["nis_bound"] = float(chi2.ppf(cfg.jc_prob, 2 * keep.size))
         if not common["nis"] <= common["nis_bound"]:
@@ -601,7 +581,7 @@ class LoopCloser:
         merged = [(int(a), int(b)) for a, b in zip(keep, drop)]
         for a, b in merged:
             self.history.merged(drop=b, keep=a)
-            self.mark_seen([a], t)
+            self.history.mark_seen([a], t)
         return merged
 
     def _in_range(self, state) -> np.ndarray:

@@ -4,7 +4,8 @@ loop (`slam.loop.Slam`) and read by loop closure (`slam.closure`) and the log (`
 Per scan: its time, the filter's pose and covariance after the prediction, the odometry
 increment from the scan before (frame of that scan) and its covariance. Per landmark (by id):
 the scan it joined the map, the scans it was associated in (its tentative sightings
-included), and, after a loop closure, the landmark it was merged into.
+included), the time it was last seen (kept by loop closure, `mark_seen`), and, after a loop
+closure, the landmark it was merged into.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ class RunHistory:
         self.first_scan: dict[int, int] = {}  # landmark id -> scan it joined the map
         self.n_obs: dict[int, int] = {}  # landmark id -> scans it was associated in
         self.alias: dict[int, int] = {}  # a landmark merged into another: its id -> the other's
+        self._seen = np.full(256, np.nan)  # by landmark id: the time it was last seen
 
     def odometry(self, k: int, delta: np.ndarray, cov: np.ndarray) -> None:
         """The odometry increment from scan k - 1 to k (frame of k - 1) and its covariance."""
@@ -46,6 +48,25 @@ class RunHistory:
     def observed(self, landmark: int) -> None:
         """Landmark `landmark` was used in an update."""
         self.n_obs[landmark] = self.n_obs.get(landmark, 0) + 1
+
+    def mark_seen(self, ids, t: float, only_new: bool = False) -> None:
+        """Landmarks `ids` were seen (updated) at time t (only_new: those not seen before)."""
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        if ids.size and ids.max() >= self._seen.size:
+            grown = np.full(max(2 * self._seen.size, int(ids.max()) + 1), np.nan)
+            grown[: self._seen.size] = self._seen
+            self._seen = grown
+        if only_new:
+            ids = ids[np.isnan(self._seen[ids])]
+        self._seen[ids] = t
+
+    def seen_at(self, ids, default: float) -> np.ndarray:
+        """The time each landmark of `ids` was last seen (`default` if never)."""
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        out = np.full(ids.size, default)
+        known = ids < self._seen.size
+        out[known] = self._seen[ids[known]]
+        return np.where(np.isnan(out), default, out)
 
     def merged(self, drop: int, keep: int) -> None:
         """Landmark `drop` was found to be landmark `keep` (a loop closure): its sightings and

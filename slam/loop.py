@@ -1,25 +1,34 @@
 """`slam.run_slam`: EKF-SLAM over one `Sequence`, scan by scan, as its configuration says.
 
-`Slam.step(k)` is the loop's body, five named steps with a record passed between them:
+`Slam.step(k)` is the loop's body, five named steps; each returns what it produced and the
+scan's record (`ScanResult`) collects it for the log and the visualiser:
 1. predict: integrate the odometry from the previous scan (zero-order hold, `slam.vehicle`);
 2. measure: the scan's circles as range-bearing measurements of their centres (the source,
-   `slam.sources`: an extractor, the sequence's detections, or given features);
+   `slam.sources`: an extractor, the sequence's detections, or given features), each
+   NEW_TENTATIVE or OUT_OF_RANGE;
 3. associate, 5. manage: the map manager (`slam.map_managers`: tentatives with a single-scan
-   associator, or the K-scan IHGR window) pairs measurements with landmarks and decides what
-   joins the map;
-4. update: all measurements paired with landmarks at once (Joseph form, `slam.ekf.Filter`).
+   associator, or the K-scan IHGR window; one contract) pairs measurements with landmarks
+   (`ScanAssociation`) and decides what joins the map (`MapDecisions`: every measurement's
+   final status and track, the landmarks that joined, earlier measurements re-tracked);
+4. update: all measurements paired with landmarks at once (Joseph form, `slam.ekf.Filter`);
+   returns the landmark each measurement updated.
 A scan after which the odometry has moved the vehicle less than `vehicle.min_travel_m` since
-the last scan used is predicted only: its measurements are logged with status SKIPPED.
-Pruning (`slam.map_managers.Pruner`) follows map management when the map policy asks for it, and
-loop closure (`slam.closure.LoopCloser`) when `[closure] enabled`.
+the last scan used is predicted only (`RestGate`): its measurements are logged SKIPPED.
+Pruning (`slam.map_managers.Pruner`) follows map management when the map policy asks for
+it, and loop closure (`slam.closure.LoopCloser`) when `[closure] enabled`: before the
+association it says which old landmarks the scan must not pair (`Revisit`), after map
+management what it matched and merged (`ClosureDecision`).
 
-The components are built once from the configuration (`Slam.__init__`); the start pose comes
-from `slam.start.initial_pose` and the run's checks from `slam.checks`. Before the timed loop
-the steps run over the first scans on a throwaway filter until one update has been made
-(`warm_up`): the first call of a step compiles or loads numba kernels and imports lazily,
-seconds that would otherwise be timed as the first scans'. The estimate does not depend on it.
-Everything the run did is returned as a `SlamLog`; the optional visualiser is any object with
-the methods of `NullVisualiser`.
+The loop's roles: the source, the motion, the laser (mounting and view), the filter, the
+map manager, pruning, loop closure, the rest gate, the run's history (`slam.history`: what
+the past scans did that closure and the log read) and the log (`slam.log.LogBuilder`).
+The components come from the configuration once (`slam.components`); `run_slam` builds one
+`Slam` and starts it from a prior (`Slam.start`): for the first pass a GPS start fits to
+(`slam.start.first_pass_wanted`), for the warm-up, and for the run. The warm-up runs the
+steps over the first scans until one update has been made: the first call of a step
+compiles or loads numba kernels and imports lazily, seconds that would otherwise be timed as
+the first scans'. The estimate does not depend on it. Everything the run did is returned as
+a `SlamLog`; the optional visualiser is any object with the methods of `NullVisualiser`.
 """
 
 from __future__ import annotations

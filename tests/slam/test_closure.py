@@ -142,8 +142,8 @@ def test_an_old_landmark_is_hidden_by_another_tree_near_it_not_by_itself_mapped_
     f.predict(np.zeros(3), np.eye(3), np.diag([0.04, 0.04, 1e-6]))
     _add(f, np.zeros(3), np.array([pts[0] + [0.3, 0.0], pts[1] + [0.0, 1.2]]), 100)
     closer = _closer(f, ClosureConfig(enabled=True, min_pairs=3))
-    closer.mark_seen(old_ids, 0.0)
-    closer.mark_seen([100, 101], 100.0)
+    closer.history.mark_seen(old_ids, 0.0)
+    closer.history.mark_seen([100, 101], 100.0)
     revisit = closer.revisit(f, 500)
     assert revisit.hidden is None and revisit.n_hidden == 0  # 100 s: the old ones old
     closer.seen_together(f, np.array([old_ids[1], 101, old_ids[5]]))
@@ -197,7 +197,7 @@ def _overconfident_revisit(
         pts, recent_pts, drift, pose_sd=(0.05, 0.05, 0.001), start_sd=start_sd
     )
     closer = _closer(f, ClosureConfig(enabled=True), hold_frame)
-    closer.mark_seen(old_ids, 0.0)  # the old trees: mapped and last seen at 0 s
+    closer.history.mark_seen(old_ids, 0.0)  # the old trees: mapped and last seen at 0 s
     closer.history.first_scan.update({i: 450 for i in recent_ids})  # the recent: at 90 s
     closer.history.odo_delta[1:501] = [0.5, 0.0, 0.0]
     closer.history.odo_cov[1:501] = np.diag(np.square(drift_sd) / 500.0)
@@ -215,7 +215,7 @@ def test_landmarks_passed_by_while_their_trees_are_mapped_again_start_a_match():
     closer.view = View(fov=(-math.pi / 2, math.pi / 2), max_range=80.0)  # the half ahead
     f.add_landmark(np.array([75.0, 0.0]), R_TINY, LASER, 50)  # ahead, past the stand
     f.add_landmark(np.array([3.0, math.pi]), R_TINY, LASER, 51)  # behind, by the stand
-    closer.mark_seen([*old_ids, 50, 51], 50.0)
+    closer.history.mark_seen([*old_ids, 50, 51], 50.0)
     assert closer.revisit(f, 500).hidden is None
     passed = closer.passed_by(f, 100.0)
     xy = f.landmarks_xy
@@ -240,7 +240,7 @@ def test_landmarks_passed_by_while_their_trees_are_mapped_again_start_a_match():
     # the new landmarks farther than max_offset_m from every stale one: nothing is tried
     f, old_ids, _, closer = _overconfident_revisit((1.5, 1.5, 0.03))
     closer.cfg = ClosureConfig(enabled=True, max_offset_m=1.0)
-    closer.mark_seen(old_ids, 50.0)
+    closer.history.mark_seen(old_ids, 50.0)
     assert closer.passed_by(f, 100.0).size == 0
     assert closer.candidates(f, 100.0)[0].size >= closer.cfg.min_pairs  # recent ones there
     assert closer.close(f, 500, np.zeros(0, np.int64), Revisit()).event is None
