@@ -1,9 +1,13 @@
 """Map managers: who associates a scan's measurements and decides what joins the map. One per
-run, chosen once from the configuration (`make_map_manager`), with the same two steps:
+run, chosen once from the `[association]` and `[map_policy]` sections (`make_map_manager`),
+interchangeable behind one contract (`MapManager`):
 
-- `associate(state, meas, drift)`: which landmark (or tentative) each measurement belongs to;
-- `manage(state, meas, a, track)`: tentatives seen again count a sighting, new measurements
-  start landmarks-to-be, confirmed ones join the filter's state; returns how many are pending.
+- `associate(state, meas, drift, hidden)`: which landmark (or tentative) each measurement
+  belongs to (`ScanAssociation`); `hidden`: landmarks it must not pair (loop closure's);
+- `manage(state, meas, a, paired)`: tentatives seen again count a sighting, new measurements
+  start landmarks-to-be, confirmed ones join the filter's state; returns its decisions
+  (`MapDecisions`) and changes no array of the loop's or the log's;
+- `n_pending`, `tentative_xy`, `stats()`: what is pending, where, and the run's figures.
 
 `TentativeMap` (association "ihgr", "jcbb", "nn") keeps new features as tentatives outside the
 state until they have been associated in `MapPolicy.confirm_scans` scans (`slam.tentatives`).
@@ -21,6 +25,7 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numba import njit
@@ -37,6 +42,7 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "MapDecisions",
+    "MapManager",
     "ScanAssociation",
     "Pruner",
     "TentativeMap",
@@ -110,6 +116,18 @@ class MapDecisions:
     joined: list
     retracks: list
     n_pending: int
+
+
+@runtime_checkable
+class MapManager(Protocol):
+    """The contract of a map manager (module doc): `TentativeMap` and `WindowMap`."""
+
+    n_pending: int
+    tentative_xy: np.ndarray
+
+    def associate(self, state, meas, drift, hidden=None) -> ScanAssociation: ...
+    def manage(self, state, meas, a: ScanAssociation, paired) -> MapDecisions: ...
+    def stats(self) -> dict | None: ...
 
 
 @dataclass(eq=False)
@@ -461,9 +479,7 @@ def _shown(hidden, n: int) -> np.ndarray:
     return np.ones(n, bool) if hidden is None else ~np.asarray(hidden, bool)
 
 
-def make_map_manager(
-    laser, view: View, association, policy: MapPolicy, associator
-) -> TentativeMap | WindowMap:
+def make_map_manager(laser, view: View, association, policy: MapPolicy, associator) -> MapManager:
     """The run's map manager from the `[association]` and `[map_policy]` sections: `WindowMap`
     for "ihgr-window" (which associates by itself), else `TentativeMap` around the associator
     callable. Both are used the same way (module doc)."""
