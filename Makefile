@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: reproduce test check format install bench docs report clean
+.PHONY: reproduce test check format install bench docs report clean strip-notebooks
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -19,6 +19,11 @@ install: $(STAMP)
 format: $(STAMP)
 	$(BIN)/ruff format .
 	$(BIN)/ruff check --fix .
+
+# notebooks are committed without outputs (tests/test_notebook.py checks it): strip them after
+# running them in Jupyter
+strip-notebooks: $(STAMP)
+	$(BIN)/python examples/strip_notebook.py examples/*.ipynb
 
 reproduce: $(STAMP)
 	$(BIN)/trunkslam reproduce --out results

@@ -1,8 +1,8 @@
 """Data association: measurements and predictions in, assignments out. Knows no EKF.
 
-- `associate(z, R, z_hat, H, P, method="ihgr" | "jcbb" | "nn", gate_prob=0.99, **params)`:
-  one scan; returns the map feature of each measurement or -1. `associate_detailed` adds the
-  method's statistics.
+- `associate(z, R, z_hat, H, P, method="ihgr" | "jcbb" | "nn", gate_prob=..., **params)`:
+  one scan (gate_prob: the caller's, no default here); returns the map feature of each
+  measurement or -1. `associate_detailed` adds the method's statistics.
 - `SlidingWindowAssociator`: K-scan IHGR for a SLAM loop, one committed scan per call.
 - `ihgr_round` / `solve_set_partition`: the LP relaxation + iterative heuristic greedy rounding
   core, for any set-partitioning problem (and `milp` for the exact reference).

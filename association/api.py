@@ -54,16 +54,7 @@ def _rounding_options(params: dict) -> dict:
 
 
 def associate_detailed(
-    z,
-    R,
-    z_hat,
-    H,
-    P,
-    method: str = "ihgr",
-    gate_prob: float = 0.99,
-    *,
-    validate: bool = True,
-    **params,
+    z, R, z_hat, H, P, method: str = "ihgr", *, gate_prob: float, validate: bool = True, **params
 ) -> Association:
     """`associate` with the method's statistics; see `associate` for the arguments."""
     _check_method(method, params)
@@ -129,16 +120,7 @@ def _solve(prep: Prepared, method: str, gate_prob: float, params: dict):
 
 
 def associate(
-    z,
-    R,
-    z_hat,
-    H,
-    P,
-    method: str = "ihgr",
-    gate_prob: float = 0.99,
-    *,
-    validate: bool = True,
-    **params,
+    z, R, z_hat, H, P, method: str = "ihgr", *, gate_prob: float, validate: bool = True, **params
 ) -> np.ndarray:
     """Associate the m measurements of one scan with the n map features.
 
@@ -150,6 +132,8 @@ def associate(
     method: "ihgr" (LP + iterative heuristic greedy rounding, costs of `CostModel`),
         "jcbb" (joint compatibility branch and bound) or "nn" (gated nearest neighbour).
     gate_prob: probability of the chi-square gates (individual: 2 dof; JCBB joint: 2k dof).
+        No default here: the caller's setting is the one (`slam.config.AssociationConfig`'s
+        0.999 for a SLAM run; the association study's own 0.99).
     validate: False skips the checks of z, R, z_hat, H, P and gate_prob (shapes, finite,
         symmetric, positive (semi-)definite; `association.inputs.prepare`), for callers whose
         inputs are valid by construction, such as the SLAM loop: the same answer for valid

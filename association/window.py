@@ -275,8 +275,8 @@ class SlidingWindowAssociator:
 
     def __init__(
         self,
-        K: int = 3,
-        gate_prob: float = 0.99,
+        K: int,
+        gate_prob: float,
         model: CostModel | None = None,
         max_tracks: int = 20_000,
         **rounding,

@@ -27,10 +27,10 @@ from threadpoolctl import threadpool_limits
 from experiments.eval.gps import score_sequence
 from experiments.eval.vouched import vouched_for_sequence
 from experiments.io.victoria_park import gtsam_graph, load_victoria_park
-from experiments.paper.victoria_park import run_config
+from experiments.paper.victoria_park.real_run import run_config
 from slam import run_slam, se2
+from slam.se2 import procrustes_2d
 from slam.smoother import SmootherOptions, problem_from_log, smooth, solve_graph_file
-from slam.start import procrustes_2d
 
 ARM_TOP = (1270.0, 1340.0)  # s: the top of the arm, where the run's error is largest
 LEVELS = (120.0, 150.0)  # m: y of the crossings reported (the way up the arm, x < -100 m)

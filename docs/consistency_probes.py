@@ -52,7 +52,7 @@ from experiments.exec.trials import spawn_seeds
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import run_slam, se2
-from slam.measurement import DEFAULT_RANGE_BIAS
+from slam.config import DEFAULT_RANGE_BIAS
 
 METHODS = ("paper", "geometric", "bailey")
 
@@ -225,7 +225,7 @@ def by_beams(roots=(1000, 1001, 1002, 1003)) -> None:
 
 
 # paper's range-bias line under the constant model (noise-calibration before the filter took
-# the fit's own covariance for paper circles; `slam.measurement.DEFAULT_RANGE_BIAS` notes it)
+# the fit's own covariance for paper circles; `slam.config.DEFAULT_RANGE_BIAS` notes it)
 CONSTANT_MODEL_PAPER_BIAS = (-0.0107, 0.00067)
 
 

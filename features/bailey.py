@@ -42,7 +42,7 @@ import numpy as np
 from numba import njit
 
 from features.errors import FeaturesError
-from features.limits import PARAM_LIMIT, PARAM_TINY, magnitude_problem
+from features.limits import PARAM_LIMIT, PARAM_TINY, magnitude_problem, sourced
 from features.types import KIND_CIRCLE, KIND_CLUTTER, Features, Scan
 
 __all__ = ["BAILEY_OPTIONS", "BaileyParams", "detect_trees", "extract_bailey", "BAILEY_BEAM_RAD"]
@@ -56,15 +56,42 @@ _TWO_PI = 2.0 * math.pi
 class BaileyParams:
     """The detector's constants; the defaults are the original's (names in brackets)."""
 
-    max_range_m: float = 75.0  # [M11] beams with r >= this are invalid (step 1)
-    min_start_range_m: float = 1.0  # [M10] a segment's first beam must be farther (step 7)
-    break_jump_m: float = 1.5  # [M2] range jump that breaks a segment (step 2)
-    break_gap_rad: float = 10 * math.pi / 360  # [M2a] angular gap that breaks a segment (step 2)
-    isolation_m: float = 3.0  # [M3] end-to-start distance to the next 3 segments (step 3)
-    occlusion_gap_rad: float = 2 * math.pi / 360  # [daMin2] 1 deg, see the module doc (step 4)
-    max_chord_m: float = 1.0  # [M5] start-to-end distance (step 6)
-    fov_margin_rad: float = 5 * math.pi / 306  # [daa] sic, 306 (step 7)
-    edge_ratio: float = 1.0 / 3.0  # |R_start - R_end| < ratio * diameter (step 9)
+    # [M11] beams with r >= this are invalid (step 1)
+    max_range_m: float = sourced(
+        75.0, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
+    # [M10] a segment's first beam must be farther (step 7)
+    min_start_range_m: float = sourced(
+        1.0, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
+    # [M2] range jump that breaks a segment (step 2)
+    break_jump_m: float = sourced(
+        1.5, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
+    # [M2a] angular gap that breaks a segment (step 2)
+    break_gap_rad: float = sourced(
+        10 * math.pi / 360, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
+    # [M3] end-to-start distance to the next 3 segments (step 3)
+    isolation_m: float = sourced(
+        3.0, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
+    # [daMin2] 1 deg, see the module doc (step 4)
+    occlusion_gap_rad: float = sourced(
+        2 * math.pi / 360, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
+    # [M5] start-to-end distance (step 6)
+    max_chord_m: float = sourced(
+        1.0, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
+    # [daa] sic, 306 (step 7)
+    fov_margin_rad: float = sourced(
+        5 * math.pi / 306, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
+    # |R_start - R_end| < ratio * diameter (step 9)
+    edge_ratio: float = sourced(
+        1.0 / 3.0, "paper: Bailey's detector, the original's constant (bracketed name)"
+    )
 
     def __post_init__(self) -> None:
         for f in fields(self):

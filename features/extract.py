@@ -49,7 +49,7 @@ from features.fitting import (
     fit_circle_taubin,
     fit_line_tls,
 )
-from features.limits import magnitude_problem
+from features.limits import magnitude_problem, sourced
 from features.segmentation import END_NO_RETURN, END_SCAN, max_growth_ratio, segment_kernel
 from features.types import Features, Scan
 
@@ -66,34 +66,59 @@ _LINE_TESTS = {"paper": 0, "lrt": 1}
 class ExtractorParams:
     """Parameters of the extractor; defaults are the paper's values where it gives one."""
 
-    sigma_r_m: float = 0.02  # range noise of the EKF (eq. 3) and of the fit tests
-    q_m2: float = 1e-4  # process noise Q of eq. (2) (paper: 1e-4)
-    gate: float = 6.63  # delta of eq. (4) (paper: 6.63)
-    max_incidence_deg: float = 85.0  # degenerate (almost parallel) limit
-    merge_arcs: bool = True  # join gate-split neighbours that together form a circle
-    isolated_circles: bool = True  # a circle's segment ends at depth jumps or no-returns
-    min_points: int = 3  # beams for a segment to be a feature
-    min_circle_points: int = 4  # beams for a circle (3 points fit any circle exactly)
-    line_test: str = "lrt"  # "lrt" (default, see module doc) or "paper" (eq. 5)
-    class_prob: float = 0.99  # chi-square level of the residual tests
-    lrt_threshold: float = 6.63  # circle-vs-line likelihood-ratio threshold
-    roughness_m: float = 0.0  # surface roughness added to sigma_r in the fit tests
-    r_min_m: float = 0.05
-    r_max_m: float = 1.0
-    edge_min_jump_m: float = 0.3  # depth discontinuity that makes an occluding edge
-    lambda0: float = 0.01  # paper's modified Gauss-Newton (section 2.2)
-    max_iter: int = 100
-    tol: float = 1e-10  # relative change of E(p) that stops the iteration
+    # range noise of the EKF (eq. 3) and of the fit tests
+    sigma_r_m: float = sourced(0.02, "design: range noise of eq. (3) and of the fit tests, 2 cm")
+    # process noise Q of eq. (2) (paper: 1e-4)
+    q_m2: float = sourced(1e-4, "paper: Q of eq. (2), 1e-4")
+    # delta of eq. (4) (paper: 6.63)
+    gate: float = sourced(6.63, "paper: delta of eq. (4), 6.63")
+    # degenerate (almost parallel) limit
+    max_incidence_deg: float = sourced(
+        85.0, "design: beams nearly parallel to a surface are degenerate"
+    )
+    # join gate-split neighbours that together form a circle
+    merge_arcs: bool = sourced(
+        True, "design: join gate-split neighbours that together form a circle"
+    )
+    # a circle's segment ends at depth jumps or no-returns
+    isolated_circles: bool = sourced(
+        True, "design: a circle's segment ends at depth jumps or no-returns"
+    )
+    # beams for a segment to be a feature
+    min_points: int = sourced(3, "design: beams for a segment to be a feature")
+    # beams for a circle (3 points fit any circle exactly)
+    min_circle_points: int = sourced(4, "design: 4 beams, as 3 points fit any circle exactly")
+    # "lrt" (default, see module doc) or "paper" (eq. 5)
+    line_test: str = sourced("lrt", "design: the likelihood-ratio test (see the module doc)")
+    # chi-square level of the residual tests
+    class_prob: float = sourced(0.99, "design: chi-square level 0.99 of the residual tests")
+    # circle-vs-line likelihood-ratio threshold
+    lrt_threshold: float = sourced(
+        6.63, "design: 6.63, the chi-square(1) 0.99 point, as the paper's gate"
+    )
+    # surface roughness added to sigma_r in the fit tests
+    roughness_m: float = sourced(0.0, "design: 0, smooth surfaces")
+    r_min_m: float = sourced(0.05, "design: the smallest trunk radius taken, 5 cm")
+    r_max_m: float = sourced(1.0, "design: the largest object modelled, 1 m radius")
+    # depth discontinuity that makes an occluding edge
+    edge_min_jump_m: float = sourced(0.3, "design: a 0.3 m depth jump makes an occluding edge")
+    # paper's modified Gauss-Newton (section 2.2)
+    lambda0: float = sourced(0.01, "paper: the modified Gauss-Newton's lambda0 (section 2.2)")
+    max_iter: int = sourced(100, "design: 100 steps, the fit converges in tens")
+    # relative change of E(p) that stops the iteration
+    tol: float = sourced(1e-10, "design: relative change of E(p) that stops the iteration")
     # Short trunks (on by default; the paper's extractor, `PAPER_FAITHFUL`, has them off and
     # needs min_circle_points beams): an isolated segment of 1 to min_circle_points - 1 beams
     # whose chord is under 2 r_max_m and whose end ranges agree within its width becomes a
     # circle (`_short_trunks`); its radius is the width the beams allow, with the radius
     # limits [r_min_m, r_max_m] as the only prior.
-    short_trunks: bool = True
+    short_trunks: bool = sourced(
+        True, "design: on, most real trunks span 1-3 beams (off in the paper's extractor)"
+    )
     # No other return of the scan within this distance of a short trunk's centre (0: no test).
     # Default 2 r_max_m (the largest object modelled, 1 m radius): a return nearer than that
     # may be part of the same object, so the segment is not known to be a whole thin object.
-    short_trunk_clearance_m: float = 2.0
+    short_trunk_clearance_m: float = sourced(2.0, "design: 2 r_max_m, the largest object modelled")
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -676,6 +701,28 @@ def _resolve(params: dict, method: str, scan: Scan) -> tuple[ExtractorParams, tu
     return _cached_resolve(items, method, gamma, n_beams)
 
 
+def _resolve_params(
+    params: ExtractorParams, overrides: dict, method: str, scan: Scan
+) -> tuple[ExtractorParams, tuple]:
+    """`_resolve` of an `ExtractorParams` (its fields the cache key, as keyword arguments')
+    with `overrides` replacing some of its fields."""
+    if overrides:
+        names = {f.name for f in fields(ExtractorParams)}
+        unknown = sorted(set(overrides) - names)
+        if unknown:
+            raise FeaturesError(f"unknown extractor parameter(s) {unknown}; known: {sorted(names)}")
+        return _resolve({**params.to_dict(), **overrides}, method, scan)
+    gamma, n_beams = scan.angle_increment_rad, scan.n_beams
+    return _cached_params(params, method, gamma, n_beams)
+
+
+@lru_cache(maxsize=64)
+def _cached_params(p: ExtractorParams, method: str, gamma: float, n_beams: int):
+    """The kernel's settings of a (validated, frozen) `ExtractorParams`: the same as
+    `_cached_resolve` of its fields as keyword arguments."""
+    return p, _settings(p, method, gamma, n_beams)
+
+
 def _items(params: dict) -> tuple | None:
     """The cache key of keyword arguments, None when a value is unhashable."""
     # the value's type is part of the key: 1 == True and 0.5 == Fraction(1, 2) hash alike
@@ -789,21 +836,32 @@ def _extract_bailey(scan: Scan, params: dict) -> Features:
     return extract_bailey(scan, **params)
 
 
-def extract_features(scan: Scan, method: str = "paper", **params) -> Features:
+def extract_features(scan: Scan, method: str = "paper", params=None, **overrides) -> Features:
     """Extract segments, edges, lines, circles and clutter from one scan (laser frame).
 
     method: "paper" (modified Gauss-Newton, eq. 6-9), "geometric" (orthogonal-distance LM with
-        covariance), "kasa", "taubin", or "bailey" (the Victoria Park detector; `params` then go
-        to `features.bailey.extract_bailey`).
-    params: fields of `ExtractorParams` (e.g. sigma_r_m=0.01, line_test="paper").
+        covariance), "kasa", "taubin", or "bailey" (the Victoria Park detector).
+    params: the `ExtractorParams` (None: the defaults), which reach the kernel as they are; for
+        "bailey" the detector's `features.bailey.BaileyParams` (`extract_bailey`'s `params`).
+    overrides: fields of `ExtractorParams` replacing those of `params` (e.g. sigma_r_m=0.01,
+        line_test="paper"); for "bailey" the options of `features.bailey.extract_bailey`.
     """
     if not isinstance(scan, Scan):
         raise FeaturesError(f"scan: expected a features.Scan, got {type(scan).__name__}")
     if method == "bailey":
-        return _extract_bailey(scan, params)
+        return _extract_bailey(
+            scan, overrides if params is None else {**overrides, "params": params}
+        )
     if method not in _METHOD_CODE:
         raise FeaturesError(f"method: must be one of {list(METHODS)}, got {method!r}")
-    p, settings = _resolve(params, method, scan)
+    if params is not None and not isinstance(params, ExtractorParams):
+        raise FeaturesError(
+            f"params: expected a features.ExtractorParams, got {type(params).__name__}"
+        )
+    if params is None:
+        p, settings = _resolve(overrides, method, scan)
+    else:
+        p, settings = _resolve_params(params, overrides, method, scan)
     beams = _kernel_beams(scan)
     found = _Found._make(_extract_kernel(tuple(beams), settings))
     if beams.shift:

@@ -8,16 +8,22 @@ the run loop.
 `slam` imports `features` and `association` only (never `experiments`).
 """
 
-from slam.config import SlamConfig
+from slam.config import (
+    DEFAULT_CONSTANT_NOISE,
+    MapPolicy,
+    OdometryNoise,
+    SlamConfig,
+    SteeringCalibration,
+)
 from slam.ekf import EkfState, add_landmark, initial_state, predict, update
 from slam.errors import SlamError
 from slam.log import TIMING_KEYS, SlamLog
 from slam.loop import run_slam
-from slam.measurement import DEFAULT_CONSTANT_NOISE, measurements_from_features
+from slam.measurement import measurements_from_features
 from slam.se2 import interpolate_poses, observe, wrap_angle
 from slam.sequence import Sequence
-from slam.tentatives import MapPolicy, Tentatives
-from slam.vehicle import AckermannModel, Odometry, OdometryNoise, SteeringCalibration, integrate
+from slam.tentatives import Tentatives
+from slam.vehicle import AckermannModel, Odometry, integrate
 from slam.visual import NullVisualiser
 
 __all__ = [

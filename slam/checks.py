@@ -1,110 +1,22 @@
-"""Checks: the input checks shared by the run's data types (`Sequence`, `Odometry`), one place
-for each rule, each taking the qualified name of what it checks (e.g. "Sequence.scan_t"); and
-what a run needs beyond a valid `Sequence` and `SlamConfig` (`check_runnable`, before any work)
-and the one check the loop makes on every scan (`check_noise`). Errors are `SlamError` (a
-`ValueError`) naming the field and what to change.
+"""A run's preflight checks: what a run needs beyond a valid `Sequence` and `SlamConfig`
+(`check_runnable`, before any work), whether the configuration was made for the sequence's
+vehicle (`check_fit`), and the one check the loop makes on every scan (`check_noise`). Errors are
+`SlamError` (a `ValueError`) naming the field and what to change. The leaf validators the data
+types and settings share are `slam.validators` (this module imports the configuration; they
+import nothing of `slam`).
 """
 
 from __future__ import annotations
 
 import logging
-import math
-from dataclasses import fields
 
 import numpy as np
 
+from slam.config import SlamConfig
 from slam.errors import SlamError
+from slam.sequence import MAX_STEER_RAD, Sequence
 
-__all__ = [
-    "SETTING_TINY",
-    "SIGMA_LIMIT",
-    "check_fit",
-    "check_noise",
-    "check_runnable",
-    "check_types",
-    "finite",
-    "float_array",
-    "nonnegative_fields",
-    "readonly",
-    "setting",
-    "times",
-]
-
-# The range where the kernels' maths holds for a setting that feeds them (noise sigmas, floors,
-# poses, calibrations): a finite number whose size is 0 or within [SETTING_TINY, its limit].
-# Above the limit its square leaves the sequence file's range for variances (its squares and
-# their products overflow long before 1e300); below SETTING_TINY its square underflows to a
-# subnormal or 0 (a covariance that is singular by rounding). Subnormals are refused.
-SETTING_TINY = 1e-150  # (1e-150)^2 > 2.2e-308, the least normal double
-SIGMA_LIMIT = 1e8  # m, rad, m/s, ...: sqrt(slam.sequence.MAX_VARIANCE), the file's largest sigma
-
-
-def setting(path: str, v, *, signed: bool = False, limit: float = SIGMA_LIMIT) -> None:
-    """`v` a setting that feeds a kernel: a real number whose size is 0 or within
-    [SETTING_TINY, limit], and >= 0 unless `signed`; a `SlamError` naming `path` and the
-    allowed range otherwise."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise SlamError(f"{path}: must be a finite number, got {v!r}")
-    if not signed and v < 0:
-        raise SlamError(f"{path}: must be a finite number >= 0, got {v!r}")
-    if abs(v) > limit or (v != 0 and abs(v) < SETTING_TINY):
-        size = "of size " if signed else ""
-        raise SlamError(
-            f"{path}: must be 0 or a number {size}in [{SETTING_TINY:g}, {limit:g}], got {v!r}"
-        )
-
-
-def nonnegative_fields(owner: str, obj) -> None:
-    """Every field of the dataclass `obj` a finite real number >= 0 (noise sigmas) in the range
-    of `setting`; a `SlamError` naming `owner`.field otherwise."""
-    for f in fields(obj):
-        setting(f"{owner}.{f.name}", getattr(obj, f.name))
-
-
-def readonly(a: np.ndarray) -> np.ndarray:
-    """`a`, made read-only (returned for chaining)."""
-    a.setflags(write=False)
-    return a
-
-
-def float_array(name: str, value, ndim: int, width: int | None = None) -> np.ndarray:
-    """A read-only float64 copy of `value` with `ndim` dimensions (and `width` columns)."""
-    try:
-        a = np.array(value)
-    except Exception as exc:  # ragged lists and the like
-        raise SlamError(f"{name}: cannot be read as an array ({exc})") from None
-    if a.dtype.kind not in "fiu":
-        raise SlamError(f"{name}: expected numbers, got dtype {a.dtype}")
-    expected = {1: "(n,)", 2: f"(n, {width})" if width else "(n, m)"}.get(ndim, f"{ndim}-D")
-    if a.ndim != ndim or (width is not None and a.shape[-1] != width):
-        raise SlamError(f"{name}: expected shape {expected}, got {a.shape}")
-    return readonly(a.astype(np.float64))
-
-
-def finite(name: str, a: np.ndarray) -> None:
-    """Raise unless every value of `a` is finite."""
-    if not np.all(np.isfinite(a)):
-        raise SlamError(f"{name}: values must be finite (NaN or inf found)")
-
-
-def times(name: str, value) -> np.ndarray:
-    """`value` as read-only float64 times (n,), checked finite and strictly increasing."""
-    t = float_array(name, value, 1)
-    if not np.all(np.isfinite(t)):
-        raise SlamError(
-            f"{name}: times must be finite (first bad index "
-            f"{int(np.flatnonzero(~np.isfinite(t))[0])})"
-        )
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if bad.size:
-        i = int(bad[0])
-        short = name.rsplit(".", 1)[-1]
-        raise SlamError(
-            f"{name}: times must be strictly increasing; {short}[{i + 1}] = "
-            f"{t[i + 1]!r} s follows {short}[{i}] = {t[i]!r} s ({bad.size} such step(s))"
-        )
-    return t
-
+__all__ = ["check_fit", "check_noise", "check_runnable", "check_types"]
 
 log = logging.getLogger(__name__)
 
@@ -113,9 +25,6 @@ log = logging.getLogger(__name__)
 
 def check_types(seq, cfg) -> None:
     """A `Sequence` and a `SlamConfig`, named when not."""
-    from slam.config import SlamConfig
-    from slam.sequence import Sequence
-
     if not isinstance(seq, Sequence):
         raise SlamError(f"sequence: expected a slam.Sequence, got {type(seq).__name__}")
     if not isinstance(cfg, SlamConfig):
@@ -144,8 +53,6 @@ def check_runnable(seq, cfg, n_features: int | None = None) -> np.ndarray:
 
 
 def _check_steering(seq, cfg, steer: np.ndarray) -> None:
-    from slam.sequence import MAX_STEER_RAD
-
     if not cfg.vehicle.steering.is_identity and np.any(np.abs(steer) > MAX_STEER_RAD):
         i = int(np.argmax(np.abs(steer)))
         raise SlamError(

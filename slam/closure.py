@@ -100,9 +100,9 @@ from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
 from slam import rigid, se2
+from slam.config import ClosureConfig
 from slam.ekf import landmark_columns
-from slam.errors import SlamError
-from slam.start import procrustes_2d
+from slam.se2 import procrustes_2d
 
 __all__ = [
     "BASIS",
@@ -135,79 +135,6 @@ HOLD_TOL_M = 0.01
 # Recent landmarks whose pairs propose transforms (the most-seen first): 10 give 90 ordered
 # pairs; one right pair is enough, and the cost grows with the square of this.
 BASIS = 10
-
-# The smallest match_m: the match bins landmark pairs by length in steps of match_m, so a
-# subnormal one makes the bins' count overflow; 1 mm is far below any trunk's measured spread.
-MIN_MATCH_M = 1e-3
-
-
-@dataclass(frozen=True)
-class ClosureConfig:
-    """The `[closure]` section (see the module doc for what each setting does).
-
-    Where the defaults come from (none from Victoria Park): recent_s 30 and old_s 60 s: a
-    landmark seen in the last 30 s is part of the local map, one unseen for a minute has been
-    left behind (at 1-3 m/s, 60-180 m away), and one in view unseen for 30 s while new
-    landmarks join the map within max_offset_m of it is passed by (module doc, step 1);
-    min_pairs 6 with margin 3 and match_m 0.5 m were set by hand in the simulated park
-    (experiment `loop-closure`, drives 0-11): at 1.0 m, random hypotheses in a stand of trees
-    3 m apart explained 5-6 landmarks, at 0.5 m 3-4, and landmarks of one local map agree to
-    a few centimetres; min_sep_m 3 m: the trees' spacing
-    there; max_offset_m 15 m and max_rotation_deg 15 deg: larger than any drift of the
-    simulated returns (0-8 m); jc_prob 0.999 as the association gates. every_scans 5: a match
-    a second at 5 Hz. re_register: check a match the filter's covariance refuses against dead
-    reckoning and one rigid motion instead (module doc, step 3); off, such a match is
-    refused. tree_sd_m 0.05 m: a trunk's measured centre moves along the line of sight with
-    the side it is seen from, which the filter's white measurement noise averages away; the
-    rigid-fit test adds it to each landmark (per axis). The figure is what
-    `experiments.eval.trunk_offsets.view_offset` measures on Victoria Park scans 1-2000, the
-    calibration scans (a test checks it); in the simulator, whose trunks are circles, it
-    changed no figure of the standard filter's park and orchard runs (100 drives each).
-    The others are a first version, checked in the simulator only.
-    """
-
-    enabled: bool = False
-    every_scans: int = 5
-    recent_s: float = 30.0
-    old_s: float = 60.0
-    min_pairs: int = 6
-    margin: int = 3
-    match_m: float = 0.5
-    min_sep_m: float = 3.0
-    max_offset_m: float = 15.0
-    max_rotation_deg: float = 15.0
-    jc_prob: float = 0.999
-    re_register: bool = True
-    tree_sd_m: float = 0.05
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.type == "bool":
-                if not isinstance(v, bool):
-                    raise SlamError(f"closure.{f.name}: must be true or false, got {v!r}")
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise SlamError(f"closure.{f.name}: must be a finite number, got {v!r}")
-            if f.type == "int" and (v != int(v) or v < 1):
-                raise SlamError(f"closure.{f.name}: must be a whole number >= 1, got {v!r}")
-            if f.name == "tree_sd_m":
-                if v < 0:
-                    raise SlamError(f"closure.{f.name}: must be >= 0, got {v!r}")
-            elif v <= 0:
-                raise SlamError(f"closure.{f.name}: must be > 0, got {v!r}")
-        if not 0.0 < self.jc_prob < 1.0:
-            raise SlamError(f"closure.jc_prob: must be in (0, 1), got {self.jc_prob!r}")
-        if self.match_m < MIN_MATCH_M:  # pairs are binned by length in steps of match_m
-            raise SlamError(
-                f"closure.match_m: must be >= {MIN_MATCH_M} m (MIN_MATCH_M), got {self.match_m!r}"
-            )
-        if self.old_s < self.recent_s:  # an old landmark must not be a recent one too
-            raise SlamError(
-                f"closure.old_s: must be >= recent_s ({self.recent_s!r}), got {self.old_s!r}"
-            )
-        if self.min_pairs < 3:
-            raise SlamError(f"closure.min_pairs: must be >= 3, got {self.min_pairs!r}")
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,11 @@ from slam.checks import check_fit, check_runnable, check_types
 from slam.config import AssociationConfig, ClosureConfig, MapPolicy, SlamConfig
 from slam.errors import SlamError
 from slam.map_managers import View
-from slam.motion import IncrementMotion, UnicycleMotion
+from slam.motion import AckermannMotion, IncrementMotion, UnicycleMotion
 from slam.sequence import Sequence
 from slam.sources import make_source
 from slam.start import antenna_of
-from slam.vehicle import AckermannModel, Motion, Odometry
+from slam.vehicle import AckermannModel, Odometry
 
 __all__ = ["Components", "components", "laser_pose", "make_motion"]
 
@@ -99,7 +99,7 @@ def _associator(cfg: SlamConfig, given=None):
 
     method = "ihgr" if cfg.association.windowed else cfg.association.method
 
-    def call(z, R, z_hat, H, P, gate_prob=0.99, **params):
+    def call(z, R, z_hat, H, P, *, gate_prob, **params):
         # The loop's inputs are valid by construction (finite, P symmetric PSD as the filter
         # keeps it): the trusted path, without the checks that would cost more than the solve.
         return associate(
@@ -121,7 +121,7 @@ def make_motion(seq: Sequence, cfg: SlamConfig, steer=None):
         )
     if model == "pose-increment":
         return IncrementMotion(odo.t_s, odo.pose, cfg.vehicle.increment_noise)
-    return Motion(
+    return AckermannMotion(
         AckermannModel.from_vehicle(seq.vehicle),
         Odometry(odo.t_s, odo.speed_mps, odo.steer_rad if steer is None else steer),
         cfg.vehicle.odometry_noise,

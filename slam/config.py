@@ -6,6 +6,12 @@ A run is its configuration: the features (extractor and its parameters), the ass
 calibration, laser and antenna poses), the start, the map policy and the filter. Written beside
 a result (`config.toml`), it reproduces the run to the bit.
 
+Every default of a run's settings is set here, once, with its source in one line (`default`:
+the paper, the simulator, a sensor model, a named calibration, or a design choice with its
+reason); `setting_sources()` lists them (the configuration reference shows that list). The
+extractors' parameters keep theirs in `features` (`ExtractorParams`, `BaileyParams`, each field
+with its source), since `features` imports nothing of `slam`.
+
     [features]      method, [features.extractor] (`features.ExtractorParams`),
                     [features.bailey] (the Bailey detector's noise model and constants)
     [association]   method, gate_prob, new_feature_gate_prob, window_scans, view margins, params
@@ -14,8 +20,8 @@ a result (`config.toml`), it reproduces the run to the bit.
     [vehicle]       odometry_noise, steering, laser_pose, laser_latency_s, gps_antenna,
                     max_odometry_gap_s, min_travel_m
     [start]         initial_pose_sigma, initial_heading_rad, GPS start fit
-    [map_policy]    `slam.tentatives.MapPolicy`
-    [closure]       `slam.closure.ClosureConfig` (loop closure; off by default)
+    [map_policy]    `MapPolicy`
+    [closure]       `ClosureConfig` (loop closure; off by default)
     [filter]        first_estimates_jacobians
 
 `SlamConfig.from_dict(d)` refuses unknown keys (with a "did you mean" and, for the keys of the
@@ -34,38 +40,41 @@ import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, is_dataclass
 
+import numpy as np
+
 from features import ExtractorParams
 from features.bailey import BaileyParams
-from slam.checks import SETTING_TINY, setting
-from slam.closure import ClosureConfig
 from slam.errors import SlamError
-from slam.measurement import (
-    DEFAULT_CONSTANT_NOISE,
-    DEFAULT_FIT_FLOOR,
-    DEFAULT_RANGE_BIAS,
-    MeasurementModel,
-    NoiseModel,
-)
-from slam.motion import IncrementNoise, UnicycleNoise
+from slam.measurement import MeasurementModel, NoiseModel
 from slam.sequence import MAX_ANGLE_RAD, MAX_COORDINATE_M
-from slam.tentatives import MapPolicy
-from slam.vehicle import OdometryNoise, SteeringCalibration
+from slam.validators import SETTING_TINY, nonnegative_fields, setting
 
 __all__ = [
     "ASSOCIATION_METHODS",
+    "DEFAULT_CONSTANT_NOISE",
+    "DEFAULT_FIT_FLOOR",
+    "DEFAULT_RANGE_BIAS",
     "FEATURE_METHODS",
     "GPS_START_TRACKS",
     "OWN_COVARIANCE",
     "AssociationConfig",
     "BaileyConfig",
+    "ClosureConfig",
     "FeaturesConfig",
     "FilterConfig",
+    "IncrementNoise",
+    "MapPolicy",
     "MeasurementConfig",
+    "OdometryNoise",
     "SlamConfig",
     "StartConfig",
+    "SteeringCalibration",
+    "UnicycleNoise",
     "VehicleConfig",
     "config_from_dict",
     "config_to_dict",
+    "default",
+    "setting_sources",
 ]
 
 # the extractors of `features.extract_features`, and the sequence's own precomputed detections
@@ -85,8 +94,35 @@ OWN_COVARIANCE = ("geometric", "paper")
 MAX_LATENCY_S = 1.0  # a laser stamped a second or more off its measurement is a clock fault
 
 
+def default(value, source: str, *, factory: bool = False):
+    """A setting's default and where it comes from, in one line: "paper: ...", "simulator: ...",
+    "sensor model: ...", "calibration: ..." (a named calibration run) or "design: ..." (a choice
+    of this program's, reason given). `factory`: `value` makes the default (a dataclass)."""
+    meta = {"source": source}
+    if factory:
+        return field(default_factory=value, metadata=meta)
+    return field(default=value, metadata=meta)
+
+
+def setting_sources(obj=None, path: str = "") -> list[tuple[str, object, str]]:
+    """(dotted path, default, source) of every setting of `obj` (default `SlamConfig()`, the
+    built-in settings as they take effect), nested sections expanded: the configuration
+    reference (docs/configuration.md) shows this list."""
+    obj = SlamConfig() if obj is None else obj
+    out = []
+    for f in fields(obj):
+        where = f"{path}.{f.name}" if path else f.name
+        value = getattr(obj, f.name)
+        if is_dataclass(value):
+            out += setting_sources(value, where)
+        else:
+            out.append((where, _plain(value), f.metadata.get("source", "")))
+    return out
+
+
 def _finite(owner: str, name: str, v) -> None:
-    """A finite number >= 0 in the range where the kernels' maths holds (`slam.checks.setting`)."""
+    """A finite number >= 0 in the range where the kernels' maths holds
+    (`slam.validators.setting`)."""
     setting(f"{owner}.{name}", v)
 
 
@@ -95,17 +131,389 @@ def _choice(owner: str, name: str, v, choices) -> None:
         raise SlamError(f"{owner}.{name}: expected one of {list(choices)}, got {v!r}")
 
 
+# ---- the defaults' tables and the sections' parts (odometry, steering, map policy, closure) ----
+
+# The "constant" measurement noise model of each extractor: configured constants, not a fit:
+#   sigma_range = range_sigma_m + range_sigma_per_m * range,
+#   sigma_bearing^2 = bearing_sigma_rad^2 + (cross_range_sigma_m / range)^2.
+# Values: maximum-likelihood fits of this model to the range and bearing errors of the centres
+# of the circles found on trunks in the simulated tree park (LMS200, 1 cm range noise, 1 cm
+# quantisation; `trunkslam reproduce noise-calibration`, seeds 1000-1003, apart from the
+# experiment's, each run's path varied as in experiment 2), rounded up to two digits. Fitted
+# (a, b, c, t): paper (0.0120, 0.00085, 0, 0.0081), geometric (0.0081, 0.0013, 0, 0.0078),
+# bailey (0.0098, 0.0014, 0.0019, 0.0022). The fitted extractors' centres are off by under 1 cm
+# across the beam (the bearing error falls as 1/range: c fits to 0); the Bailey detector's
+# bearing is quantised by the beams (about 0.1 deg whatever the range). The paper's fit also has
+# a mean range error of -4.6 mm (Kasa's bias toward the sensor), which a zero-mean model cannot
+# represent (`DEFAULT_RANGE_BIAS`).
+# "other" (any other source of circles): the Zaragoza SLAM-school model of the Victoria Park
+# detections, 0.05 m + 1% of the range and 0.5 deg (BAILEY_DETECTOR.md section 4).
+DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
+    "paper": NoiseModel(0.013, 0.00085, 0.0, 0.0081),
+    "geometric": NoiseModel(0.0082, 0.0014, 0.0, 0.0078),
+    "bailey": NoiseModel(0.0098, 0.0014, 0.0019, 0.0022),
+    "other": NoiseModel(0.05, 0.01, math.radians(0.5), 0.0),
+}
+
+# Mean range error of each extractor's centres as a function of range, bias(r) = a + b r
+# (a in m, b in m per m of range), subtracted from its ranges: the line through the range errors
+# of the circles found on trunks in the calibration runs (noise-calibration, seeds 1000-1003,
+# never the experiment's) by maximum likelihood under the filter's own sigmas (least squares
+# weighted by 1 / sigma^2; `experiments.paper.calibration.range_bias_line`), rounded to 0.1 mm
+# and 0.01 mm per m. paper (-0.0076, 0.00010): its Gauss-Newton fit pulls the centre toward the
+# sensor (mean -4.6 mm, -0.42 of the sigma of its own covariance, which the filter uses for it);
+# bailey (-0.0097, 0.00062): its radius from the angular width is too small (mean -2.7 mm, -0.16
+# sigma); geometric (-0.0008, -0.00021): +0.9 mm on average, but -0.10 of the sigma the filter
+# gives each fit, so biased where the fit is precise (an unweighted line made its NEES worse).
+# A bias that every tree shares is not noise: a filter that treats scans as independent averages
+# it into the pose with ever-growing confidence (NEES above its bounds). Applied to every circle
+# of that method (extracted, or a sequence's detections); the Victoria Park preset sets them to 0
+# (the simulated sensor's biases say nothing of the real one).
+DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
+    "paper": (-0.0076, 0.0001),
+    "geometric": (-0.0008, -0.00021),
+    "bailey": (-0.0097, 0.00062),
+}
+
+# Floors (range m, bearing rad) added in quadrature to a fit's own covariance ("fit" noise):
+# maximum-likelihood fit of R_fit + diag(f_r^2, f_b^2) to the `geometric` centres' errors in the
+# calibration runs (seeds 1000-1003): 6.29 mm and 0.092 mrad (rounded up to 2 digits). The fit's
+# covariance assumes independent Gaussian range noise; the 1 cm quantisation and the mixed
+# returns at the trunk's edges are neither, and the most precise fits (many beams, close
+# trees: the ones that steer the filter) were the most over-confident (range sigma under 10 mm:
+# errors 1.37-1.54 times their stated variance). NIS per dof of the calibration circles: 1.17
+# under the fit's covariance, 0.93 with the floors.
+DEFAULT_FIT_FLOOR: tuple[float, float] = (0.0063, 0.000093)
+
+
+@dataclass(frozen=True)
+class OdometryNoise:
+    """Independent errors of each odometry sample's readings (zero-order hold values).
+
+    speed_sigma_mps: standard deviation of the encoder speed reading, m/s.
+    steer_sigma_rad: standard deviation of the steering angle reading, rad.
+    The defaults are those of the simulated Cycab (`experiments.sim.trajectory.CycabParams`).
+    floor_xy_m_per_sqrt_s, floor_theta_rad_per_sqrt_s: a small white process noise on the pose
+        itself (variance per second). It keeps the covariance from being singular when the car
+        is at or near rest: the linearised model then puts no noise on y and theta, while the
+        neglected second-order terms (speed error x steering error, heading error x distance
+        actually driven) do move the car; without it the first scans' NEES reached 2000 in
+        some runs of the tree park. While driving it is negligible (1 mm and 0.1 mrad per
+        square-root second against about 2 cm and 8 mrad per second of odometry noise).
+    speed_sigma_per_speed: the speed sigma grows by this much per m/s of the encoder's reading
+        (a scale error, wheel slip): sigma_v = speed_sigma_mps + speed_sigma_per_speed |v_e|.
+    steer_sigma_per_lateral_mps2: the steering sigma grows by this much (rad) per m/s^2 of the
+        sample's lateral acceleration a = v_c^2 |tan(alpha)| / L (the tyres' slip angles grow
+        with the cornering force): sigma_alpha = steer_sigma_rad + this * a.
+    Both 0 by default (the simulated Cycab's readings carry constant noise); the Victoria Park
+    preset's values are fitted (experiments/paper/victoria_park/calibration.py).
+    """
+
+    speed_sigma_mps: float = default(
+        0.1, "simulator: the simulated Cycab's speed noise (CycabParams)"
+    )
+    steer_sigma_rad: float = default(
+        math.radians(2.0), "simulator: the simulated Cycab's steering noise, 2 deg (CycabParams)"
+    )
+    floor_xy_m_per_sqrt_s: float = default(
+        0.001, "design: keeps the covariance regular at rest (tree park NEES, see doc)"
+    )
+    floor_theta_rad_per_sqrt_s: float = default(
+        0.0001, "design: keeps the covariance regular at rest (tree park NEES, see doc)"
+    )
+    speed_sigma_per_speed: float = default(
+        0.0, "simulator: 0, the simulated Cycab's readings carry constant noise"
+    )
+    steer_sigma_per_lateral_mps2: float = default(
+        0.0, "simulator: 0, the simulated Cycab's readings carry constant noise"
+    )
+
+    def __post_init__(self) -> None:
+        nonnegative_fields("vehicle.odometry_noise", self)
+
+    def Q_u(self, v_enc_mps: float, v_axle_mps: float, steer_rad: float, L: float) -> np.ndarray:
+        """(2, 2) covariance of one sample's (v_e, alpha) readings."""
+        sv = self.speed_sigma_mps + self.speed_sigma_per_speed * abs(v_enc_mps)
+        lateral = v_axle_mps * v_axle_mps * abs(math.tan(steer_rad)) / L
+        sa = self.steer_sigma_rad + self.steer_sigma_per_lateral_mps2 * lateral
+        return np.diag([sv * sv, sa * sa])
+
+    @property
+    def Q_floor(self) -> np.ndarray:
+        """(3, 3) pose noise per second (world frame)."""
+        a, b = self.floor_xy_m_per_sqrt_s**2, self.floor_theta_rad_per_sqrt_s**2
+        return np.diag([a, a, b])
+
+
+@dataclass(frozen=True)
+class SteeringCalibration:
+    """The front-wheel angle from the steering reading r:
+
+        alpha = offset_rad + gain r + cubic_per_rad2 r^3
+
+    A steering sensor reads the wheel angle through a linkage, and a bicycle model's single
+    wheel stands for two that turn by different angles, so the angle that sets the turn rate
+    v tan(alpha) / L need not be the reading itself. The identity by default (the simulated
+    Cycab's readings are the model's angle); the Victoria Park preset's gain and cubic term are
+    fitted (experiments/paper/victoria_park/calibration.py). The odometry noise (`OdometryNoise`)
+    applies to the calibrated angle.
+    """
+
+    offset_rad: float = default(
+        0.0, "simulator: identity, the simulated Cycab reads the model's angle"
+    )
+    gain: float = default(1.0, "simulator: identity, the simulated Cycab reads the model's angle")
+    cubic_per_rad2: float = default(
+        0.0, "simulator: identity, the simulated Cycab reads the model's angle"
+    )
+
+    def __post_init__(self) -> None:
+        for name in ("offset_rad", "gain", "cubic_per_rad2"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise SlamError(f"SteeringCalibration.{name}: must be a finite number, got {v!r}")
+        if not self.gain > 0:
+            raise SlamError(f"SteeringCalibration.gain: must be > 0, got {self.gain!r}")
+        for name in ("offset_rad", "gain", "cubic_per_rad2"):  # the range where the maths holds
+            setting(f"SteeringCalibration.{name}", getattr(self, name), signed=True)
+
+    @property
+    def is_identity(self) -> bool:
+        return self.offset_rad == 0.0 and self.gain == 1.0 and self.cubic_per_rad2 == 0.0
+
+    def apply(self, steer_rad: np.ndarray) -> np.ndarray:
+        """The calibrated angles of readings `steer_rad` (the same array when the identity)."""
+        if self.is_identity:
+            return steer_rad
+        r = np.asarray(steer_rad, dtype=np.float64)
+        return self.offset_rad + self.gain * r + self.cubic_per_rad2 * r**3
+
+
+@dataclass(frozen=True)
+class UnicycleNoise:
+    """Independent errors of each (speed, yaw rate) sample (zero-order hold values).
+
+    speed_sigma_mps (+ speed_sigma_per_speed per m/s of the reading) and yaw_rate_sigma_rad_s
+    (+ yaw_rate_sigma_per_yaw_rate per rad/s of the reading): the sigmas of one sample. The
+    defaults are the simulated Cycab's odometry seen as a unicycle's: its speed sigma 0.1 m/s,
+    and its 2 degree steering sigma at its 1.2 m/s cruise speed on its 1.2 m wheelbase,
+    v sigma_alpha / L = 2 degrees per second (`experiments.sim.trajectory.CycabParams`); a
+    robot's own figures replace them.
+    floor_xy_m_per_sqrt_s, floor_theta_rad_per_sqrt_s: a small white pose noise per second,
+    which keeps the covariance non-singular at rest (as `OdometryNoise`'s).
+    """
+
+    speed_sigma_mps: float = default(
+        0.1, "simulator: the simulated Cycab's speed noise as a unicycle's"
+    )
+    yaw_rate_sigma_rad_s: float = default(
+        math.radians(2.0), "simulator: the Cycab's 2 deg steering noise at 1.2 m/s on 1.2 m"
+    )
+    speed_sigma_per_speed: float = default(
+        0.0, "simulator: 0, constant noise as the simulated Cycab's"
+    )
+    yaw_rate_sigma_per_yaw_rate: float = default(
+        0.0, "simulator: 0, constant noise as the simulated Cycab's"
+    )
+    floor_xy_m_per_sqrt_s: float = default(0.001, "design: as OdometryNoise's floor")
+    floor_theta_rad_per_sqrt_s: float = default(0.0001, "design: as OdometryNoise's floor")
+
+    def __post_init__(self) -> None:
+        nonnegative_fields("vehicle.unicycle_noise", self)
+
+
+@dataclass(frozen=True)
+class IncrementNoise:
+    """The noise of an odometry increment (dx, dy, dtheta in the frame of its start) of length
+    d metres and turn dtheta: sigma_x = sigma_y = xy_sigma_per_m d, sigma_theta =
+    theta_sigma_per_rad |dtheta| + theta_sigma_per_m d, plus the floors per second. The
+    defaults are the simulated Cycab's odometry over its 1.2 m/s cruise: a speed error of 0.1 m/s
+    per 50 ms sample, independent from sample to sample, adds 0.1 x 0.05 x sqrt(20) = 0.022 m per
+    second of driving, 0.019 m per metre; its 2 degree steering error adds, through
+    v tan(alpha) / L, 2 x 0.05 x sqrt(20) = 0.45 degree per second, 0.0065 rad per metre.
+    Turning on the spot has no such derivation: theta_sigma_per_rad 0.05 (3 degrees per radian)
+    is a caution to replace with a robot's own figures.
+    """
+
+    xy_sigma_per_m: float = default(
+        0.019, "simulator: the Cycab's speed noise over its 1.2 m/s cruise (see doc)"
+    )
+    theta_sigma_per_rad: float = default(
+        0.05, "design: a caution, 3 deg per radian turned on the spot"
+    )
+    theta_sigma_per_m: float = default(
+        0.0065, "simulator: the Cycab's steering noise over its 1.2 m/s cruise (see doc)"
+    )
+    floor_xy_m_per_sqrt_s: float = default(0.001, "design: as OdometryNoise's floor")
+    floor_theta_rad_per_sqrt_s: float = default(0.0001, "design: as OdometryNoise's floor")
+
+    def __post_init__(self) -> None:
+        nonnegative_fields("vehicle.increment_noise", self)
+
+
+@dataclass(frozen=True)
+class MapPolicy:
+    """When tentative features join the map or are dropped.
+
+    confirm_scans: a tentative feature joins the map when it has been associated in this many
+        scans (its first sighting included): the paper's 3.
+    drop_after_missed: a tentative feature is dropped when it has gone this many consecutive
+        scans without being associated (1: "not seen again" in the next scan drops it).
+    prune_after_expected, prune_hit_ratio, prune_range_m: a landmark of the map is removed from
+        the state (marginalised out) once it has been expected in at least
+        `prune_after_expected` scans since it joined the map and was associated in fewer than
+        `prune_hit_ratio` of them. Expected: its predicted position lies inside the laser's
+        field of view (no margins) and within `prune_range_m` and the usable range. 0 (the
+        default): never; the map keeps whatever joined it.
+    """
+
+    confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
+    drop_after_missed: int = default(1, "paper: a tentative feature not seen again is dropped")
+    prune_after_expected: int = default(
+        0, "design: 0, no pruning (the map keeps whatever joined it)"
+    )
+    prune_hit_ratio: float = default(0.0, "design: 0, no pruning")
+    prune_range_m: float = default(math.inf, "design: inf, no range limit on pruning")
+
+    def __post_init__(self) -> None:
+        for name in ("confirm_scans", "drop_after_missed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise SlamError(f"MapPolicy.{name}: must be an integer >= 1, got {v!r}")
+        v = self.prune_after_expected
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise SlamError(f"MapPolicy.prune_after_expected: must be an integer >= 0, got {v!r}")
+        r = self.prune_hit_ratio
+        if isinstance(r, bool) or not isinstance(r, (int, float)) or not 0.0 <= r <= 1.0:
+            raise SlamError(f"MapPolicy.prune_hit_ratio: must be in [0, 1], got {r!r}")
+        m = self.prune_range_m
+        if isinstance(m, bool) or not isinstance(m, (int, float)) or not m > 0 or m != m:
+            raise SlamError(f"MapPolicy.prune_range_m: must be > 0 (inf: no limit), got {m!r}")
+
+    @property
+    def prunes(self) -> bool:
+        """Whether landmarks can leave the map."""
+        return self.prune_after_expected > 0 and self.prune_hit_ratio > 0.0
+
+
+# The smallest match_m: the match bins landmark pairs by length in steps of match_m, so a
+# subnormal one makes the bins' count overflow; 1 mm is far below any trunk's measured spread.
+MIN_MATCH_M = 1e-3
+
+
+@dataclass(frozen=True)
+class ClosureConfig:
+    """The `[closure]` section (see the module doc for what each setting does).
+
+    Where the defaults come from (each field's `source`; one, tree_sd_m, from Victoria Park, the
+    others from the simulator): recent_s 30 and old_s 60 s: a
+    landmark seen in the last 30 s is part of the local map, one unseen for a minute has been
+    left behind (at 1-3 m/s, 60-180 m away), and one in view unseen for 30 s while new
+    landmarks join the map within max_offset_m of it is passed by (module doc, step 1);
+    min_pairs 6 with margin 3 and match_m 0.5 m were set by hand in the simulated park
+    (experiment `loop-closure`, drives 0-11): at 1.0 m, random hypotheses in a stand of trees
+    3 m apart explained 5-6 landmarks, at 0.5 m 3-4, and landmarks of one local map agree to
+    a few centimetres; min_sep_m 3 m: the trees' spacing
+    there; max_offset_m 15 m and max_rotation_deg 15 deg: larger than any drift of the
+    simulated returns (0-8 m); jc_prob 0.999 as the association gates. every_scans 5: a match
+    a second at 5 Hz. re_register: check a match the filter's covariance refuses against dead
+    reckoning and one rigid motion instead (module doc, step 3); off, such a match is
+    refused. tree_sd_m 0.05 m: a trunk's measured centre moves along the line of sight with
+    the side it is seen from, which the filter's white measurement noise averages away; the
+    rigid-fit test adds it to each landmark (per axis). The figure is what
+    `experiments.eval.trunk_offsets.view_offset` measures on Victoria Park scans 1-2000, the
+    calibration scans (a test checks it); in the simulator, whose trunks are circles, it
+    changed no figure of the standard filter's park and orchard runs (100 drives each).
+    The others are a first version, checked in the simulator only.
+    """
+
+    enabled: bool = default(
+        False, "design: off unless asked for (a run without closure is the paper's filter)"
+    )
+    every_scans: int = default(
+        5, "simulator: hand-set in the simulated park, a match a second at 5 Hz"
+    )
+    recent_s: float = default(
+        30.0, "simulator: hand-set in the simulated park (experiment loop-closure, drives 0-11)"
+    )
+    old_s: float = default(
+        60.0, "simulator: hand-set in the simulated park (experiment loop-closure, drives 0-11)"
+    )
+    min_pairs: int = default(
+        6, "simulator: hand-set in the simulated park (experiment loop-closure, drives 0-11)"
+    )
+    margin: int = default(
+        3, "simulator: hand-set in the simulated park (experiment loop-closure, drives 0-11)"
+    )
+    match_m: float = default(
+        0.5, "simulator: hand-set in the simulated park (experiment loop-closure, drives 0-11)"
+    )
+    min_sep_m: float = default(3.0, "simulator: the simulated park's tree spacing, 3 m")
+    max_offset_m: float = default(15.0, "simulator: above the simulated returns' drift (0-8 m)")
+    max_rotation_deg: float = default(15.0, "simulator: above the simulated returns' drift")
+    jc_prob: float = default(
+        0.999, "design: as the association gates (AssociationConfig.gate_prob)"
+    )
+    re_register: bool = default(
+        True, "design: check a refused match against dead reckoning (module doc, step 3)"
+    )
+    tree_sd_m: float = default(
+        0.05, "calibration: Victoria Park scans 1-2000 (experiments.eval.trunk_offsets.view_offset)"
+    )
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if f.type == "bool":
+                if not isinstance(v, bool):
+                    raise SlamError(f"closure.{f.name}: must be true or false, got {v!r}")
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise SlamError(f"closure.{f.name}: must be a finite number, got {v!r}")
+            if f.type == "int" and (v != int(v) or v < 1):
+                raise SlamError(f"closure.{f.name}: must be a whole number >= 1, got {v!r}")
+            if f.name == "tree_sd_m":
+                if v < 0:
+                    raise SlamError(f"closure.{f.name}: must be >= 0, got {v!r}")
+            elif v <= 0:
+                raise SlamError(f"closure.{f.name}: must be > 0, got {v!r}")
+        if not 0.0 < self.jc_prob < 1.0:
+            raise SlamError(f"closure.jc_prob: must be in (0, 1), got {self.jc_prob!r}")
+        if self.match_m < MIN_MATCH_M:  # pairs are binned by length in steps of match_m
+            raise SlamError(
+                f"closure.match_m: must be >= {MIN_MATCH_M} m (MIN_MATCH_M), got {self.match_m!r}"
+            )
+        if self.old_s < self.recent_s:  # an old landmark must not be a recent one too
+            raise SlamError(
+                f"closure.old_s: must be >= recent_s ({self.recent_s!r}), got {self.old_s!r}"
+            )
+        if self.min_pairs < 3:
+            raise SlamError(f"closure.min_pairs: must be >= 3, got {self.min_pairs!r}")
+
+
 @dataclass(frozen=True)
 class BaileyConfig:
     """The Bailey detector (`features.bailey.extract_bailey`): the noise model its circles carry
     (the Zaragoza SLAM school's for the Victoria Park detections: range sigma 0.05 m + 1% of
     range, bearing sigma 0.5 deg; radius sigma 0.05 m) and its constants (`detector`)."""
 
-    range_sigma_m: float = 0.05
-    range_sigma_per_m: float = 0.01
-    bearing_sigma_rad: float = math.radians(0.5)
-    radius_sigma_m: float = 0.05
-    detector: BaileyParams = field(default_factory=BaileyParams)
+    range_sigma_m: float = default(
+        0.05, "sensor model: the Zaragoza school's Victoria Park detections, 0.05 m"
+    )
+    range_sigma_per_m: float = default(
+        0.01, "sensor model: the Zaragoza school's Victoria Park detections, 1% of range"
+    )
+    bearing_sigma_rad: float = default(
+        math.radians(0.5), "sensor model: the Zaragoza school's Victoria Park detections, 0.5 deg"
+    )
+    radius_sigma_m: float = default(
+        0.05, "sensor model: the Zaragoza school's Victoria Park detections, 0.05 m"
+    )
+    detector: BaileyParams = default(
+        BaileyParams,
+        "paper: Bailey's detector constants (features.bailey.BaileyParams)",
+        factory=True,
+    )
 
     def __post_init__(self) -> None:
         for name in ("range_sigma_m", "range_sigma_per_m", "bearing_sigma_rad", "radius_sigma_m"):
@@ -125,13 +533,29 @@ class FeaturesConfig:
         `method` then names the noise model of its circles.
     """
 
-    method: str = "paper"
-    extractor: ExtractorParams = field(default_factory=ExtractorParams)
-    bailey: BaileyConfig = field(default_factory=BaileyConfig)
-    file: str | None = None
+    method: str = default("paper", "paper: the paper's extractor")
+    extractor: ExtractorParams = default(
+        ExtractorParams,
+        "paper: the paper's parameters (features.ExtractorParams, each field's own)",
+        factory=True,
+    )
+    bailey: BaileyConfig = default(
+        BaileyConfig, "sensor model: the Zaragoza school's Victoria Park detections", factory=True
+    )
+    file: str | None = default(None, "design: none, extract from the scans")
 
     def __post_init__(self) -> None:
         _choice("features", "method", self.method, FEATURE_METHODS)
+
+    def extractor_args(self) -> tuple:
+        """(params, options) of `features.extract_features(scan, self.method, params,
+        **options)`: the `ExtractorParams` itself (the Bailey detector's `BaileyParams` and its
+        noise model's sigmas for "bailey"), so a setting keeps its form to the kernel."""
+        if self.method == "bailey":
+            b = self.bailey
+            sigmas = ("range_sigma_m", "range_sigma_per_m", "bearing_sigma_rad", "radius_sigma_m")
+            return b.detector, {name: getattr(b, name) for name in sigmas}
+        return self.extractor, {}
 
     def extractor_kwargs(self) -> dict:
         """The keyword arguments of `features.extract_features(scan, self.method, **kwargs)`."""
@@ -169,13 +593,21 @@ class AssociationConfig:
         "ihgr-window" the `CostModel` densities and the rounding options).
     """
 
-    method: str = "ihgr"
-    gate_prob: float = 0.999
-    new_feature_gate_prob: float = 0.9999
-    window_scans: int = 3
-    view_margin_m: float = 2.0
-    view_margin_rad: float = math.radians(10.0)
-    params: dict = field(default_factory=dict)
+    method: str = default("ihgr", "paper: IHGR, the paper's associator")
+    gate_prob: float = default(
+        0.999, "simulator: 0.999, where 0.99 lost the tree park in 2 of 50 runs (see doc)"
+    )
+    new_feature_gate_prob: float = default(
+        0.9999, "design: a wider gate than gate_prob for new landmarks (see doc)"
+    )
+    window_scans: int = default(3, "design: K = 3, 2..4 intended (docs/experiments/association.md)")
+    view_margin_m: float = default(
+        2.0, "design: landmarks 2 m beyond the laser's range are still offered"
+    )
+    view_margin_rad: float = default(
+        math.radians(10.0), "design: landmarks 10 deg beyond the field of view are still offered"
+    )
+    params: dict = default(dict, "design: none, the associator's own defaults", factory=True)
 
     def __post_init__(self) -> None:
         _choice("association", "method", self.method, ASSOCIATION_METHODS)
@@ -222,19 +654,38 @@ class MeasurementConfig:
     fit_floor_range_m, fit_floor_bearing_rad: added in quadrature to a fit's covariance (model
         error the fit cannot see: range quantisation, mixed returns); the defaults are the
         maximum-likelihood floors of the `geometric` fit in the simulated tree park
-        (`slam.measurement.DEFAULT_FIT_FLOOR`, calibration seeds 1000-1003).
+        (`DEFAULT_FIT_FLOOR`, calibration seeds 1000-1003).
     range_bias: known mean range error a + b r of each extractor's centres, by method name, as
         (a_m, b_per_m), subtracted from its ranges; methods not given keep their
         `DEFAULT_RANGE_BIAS` entry ((0, 0) when it has none).
     max_range_m: circles farther away are not used (the laser's own maximum applies too).
     """
 
-    noise: str = "auto"
-    constant_noise: Mapping[str, NoiseModel] = field(default_factory=dict)
-    fit_floor_range_m: float = DEFAULT_FIT_FLOOR[0]
-    fit_floor_bearing_rad: float = DEFAULT_FIT_FLOOR[1]
-    range_bias: Mapping[str, tuple[float, float]] = field(default_factory=dict)
-    max_range_m: float = math.inf
+    noise: str = default(
+        "auto",
+        "design: the circles' own covariance where it describes their errors (OWN_COVARIANCE)",
+    )
+    constant_noise: Mapping[str, NoiseModel] = default(
+        dict,
+        "calibration: noise-calibration, tree park seeds 1000-1003 (DEFAULT_CONSTANT_NOISE)",
+        factory=True,
+    )
+    fit_floor_range_m: float = default(
+        DEFAULT_FIT_FLOOR[0],
+        "calibration: noise-calibration, simulated tree park seeds 1000-1003 (DEFAULT_FIT_FLOOR)",
+    )
+    fit_floor_bearing_rad: float = default(
+        DEFAULT_FIT_FLOOR[1],
+        "calibration: noise-calibration, simulated tree park seeds 1000-1003 (DEFAULT_FIT_FLOOR)",
+    )
+    range_bias: Mapping[str, tuple[float, float]] = default(
+        dict,
+        "calibration: noise-calibration, simulated tree park seeds 1000-1003 (DEFAULT_RANGE_BIAS)",
+        factory=True,
+    )
+    max_range_m: float = default(
+        math.inf, "sensor model: inf, the laser's own maximum range applies"
+    )
 
     def __post_init__(self) -> None:
         _choice("measurement", "noise", self.noise, ("auto", "fit", "constant"))
@@ -310,13 +761,13 @@ class VehicleConfig:
     forward, y left).
 
     odometry_noise: sigma of each odometry sample's speed and steering readings, for an
-        "ackermann" car (`slam.vehicle.OdometryNoise`, with its pose floor for slip).
+        "ackermann" car (`OdometryNoise`, with its pose floor for slip).
     unicycle_noise: the same for a "unicycle" vehicle's speed and yaw-rate samples
-        (`slam.motion.UnicycleNoise`).
+        (`UnicycleNoise`).
     increment_noise: the noise of a "pose-increment" vehicle's odometry increments, per metre
-        and per radian (`slam.motion.IncrementNoise`). The sequence's vehicle says which of the
+        and per radian (`IncrementNoise`). The sequence's vehicle says which of the
         three its odometry is.
-    steering: the front-wheel angle from the steering reading (`slam.vehicle.SteeringCalibration`,
+    steering: the front-wheel angle from the steering reading (`SteeringCalibration`,
         offset + gain r + cubic r^3; the identity by default).
     laser_pose: (x_m, y_m, theta_rad) of the laser, replacing the sequence's (a calibrated
         mounting); None keeps the sequence's.
@@ -324,7 +775,7 @@ class VehicleConfig:
         pose of its stamp minus this (`SlamLog.scan_t` holds those times; the sequence's own
         stamps stay the scans', e.g. for choosing the GPS fixes within 25 ms of a scan). 0
         (default): at its stamp. Derived for the ute by the calibration's J on scans 1-2000
-        (`experiments.paper.vp_calibration.latency_profile`), a sensor property, never a
+        (`experiments.paper.victoria_park.calibration.latency_profile`), a sensor property, never a
         GPS error; a magnitude of a second or more is an error.
     gps_antenna: (x_m, y_m) of the GPS antenna, replacing the sequence's; None keeps the
         sequence's (the laser's position when it has none).
@@ -338,16 +789,36 @@ class VehicleConfig:
         is warned (`slam.checks.check_fit`). None: no claim.
     """
 
-    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
-    unicycle_noise: UnicycleNoise = field(default_factory=UnicycleNoise)
-    increment_noise: IncrementNoise = field(default_factory=IncrementNoise)
-    steering: SteeringCalibration = field(default_factory=SteeringCalibration)
-    laser_pose: tuple[float, float, float] | None = None
-    laser_latency_s: float = 0.0
-    gps_antenna: tuple[float, float] | None = None
-    max_odometry_gap_s: float = 1.0
-    min_travel_m: float = 0.0
-    calibrated_for: tuple[float, float] | None = (1.2, 0.0)
+    odometry_noise: OdometryNoise = default(
+        OdometryNoise, "simulator: the simulated Cycab's (OdometryNoise)", factory=True
+    )
+    unicycle_noise: UnicycleNoise = default(
+        UnicycleNoise,
+        "simulator: the simulated Cycab's as a unicycle's (UnicycleNoise)",
+        factory=True,
+    )
+    increment_noise: IncrementNoise = default(
+        IncrementNoise,
+        "simulator: the simulated Cycab's as increments (IncrementNoise)",
+        factory=True,
+    )
+    steering: SteeringCalibration = default(
+        SteeringCalibration,
+        "simulator: identity, the simulated Cycab's (SteeringCalibration)",
+        factory=True,
+    )
+    laser_pose: tuple[float, float, float] | None = default(
+        None, "sensor model: none, the sequence's own laser pose"
+    )
+    laser_latency_s: float = default(0.0, "sensor model: 0, scans stamped when measured")
+    gps_antenna: tuple[float, float] | None = default(
+        None, "sensor model: none, the sequence's own antenna position"
+    )
+    max_odometry_gap_s: float = default(1.0, "design: a second without odometry is a data fault")
+    min_travel_m: float = default(0.0, "design: 0, every scan is used")
+    calibrated_for: tuple[float, float] | None = default(
+        (1.2, 0.0), "simulator: the simulated Cycab's wheelbase 1.2 m, encoder offset 0 m"
+    )
 
     def __post_init__(self) -> None:
         for name, n in (("laser_pose", 3), ("gps_antenna", 2), ("calibrated_for", 2)):
@@ -403,12 +874,16 @@ class StartConfig:
         used when it is larger).
     """
 
-    initial_pose_sigma: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    initial_heading_rad: float | None = None
-    gps_fit_m: float = 50.0
-    gps_track: str = "dead-reckoning"
-    gps_sigma_m: float = 1.0
-    heading_sigma_rad: float = math.radians(5.0)
+    initial_pose_sigma: tuple[float, float, float] = default(
+        (0.0, 0.0, 0.0), "design: 0, the map's frame is the start pose"
+    )
+    initial_heading_rad: float | None = default(None, "design: none, from the GPS fit or 0")
+    gps_fit_m: float = default(50.0, "design: 50 m of driving for the GPS start fit")
+    gps_track: str = default("dead-reckoning", "design: dead reckoning, no first pass")
+    gps_sigma_m: float = default(1.0, "design: 1 m floor of a GPS start's position")
+    heading_sigma_rad: float = default(
+        math.radians(5.0), "design: 5 deg floor of a GPS start's heading"
+    )
 
     def __post_init__(self) -> None:
         if len(self.initial_pose_sigma) != 3 or not all(
@@ -438,7 +913,9 @@ class FilterConfig:
         does not grow confident in the global heading, which nothing observes.
     """
 
-    first_estimates_jacobians: bool = False
+    first_estimates_jacobians: bool = default(
+        False, "paper: off, the paper's EKF (Huang et al. 2008 when on)"
+    )
 
 
 @dataclass(frozen=True)

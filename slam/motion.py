@@ -1,12 +1,14 @@
-"""Motion models other than the car's: how a robot's own odometry moves the filter's pose.
+"""The motion models, one per kind of odometry: how a run's odometry moves the filter's pose.
 
-Every model offers the loop (`slam.loop`) the same two things as `slam.vehicle.Motion` (the
-Ackermann car):
+Every odometry model of a run lives here and offers the loop (`slam.loop`) the same two things:
 
 - `integrate(pose, t0_s, t1_s)` -> (pose1 (3,), F (3, 3), Q (3, 3)): the pose at t1_s from the
   pose at t0_s, F = d pose1 / d pose and Q the covariance the odometry's noise adds (world
   frame), heading wrapped to (-pi, pi];
 - `distance(t0_s, t1_s)`: the metres driven in between (for `vehicle.min_travel_m`).
+
+`AckermannMotion`: a car's speed and steering samples through its Ackermann model
+(`slam.vehicle`: the model, the arc step and its noise).
 
 `UnicycleMotion`: speed v and yaw rate omega samples (a differential-drive robot's, or any
 `nav_msgs/Odometry` twist), held between samples and integrated as exact arcs, with noise on
@@ -30,66 +32,19 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from slam import se2
-from slam.checks import finite, float_array, nonnegative_fields, times
+from slam import se2, vehicle
+from slam.config import IncrementNoise, OdometryNoise, UnicycleNoise
 from slam.errors import SlamError
+from slam.validators import finite, float_array, times
+from slam.vehicle import AckermannModel, Odometry
 
 __all__ = [
+    "AckermannMotion",
     "IncrementMotion",
-    "IncrementNoise",
     "UnicycleMotion",
-    "UnicycleNoise",
     "increment_jacobians",
     "unicycle_step",
 ]
-
-
-@dataclass(frozen=True)
-class UnicycleNoise:
-    """Independent errors of each (speed, yaw rate) sample (zero-order hold values).
-
-    speed_sigma_mps (+ speed_sigma_per_speed per m/s of the reading) and yaw_rate_sigma_rad_s
-    (+ yaw_rate_sigma_per_yaw_rate per rad/s of the reading): the sigmas of one sample. The
-    defaults are the simulated Cycab's odometry seen as a unicycle's: its speed sigma 0.1 m/s,
-    and its 2 degree steering sigma at its 1.2 m/s cruise speed on its 1.2 m wheelbase,
-    v sigma_alpha / L = 2 degrees per second (`experiments.sim.trajectory.CycabParams`); a
-    robot's own figures replace them.
-    floor_xy_m_per_sqrt_s, floor_theta_rad_per_sqrt_s: a small white pose noise per second,
-    which keeps the covariance non-singular at rest (as `slam.vehicle.OdometryNoise`'s).
-    """
-
-    speed_sigma_mps: float = 0.1
-    yaw_rate_sigma_rad_s: float = math.radians(2.0)
-    speed_sigma_per_speed: float = 0.0
-    yaw_rate_sigma_per_yaw_rate: float = 0.0
-    floor_xy_m_per_sqrt_s: float = 0.001
-    floor_theta_rad_per_sqrt_s: float = 0.0001
-
-    def __post_init__(self) -> None:
-        nonnegative_fields("vehicle.unicycle_noise", self)
-
-
-@dataclass(frozen=True)
-class IncrementNoise:
-    """The noise of an odometry increment (dx, dy, dtheta in the frame of its start) of length
-    d metres and turn dtheta: sigma_x = sigma_y = xy_sigma_per_m d, sigma_theta =
-    theta_sigma_per_rad |dtheta| + theta_sigma_per_m d, plus the floors per second. The
-    defaults are the simulated Cycab's odometry over its 1.2 m/s cruise: a speed error of 0.1 m/s
-    per 50 ms sample, independent from sample to sample, adds 0.1 x 0.05 x sqrt(20) = 0.022 m per
-    second of driving, 0.019 m per metre; its 2 degree steering error adds, through
-    v tan(alpha) / L, 2 x 0.05 x sqrt(20) = 0.45 degree per second, 0.0065 rad per metre.
-    Turning on the spot has no such derivation: theta_sigma_per_rad 0.05 (3 degrees per radian)
-    is a caution to replace with a robot's own figures.
-    """
-
-    xy_sigma_per_m: float = 0.019
-    theta_sigma_per_rad: float = 0.05
-    theta_sigma_per_m: float = 0.0065
-    floor_xy_m_per_sqrt_s: float = 0.001
-    floor_theta_rad_per_sqrt_s: float = 0.0001
-
-    def __post_init__(self) -> None:
-        nonnegative_fields("vehicle.increment_noise", self)
 
 
 def _pieces(t: np.ndarray, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
@@ -164,6 +119,26 @@ def _unicycle_kernel(pose, dts, vs, ws, sigmas):
     out = np.empty(3)
     out[0], out[1], out[2] = x, y, th
     return out, F, 0.5 * (Q + Q.T)
+
+
+@dataclass(frozen=True, eq=False)
+class AckermannMotion:
+    """A car's motion from its odometry (`slam.vehicle`): the Ackermann model, the speed and
+    steering samples, and their noise."""
+
+    model: AckermannModel
+    odometry: Odometry
+    noise: OdometryNoise
+
+    def integrate(self, pose: np.ndarray, t0_s: float, t1_s: float):
+        """(pose1 (3,), F (3, 3), Q (3, 3)) from t0_s to t1_s (`integrate`)."""
+        return vehicle.integrate(self.model, pose, self.odometry, t0_s, t1_s, noise=self.noise)
+
+    def distance(self, t0_s: float, t1_s: float) -> float:
+        """Distance the rear-axle centre drove from t0_s to t1_s by the odometry (m)."""
+        dt, v, a = self.odometry.pieces(t0_s, t1_s)
+        k = self.model.encoder_offset_m / self.model.wheelbase_m
+        return float(np.sum(np.abs(v / (1.0 - k * np.tan(a))) * dt))
 
 
 @dataclass(frozen=True, eq=False)

@@ -20,8 +20,7 @@ import numpy as np
 
 from slam.ekf import Filter
 from slam.errors import SlamError
-from slam.se2 import wrap_angle
-from slam.start import procrustes_2d
+from slam.se2 import procrustes_2d, wrap_angle
 
 __all__ = [
     "free_rigid_motion",

@@ -29,6 +29,7 @@ __all__ = [
     "inverse_observe",
     "observe",
     "observed_points",
+    "procrustes_2d",
     "rotate",
     "sensor_position",
     "sinc_and_derivative",
@@ -194,3 +195,11 @@ def interpolate_poses(t_query, t_s, poses) -> np.ndarray:
         ],
         axis=1,
     )
+
+
+def procrustes_2d(A: np.ndarray, B: np.ndarray) -> tuple[float, np.ndarray]:
+    """The rotation theta and translation t (2,) minimising sum |B_i - (R(theta) A_i + t)|^2."""
+    ca, cb = A.mean(axis=0), B.mean(axis=0)
+    H = (A - ca).T @ (B - cb)
+    theta = math.atan2(H[0, 1] - H[1, 0], H[0, 0] + H[1, 1])
+    return theta, cb - rotate(theta, ca)

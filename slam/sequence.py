@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from features.types import Scan
-from slam.checks import finite, float_array, readonly, times
 from slam.errors import SlamError
+from slam.validators import finite, float_array, readonly, times
 
 __all__ = [
     "MAX_ANGLE_RAD",

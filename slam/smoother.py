@@ -241,8 +241,8 @@ MAX_LANDMARK_ID = 2**53
 def _check_values(p: Problem) -> None:
     """Times strictly increasing, every value within the sequence file's limits (beyond them a
     value is a corrupt file: its squares overflow in the solve), integers whole and in range."""
-    from slam.checks import times
     from slam.sequence import MAX_ANGLE_RAD, MAX_COORDINATE_M, MAX_TIME_S, MAX_VARIANCE
+    from slam.validators import times
 
     times("Problem.scan_t", p.scan_t)
     limits = [("scan_t", p.scan_t, MAX_TIME_S, "s"), ("meas_R", p.meas_R, MAX_VARIANCE, ""),

@@ -60,14 +60,14 @@ class ExtractorSource:
                 f"features: {self.method!r} extracts from raw scans, and this sequence has none; "
                 "use the method 'detections'"
             )
-        self.kwargs = features.extractor_kwargs()
+        self.params, self.options = features.extractor_args()
         self.model = measurement.model_for(self.method)
         self.count = None  # not precomputed
 
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
         from features import extract_features
 
-        f = extract_features(scan, self.method, **self.kwargs)
+        f = extract_features(scan, self.method, self.params, **self.options)
         return (f, *self.model.from_features(f))
 
 

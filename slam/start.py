@@ -40,7 +40,6 @@ __all__ = [
     "fit_gps_start_to_track",
     "first_pass_wanted",
     "initial_pose",
-    "procrustes_2d",
 ]
 
 log = logging.getLogger(__name__)
@@ -58,14 +57,6 @@ class GpsStart:
     n_rejected: int
     distance_m: float
     rms_m: float
-
-
-def procrustes_2d(A: np.ndarray, B: np.ndarray) -> tuple[float, np.ndarray]:
-    """The rotation theta and translation t (2,) minimising sum |B_i - (R(theta) A_i + t)|^2."""
-    ca, cb = A.mean(axis=0), B.mean(axis=0)
-    H = (A - ca).T @ (B - cb)
-    theta = math.atan2(H[0, 1] - H[1, 0], H[0, 0] + H[1, 1])
-    return theta, cb - se2.rotate(theta, ca)
 
 
 def fit_gps_start(
@@ -184,7 +175,7 @@ def _fit_track(a: np.ndarray, b: np.ndarray, fit_m: float, heading_rad: float | 
 
 def _fit(A: np.ndarray, B: np.ndarray, heading_rad: float | None) -> tuple[float, np.ndarray]:
     if heading_rad is None:
-        return procrustes_2d(A, B)
+        return se2.procrustes_2d(A, B)
     return float(heading_rad), (B - se2.rotate(float(heading_rad), A)).mean(axis=0)
 
 
@@ -217,7 +208,7 @@ def initial_pose(seq, cfg, motion, laser: np.ndarray, track=None):
     """(pose (3,), covariance (3, 3), how) of the filter's prior at the first scan, how being
     "truth", "gps" or "origin" (`SlamConfig.start`).
 
-    motion: the run's `slam.vehicle.Motion`, for a dead-reckoned GPS fit; track: (scan times,
+    motion: the run's motion model (`slam.motion`), for a dead-reckoned GPS fit; track: (scan times,
     poses) of the pass of the filter from the origin that `first_pass_wanted` asked for (for
     `gps_track = "slam"`)."""
     start = cfg.start

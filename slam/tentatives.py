@@ -15,58 +15,14 @@ vehicle's uncertainty, so the gate is, if anything, too wide).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from slam.errors import SlamError
+from slam.config import MapPolicy
 from slam.se2 import inverse_observe
 
-__all__ = ["MapPolicy", "Tentatives", "sighting"]
-
-
-@dataclass(frozen=True)
-class MapPolicy:
-    """When tentative features join the map or are dropped.
-
-    confirm_scans: a tentative feature joins the map when it has been associated in this many
-        scans (its first sighting included): the paper's 3.
-    drop_after_missed: a tentative feature is dropped when it has gone this many consecutive
-        scans without being associated (1: "not seen again" in the next scan drops it).
-    prune_after_expected, prune_hit_ratio, prune_range_m: a landmark of the map is removed from
-        the state (marginalised out) once it has been expected in at least
-        `prune_after_expected` scans since it joined the map and was associated in fewer than
-        `prune_hit_ratio` of them. Expected: its predicted position lies inside the laser's
-        field of view (no margins) and within `prune_range_m` and the usable range. 0 (the
-        default): never; the map keeps whatever joined it.
-    """
-
-    confirm_scans: int = 3
-    drop_after_missed: int = 1
-    prune_after_expected: int = 0
-    prune_hit_ratio: float = 0.0
-    prune_range_m: float = math.inf
-
-    def __post_init__(self) -> None:
-        for name in ("confirm_scans", "drop_after_missed"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-                raise SlamError(f"MapPolicy.{name}: must be an integer >= 1, got {v!r}")
-        v = self.prune_after_expected
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
-            raise SlamError(f"MapPolicy.prune_after_expected: must be an integer >= 0, got {v!r}")
-        r = self.prune_hit_ratio
-        if isinstance(r, bool) or not isinstance(r, (int, float)) or not 0.0 <= r <= 1.0:
-            raise SlamError(f"MapPolicy.prune_hit_ratio: must be in [0, 1], got {r!r}")
-        m = self.prune_range_m
-        if isinstance(m, bool) or not isinstance(m, (int, float)) or not m > 0 or m != m:
-            raise SlamError(f"MapPolicy.prune_range_m: must be > 0 (inf: no limit), got {m!r}")
-
-    @property
-    def prunes(self) -> bool:
-        """Whether landmarks can leave the map."""
-        return self.prune_after_expected > 0 and self.prune_hit_ratio > 0.0
+__all__ = ["Tentatives", "sighting"]
 
 
 def sighting(

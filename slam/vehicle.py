@@ -19,7 +19,7 @@ form (no Euler error), so exact odometry reproduces a path built by the same hol
 
 with sinc(h) = sin(h) / h (1 at h = 0). Noise: each odometry sample's speed and steering
 readings carry independent zero-mean errors of covariance Q_u = diag(sigma_v^2, sigma_alpha^2)
-(`OdometryNoise`; the sigmas may grow with the speed and the lateral acceleration of the
+(`slam.config.OdometryNoise`; the sigmas may grow with the speed and the lateral acceleration of the
 sample); they enter the pose through the analytic Jacobian G = d pose1 / d(v_e, alpha), and the
 pose's own uncertainty through F = d pose1 / d pose.
 """
@@ -33,16 +33,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from slam.checks import finite, float_array, nonnegative_fields, setting, times
+from slam.config import OdometryNoise
 from slam.errors import SlamError
 from slam.se2 import sinc_and_derivative, wrap_angle
+from slam.validators import finite, float_array, times
 
 __all__ = [
     "AckermannModel",
-    "Motion",
     "Odometry",
-    "OdometryNoise",
-    "SteeringCalibration",
     "arc_step",
     "arc_step_jacobians",
     "integrate",
@@ -149,93 +147,6 @@ def arc_step_jacobians(
     return pose1, F, J_dh @ J_va @ J_u
 
 
-@dataclass(frozen=True)
-class OdometryNoise:
-    """Independent errors of each odometry sample's readings (zero-order hold values).
-
-    speed_sigma_mps: standard deviation of the encoder speed reading, m/s.
-    steer_sigma_rad: standard deviation of the steering angle reading, rad.
-    The defaults are those of the simulated Cycab (`experiments.sim.trajectory.CycabParams`).
-    floor_xy_m_per_sqrt_s, floor_theta_rad_per_sqrt_s: a small white process noise on the pose
-        itself (variance per second). It keeps the covariance from being singular when the car
-        is at or near rest: the linearised model then puts no noise on y and theta, while the
-        neglected second-order terms (speed error x steering error, heading error x distance
-        actually driven) do move the car; without it the first scans' NEES reached 2000 in
-        some runs of the tree park. While driving it is negligible (1 mm and 0.1 mrad per
-        square-root second against about 2 cm and 8 mrad per second of odometry noise).
-    speed_sigma_per_speed: the speed sigma grows by this much per m/s of the encoder's reading
-        (a scale error, wheel slip): sigma_v = speed_sigma_mps + speed_sigma_per_speed |v_e|.
-    steer_sigma_per_lateral_mps2: the steering sigma grows by this much (rad) per m/s^2 of the
-        sample's lateral acceleration a = v_c^2 |tan(alpha)| / L (the tyres' slip angles grow
-        with the cornering force): sigma_alpha = steer_sigma_rad + this * a.
-    Both 0 by default (the simulated Cycab's readings carry constant noise); the Victoria Park
-    preset's values are fitted (experiments/paper/vp_calibration.py).
-    """
-
-    speed_sigma_mps: float = 0.1
-    steer_sigma_rad: float = math.radians(2.0)
-    floor_xy_m_per_sqrt_s: float = 0.001
-    floor_theta_rad_per_sqrt_s: float = 0.0001
-    speed_sigma_per_speed: float = 0.0
-    steer_sigma_per_lateral_mps2: float = 0.0
-
-    def __post_init__(self) -> None:
-        nonnegative_fields("vehicle.odometry_noise", self)
-
-    def Q_u(self, v_enc_mps: float, v_axle_mps: float, steer_rad: float, L: float) -> np.ndarray:
-        """(2, 2) covariance of one sample's (v_e, alpha) readings."""
-        sv = self.speed_sigma_mps + self.speed_sigma_per_speed * abs(v_enc_mps)
-        lateral = v_axle_mps * v_axle_mps * abs(math.tan(steer_rad)) / L
-        sa = self.steer_sigma_rad + self.steer_sigma_per_lateral_mps2 * lateral
-        return np.diag([sv * sv, sa * sa])
-
-    @property
-    def Q_floor(self) -> np.ndarray:
-        """(3, 3) pose noise per second (world frame)."""
-        a, b = self.floor_xy_m_per_sqrt_s**2, self.floor_theta_rad_per_sqrt_s**2
-        return np.diag([a, a, b])
-
-
-@dataclass(frozen=True)
-class SteeringCalibration:
-    """The front-wheel angle from the steering reading r:
-
-        alpha = offset_rad + gain r + cubic_per_rad2 r^3
-
-    A steering sensor reads the wheel angle through a linkage, and a bicycle model's single
-    wheel stands for two that turn by different angles, so the angle that sets the turn rate
-    v tan(alpha) / L need not be the reading itself. The identity by default (the simulated
-    Cycab's readings are the model's angle); the Victoria Park preset's gain and cubic term are
-    fitted (experiments/paper/vp_calibration.py). The odometry noise (`OdometryNoise`) applies to
-    the calibrated angle.
-    """
-
-    offset_rad: float = 0.0
-    gain: float = 1.0
-    cubic_per_rad2: float = 0.0
-
-    def __post_init__(self) -> None:
-        for name in ("offset_rad", "gain", "cubic_per_rad2"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise SlamError(f"SteeringCalibration.{name}: must be a finite number, got {v!r}")
-        if not self.gain > 0:
-            raise SlamError(f"SteeringCalibration.gain: must be > 0, got {self.gain!r}")
-        for name in ("offset_rad", "gain", "cubic_per_rad2"):  # the range where the maths holds
-            setting(f"SteeringCalibration.{name}", getattr(self, name), signed=True)
-
-    @property
-    def is_identity(self) -> bool:
-        return self.offset_rad == 0.0 and self.gain == 1.0 and self.cubic_per_rad2 == 0.0
-
-    def apply(self, steer_rad: np.ndarray) -> np.ndarray:
-        """The calibrated angles of readings `steer_rad` (the same array when the identity)."""
-        if self.is_identity:
-            return steer_rad
-        r = np.asarray(steer_rad, dtype=np.float64)
-        return self.offset_rad + self.gain * r + self.cubic_per_rad2 * r**3
-
-
 @dataclass(frozen=True, eq=False)
 class Odometry:
     """Odometry samples (zero-order hold).
@@ -276,25 +187,6 @@ class Odometry:
         dt = np.diff(edges)
         keep = dt > 0
         return dt[keep], self.speed_mps[idx[keep]], self.steer_rad[idx[keep]]
-
-
-@dataclass(frozen=True, eq=False)
-class Motion:
-    """A vehicle's motion from its odometry: the model, the samples, and their noise."""
-
-    model: AckermannModel
-    odometry: Odometry
-    noise: OdometryNoise
-
-    def integrate(self, pose: np.ndarray, t0_s: float, t1_s: float):
-        """(pose1 (3,), F (3, 3), Q (3, 3)) from t0_s to t1_s (`integrate`)."""
-        return integrate(self.model, pose, self.odometry, t0_s, t1_s, noise=self.noise)
-
-    def distance(self, t0_s: float, t1_s: float) -> float:
-        """Distance the rear-axle centre drove from t0_s to t1_s by the odometry (m)."""
-        dt, v, a = self.odometry.pieces(t0_s, t1_s)
-        k = self.model.encoder_offset_m / self.model.wheelbase_m
-        return float(np.sum(np.abs(v / (1.0 - k * np.tan(a))) * dt))
 
 
 def integrate(

@@ -885,6 +885,36 @@ _DTYPES = ["f8", "f4", "f2", "i8", "i1", "u8", "?", "c16", "M8[s]", "m8[s]", "U3
 _SPECIAL = [math.nan, math.inf, -math.inf, 1e300, -1e300, 0.0, -1.0, 1e-300, 2.0**62]
 
 
+def _reshaped(draw, st, a: np.ndarray) -> np.ndarray:
+    """`a` with its shape changed (a draw of `mutated_arrays`)."""
+    shape = draw(st.sampled_from(["scalar", "empty", "more", "less", "extra", "flat"]))
+    if shape == "scalar":
+        return np.array(a.reshape(-1)[0] if a.size else 1.0)
+    if shape == "empty":
+        return a[:0] if a.ndim else np.zeros(0)
+    if shape == "more":
+        return np.concatenate([a, a[-1:]]) if a.ndim and a.size else a
+    if shape == "less":
+        return a[:-1] if a.ndim else a
+    if shape == "extra":
+        return a[..., None]
+    return a.reshape(-1)
+
+
+def _damaged_bytes(draw, st, a: np.ndarray) -> bytes:
+    """The .npy bytes of `a` damaged: bytes after its data, cut short, or bytes flipped."""
+    data = npy_bytes(a)
+    how = draw(st.sampled_from(["trailing", "cut", "flip"]))
+    if how == "trailing":
+        return data + b"\0" * draw(st.integers(1, 64))
+    if how == "cut":
+        return data[: draw(st.integers(0, len(data) - 1))]
+    data = bytearray(data)
+    for _ in range(draw(st.integers(1, 8))):
+        data[draw(st.integers(0, len(data) - 1))] ^= 0xFF
+    return bytes(data)
+
+
 def mutated_arrays(bases: dict[str, dict[str, np.ndarray]], max_ops: int = 3):
     """A strategy: (arrays, raw) of an `.npz` from one of the valid `bases` with 1..max_ops
     mutations: a variable's dtype changed (complex, datetime, boolean, strings, bytes, objects,
@@ -924,20 +954,7 @@ def mutated_arrays(bases: dict[str, dict[str, np.ndarray]], max_ops: int = 3):
                 except (TypeError, ValueError, OverflowError):
                     arrays[k] = np.zeros(a.shape, dt)
             elif op == "shape":
-                shape = draw(st.sampled_from(["scalar", "empty", "more", "less", "extra",
-                                              "flat"]))  # fmt: skip
-                if shape == "scalar":
-                    arrays[k] = np.array(a.reshape(-1)[0] if a.size else 1.0)
-                elif shape == "empty":
-                    arrays[k] = a[:0] if a.ndim else np.zeros(0)
-                elif shape == "more":
-                    arrays[k] = np.concatenate([a, a[-1:]]) if a.ndim and a.size else a
-                elif shape == "less":
-                    arrays[k] = a[:-1] if a.ndim else a
-                elif shape == "extra":
-                    arrays[k] = a[..., None]
-                else:
-                    arrays[k] = a.reshape(-1)
+                arrays[k] = _reshaped(draw, st, a)
             elif op == "values":
                 if a.dtype.kind in "fiu" and a.size:
                     b = a.astype(np.float64 if a.dtype.kind == "f" else np.int64)
@@ -950,18 +967,7 @@ def mutated_arrays(bases: dict[str, dict[str, np.ndarray]], max_ops: int = 3):
                         flat[i] = v
                     arrays[k] = b
             elif op == "raw":
-                data = npy_bytes(a)
-                how = draw(st.sampled_from(["trailing", "cut", "flip"]))
-                if how == "trailing":
-                    data += b"\0" * draw(st.integers(1, 64))
-                elif how == "cut":
-                    data = data[: draw(st.integers(0, len(data) - 1))]
-                else:
-                    data = bytearray(data)
-                    for _ in range(draw(st.integers(1, 8))):
-                        data[draw(st.integers(0, len(data) - 1))] ^= 0xFF
-                    data = bytes(data)
-                raw[k] = data
+                raw[k] = _damaged_bytes(draw, st, a)
             elif op == "json" and a.dtype.kind == "U" and a.ndim == 0:
                 try:
                     doc = json.loads(str(a))

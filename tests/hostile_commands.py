@@ -378,11 +378,16 @@ def _compression(fmt: str, mode: str):
 
 
 def rosbag_cases() -> list[CommandCase]:
-    rng = np.random.default_rng(43)
-    junk = rng.bytes(4096)
-    later = BagPlan(odo_ns=tuple(EPOCH_NS + 2_000_000_000 + k * 100_000_000 for k in range(8)))
-    negative = BagPlan(scan_ns=(-1_000_000_000,) + BagPlan().scan_ns[1:])
-    out = [
+    junk = np.random.default_rng(43).bytes(4096)
+    out = _bag_file_cases(junk) + _bag_content_cases()
+    if os.geteuid() != 0:
+        out.append(_bag_case("the .db3 unreadable", "bag", _bag(after=_chmod0("bag.db3"))))
+    return out
+
+
+def _bag_file_cases(junk: bytes) -> list[CommandCase]:
+    """Bags that are not bags: the files, their metadata and their storage damaged."""
+    return [
         _bag_case("an .mcap of its magic bytes", "mcap.mcap", _file("mcap.mcap", b"\x89MCAP0\r\n")),
         _bag_case("random bytes named .bag", "rand.bag", _file("rand.bag", junk)),
         _bag_case("an empty .bag", "empty.bag", _file("empty.bag", b"")),
@@ -419,6 +424,14 @@ def rosbag_cases() -> list[CommandCase]:
         _bag_case("the .db3 a FIFO", "bag.db3", _bag(after=_fifo_at("bag.db3"))),
         _bag_case("the .db3 random bytes", "bag", _bag(after=_replace_storage(junk))),
         _bag_case("the .db3 empty", "bag", _bag(after=_replace_storage(b""))),
+    ]
+
+
+def _bag_content_cases() -> list[CommandCase]:
+    """Valid bags with bad contents (stamps, values), bad options and outputs."""
+    later = BagPlan(odo_ns=tuple(EPOCH_NS + 2_000_000_000 + k * 100_000_000 for k in range(8)))
+    negative = BagPlan(scan_ns=(-1_000_000_000,) + BagPlan().scan_ns[1:])
+    return [
         _bag_case("a negative scan stamp", "negative", _bag(negative)),
         _bag_case("odometry only after the last scan", "odometry", _bag(later)),
         _bag_case(
@@ -467,9 +480,6 @@ def rosbag_cases() -> list[CommandCase]:
             out=lambda f, bag: _link(f / "seq.npz", precious(f)),
         ),  # fmt: skip
     ]
-    if os.geteuid() != 0:
-        out.append(_bag_case("the .db3 unreadable", "bag", _bag(after=_chmod0("bag.db3"))))
-    return out
 
 
 def _chmod0(name: str):
@@ -523,131 +533,144 @@ def _lock(out: Path) -> Path:
     return out.parent / f".{out.name}.lock"
 
 
+def _link_slam(where):
+    def setup(f):
+        d, out = drive(f), f / "out"
+        at = {"--out lock": _lock(out), "--out": out, "--rerun": f / "rec.rrd"}[where]
+        extra = ["--rerun", f / "rec.rrd"] if where == "--rerun" else []
+        return ["slam", d, "--out", out, *extra], at, d
+
+    return setup
+
+
+def _link_slam_smooth(f):
+    d, out = drive(f), f / "out"
+    return ["slam", d, "--out", out, "--smooth"], _lock(out), d
+
+
+def _link_smooth(where):
+    def setup(f):
+        run = slam_run(f)
+        at = _lock(run) if where == "RUN_DIR lock" else run / where
+        if at.exists():
+            at.unlink()
+        return ["smooth", run], at, run / "run_log.npz"
+
+    return setup
+
+
+def _link_export(where):
+    def setup(f):
+        d, out = drive(f), f / "ref"
+        return ["export-reference", d, "--out", out], _lock(out) if "lock" in where else out, d
+
+    return setup
+
+
+def _link_extract(where):
+    def setup(f):
+        d = drive(f)
+        at = f / ("features.json" if where == "--out" else "rec.rrd")
+        extra = ["--rerun", f / "rec.rrd"] if where == "--rerun" else []
+        return ["extract", d, "--out", f / "features.json", *extra], at, d
+
+    return setup
+
+
+def _link_simulate(f):
+    return ["simulate", "test_yard", "--pose", "0,0,0", "--out", f / "s.npz"], f / "s.npz", None
+
+
+def _link_simulate_drive(f):
+    out = f / "d.npz"
+    return ["simulate-drive", "--scans", "3", "--out", out], out, None
+
+
+def _link_convert(f):
+    bag = write_bag(f / "bag")
+    out = f / "seq.npz"
+    return ["convert", "rosbag", bag, *ROS_ARGS, "--out", out], out, bag / "bag.db3"
+
+
+def _link_sweep(where):
+    def setup(f):
+        spec = f / "sw.toml"
+        spec.write_text(SWEEP)
+        out = f / "sweep"
+        return ["sweep", spec, "--out", out], _lock(out) if "lock" in where else out, spec
+
+    return setup
+
+
+def _link_reproduce(where):
+    def setup(f):
+        out = f / "results"
+        args = ["reproduce", "noise-calibration", "--quick", "--workers", "1", "--out", out]
+        return args, _lock(out) if "lock" in where else out, None
+
+    return setup
+
+
+def _link_bench(f):
+    out = f / "bench.md"
+    return ["bench", "raycast", "--repeats", "1", "--out", out], out, None
+
+
+def _link_export_graph(f):
+    run = slam_run(f)
+    out = f / "run.g2o"
+    return ["export-graph", run, "--out", out], out, run / "run_log.npz"
+
+
+def _link_export_map(f):
+    run = slam_run(f)
+    out = f / "map.geojson"
+    return ["export-map", run, "--out", out], out, run / "map.csv"
+
+
+def _link_report(where):
+    def setup(f):
+        bench = f / "bench_results"
+        bench.mkdir()
+        (bench / "bench_x.md").write_text("A table (a machine)\n\n| a |\n|---|\n| 1 |\n")
+        docs = f / "site" / "results"
+        docs.parent.mkdir()
+        readme = f / "README.md"
+        at = readme if where == "--readme" else _lock(docs)
+        shown = readme if where == "--readme" else ""
+        args = ["report", bench, "--docs", docs, "--readme", shown, "--pages", ""]
+        return args, at, bench / "bench_x.md"
+
+    return setup
+
+
 def _link_setups() -> dict[tuple[str, str], Callable]:
     """(command, planted path's role) -> setup(folder) -> (args, planted path, input)."""
-
-    def slam(where):
-        def setup(f):
-            d, out = drive(f), f / "out"
-            at = {"--out lock": _lock(out), "--out": out, "--rerun": f / "rec.rrd"}[where]
-            extra = ["--rerun", f / "rec.rrd"] if where == "--rerun" else []
-            return ["slam", d, "--out", out, *extra], at, d
-
-        return setup
-
-    def slam_smooth(f):
-        d, out = drive(f), f / "out"
-        return ["slam", d, "--out", out, "--smooth"], _lock(out), d
-
-    def smooth(where):
-        def setup(f):
-            run = slam_run(f)
-            at = _lock(run) if where == "RUN_DIR lock" else run / where
-            if at.exists():
-                at.unlink()
-            return ["smooth", run], at, run / "run_log.npz"
-
-        return setup
-
-    def export(where):
-        def setup(f):
-            d, out = drive(f), f / "ref"
-            return ["export-reference", d, "--out", out], _lock(out) if "lock" in where else out, d
-
-        return setup
-
-    def extract(where):
-        def setup(f):
-            d = drive(f)
-            at = f / ("features.json" if where == "--out" else "rec.rrd")
-            extra = ["--rerun", f / "rec.rrd"] if where == "--rerun" else []
-            return ["extract", d, "--out", f / "features.json", *extra], at, d
-
-        return setup
-
-    def simulate(f):
-        return ["simulate", "test_yard", "--pose", "0,0,0", "--out", f / "s.npz"], f / "s.npz", None
-
-    def simulate_drive(f):
-        out = f / "d.npz"
-        return ["simulate-drive", "--scans", "3", "--out", out], out, None
-
-    def convert(f):
-        bag = write_bag(f / "bag")
-        out = f / "seq.npz"
-        return ["convert", "rosbag", bag, *ROS_ARGS, "--out", out], out, bag / "bag.db3"
-
-    def sweep(where):
-        def setup(f):
-            spec = f / "sw.toml"
-            spec.write_text(SWEEP)
-            out = f / "sweep"
-            return ["sweep", spec, "--out", out], _lock(out) if "lock" in where else out, spec
-
-        return setup
-
-    def reproduce(where):
-        def setup(f):
-            out = f / "results"
-            args = ["reproduce", "noise-calibration", "--quick", "--workers", "1", "--out", out]
-            return args, _lock(out) if "lock" in where else out, None
-
-        return setup
-
-    def bench(f):
-        out = f / "bench.md"
-        return ["bench", "raycast", "--repeats", "1", "--out", out], out, None
-
-    def export_graph(f):
-        run = slam_run(f)
-        out = f / "run.g2o"
-        return ["export-graph", run, "--out", out], out, run / "run_log.npz"
-
-    def export_map(f):
-        run = slam_run(f)
-        out = f / "map.geojson"
-        return ["export-map", run, "--out", out], out, run / "map.csv"
-
-    def report(where):
-        def setup(f):
-            bench = f / "bench_results"
-            bench.mkdir()
-            (bench / "bench_x.md").write_text("A table (a machine)\n\n| a |\n|---|\n| 1 |\n")
-            docs = f / "site" / "results"
-            docs.parent.mkdir()
-            readme = f / "README.md"
-            at = readme if where == "--readme" else _lock(docs)
-            shown = readme if where == "--readme" else ""
-            args = ["report", bench, "--docs", docs, "--readme", shown, "--pages", ""]
-            return args, at, bench / "bench_x.md"
-
-        return setup
-
     return {
-        ("slam", "--out lock"): slam("--out lock"),
-        ("slam", "--out"): slam("--out"),
-        ("slam", "--rerun"): slam("--rerun"),
-        ("slam --smooth", "--out lock"): slam_smooth,
-        ("smooth", "RUN_DIR lock"): smooth("RUN_DIR lock"),
-        ("smooth", "smoother.json"): smooth("smoother.json"),
-        ("smooth", "trajectory_smoothed.tum"): smooth("trajectory_smoothed.tum"),
-        ("smooth", "map_smoothed.csv"): smooth("map_smoothed.csv"),
-        ("export-reference", "--out lock"): export("--out lock"),
-        ("export-reference", "--out"): export("--out"),
-        ("extract", "--out"): extract("--out"),
-        ("extract", "--rerun"): extract("--rerun"),
-        ("simulate", "--out"): simulate,
-        ("simulate-drive", "--out"): simulate_drive,
-        ("convert rosbag", "--out"): convert,
-        ("sweep", "--out lock"): sweep("--out lock"),
-        ("sweep", "--out"): sweep("--out"),
-        ("reproduce", "--out lock"): reproduce("--out lock"),
-        ("reproduce", "--out"): reproduce("--out"),
-        ("bench raycast", "--out"): bench,
-        ("export-graph", "--out"): export_graph,
-        ("export-map", "--out"): export_map,
-        ("report", "--docs lock"): report("--docs lock"),
-        ("report", "--readme"): report("--readme"),
+        ("slam", "--out lock"): _link_slam("--out lock"),
+        ("slam", "--out"): _link_slam("--out"),
+        ("slam", "--rerun"): _link_slam("--rerun"),
+        ("slam --smooth", "--out lock"): _link_slam_smooth,
+        ("smooth", "RUN_DIR lock"): _link_smooth("RUN_DIR lock"),
+        ("smooth", "smoother.json"): _link_smooth("smoother.json"),
+        ("smooth", "trajectory_smoothed.tum"): _link_smooth("trajectory_smoothed.tum"),
+        ("smooth", "map_smoothed.csv"): _link_smooth("map_smoothed.csv"),
+        ("export-reference", "--out lock"): _link_export("--out lock"),
+        ("export-reference", "--out"): _link_export("--out"),
+        ("extract", "--out"): _link_extract("--out"),
+        ("extract", "--rerun"): _link_extract("--rerun"),
+        ("simulate", "--out"): _link_simulate,
+        ("simulate-drive", "--out"): _link_simulate_drive,
+        ("convert rosbag", "--out"): _link_convert,
+        ("sweep", "--out lock"): _link_sweep("--out lock"),
+        ("sweep", "--out"): _link_sweep("--out"),
+        ("reproduce", "--out lock"): _link_reproduce("--out lock"),
+        ("reproduce", "--out"): _link_reproduce("--out"),
+        ("bench raycast", "--out"): _link_bench,
+        ("export-graph", "--out"): _link_export_graph,
+        ("export-map", "--out"): _link_export_map,
+        ("report", "--docs lock"): _link_report("--docs lock"),
+        ("report", "--readme"): _link_report("--readme"),
     }
 
 
@@ -736,9 +759,12 @@ def _sweep_with(text: str):
 
 
 def option_cases() -> list[CommandCase]:
-    S = ["slam", "DRIVE", "--out", "OUT"]
-    U = ["smooth", "RUNUTF8"]
-    cases = [
+    return [_expand(c) for c in _executor_option_cases() + _input_option_cases()]
+
+
+def _executor_option_cases() -> list:
+    """Options of where and how work runs: workers, threads, Dask, bench sizes."""
+    return [
         _opt("reproduce --workers 10**30", "--workers", lambda f: [
             "reproduce", "noise-calibration", "--workers", BIG, "--out", f / "r"]),
         _opt("sweep --workers 10**30", "--workers", lambda f: [
@@ -770,6 +796,14 @@ def option_cases() -> list[CommandCase]:
             "--out", f / "s"]),
         _opt("bench reproduce --dask bogus://x", "--dask", lambda f: [
             "bench", "reproduce", "noise-calibration", "--dask", "bogus://x"]),
+    ]  # fmt: skip
+
+
+def _input_option_cases() -> list:
+    """Options naming inputs and outputs (configs, sweeps, scenes, paths) and numeric options."""
+    S = ["slam", "DRIVE", "--out", "OUT"]
+    U = ["smooth", "RUNUTF8"]
+    return [
         _opt("slam --config /dev/zero", "/dev/zero", _with_drive(*S, "--config", "/dev/zero")),
         _opt("slam --config /dev/urandom", "/dev/urandom", _with_drive(
             *S, "--config", "/dev/urandom")),
@@ -833,7 +867,6 @@ def option_cases() -> list[CommandCase]:
         _opt("bench association --seed 10**30", "--seed", lambda f: [
             "bench", "association", "--repeats", "1", "--seed", BIG], ok_if_runs=True),
     ]  # fmt: skip
-    return [_expand(c) for c in cases]
 
 
 def _renamed(p: Path, name: str) -> Path:

@@ -65,10 +65,10 @@ def extract_summary(settings: dict) -> dict:
     methods = ["bailey"] if cfg.features.method == "bailey" else ["paper", "geometric", "kasa"]
     out = {}
     for method in methods:
-        kwargs = cfg.features.extractor_kwargs()
+        params, options = cfg.features.extractor_args()
         n, finite = 0, True
         for k in range(seq.n_scans):
-            feats = extract_features(seq.scan(k), method, **kwargs)
+            feats = extract_features(seq.scan(k), method, params, **options)
             n += feats.circle_params.shape[0]
             finite &= bool(np.isfinite(feats.circle_params).all())
             finite &= bool(np.isfinite(feats.circle_cov).all())

@@ -64,7 +64,7 @@ def victoria_park_1000() -> dict:
     from experiments.eval.gps import score_sequence
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_victoria_park
-    from experiments.paper.victoria_park import nis_inside
+    from experiments.paper.victoria_park.real_run import nis_inside
     from slam import run_slam
 
     seq = load_victoria_park(full=True, n_scans=1000)

@@ -5,17 +5,21 @@
 - rooms of `experiments`: a room imports only rooms below it (`errors` and `bundled`, the
   package data's folders, at the bottom; `io`, `sim`, `eval` and `exec` never import `paper`,
   `bench`, `pipeline`, `render` or `cli`);
-- third-party packages confined to one module (gtsam, rerun, matplotlib, dask, rosbags);
+- third-party packages confined to one module (gtsam, rerun, dask, rosbags), matplotlib to the
+  figure modules (`experiments/render/plots.py`, `experiments/paper/**/*figures.py`);
 - no private name (`_x`) or private module imported from another module;
+- no import circle among the modules of the packages (imports inside functions count too);
 - STYLE.md section 4b's signs of a missing name: no function over 80 lines (numba kernels
-  aside) and no call with more than five positional arguments (calls of numba kernels, of a
-  logger and of builtins aside).
+  aside; in the packages, tests/, docs/*.py and examples/) and no call with more than five
+  positional arguments in the packages (calls of numba kernels, of a logger and of builtins
+  aside).
 """
 
 from __future__ import annotations
 
 import ast
 import builtins
+import re
 from pathlib import Path
 
 import pytest
@@ -43,11 +47,12 @@ ROOMS = {
     "cli": {"errors", "bundled", "io", "sim", "eval", "render", "exec"}
     | {"paper", "bench", "pipeline"},
 }
+# matplotlib: the figure modules (each experiment's, beside it) and their shared helpers
+FIGURE_MODULES = re.compile(r"experiments/(render/plots|paper/(\w+/)?(\w+_)?figures)\.py")
 # third-party packages confined to one module
 CONFINED = {
     "gtsam": "slam/smoother.py",
     "rerun": "experiments/render/viz.py",
-    "matplotlib": "experiments/render/plots.py",
     "dask": "experiments/exec/cluster.py",
     "distributed": "experiments/exec/cluster.py",
     "rosbags": "experiments/io/rosbag.py",
@@ -91,6 +96,8 @@ def test_imports_flow_one_way(path):
     for lib, home in CONFINED.items():
         if lib in top_level(path):
             assert rel == home, f"{rel} imports {lib}; only {home} may"
+    if "matplotlib" in top_level(path):
+        assert FIGURE_MODULES.fullmatch(rel), f"{rel} imports matplotlib; only figure modules may"
 
 
 @pytest.mark.parametrize("path", EXPERIMENTS, ids=lambda p: str(p.relative_to(ROOT)))
@@ -122,6 +129,7 @@ def test_no_private_names_cross_modules(path):
 
 def test_the_checks_see_files():
     assert len(FILES) > 40 and len(EXPERIMENTS) > 20
+    assert {p.relative_to(ROOT).parts[0] for p in READ_TOO} == {"tests", "docs", "examples"}
     assert "features" in top_level(ROOT / "features" / "__init__.py")
     assert {room(p.relative_to(ROOT)) for p in EXPERIMENTS} == set(ROOMS)
     assert "experiments.io.writers" in imported_modules(ROOT / "experiments/render/plots.py")
@@ -135,6 +143,82 @@ def test_library_code_never_points_into_tests():
             if isinstance(node, ast.Constant) and isinstance(node.value, str):
                 v = node.value
                 assert v != "tests" and "tests/golden" not in v, f"{path}: {v[:60]!r}"
+
+
+def module_name(path: Path) -> str:
+    """The dotted module of a file of the packages (a package's __init__ is the package)."""
+    return ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+
+
+def import_graph(files) -> dict[str, set[str]]:
+    """Module -> the modules of `files` it imports (`from a.b import c` imports a.b.c when c
+    is a module of `files`, a.b otherwise)."""
+    names = {module_name(p) for p in files}
+    graph = {}
+    for path in files:
+        deps = set()
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.Import):
+                deps |= {a.name for a in node.names if a.name in names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                for a in node.names:
+                    full = f"{node.module}.{a.name}"
+                    deps |= {full} if full in names else {node.module} & names
+        graph[module_name(path)] = deps - {module_name(path)}
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import circles of `graph`: its strongly connected components of more than one
+    module (Tarjan's algorithm, iterative), each sorted."""
+    index, low, stack, on, out = {}, {}, [], set(), []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on.add(root)
+        while work:
+            v, children = work[-1]
+            w = next(children, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on.add(w)
+                    work.append((w, iter(sorted(graph.get(w, ())))))
+                elif w in on:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                comp = []
+                while True:
+                    w = stack.pop()
+                    on.discard(w)
+                    comp.append(w)
+                    if w == v:
+                        break
+                if len(comp) > 1:
+                    out.append(sorted(comp))
+    return out
+
+
+def test_no_import_circles():
+    """No module of slam/, features/, association/ or experiments/ imports, through others, a
+    module that imports it: each module can be read (and tested) after the ones it uses."""
+    found = circles(import_graph(FILES))
+    assert not found, f"import circles: {found}"
+
+
+def test_the_circle_check_sees_circles():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": {"e2"}, "e2": set()}
+    assert circles(graph) == [["a", "b", "c"]]
+    assert circles({"x": {"y"}, "y": {"x"}, "z": set()}) == [["x", "y"]]
+    assert "slam.config" in import_graph(FILES)["slam.checks"]
 
 
 def test_datasets_is_not_a_python_package():
@@ -213,10 +297,21 @@ def long_calls(tree: ast.Module, rel: str) -> list[str]:
     ]
 
 
-@pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(ROOT)))
+# beyond the packages, the function-length check reads the tests, the docs' scripts and examples
+READ_TOO = sorted(
+    [
+        *(ROOT / "tests").rglob("*.py"),
+        *(ROOT / "docs").glob("*.py"),
+        *(ROOT / "examples").rglob("*.py"),
+    ]
+)
+
+
+@pytest.mark.parametrize("path", FILES + READ_TOO, ids=lambda p: str(p.relative_to(ROOT)))
 def test_no_function_over_80_lines(path):
     """A function longer than a screen is a concept without a name (STYLE.md section 4b)."""
-    bad = long_functions(TREES[path])
+    tree = TREES[path] if path in TREES else ast.parse(path.read_text(), filename=str(path))
+    bad = long_functions(tree)
     assert not bad, f"{path.relative_to(ROOT)}: {bad}"
 
 

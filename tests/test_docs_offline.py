@@ -113,3 +113,16 @@ def test_a_headless_browser_finds_a_page_from_disk(site):
     assert res.returncode == 0, res.stderr[-2000:]
     assert re.search(r'class="md-search-result__item"', res.stdout), res.stdout[-3000:]
     assert "victoria-park.html" in res.stdout
+
+
+def test_the_tutorial_page_is_the_notebook_as_run(site):
+    """tutorial.html is examples/tutorial.ipynb executed at build time (docs/hooks/notebook.py,
+    mkdocs-jupyter): its two figures inline, its scores printed, and in place of the rerun
+    widget a note, with no widget loader (it would fetch from unpkg.com) or state left."""
+    page = (site / "tutorial.html").read_text(encoding="utf-8")
+    assert len(re.findall(r'<img[^>]+src="data:image/png;base64,', page)) == 2
+    assert re.search(r"EKF\s+ATE \d\.\d{4} m \| NEES mean", page)
+    assert re.search(r"smoothed\s+ATE \d\.\d{4} m \| NEES mean", page)
+    assert "The rerun viewer shows here in Jupyter" in page
+    for gone in ("addWidgetsRenderer", "unpkg.com", "widget-state+json", "widget-view+json"):
+        assert gone not in page, gone

@@ -35,9 +35,10 @@ def _timed_calls() -> dict[str, Callable[[dict], object]]:
     (IHGR with and without presolve; the K = 3 window, fed every scan in turn)."""
     from association import SlidingWindowAssociator, associate_detailed
     from association.inputs import prepare
+    from experiments.paper.association import STUDY_GATE_PROB
 
     args = ("z", "R", "z_hat", "H", "P")
-    win = SlidingWindowAssociator(K=3)
+    win = SlidingWindowAssociator(K=3, gate_prob=STUDY_GATE_PROB)
     Q_rel = np.diag([0.02**2, 0.02**2, math.radians(0.2) ** 2])
 
     def window(s):
@@ -45,12 +46,18 @@ def _timed_calls() -> dict[str, Callable[[dict], object]]:
         return win.last
 
     return {
-        "checks": lambda s: prepare(*(s[a] for a in args), 0.99),
-        "ihgr": lambda s: associate_detailed(*(s[a] for a in args), "ihgr"),
-        "ihgr_nopre": lambda s: associate_detailed(*(s[a] for a in args), "ihgr", presolve=False),
+        "checks": lambda s: prepare(*(s[a] for a in args), STUDY_GATE_PROB),
+        "ihgr": lambda s: associate_detailed(
+            *(s[a] for a in args), "ihgr", gate_prob=STUDY_GATE_PROB
+        ),
+        "ihgr_nopre": lambda s: associate_detailed(
+            *(s[a] for a in args), "ihgr", presolve=False, gate_prob=STUDY_GATE_PROB
+        ),
         "window": window,
-        "jcbb": lambda s: associate_detailed(*(s[a] for a in args), "jcbb"),
-        "nn": lambda s: associate_detailed(*(s[a] for a in args), "nn"),
+        "jcbb": lambda s: associate_detailed(
+            *(s[a] for a in args), "jcbb", gate_prob=STUDY_GATE_PROB
+        ),
+        "nn": lambda s: associate_detailed(*(s[a] for a in args), "nn", gate_prob=STUDY_GATE_PROB),
     }
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from slam import interpolate_poses, se2
-from slam.start import procrustes_2d
+from slam.se2 import procrustes_2d
 
 __all__ = [
     "GpsScore",

@@ -28,7 +28,7 @@ from scipy.spatial import cKDTree
 from slam import se2
 from slam.closure import SAME_TREE_M
 from slam.log import OUT_OF_RANGE, SKIPPED
-from slam.start import procrustes_2d
+from slam.se2 import procrustes_2d
 
 __all__ = [
     "false_detection_rate",

@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from slam import se2
-from slam.start import procrustes_2d
+from slam.se2 import procrustes_2d
 
 __all__ = [
     "PAIR_POOL",

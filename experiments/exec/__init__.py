@@ -17,6 +17,7 @@ Nothing here imports numpy at module level: a worker process sets its thread lim
 numpy loads.
 """
 
+from experiments.exec.choose import make_executor
 from experiments.exec.trials import (
     Batch,
     Executor,
@@ -24,7 +25,6 @@ from experiments.exec.trials import (
     TrialFailure,
     TrialsFailed,
     describe_seed,
-    make_executor,
     spawn_seeds,
 )
 

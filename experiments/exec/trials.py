@@ -14,7 +14,6 @@ from __future__ import annotations
 import copy
 import logging
 import math
-import os
 import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
@@ -29,7 +28,6 @@ __all__ = [
     "TrialFailure",
     "TrialsFailed",
     "describe_seed",
-    "make_executor",
     "run_chunk",
     "spawn_seeds",
 ]
@@ -283,23 +281,3 @@ def _blas_controller():
 
         _CONTROLLER = ThreadpoolController()
     return _CONTROLLER
-
-
-def make_executor(workers: int | None = None, dask: str | None = None) -> Executor:
-    """The executor `--workers N` / `--dask ADDRESS` ask for: a Dask scheduler when an address
-    is given, else N local processes (None: every core this process may use), else (N = 1) this
-    process. The caller closes it."""
-    if dask:
-        from experiments.exec.cluster import DaskExecutor
-
-        return DaskExecutor(dask)
-    if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
-        workers = workers or os.cpu_count() or 1
-    if workers < 1:
-        raise ConfigError(f"--workers must be at least 1, got {workers}")
-    if workers == 1:
-        return SerialExecutor()
-    from experiments.exec.local import ProcessExecutor
-
-    return ProcessExecutor(workers)

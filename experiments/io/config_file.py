@@ -2,6 +2,9 @@
 
 The file's tables are the sections of `slam.SlamConfig` ([features], [association],
 [measurement], [vehicle], [start], [map_policy], [filter]); keys left out keep their defaults.
+A preset (experiments/presets/*.toml) stores only what differs from the built-in settings
+(`preset_toml`) and is read as that diff over them; the `config.toml` a run writes holds every
+setting (`config_toml`), so it reproduces the run whatever the built-in settings become.
 `SlamConfig.from_dict` refuses unknown keys (suggesting the nearest, or where a key of the
 earlier flat format lives now), wrong types and impossible values, and the error names the file
 and the key. Presets: experiments/presets/*.toml, package data (`experiments.bundled`), so an
@@ -26,7 +29,14 @@ from experiments.io.paths import check_depth, read_text_file
 if TYPE_CHECKING:  # `slam` (numpy, numba, scipy) loads when a configuration is read, not for
     from slam import SlamConfig  # `trunkslam presets` or a misspelt preset's name
 
-__all__ = ["config_toml", "load_slam_config", "preset_path", "presets"]
+__all__ = [
+    "config_diff",
+    "config_toml",
+    "load_slam_config",
+    "preset_path",
+    "preset_toml",
+    "presets",
+]
 
 
 def presets() -> dict[str, str]:
@@ -79,3 +89,63 @@ def config_toml(cfg: SlamConfig, header: str = "") -> str:
     """The configuration as TOML text (what `load_slam_config` reads back)."""
     lines = "".join(f"# {h}\n" for h in header.splitlines()) if header else ""
     return lines + tomli_w.dumps(cfg.to_dict())
+
+
+# Tables written whole when any of their keys differs: a constant noise model is read as its four
+# sigmas together (`slam.measurement.NoiseModel`), the associator's parameters as one table.
+_WHOLE = ("measurement.constant_noise.", "association.params")
+
+
+def config_diff(data: dict, base: dict, path: str = "") -> dict:
+    """The settings of `data` (a `SlamConfig.to_dict()`) that differ from `base`'s, as a nested
+    dict that `SlamConfig.from_dict` reads back to `data`'s configuration."""
+    out = {}
+    for key, value in data.items():
+        where = f"{path}.{key}" if path else key
+        if key in base and base[key] == value:
+            continue
+        whole = where.startswith(_WHOLE[0]) or where == _WHOLE[1]
+        if isinstance(value, dict) and isinstance(base.get(key), dict) and not whole:
+            value = config_diff(value, base[key], where)
+            if not value:
+                continue
+        out[key] = value
+    return out
+
+
+def preset_toml(cfg: SlamConfig, header: str = "") -> str:
+    """The configuration as a preset: only the settings that differ from the built-in ones
+    (`SlamConfig()`), which `load_slam_config` reads back to `cfg` (checked here: a setting the
+    diff cannot carry, such as None over a built-in value, is an error)."""
+    from slam import SlamConfig
+
+    diff = config_diff(cfg.to_dict(), SlamConfig().to_dict())
+    if SlamConfig.from_dict(diff) != cfg:
+        raise ConfigError("this configuration cannot be written as a diff from the built-in one")
+    lines = "".join(f"# {h}\n" for h in header.splitlines()) if header else ""
+    return lines + "\n".join(_tables(diff, ""))
+
+
+def _tables(d: dict, path: str) -> list[str]:
+    """Short TOML of a nested dict: a table of plain values (a noise model, a calibration) is
+    written inline on its key's line, arrays on one line; blocks separated by blank lines."""
+    inline = {k: v for k, v in d.items() if not isinstance(v, dict) or (path and _plain_table(v))}
+    lines = [f"[{path}]"] if path and inline else []
+    lines += [f"{k} = {_value(v)}" for k, v in inline.items()]
+    blocks = ["\n".join(lines) + "\n"] if lines else []
+    for k, v in d.items():
+        if k not in inline:
+            blocks += _tables(v, f"{path}.{k}" if path else k)
+    return blocks
+
+
+def _plain_table(d: dict) -> bool:
+    return all(not isinstance(v, dict) for v in d.values())
+
+
+def _value(v) -> str:
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + " }"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    return tomli_w.dumps({"v": v})[4:-1]

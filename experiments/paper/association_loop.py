@@ -171,8 +171,8 @@ def tree_park_trial(job: tuple, seed: int) -> dict:
     )
     seq = simulate_cycab_run(np.random.default_rng(seed), "tree_park", cyc)
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
-    kwargs = base.features.extractor_kwargs()
-    feats = [extract_features(seq.scan(k), "paper", **kwargs) for k in range(seq.n_scans)]
+    params, options = base.features.extractor_args()
+    feats = [extract_features(seq.scan(k), "paper", params, **options) for k in range(seq.n_scans)]
     objects = [
         [
             dominant_label(run_labels(seq.scan_labels[k], a, b), returns_only=True)[0]
@@ -249,7 +249,7 @@ def victoria_park_trial(job: tuple, seed=None) -> dict:
     from experiments.eval.vouched import vouched_for_sequence
     from experiments.io.config_file import load_slam_config
     from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
-    from experiments.paper.victoria_park import PRESET, head
+    from experiments.paper.victoria_park.real_run import PRESET, head
 
     n_scans, (label, assoc, K) = job
     full = load_victoria_park(full=True)

@@ -6,9 +6,9 @@ as in experiment 2 (`experiments.sim.trajectory.MONTE_CARLO_PATH`: runs along on
 four copies of one geometry, and the extractors' errors are fixed by it), extracts circles with
 each method, and fits sigma_range = a + b r and sigma_bearing^2 = c^2 + (t / r)^2 to the centre
 errors of the circles found on trunks by maximum likelihood. Writes noise_calibration.md/.csv.
-The values in `slam.measurement.DEFAULT_CONSTANT_NOISE` are these fits rounded up to two digits.
+The values in `slam.config.DEFAULT_CONSTANT_NOISE` are these fits rounded up to two digits.
 It also fits each extractor's mean range error a + b r by maximum likelihood under the sigmas
-the filter gives its circles (`range_bias_line`; `slam.measurement.DEFAULT_RANGE_BIAS`), and
+the filter gives its circles (`range_bias_line`; `slam.config.DEFAULT_RANGE_BIAS`), and
 the floors of the geometric fit's covariance (`calibrate_fit_floor`, noise_calibration_floor).
 """
 
@@ -25,11 +25,13 @@ from experiments.eval.detections import dominant_label, run_labels
 from experiments.exec import SerialExecutor
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.paper.slam import METHODS, extractor_params
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
 from slam import DEFAULT_CONSTANT_NOISE, SlamConfig, interpolate_poses, se2, wrap_angle
-from slam.measurement import DEFAULT_FIT_FLOOR, measurements_from_features
+from slam.config import DEFAULT_FIT_FLOOR
+from slam.measurement import measurements_from_features
 
 __all__ = [
     "FLOOR_QUANTITIES",
@@ -362,6 +364,12 @@ TABLES = (
 )
 
 
+@experiment(
+    "noise-calibration",
+    order=90,
+    page="consistency.md",
+    help="measurement-noise model of each extractor",
+)
 def run(ctx) -> None:
     """The registered experiment `noise-calibration`: the fits beside the values in use."""
     fits = calibrate_measurement_noise(executor=ctx.executor)

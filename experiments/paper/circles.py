@@ -30,8 +30,9 @@ import numpy as np
 from experiments.eval.circles import center_error, circle_crlb, radius_error
 from experiments.eval.detections import assign_circles
 from experiments.exec import SerialExecutor, spawn_seeds
-from experiments.paper import products
+from experiments.paper import circles_figures, products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.render import plots
 from experiments.sim import load_scene, scene_from_dict, sensor_preset, simulate_scan
 from features import extract_features
@@ -479,6 +480,13 @@ PILLAR_TABLES = (
 )
 
 
+@experiment(
+    "table1",
+    "table2",
+    order=20,
+    page="circles.md",
+    help="circle-centre and radius accuracy on the pillar court (one run), circles.rrd",
+)
 def run_tables(ctx) -> None:
     """Tables 1 and 2 (and their all-pillar versions), the bias and efficiency tables, figures."""
     n = 20 if ctx.quick else 200
@@ -519,7 +527,7 @@ def pillar_figures(rng: np.random.Generator, rec) -> dict[str, bytes]:
     sensor = _sensor()
     sigma = sensor.effective_sigma_m
     truth = scene.truth_landmarks
-    files = {"fig2a_scene.png": products.png(plots.plot_scene, scene)}
+    files = {"fig2a_scene.png": products.png(circles_figures.plot_scene, scene)}
     for k, pose in enumerate(scene.scan_positions):
         ranges, _ = simulate_scan(scene, pose, sensor, rng)
         scan = sensor.scan(ranges, stamp_s=float(k))
@@ -531,7 +539,7 @@ def pillar_figures(rng: np.random.Generator, rec) -> dict[str, bytes]:
         truth_l = np.column_stack([_to_sensor(truth, pose), truth[:, 2]])
         if k == 0:
             files["fig2b_raw_scan.png"] = products.png(
-                plots.plot_raw_scan,
+                circles_figures.plot_raw_scan,
                 scan.points_xy,
                 "Fig. 2(b): one whole scan (simulated pillar court, position 1; laser frame)",
             )
@@ -654,6 +662,12 @@ SWEEP_TABLE = TableSpec(
 )
 
 
+@experiment(
+    "circle-sweep",
+    order=30,
+    page="circles.md",
+    help="CE and RE against range, radius and noise, with the Cramer-Rao bound",
+)
 def run_sweep(ctx) -> None:
     n = 10 if ctx.quick else 100
     ctx.config.setdefault("circle-sweep", {}).update(
@@ -668,5 +682,5 @@ def run_sweep(ctx) -> None:
     for (var, v), res in zip(points, got):
         results[var][v] = res
     products.tables(ctx, [SWEEP_TABLE], CircleSweep(n, results))
-    spec = ("circle_sweep.png", plots.plot_sweep, (results,), {"held": SWEEP_DEFAULT})
+    spec = ("circle_sweep.png", circles_figures.plot_sweep, (results,), {"held": SWEEP_DEFAULT})
     products.figures(ctx, [spec], desc="circle sweep figure")

@@ -16,8 +16,9 @@ import logging
 
 from experiments.errors import MissingDataError
 from experiments.io.writers import write_tidy_table
-from experiments.paper import products
+from experiments.paper import features_figures, products
 from experiments.paper.classification import RADII_M, RANGES_M, classification_study
+from experiments.paper.registry import experiment
 from experiments.render import plots
 from features import extract_features
 
@@ -82,7 +83,7 @@ def classification(ctx) -> None:
         f"Simulated trunks ahead of a PLS200 (0.5 deg beams), {100 * sigma:g} cm range noise, "
         f"1 cm quantisation, {n} trials per point"
     )
-    spec = ("classification.png", plots.plot_circle_rates, (res,), {"setup": setup})
+    spec = ("classification.png", features_figures.plot_circle_rates, (res,), {"setup": setup})
     products.figures(ctx, [spec], desc="classification figure")
 
 
@@ -144,6 +145,12 @@ def victoria_park_scans(quick: bool, rec) -> tuple[dict | str, bytes | None]:
     return {"scan_index": best_k, "scans_logged": n}, figure
 
 
+@experiment(
+    "features",
+    order=10,
+    page="features.md",
+    help="classification of simulated trunks, the Victoria Park scan figure, features.rrd",
+)
 def run(ctx) -> None:
     from dataclasses import asdict
 

@@ -27,10 +27,10 @@ import numpy as np
 from scipy.stats import chi2
 
 from experiments.eval.series import slam_panels, slam_series
-from experiments.paper import products
+from experiments.paper import loop_closure_figures, products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.paper.slam import CYCAB_SLAM, extractor_params
-from experiments.render import plots
 from experiments.sim.loops import loop_drive, loop_params
 from features import extract_features
 from slam import SlamConfig, interpolate_poses, run_slam, se2
@@ -77,8 +77,10 @@ def loop_config(
 def drive_features(seed: int, kind: str) -> tuple:
     """(sequence, its paper-faithful features per scan) of `loop_drive(seed, kind)`."""
     seq = loop_drive(seed, kind, NOISE_SCALE)
-    kw = loop_config(False).features.extractor_kwargs()
-    return seq, [extract_features(seq.scan(k), "paper", **kw) for k in range(seq.n_scans)]
+    params, options = loop_config(False).features.extractor_args()
+    return seq, [
+        extract_features(seq.scan(k), "paper", params, **options) for k in range(seq.n_scans)
+    ]
 
 
 def _identities(lg, seq, feats) -> dict[int, int]:
@@ -173,7 +175,11 @@ def closure_products(seed: int) -> dict[str, bytes]:
                        "closures": lg.pose[at, :2]}  # fmt: skip
     title = f"Simulated park, drive {seed}: one lap, out through open ground and back"
     png = products.png(
-        plots.plot_loop_closure, seq.truth_landmarks[:, :2], truth[:, :2], runs, title
+        loop_closure_figures.plot_loop_closure,
+        seq.truth_landmarks[:, :2],
+        truth[:, :2],
+        runs,
+        title,
     )
     return {"loop_closure_map.png": png, "loop_closure.rrd": rec.data}
 
@@ -253,6 +259,13 @@ TABLE = TableSpec(
 )
 
 
+@experiment(
+    "loop-closure",
+    order=120,
+    page="loop-closure.md",
+    help="simulated loops in a park and an orchard, loop closure off and on (only when named)",
+    default=False,
+)
 def run(ctx) -> None:
     """The registered experiment `loop-closure` (only when named)."""
     jobs = [(kind, i) for kind, n in RUNS.items() for i in range(QUICK_RUNS if ctx.quick else n)]

@@ -16,7 +16,7 @@ experiment computed (`figures`), or made by a trial of the experiment's own (a r
 files are the same whatever ran them: PNG byte for byte; a recording up to the ids and
 timestamps rerun puts in every file.
 
-- `figure_trial`: draws one figure (a `plot_*` function of `experiments.render.plots`)
+- `figure_trial`: draws one figure (a `plot_*` function of an experiment's figure module)
 - `figures(ctx, specs)`: draws figures on the executor and writes them after the experiments
   (`RunContext.later`)
 - `write(ctx, files)`: writes a product's files into the result folder
@@ -36,7 +36,7 @@ from experiments.io.writers import tidy_table, write_atomic
 
 __all__ = ["FigureSpec", "TableSpec", "figure_trial", "figures", "png", "tables", "write"]
 
-# (file name, a plot_* function of experiments.render.plots, its arguments before `path`, its
+# (file name, a plot_* function of a figure module, its arguments before `path`, its
 # keyword arguments): the figure `plot(*args, path=..., **kwargs)` draws
 FigureSpec = tuple[str, Callable, tuple, dict]
 

@@ -1,4 +1,5 @@
-"""What every experiment receives, and the registry `trunkslam reproduce` runs from."""
+"""What every experiment receives, and the experiments `trunkslam reproduce` runs (registered
+by each experiment: `experiments.paper.registry`)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import numpy as np
 
 from experiments.errors import ConfigError
 from experiments.exec import Batch, Executor, SerialExecutor
+from experiments.paper.registry import REGISTERED, Experiment, declared
 
 __all__ = [
     "DEFAULT_EXPERIMENTS",
@@ -90,74 +92,23 @@ def experiment_seed(seed: int, name: str) -> np.random.SeedSequence:
     return np.random.SeedSequence([seed] + [ord(c) for c in name])
 
 
-@dataclass(frozen=True)
-class Experiment:
-    """A registered experiment: its function ("module:function", called with a RunContext),
-    what it shows, and whether `trunkslam reproduce` without names runs it. Names that share a
-    function (table1 and table2, table3 and table4) are one run."""
-
-    target: str
-    about: str = ""
-    default: bool = True
-
-
-# Order is the run order.
-EXPERIMENTS: dict[str, Experiment] = {
-    "features": Experiment(
-        "experiments.paper.features:run", about="trunk classification; a Victoria Park scan"
-    ),
-    "table1": Experiment("experiments.paper.circles:run_tables", about="circle-centre error CE"),
-    "table2": Experiment("experiments.paper.circles:run_tables", about="radius error RE"),
-    "circle-sweep": Experiment(
-        "experiments.paper.circles:run_sweep", about="CE, RE against range, radius, noise"
-    ),
-    "table3": Experiment("experiments.paper.slam:run", about="EKF-SLAM pose errors"),
-    "table4": Experiment("experiments.paper.slam:run", about="false-detection rates"),
-    "association": Experiment(
-        "experiments.paper.association:run", about="IHGR, JCBB and NN: rates and optimality"
-    ),
-    "victoria-park": Experiment(
-        "experiments.paper.victoria_park:run",
-        about="EKF-SLAM on the real run against GPS (needs the data; skipped without)",
-    ),
-    "victoria-park-rfs": Experiment(
-        "experiments.paper.victoria_park_rfs:run",
-        about="the full run under the published RFS protocol, exactly: 100 clutter draws "
-        "(needs the data; --quick: 10 draws; only when named)",
-        default=False,
-    ),
-    "smoother": Experiment(
-        "experiments.paper.smoother:run",
-        about="GTSAM smoother: GTSAM's Victoria Park graph; the EKF's full run re-solved",
-    ),
-    "noise-calibration": Experiment(
-        "experiments.paper.calibration:run", about="fit of the constant measurement-noise model"
-    ),
-    "victoria-park-calibration": Experiment(
-        "experiments.paper.vp_calibration:run",
-        about="the ute's noise and laser yaw from scans 1-2000 (not in the default run)",
-        default=False,
-    ),
-    "victoria-park-map-policy": Experiment(
-        "experiments.paper.vp_map_policy:run",
-        about="the map policy's confirm_scans and pruning settings from scans 1-2000 (only when "
-        "named)",
-        default=False,
-    ),
-    "loop-closure": Experiment(
-        "experiments.paper.loop_closure:run",
-        about="simulated loops in a park and an orchard, loop closure off and on (only when named)",
-        default=False,
-    ),
-}
+# Order is the run order: each experiment's `order` (`experiments.paper.registry`).
+EXPERIMENTS: dict[str, Experiment] = declared()
 DEFAULT_EXPERIMENTS = tuple(name for name, e in EXPERIMENTS.items() if e.default)
 
 
 def get_experiment(name: str) -> Callable[[RunContext], None]:
+    """The function of experiment `name`, its module imported (and its registration checked
+    against the declaration read from the source)."""
     try:
         target = EXPERIMENTS[name].target
     except KeyError:
         known = ", ".join(EXPERIMENTS)
         raise ConfigError(f"unknown experiment {name!r}; known: {known}") from None
     module, func = target.split(":")
-    return getattr(importlib.import_module(module), func)
+    fn = getattr(importlib.import_module(module), func)
+    if REGISTERED.get(name) != EXPERIMENTS[name]:  # a decorator the source reading misread
+        raise RuntimeError(
+            f"experiment {name!r}: registered {REGISTERED.get(name)}, read {EXPERIMENTS[name]}"
+        )
+    return fn

@@ -63,6 +63,7 @@ from experiments.io.config_file import config_toml
 from experiments.io.writers import dumps_json, json_types, write_atomic
 from experiments.paper import products
 from experiments.paper.products import FigureSpec, TableSpec
+from experiments.paper.registry import experiment
 from experiments.sim import sensor_preset
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
@@ -157,7 +158,7 @@ class Exp2Config:
 
 
 # Consistency variants: (name, method, SlamConfig overrides, kind). They explain the NEES figures:
-# each switches off one part of the measurement model (`slam.measurement.DEFAULT_RANGE_BIAS`,
+# each switches off one part of the measurement model (`slam.config.DEFAULT_RANGE_BIAS`,
 # `DEFAULT_FIT_FLOOR`) or changes the detections. kind "synthetic": the method's circles on
 # trunks only, each centre replaced by the truth plus Gaussian noise drawn from the method's
 # constant noise model (same detections, ideal errors, no bias to correct); "": as extracted.
@@ -320,8 +321,8 @@ def slam_trial(job: tuple[Exp2Config, int, bool], seed) -> dict:
     feats: dict[str, list] = {}
     for m in sorted({v[1] for v in variants}):
         t0 = time.perf_counter()
-        params = run_config(cfg, m).features.extractor_kwargs()
-        feats[m] = [extract_features(seq.scan(k), m, **params) for k in range(seq.n_scans)]
+        params, options = run_config(cfg, m).features.extractor_args()
+        feats[m] = [extract_features(seq.scan(k), m, params, **options) for k in range(seq.n_scans)]
         out["time_extract"][m] = (time.perf_counter() - t0) / seq.n_scans
     noise_rng = rng.spawn(1)[0]
     for name, m, overrides, kind in variants:
@@ -758,7 +759,7 @@ def _figure_specs(res: Exp2Results) -> list[FigureSpec]:
 
 def _fig7_path(res: Exp2Results, scene, truth: np.ndarray) -> FigureSpec:
     """Fig. 7: the true and estimated path of run 0 with the trees (paper features)."""
-    from experiments.render import plots
+    from experiments.paper import slam_figures
 
     main = "paper" if "paper" in res.logs0 else next(iter(res.logs0))
     lg = res.logs0[main]
@@ -773,7 +774,12 @@ def _fig7_path(res: Exp2Results, scene, truth: np.ndarray) -> FigureSpec:
     )
     walls = [w.points_xy for w in scene.walls]
     bushes = [b.points_xy for b in scene.bushes]
-    return ("fig7_slam_path.png", plots.plot_slam_path, args, {"walls": walls, "bushes": bushes})
+    return (
+        "fig7_slam_path.png",
+        slam_figures.plot_slam_path,
+        args,
+        {"walls": walls, "bushes": bushes},
+    )
 
 
 def _most_observed_tree(res: Exp2Results, methods: list[str]) -> tuple[int | None, dict]:
@@ -794,7 +800,7 @@ def _most_observed_tree(res: Exp2Results, methods: list[str]) -> tuple[int | Non
 def _fig10_innovations(res: Exp2Results, scene, pair: list[str]) -> FigureSpec:
     """Fig. 10: range and bearing innovations with 3 sigma of the tree observed most often by
     both methods (run 0)."""
-    from experiments.render import plots
+    from experiments.paper import slam_figures
 
     best, trees = _most_observed_tree(res, pair)
     series = []
@@ -814,12 +820,12 @@ def _fig10_innovations(res: Exp2Results, scene, pair: list[str]) -> FigureSpec:
         )
     name = scene.circles[best].name if best is not None else "-"
     title = f"Fig. 10: innovations of tree {name} with 3 sigma bounds (run 0)"
-    return ("fig10_innovations.png", plots.plot_innovations, (series, title), {})
+    return ("fig10_innovations.png", slam_figures.plot_innovations, (series, title), {})
 
 
 def _fig11_pose_errors(res: Exp2Results, truth: np.ndarray, pair: list[str]) -> FigureSpec:
     """Fig. 11: the errors of the predicted pose with 3 sigma (run 0)."""
-    from experiments.render import plots
+    from experiments.paper import slam_figures
 
     series = []
     for m in pair:
@@ -836,12 +842,12 @@ def _fig11_pose_errors(res: Exp2Results, truth: np.ndarray, pair: list[str]) -> 
             }
         )
     title = "Fig. 11: predicted pose errors with 3 sigma bounds (run 0)"
-    return ("fig11_pose_errors.png", plots.plot_pose_errors, (series, title), {})
+    return ("fig11_pose_errors.png", slam_figures.plot_pose_errors, (series, title), {})
 
 
 def _nees_figure(res: Exp2Results) -> FigureSpec:
     """The average NEES per scan of every method, with its 95% bounds."""
-    from experiments.render import plots
+    from experiments.paper import slam_figures
 
     cfg = res.config
     args = (
@@ -851,7 +857,7 @@ def _nees_figure(res: Exp2Results) -> FigureSpec:
         "NEES (3 dof, no unit)",
     )
     # consistency() leaves scan 0 out
-    return ("nees.png", plots.plot_consistency, args, {"expected": 3.0, "first_scan": 1})
+    return ("nees.png", slam_figures.plot_consistency, args, {"expected": 3.0, "first_scan": 1})
 
 
 def recording_trial(cfg: Exp2Config, seed) -> dict[str, bytes]:
@@ -872,6 +878,14 @@ def recording_trial(cfg: Exp2Config, seed) -> dict[str, bytes]:
 # ---- the registered experiment ------------------------------------------------------------------
 
 
+@experiment(
+    "table3",
+    "table4",
+    order=40,
+    page="slam.md",
+    help="EKF-SLAM Monte Carlo on the simulated tree park (one run), with the GTSAM "
+    "smoother's columns, slam.rrd",
+)
 def run(ctx, cfg: Exp2Config | None = None) -> Exp2Results:
     """Experiment 2 (registered as `table3` and `table4`, one run for both): Tables 3 and 4,
     Figs. 7, 10, 11, NEES/NIS and slam.rrd into ctx.out_dir."""

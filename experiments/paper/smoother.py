@@ -35,6 +35,7 @@ from experiments.io.config_file import load_slam_config
 from experiments.io.victoria_park import gtsam_graph, load_victoria_park
 from experiments.io.writers import write_tidy_table
 from experiments.paper import products
+from experiments.paper.registry import experiment
 from slam import run_slam, se2
 from slam.smoother import problem_from_log, smooth, solve_graph_file
 
@@ -85,6 +86,12 @@ def smoother_trial(job: tuple, seed=None) -> dict:
     return _victoria_park(arg, closure=kind == "victoria-park-closure")
 
 
+@experiment(
+    "smoother",
+    order=80,
+    page="smoother.md",
+    help="GTSAM's Victoria Park graph solved; the full run's EKF against its smoother",
+)
 def run(ctx) -> None:
     """The registered experiment `smoother`: its parts are trials (`smoother_trial`), the run
     without closure also drawing the figures; the table is written after the other experiments have
@@ -149,8 +156,8 @@ def run(ctx) -> None:
 
 
 def _victoria_park(quick: bool, closure: bool = False) -> dict:
-    from experiments.paper.victoria_park import GPS_GAP_S, head
-    from experiments.render import plots
+    from experiments.paper.victoria_park import figures
+    from experiments.paper.victoria_park.real_run import GPS_GAP_S, head
 
     full = load_victoria_park(full=True)
     cfg = load_slam_config(PRESET)
@@ -199,10 +206,10 @@ def _victoria_park(quick: bool, closure: bool = False) -> dict:
     title = "Victoria Park: EKF and smoothed antenna paths over the GPS fixes (smoothed map)"
     files = {
         "vp_smoother_map.png": products.png(
-            plots.plot_vp_map, full.gps_xy, ant, sm.landmark_xy, title
+            figures.plot_vp_map, full.gps_xy, ant, sm.landmark_xy, title
         ),
         "vp_smoother_errors.png": products.png(
-            plots.plot_gps_errors,
+            figures.plot_gps_errors,
             errors,
             sc_e.jump,
             "Victoria Park: distance to the GPS fixes (jumps marked x)",

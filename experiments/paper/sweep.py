@@ -567,7 +567,7 @@ def run_sweep(
 ) -> tuple[list[Path], list]:
     """Run a parsed sweep into out_dir (replaced as one set); returns (files written, failed
     trials). Failed trials are left out of the means (column n) and listed in sweep.json."""
-    from experiments.render import plots
+    from experiments.paper import sweep_figures
 
     out_dir = Path(out_dir)
     check_output_folder(out_dir, "--out", "sweep")
@@ -596,7 +596,7 @@ def run_sweep(
             name = f"sweep_{field}.png"
             title = f"{STUDY_TITLES[spec.study]}: {spec.trials} trials per point, {field} swept"
             written.append(
-                plots.plot_sweep_field(
+                sweep_figures.plot_sweep_field(
                     rows,
                     spec.swept,
                     k,

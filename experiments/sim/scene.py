@@ -4,9 +4,14 @@ World frame: x and y in metres (x east, y north in our scene files), headings th
 counter-clockwise from +x. Everything in this module is in the world frame.
 
 Objects
-  circles  pillars and tree trunks: centre (2,) m, radius m.               kind "pillar" | "trunk"
-  walls    building walls and low balusters: open or closed polylines.     kind "wall" | "baluster"
+  circles  pillars, tree trunks, posts and legs: centre (2,) m, radius m.
+           kind "pillar" | "trunk" | "post" (lamp posts, sign poles) | "leg" (a person's leg)
+  walls    building walls, low balusters, car bodies: open or closed polylines.
+           kind "wall" | "baluster" | "car"
   bushes   shrubs: irregular closed polygons (clutter for the extractor).  kind "bush"
+"post", "leg" and "car" are the clutter that fools a trunk extractor on real data
+(`experiments.sim.clutter`); a scene's `truth_trunks` are its circles of kind "trunk" or
+"pillar" only, while `truth_landmarks` keeps every circle (the label convention below).
 Every object has a unique `name` and a `height_m` above flat ground (inf = taller than any laser);
 an object no taller than the laser's scan plane is invisible to it (the paper's low balusters,
 over which its laser at ~1.2 m "can see the object outside the balusters").
@@ -53,10 +58,12 @@ __all__ = [
     "MIXED_LABEL",
     "CIRCLE_KINDS",
     "WALL_KINDS",
+    "LANDMARK_KINDS",
 ]
 
-CIRCLE_KINDS = ("pillar", "trunk")
-WALL_KINDS = ("wall", "baluster")
+CIRCLE_KINDS = ("pillar", "trunk", "post", "leg")
+WALL_KINDS = ("wall", "baluster", "car")
+LANDMARK_KINDS = ("pillar", "trunk")  # the circles a trunk map should hold
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -134,7 +141,7 @@ class WallObject:
 
     points_xy: (P, 2) m, P >= 2, world frame; consecutive points distinct.
     closed: if True, the last point joins the first (a building outline).
-    kind: "wall" or "baluster". height_m: above the ground (inf = always in the scan plane).
+    kind: "wall", "baluster" or "car". height_m: above the ground (inf = always in the scan plane).
     """
 
     name: str
@@ -288,6 +295,14 @@ class Scene:
         if not self.circles:
             return np.zeros((0, 3))
         return np.array([[*c.center_xy, c.radius_m] for c in self.circles])
+
+    @property
+    def truth_trunks(self) -> np.ndarray:
+        """(T,) labels of the circles a trunk map should hold (kind in `LANDMARK_KINDS`); every
+        circle of a scene without posts or legs."""
+        return np.array(
+            [i for i, c in enumerate(self.circles) if c.kind in LANDMARK_KINDS], dtype=np.int64
+        )
 
     def label_of(self, name: str) -> int:
         """The label of the object called `name`."""

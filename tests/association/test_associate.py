@@ -31,6 +31,7 @@ from association.inputs import (
 from association.single import single_scan_problem
 
 METHODS = ("ihgr", "jcbb", "nn")
+GATE = 0.99  # association has no default gate; these tests' cases were drawn for this one
 R0 = np.diag([0.05**2, math.radians(0.5) ** 2])
 
 
@@ -101,13 +102,13 @@ def test_well_separated_landmarks_are_all_correct(method):
     lm = grid_landmarks()
     for _ in range(20):
         z, R, z_hat, H, P, truth = scene(rng, lm, p_detect=0.8, err_scale=0.3)
-        np.testing.assert_array_equal(associate(z, R, z_hat, H, P, method), truth)
+        np.testing.assert_array_equal(associate(z, R, z_hat, H, P, method, gate_prob=GATE), truth)
 
 
 def test_well_separated_landmarks_window_all_correct():
     rng = np.random.default_rng(12)
     lm = grid_landmarks()
-    win = SlidingWindowAssociator(K=3)
+    win = SlidingWindowAssociator(K=3, gate_prob=GATE)
     for t in range(6):
         pose = np.array([0.5 * t, 0.0, 0.0])
         z, R, z_hat, H, P, truth = scene(rng, lm, pose=pose, p_detect=0.8, err_scale=0.3)
@@ -126,12 +127,12 @@ def test_bearing_wrap_around(method):
     z[1, 1] = np.pi - 0.005  # true bearing is -pi + 0.0083
     P = np.eye(H.shape[2]) * 1e-4
     R = np.diag([0.05**2, 0.01**2])
-    np.testing.assert_array_equal(associate(z, R, z_hat, H, P, method), [0, 1, 2])
+    np.testing.assert_array_equal(associate(z, R, z_hat, H, P, method, gate_prob=GATE), [0, 1, 2])
     # unwrapped angles (+- 2 pi k) in the inputs mean the same
     z2, zh2 = z.copy(), z_hat.copy()
     z2[:, 1] += 2 * np.pi
     zh2[:, 1] -= 4 * np.pi
-    np.testing.assert_array_equal(associate(z2, R, zh2, H, P, method), [0, 1, 2])
+    np.testing.assert_array_equal(associate(z2, R, zh2, H, P, method, gate_prob=GATE), [0, 1, 2])
 
 
 def test_wrap_angle_range():
@@ -165,8 +166,8 @@ def test_result_does_not_depend_on_order(seed, n_lm, n_clutter, sigma_xy, data):
     pf = np.array(data.draw(st.permutations(range(n)), label="feature order"), dtype=int)
     Rm = np.broadcast_to(R, (m, 2, 2)) * rng.uniform(0.5, 2.0, (m, 1, 1))  # per-measurement R
     for method in METHODS:
-        a = associate(z, Rm, z_hat, H, P, method)
-        b = associate(z[pm], Rm[pm], z_hat[pf], H[pf], P, method)
+        a = associate(z, Rm, z_hat, H, P, method, gate_prob=GATE)
+        b = associate(z[pm], Rm[pm], z_hat[pf], H[pf], P, method, gate_prob=GATE)
         # b[k] is the answer for measurement pm[k], in the permuted feature numbering
         expect = np.where(a[pm] >= 0, np.argsort(pf)[np.maximum(a[pm], 0)], -1)
         np.testing.assert_array_equal(b, expect, err_msg=method)
@@ -181,7 +182,10 @@ def test_window_does_not_depend_on_order(seed, n_clutter, data):
     lm = rng.uniform(-12, 12, (10, 2))
     lm = lm[np.hypot(*lm.T) > 2.0]
     new = rng.uniform(-10, 10, (3, 2))  # unmapped landmarks: tracks across the window
-    w_a, w_b = SlidingWindowAssociator(K=3), SlidingWindowAssociator(K=3)
+    w_a, w_b = (
+        SlidingWindowAssociator(K=3, gate_prob=GATE),
+        SlidingWindowAssociator(K=3, gate_prob=GATE),
+    )
     n = lm.shape[0]
     for t in range(4):
         pose = np.array([0.4 * t, 0.1 * t, 0.02 * t])
@@ -220,8 +224,8 @@ def test_trusted_path_gives_the_checked_answer(seed, n_lm, n_clutter, sigma_xy):
     Rm = np.broadcast_to(R, (z.shape[0], 2, 2)) * rng.uniform(0.5, 2.0, (z.shape[0], 1, 1))
     for method in METHODS:
         for R_arg in (R, Rm):
-            a = associate_detailed(z, R_arg, z_hat, H, P, method, 0.999)
-            b = associate_detailed(z, R_arg, z_hat, H, P, method, 0.999, validate=False)
+            a = associate_detailed(z, R_arg, z_hat, H, P, method, gate_prob=0.999)
+            b = associate_detailed(z, R_arg, z_hat, H, P, method, gate_prob=0.999, validate=False)
             np.testing.assert_array_equal(b.assignment, a.assignment)
             np.testing.assert_array_equal(b.d2, a.d2)
             stats = ("cost", "gated_pairs", "lp_solves", "fractional", "nodes", "budget_exhausted")
@@ -233,10 +237,10 @@ def test_trusted_path_skips_the_checks_only():
     method and its parameters are still checked."""
     z, z_hat, H, P = two_landmarks_with_cross_term(0.5)
     with pytest.raises(AssociationError, match="joint block"):
-        associate(z, np.eye(2) * 0.01, z_hat, H, P)
-    assert associate(z, np.eye(2) * 0.01, z_hat, H, P, validate=False).shape == (2,)
+        associate(z, np.eye(2) * 0.01, z_hat, H, P, gate_prob=GATE)
+    assert associate(z, np.eye(2) * 0.01, z_hat, H, P, validate=False, gate_prob=GATE).shape == (2,)
     with pytest.raises(AssociationError, match="not parameters"):
-        associate(z, np.eye(2) * 0.01, z_hat, H, P, validate=False, max_nodes=3)
+        associate(z, np.eye(2) * 0.01, z_hat, H, P, validate=False, max_nodes=3, gate_prob=GATE)
 
 
 # ---- exactness and method-specific checks -------------------------------------------------
@@ -248,7 +252,7 @@ def test_single_scan_ihgr_equals_milp_on_contended_scenes():
     for _ in range(40):
         lm = rng.uniform(-12, 12, (int(rng.integers(3, 15)), 2))
         z, R, z_hat, H, P, _ = scene(rng, lm, sigma_xy=0.8, sigma_th=0.04, n_clutter=4)
-        det = associate_detailed(z, R, z_hat, H, P, "ihgr")
+        det = associate_detailed(z, R, z_hat, H, P, "ihgr", gate_prob=GATE)
         costs, A, e, _, _ = single_scan_problem(prepare(z, R, z_hat, H, P, 0.99), model)
         opt = solve_set_partition(costs, A, e, method="milp")
         assert det.cost == pytest.approx(opt.cost, abs=1e-9)
@@ -274,7 +278,7 @@ def test_jcbb_matches_brute_force():
         lm = lm[np.hypot(*lm.T) > 1.0]
         z, R, z_hat, H, P, _ = scene(rng, lm, sigma_xy=0.6, sigma_th=0.05, n_clutter=1)
         m, n = z.shape[0], z_hat.shape[0]
-        det = associate_detailed(z, R, z_hat, H, P, "jcbb")
+        det = associate_detailed(z, R, z_hat, H, P, "jcbb", gate_prob=GATE)
         gate1 = chi2.ppf(0.99, 2)
         best = (0, 0.0)
         for labels in itertools.product(range(-1, n), repeat=m):
@@ -300,8 +304,8 @@ def test_jcbb_node_budget_falls_back_to_a_compatible_hypothesis():
     lm = rng.uniform(-6, 6, (14, 2))
     lm = lm[np.hypot(*lm.T) > 1.0]
     z, R, z_hat, H, P, _ = scene(rng, lm, sigma_xy=1.0, sigma_th=0.08, n_clutter=5)
-    full = associate_detailed(z, R, z_hat, H, P, "jcbb")
-    cut = associate_detailed(z, R, z_hat, H, P, "jcbb", max_nodes=5)
+    full = associate_detailed(z, R, z_hat, H, P, "jcbb", gate_prob=GATE)
+    cut = associate_detailed(z, R, z_hat, H, P, "jcbb", max_nodes=5, gate_prob=GATE)
     assert cut.budget_exhausted and not full.budget_exhausted
     assert cut.nodes <= full.nodes
     pairs = [(i, j) for i, j in enumerate(cut.assignment) if j >= 0]
@@ -332,9 +336,17 @@ def test_empty_inputs():
     _, H = predict(np.zeros(3), np.array([[5.0, 0.0]]))
     P = np.eye(5) * 0.01
     for method in METHODS:
-        assert associate(np.zeros((0, 2)), R0, np.array([[5.0, 0.0]]), H, P, method).shape == (0,)
+        assert associate(
+            np.zeros((0, 2)), R0, np.array([[5.0, 0.0]]), H, P, method, gate_prob=GATE
+        ).shape == (0,)
         out = associate(
-            np.array([[5.0, 0.0]]), R0, np.zeros((0, 2)), np.zeros((0, 2, 5)), P, method
+            np.array([[5.0, 0.0]]),
+            R0,
+            np.zeros((0, 2)),
+            np.zeros((0, 2, 5)),
+            P,
+            method,
+            gate_prob=GATE,
         )
         np.testing.assert_array_equal(out, [-1])
 
@@ -395,22 +407,22 @@ def test_malformed_inputs_raise_naming_the_argument(kw, match):
     d = _bad(**kw)
     for method in METHODS:
         with pytest.raises(ValueError, match=match):
-            associate(d["z"], d["R"], d["z_hat"], d["H"], d["P"], method)
+            associate(d["z"], d["R"], d["z_hat"], d["H"], d["P"], method, gate_prob=GATE)
 
 
 def test_bad_method_gate_and_params():
     d = good_inputs()
     args = (d["z"], d["R"], d["z_hat"], d["H"], d["P"])
     with pytest.raises(ValueError, match="^method"):
-        associate(*args, method="hungarian")
+        associate(*args, method="hungarian", gate_prob=GATE)
     with pytest.raises(ValueError, match="^gate_prob"):
         associate(*args, gate_prob=1.0)
     with pytest.raises(ValueError, match="max_nodes"):
-        associate(*args, method="nn", max_nodes=3)
+        associate(*args, method="nn", max_nodes=3, gate_prob=GATE)
     with pytest.raises(ValueError, match="p_detect"):
-        associate(*args, p_detect=1.5)
+        associate(*args, p_detect=1.5, gate_prob=GATE)
     with pytest.raises(ValueError, match="max_nodes"):
-        associate(*args, method="jcbb", max_nodes=0)
+        associate(*args, method="jcbb", max_nodes=0, gate_prob=GATE)
 
 
 # ---- sliding window ------------------------------------------------------------------------
@@ -419,11 +431,11 @@ def test_bad_method_gate_and_params():
 def test_window_without_history_or_poses_is_the_single_scan():
     rng = np.random.default_rng(61)
     lm = rng.uniform(-12, 12, (12, 2))
-    w1 = SlidingWindowAssociator(K=1)
-    w3 = SlidingWindowAssociator(K=3)
+    w1 = SlidingWindowAssociator(K=1, gate_prob=GATE)
+    w3 = SlidingWindowAssociator(K=3, gate_prob=GATE)
     for _ in range(5):
         z, R, z_hat, H, P, _ = scene(rng, lm, sigma_xy=0.6, sigma_th=0.03, n_clutter=4)
-        single = associate(z, R, z_hat, H, P, "ihgr")
+        single = associate(z, R, z_hat, H, P, "ihgr", gate_prob=GATE)
         np.testing.assert_array_equal(w1.step(z, R, z_hat, H, P, sensor_pose=np.zeros(3)), single)
         np.testing.assert_array_equal(w3.step(z, R, z_hat, H, P), single)  # no sensor_pose
 
@@ -432,7 +444,7 @@ def test_window_tracks_an_unmapped_landmark_and_forgets_it_when_mapped():
     rng = np.random.default_rng(71)
     mapped = grid_landmarks()
     new_lm = np.array([[3.0, 4.5]])  # not in the map
-    win = SlidingWindowAssociator(K=3)
+    win = SlidingWindowAssociator(K=3, gate_prob=GATE)
     seen = []
     for t in range(5):
         pose = np.array([0.3 * t, 0.0, 0.0])
@@ -452,11 +464,11 @@ def test_window_tracks_an_unmapped_landmark_and_forgets_it_when_mapped():
 
 def test_window_rejects_bad_arguments():
     with pytest.raises(ValueError, match="^K"):
-        SlidingWindowAssociator(K=0)
+        SlidingWindowAssociator(K=0, gate_prob=GATE)
     with pytest.raises(ValueError, match="not options"):
-        SlidingWindowAssociator(fix=True)
+        SlidingWindowAssociator(fix=True, K=3, gate_prob=GATE)
     d = good_inputs()
-    win = SlidingWindowAssociator()
+    win = SlidingWindowAssociator(K=3, gate_prob=GATE)
     args = (d["z"], d["R"], d["z_hat"], d["H"], d["P"])
     with pytest.raises(ValueError, match="^sensor_pose:"):
         win.step(*args, sensor_pose=np.zeros(2))

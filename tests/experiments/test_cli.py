@@ -371,9 +371,9 @@ def test_extract_with_a_configuration_takes_its_extractor_parameters(tmp_path):
     assert res.exit_code == 0, res.output
     doc = json.loads(out.read_text())
     assert doc["params"]["short_trunks"] is False and doc["params"]["short_trunk_clearance_m"] == 2
-    kw = load_slam_config("cycab").features.extractor_kwargs()
+    params = load_slam_config("cycab").features.extractor
     seq = load_sequence(run)
-    want = [extract_features(seq.scan(k), "geometric", **kw) for k in range(seq.n_scans)]
+    want = [extract_features(seq.scan(k), "geometric", params) for k in range(seq.n_scans)]
     assert [len(s["circles"]) for s in doc["scans"]] == [f.n_circles for f in want]
     assert sum(f.n_circles for f in want) < sum(
         extract_features(seq.scan(k), "geometric").n_circles for k in range(seq.n_scans)

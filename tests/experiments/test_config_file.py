@@ -13,8 +13,14 @@ from experiments.cli import app
 from experiments.errors import ConfigError, DataError
 from experiments.io.config_file import config_toml, load_slam_config
 from slam import MapPolicy, OdometryNoise, SlamConfig, SteeringCalibration
-from slam.config import AssociationConfig, FilterConfig, MeasurementConfig, VehicleConfig
-from slam.measurement import DEFAULT_CONSTANT_NOISE, NoiseModel
+from slam.config import (
+    DEFAULT_CONSTANT_NOISE,
+    AssociationConfig,
+    FilterConfig,
+    MeasurementConfig,
+    VehicleConfig,
+)
+from slam.measurement import NoiseModel
 
 runner = CliRunner()
 

@@ -178,18 +178,18 @@ def test_submitted_trials_give_the_records_of_map(executors):
 def test_figures_drawn_on_every_executor_are_the_files_drawn_here(tmp_path, executors):
     """A figure drawn as a trial (`figure_trial`: in this process, in a worker process, on a
     Dask worker) is byte for byte the PNG file its plot function writes here."""
-    from experiments.render import plots
+    from experiments.paper import circles_figures, slam_figures
 
     rng = np.random.default_rng(4)
     pts = rng.normal(size=(200, 2)) * 4.0
     sig = np.abs(rng.normal(size=(30, 3)))
     series = [{"label": "a", "scan": np.arange(30), "err": rng.normal(size=(30, 3)), "sigma": sig}]
     specs = [
-        ("raw.png", plots.plot_raw_scan, (pts, "a scan"), {}),
-        ("errors.png", plots.plot_pose_errors, (series, "errors"), {}),
+        ("raw.png", circles_figures.plot_raw_scan, (pts, "a scan"), {}),
+        ("errors.png", slam_figures.plot_pose_errors, (series, "errors"), {}),
     ]
-    plots.plot_raw_scan(pts, "a scan", tmp_path / "raw.png")
-    plots.plot_pose_errors(series, "errors", tmp_path / "errors.png")
+    circles_figures.plot_raw_scan(pts, "a scan", tmp_path / "raw.png")
+    slam_figures.plot_pose_errors(series, "errors", tmp_path / "errors.png")
     for name, ex in executors.items():
         got = ex.map(figure_trial, specs, chunksize=1)
         assert [list(files) for files in got] == [["raw.png"], ["errors.png"]], name
@@ -230,13 +230,13 @@ def test_a_deferred_part_that_fails_fails_its_experiment(tmp_path, monkeypatch):
     """The circle sweep's figure is drawn after the experiments (`RunContext.later`); when that
     raises a project error, circle-sweep is listed as failed with it, its files (the table,
     written earlier) and configuration are removed, and the other experiment is kept."""
-    import experiments.render.plots as plots
     from experiments.errors import DataError
+    from experiments.paper import circles_figures
 
     def broken(*args, **kwargs):
         raise DataError("no room for the figure (test)")
 
-    monkeypatch.setattr(plots, "plot_sweep", broken)
+    monkeypatch.setattr(circles_figures, "plot_sweep", broken)
     with pytest.raises(ExperimentFailed, match="circle-sweep"):
         run_experiments(["circle-sweep", "noise-calibration"], tmp_path / "r", quick=True)
     m = json.loads((tmp_path / "r" / "manifest.json").read_text())

@@ -18,6 +18,8 @@ import pytest
 from matplotlib.colors import to_rgb
 from support import assert_tidy_tables
 
+from experiments.paper import slam_figures, sweep_figures
+from experiments.paper.victoria_park import figures as vp_figures
 from experiments.render import plots
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -69,7 +71,7 @@ def _innovation_series(scans):
 
 def test_innovation_lines_stop_where_the_tree_was_not_observed(drawn):
     # observed at scans 10-12, then not until 20: the line (and its bounds) stop after 12
-    plots.plot_innovations([_innovation_series([10, 11, 12, 20, 21])], "t", path=None)
+    slam_figures.plot_innovations([_innovation_series([10, 11, 12, 20, 21])], "t", path=None)
     axes = drawn[0].axes
     for ax in axes[:2]:
         (innov,) = _lines(ax, "paper innovation")
@@ -79,7 +81,7 @@ def test_innovation_lines_stop_where_the_tree_was_not_observed(drawn):
         assert _nan_rows(bound.get_ydata()) == [3]
         assert innov.get_marker() not in (None, "None", "")  # an observation alone still shows
     # observed at every scan: no break
-    plots.plot_innovations([_innovation_series([10, 11, 12, 13])], "t", path=None)
+    slam_figures.plot_innovations([_innovation_series([10, 11, 12, 13])], "t", path=None)
     (innov,) = _lines(drawn[1].axes[0], "paper innovation")
     assert _nan_rows(innov.get_ydata()) == []
 
@@ -94,7 +96,7 @@ def test_pose_error_lines_stop_at_missing_scans(drawn):
             "sigma": np.full((6, 3), 0.2),
         }
     ]
-    plots.plot_pose_errors(series, "t", path=None)
+    slam_figures.plot_pose_errors(series, "t", path=None)
     for ax in drawn[0].axes[:3]:
         (err,) = _lines(ax, "bailey error")
         assert _nan_rows(err.get_ydata()) == [4]
@@ -124,14 +126,14 @@ def test_gps_error_lines_stop_at_dropouts_which_are_shaded(drawn):
     t = np.array([100.0, 100.2, 100.4, 130.0, 130.2, 130.4])
     e = np.array([1.0, 1.1, 1.2, 5.0, 5.1, 5.2])
     jumps = np.zeros(6, bool)
-    plots.plot_gps_errors({"EKF": (t, e), "smoother": (t, e / 2)}, jumps, "t", path=None)
+    vp_figures.plot_gps_errors({"EKF": (t, e), "smoother": (t, e / 2)}, jumps, "t", path=None)
     ax = drawn[0].axes[0]
     for name in ("EKF", "smoother"):
         (line,) = _lines(ax, name)
         assert _nan_rows(line.get_ydata()) == [3]
     assert _spans(ax) == [(100.4, 130.0)]
     # fixes 0.2 s apart throughout: one unbroken line, nothing shaded
-    plots.plot_gps_errors({"EKF": (t[:3], e[:3])}, jumps[:3], "t", path=None)
+    vp_figures.plot_gps_errors({"EKF": (t[:3], e[:3])}, jumps[:3], "t", path=None)
     ax = drawn[1].axes[0]
     assert _nan_rows(_lines(ax, "EKF")[0].get_ydata()) == [] and _spans(ax) == []
 
@@ -139,7 +141,7 @@ def test_gps_error_lines_stop_at_dropouts_which_are_shaded(drawn):
 def test_vp_timeseries_lines_stop_where_no_scan_was_taken(drawn):
     scan_t = np.array([0.0, 0.2, 0.4, 0.6, 9.0, 9.2])  # no scan for 8.4 s
     gps_t = np.array([0.0, 0.2, 9.0])
-    plots.plot_vp_timeseries(
+    vp_figures.plot_vp_timeseries(
         gps_t,
         {"run": np.array([1.0, 2.0, 3.0])},
         np.zeros(3, bool),
@@ -160,7 +162,7 @@ def test_vp_timeseries_lines_stop_where_no_scan_was_taken(drawn):
 
 def test_nees_figure_starts_at_scan_1_with_its_band_and_expected_value(drawn):
     avg = np.array([3.0, 2.5, np.nan, 3.5])  # column 0 (scan 0) is left out by consistency()
-    plots.plot_consistency({"paper": avg}, (1.1, 5.8), "t", "NEES", None, 3.0, first_scan=1)
+    slam_figures.plot_consistency({"paper": avg}, (1.1, 5.8), "t", "NEES", None, 3.0, first_scan=1)
     ax = drawn[0].axes[0]
     (line,) = _lines(ax, "paper")
     assert list(np.asarray(line.get_xdata())) == [1, 2, 3, 4]
@@ -238,7 +240,7 @@ def test_sweep_panels_have_titles_units_nees_bounds_and_say_what_the_bars_are(dr
 
     names = ["dx_m", "dtheta_rad", "nees_mean", "nis_per_dof", "landmarks", "false_rate"]
     spec = SweepSpec("slam", 5, 0, [], ["cycab.range_sigma_m"], [], {}, {})
-    plots.plot_sweep_field(
+    sweep_figures.plot_sweep_field(
         _slam_rows(names), spec.swept, 0, "t", None, metrics=METRICS, references=_references(spec)
     )
     fig = drawn[0]
@@ -261,7 +263,7 @@ def test_sweep_panels_have_titles_units_nees_bounds_and_say_what_the_bars_are(dr
     # other studies have no consistency bounds; an unknown metric still gets a readable title
     other = SweepSpec("association", 5, 0, [], ["gate_prob"], [], {}, {})
     assert _references(other) == {}
-    plots.plot_sweep_field(_slam_rows(["odd_metric_m"]), ["gate_prob"], 0, "t", None)
+    sweep_figures.plot_sweep_field(_slam_rows(["odd_metric_m"]), ["gate_prob"], 0, "t", None)
     assert drawn[1].axes[0].get_title() == "odd metric m"
 
 
@@ -275,7 +277,7 @@ class _Ctx:
 
 
 def _vp_rows() -> list[dict]:
-    from experiments.paper.victoria_park import COLUMNS
+    from experiments.paper.victoria_park.real_run import COLUMNS
 
     rows = []
     for i, run in enumerate(("full run, published detections, ihgr", "scans 1-2000, bailey")):
@@ -292,7 +294,7 @@ def test_victoria_park_markdown_is_narrow_tables_each_a_pivot_of_the_csv(tmp_pat
 
     from experiments.io.writers import read_tidy_csv
     from experiments.paper import products
-    from experiments.paper import victoria_park as vp
+    from experiments.paper.victoria_park import real_run as vp
 
     products.tables(_Ctx(tmp_path), [vp.TABLE], _vp_rows())
     assert assert_tidy_tables(tmp_path) == {"victoria_park.csv"}
@@ -316,7 +318,7 @@ def test_published_rows_are_one_table_each_with_its_source(tmp_path):
     without a source are gone and the course project is not called Zamora et al.'s."""
     from experiments.io.writers import read_tidy_csv
     from experiments.paper import products
-    from experiments.paper import victoria_park as vp
+    from experiments.paper.victoria_park import real_run as vp
 
     products.tables(_Ctx(tmp_path), [vp.TABLE, vp.PUBLISHED_TABLE], _vp_rows())
     assert assert_tidy_tables(tmp_path) == {"victoria_park.csv", "victoria_park_published.csv"}
@@ -340,7 +342,7 @@ def test_published_rows_are_one_table_each_with_its_source(tmp_path):
 
 def test_the_tidy_check_fails_on_a_narrow_table_that_is_not_the_pivot(tmp_path):
     from experiments.paper import products
-    from experiments.paper import victoria_park as vp
+    from experiments.paper.victoria_park import real_run as vp
 
     products.tables(_Ctx(tmp_path), [vp.TABLE], _vp_rows())
     md = tmp_path / "victoria_park.md"
@@ -430,7 +432,7 @@ def test_the_closure_map_marks_each_match_by_outcome(drawn):
         (np.array([4.0, 1.0]), "beyond dead reckoning"),
         (np.array([5.0, 1.0]), "too few"),
     ]
-    plots.plot_closure_map(xy, xy, xy, matches, "t", path=None)
+    vp_figures.plot_closure_map(xy, xy, xy, matches, "t", path=None)
     ax = drawn[0].axes[0]
     assert _lines(ax, "accepted (1)")[0].get_xdata().tolist() == [1.0]
     assert _lines(ax, "not jointly compatible (2)")[0].get_xdata().tolist() == [2.0, 3.0]

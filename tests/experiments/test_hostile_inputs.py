@@ -278,8 +278,8 @@ def test_presolve_no_and_max_feature_range_nan_are_refused():
     H[0, :, 3:] = np.eye(2)
     args = (z, np.eye(2) * 0.01, z, H, np.eye(5) * 0.01)
     for make in (
-        lambda: associate(*args, method="ihgr", presolve="no"),
-        lambda: SlidingWindowAssociator(K=2, presolve="no"),
+        lambda: associate(*args, method="ihgr", presolve="no", gate_prob=0.99),
+        lambda: SlidingWindowAssociator(K=2, presolve="no", gate_prob=0.99),
     ):
         with pytest.raises(AssociationError, match="presolve: must be True or False"):
             make()
@@ -306,10 +306,11 @@ def test_associate_refuses_p_not_psd_in_its_cross_terms():
     z, z_hat, H, P = two_landmarks_with_cross_term(0.5)
     for method in ("ihgr", "jcbb", "nn"):
         with pytest.raises(AssociationError, match="P: not positive semi-definite on the joint"):
-            associate(z, np.eye(2) * 0.01, z_hat, H, P, method=method)
+            associate(z, np.eye(2) * 0.01, z_hat, H, P, method=method, gate_prob=0.99)
     P = two_landmarks_with_cross_term(0.05)[3]  # a valid correlation: accepted, methods agree
     out = {
-        m: associate(z, np.eye(2) * 0.01, z_hat, H, P, method=m).tolist() for m in ("ihgr", "jcbb")
+        m: associate(z, np.eye(2) * 0.01, z_hat, H, P, method=m, gate_prob=0.99).tolist()
+        for m in ("ihgr", "jcbb")
     }
     assert out["ihgr"] == out["jcbb"]
 

@@ -81,7 +81,8 @@ def test_the_local_sweep_marginalises_without_moving_the_map():
     """`LoopCloser.merge(update=False)` (the sweep after a re-registration) removes the
     duplicates from the state and relabels them in the history, and leaves every other estimate
     and covariance entry as it was; the update merge moves the kept landmark."""
-    from slam.closure import ClosureConfig, LoopCloser
+    from slam.closure import LoopCloser
+    from slam.config import ClosureConfig
     from slam.ekf import Filter, initial_state
     from slam.history import RunHistory
 

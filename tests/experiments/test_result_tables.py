@@ -157,9 +157,9 @@ def test_noise_calibration_in_use_values_are_slams(quick_tables):
 
 @pytest.mark.slow
 def test_range_biases_in_use_are_the_calibrations_lines(quick_tables):
-    """slam.measurement.DEFAULT_RANGE_BIAS holds the calibration's maximum-likelihood lines,
+    """slam.config.DEFAULT_RANGE_BIAS holds the calibration's maximum-likelihood lines,
     rounded to 0.1 mm and 0.01 mm per m, for every extractor."""
-    from slam.measurement import DEFAULT_RANGE_BIAS
+    from slam.config import DEFAULT_RANGE_BIAS
 
     rows = read_tidy_csv(quick_tables / "noise_calibration.csv")
 
@@ -182,8 +182,8 @@ def test_range_biases_in_use_are_the_calibrations_lines(quick_tables):
 def quick_victoria_park(tmp_path_factory, vp_dir):
     """`trunkslam reproduce victoria-park --quick` on shorter data (the first 150 scans of the
     full run and 100 raw scans, instead of 1500 and 400), so that it takes seconds."""
-    from experiments.paper import victoria_park as vp
     from experiments.paper.reproduce import run_experiments
+    from experiments.paper.victoria_park import real_run as vp
 
     full, raw, ref = vp._data(True)
     out = tmp_path_factory.mktemp("vp_tables")
@@ -195,7 +195,7 @@ def quick_victoria_park(tmp_path_factory, vp_dir):
 
 @pytest.mark.slow
 def test_quick_victoria_park_table_is_tidy(quick_victoria_park):
-    from experiments.paper.victoria_park import PUBLISHED
+    from experiments.paper.victoria_park.real_run import PUBLISHED
 
     assert assert_tidy_tables(quick_victoria_park) == {
         "victoria_park.csv",

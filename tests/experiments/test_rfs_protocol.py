@@ -1,5 +1,5 @@
 """The published RFS protocol (experiments/eval/rfs_protocol.py) and its experiment
-(experiments/paper/victoria_park_rfs.py): the clutter generator, the FOV cut, the 25 ms rule
+(experiments/paper/victoria_park/rfs.py): the clutter generator, the FOV cut, the 25 ms rule
 scored at the laser, the fixed start, and the experiment's quick path on the real data."""
 
 from __future__ import annotations
@@ -96,7 +96,7 @@ def test_the_score_is_taken_at_the_laser_not_at_the_rear_axle():
 
 
 def test_the_fixed_start_puts_the_laser_at_the_published_pose():
-    from experiments.paper.victoria_park_rfs import start_prior
+    from experiments.paper.victoria_park.rfs import start_prior
 
     """The laser's pose, position and heading, is the published start (their state is the
     laser's pose; our laser is yawed on the vehicle, so the vehicle's heading differs)."""
@@ -129,9 +129,9 @@ def test_quick_experiment_writes_the_protocol_beside_no_clutter_and_vouched(vp_d
     false detections per scan."""
     from experiments.io.victoria_park import load_victoria_park
     from experiments.io.writers import read_tidy_csv
-    from experiments.paper import victoria_park_rfs as rfs
     from experiments.paper.reproduce import run_experiments
-    from experiments.paper.victoria_park import head, run_config
+    from experiments.paper.victoria_park import rfs
+    from experiments.paper.victoria_park.real_run import head, run_config
 
     QUICK_DRAWS, ROWS = rfs.QUICK_DRAWS, rfs.ROWS
     full, raw = load_victoria_park(vp_dir, full=True), load_victoria_park(vp_dir)
@@ -160,7 +160,7 @@ def test_clutter_joins_the_scans_with_detections_only_and_keeps_them_in_scan_ord
     the others none; the real detections are all still there; the draw is its seed's."""
     from support import full_kwargs
 
-    from experiments.paper.victoria_park_rfs import ProtocolInput, with_clutter
+    from experiments.paper.victoria_park.rfs import ProtocolInput, with_clutter
     from slam import Sequence
 
     seq = Sequence(**{**full_kwargs(), "det_cov": None})

@@ -97,7 +97,7 @@ def test_the_victoria_park_experiment_writes_the_config_of_each_run(tmp_path, vp
     """The configuration file the experiment writes beside its table, given to `trunkslam
     slam`, gives the table's row (the geometric extractor on scans 1-2000)."""
     from experiments.paper.reproduce import run_experiments
-    from experiments.paper.victoria_park import vp_trial
+    from experiments.paper.victoria_park.real_run import vp_trial
 
     out = tmp_path / "r"
     run_experiments(["victoria-park"], out_dir=out, quick=True)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from experiments.eval.trunk_offsets import view_offset
-from slam.closure import ClosureConfig
+from slam.config import ClosureConfig
 
 LASER = np.array([0.5, 0.2, 0.01])
 
@@ -73,7 +73,7 @@ def test_the_closure_default_is_the_offset_victoria_park_scans_1_to_2000_show(vp
     """`closure.tree_sd_m`'s default is this procedure's figure on the calibration scans of
     Victoria Park (the preset's run, published detections), rounded to a centimetre."""
     from experiments.io.victoria_park import load_victoria_park
-    from experiments.paper import victoria_park as vp
+    from experiments.paper.victoria_park import real_run as vp
     from slam.loop import run_slam
 
     seq = vp.head(load_victoria_park(vp_dir, full=True), 2000)

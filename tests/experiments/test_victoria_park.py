@@ -266,12 +266,12 @@ def test_ss2002_reference_is_read(vp_dir):
     assert 0.05 < np.median(trees[:, 2]) < 0.5
 
 
-# ---- the preset's consistency step (experiments/paper/vp_calibration.py) --------------------
+# ---- the preset's consistency step (experiments/paper/victoria_park/calibration.py) ----------
 
 
 def test_scale_measurement_noise_scales_every_sigma_and_rejects_bad_factors():
     from experiments.io.config_file import load_slam_config, preset_path
-    from experiments.paper.vp_calibration import scale_measurement_noise
+    from experiments.paper.victoria_park.calibration import scale_measurement_noise
 
     cfg = load_slam_config(preset_path("victoria_park_ute"))
     half = scale_measurement_noise(cfg, 0.5)
@@ -295,7 +295,7 @@ def test_consistency_scale_brings_nis_per_dof_to_one(vp_dir):
     lands within 5% of 1 from a bracket that holds the crossing and from one that must be
     widened, and a bracket that cannot reach it is an error naming it."""
     from experiments.io.config_file import load_slam_config, preset_path
-    from experiments.paper.vp_calibration import consistency_scale
+    from experiments.paper.victoria_park.calibration import consistency_scale
 
     seq = load_victoria_park(vp_dir, n_scans=300)
     cfg = load_slam_config(preset_path("victoria_park_ute"))
@@ -315,7 +315,7 @@ def test_consistency_scale_brings_nis_per_dof_to_one(vp_dir):
 
 
 def test_calibration_parameters_with_and_without_the_motion_terms():
-    from experiments.paper.vp_calibration import START, config_from
+    from experiments.paper.victoria_park.calibration import START, config_from
 
     plain = config_from(START[:6]).vehicle.odometry_noise
     assert plain.speed_sigma_per_speed == 0 and plain.steer_sigma_per_lateral_mps2 == 0
@@ -325,7 +325,7 @@ def test_calibration_parameters_with_and_without_the_motion_terms():
     assert grown.speed_sigma_mps == plain.speed_sigma_mps == pytest.approx(0.5)
     with pytest.raises(ConfigError, match="theta: expected 6 or 8 parameters, got 7"):
         config_from(START[:7])
-    from experiments.paper.vp_calibration import calibrate
+    from experiments.paper.victoria_park.calibration import calibrate
 
     with pytest.raises(ConfigError, match=r"start: expected 8 parameters, got \(6,\)"):
         calibrate(None, motion_terms=True, start=START[:6])  # checked before any run
@@ -334,7 +334,7 @@ def test_calibration_parameters_with_and_without_the_motion_terms():
 def test_the_motion_terms_must_buy_more_likelihood_than_they_cost():
     """BIC = 2 J + p ln(n): with 10,000 measurements two more parameters cost 18.4 in 2 J, so
     the 8-parameter fit is chosen only when its J is lower by more than 9.2."""
-    from experiments.paper.vp_calibration import bic, select_model
+    from experiments.paper.victoria_park.calibration import bic, select_model
 
     constant = {"J": -1000.0, "theta": [0.0] * 6, "measurements": 10_000}
     assert bic(constant) == pytest.approx(-2000.0 + 6 * math.log(10_000))
@@ -349,7 +349,7 @@ def test_calibration_writes_what_the_preset_holds():
     rebuild the shipped preset exactly, so `reproduce victoria-park-calibration` writes the
     preset's settings."""
     from experiments.io.config_file import load_slam_config, preset_path
-    from experiments.paper.vp_calibration import preset_config
+    from experiments.paper.victoria_park.calibration import preset_config
 
     preset = load_slam_config(preset_path("victoria_park_ute"))
     m = preset.measurement.constant_noise["bailey"]
@@ -393,7 +393,7 @@ def test_calibration_writes_what_the_preset_holds():
 def test_start_stretch_is_the_shortest_from_which_the_heading_holds():
     """`vp_start.derive`: the shortest D from which every longer fit is within the tolerance
     of the whole path's heading, even when a shorter one came close before."""
-    from experiments.paper.vp_start import derive
+    from experiments.paper.victoria_park.start import derive
 
     rows = [(50.0, 36.9, 10), (100.0, 35.0, 20), (150.0, 36.6, 30), (200.0, 36.8, 40)]
     assert derive(rows, 0.3) == 150.0
@@ -410,8 +410,8 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
     paper's confirm_scans; the start headings of fits longer than it agree within the
     tolerance."""
     from experiments.io.config_file import load_slam_config, preset_path
-    from experiments.paper import vp_start
-    from experiments.paper.vp_calibration import BASE
+    from experiments.paper.victoria_park import start as vp_start
+    from experiments.paper.victoria_park.calibration import BASE
 
     cfg = load_slam_config(preset_path("victoria_park_ute"))
     at_start = cfg.with_(**{"map_policy.confirm_scans": BASE.map_policy.confirm_scans})
@@ -422,11 +422,11 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
     assert rows[-1][0] > 900  # scans 1-2000 drive about a kilometre
 
 
-# ---- the laser latency (experiments/paper/vp_calibration.py) -------------------------------
+# ---- the laser latency (experiments/paper/victoria_park/calibration.py) ----------------------
 
 
 def test_derive_latency_is_the_vertex_of_the_profiles_parabola_inside_the_grid():
-    from experiments.paper.vp_calibration import LATENCIES_S, derive_latency
+    from experiments.paper.victoria_park.calibration import LATENCIES_S, derive_latency
 
     def J(lat, best):
         return -61000.0 + 1e5 * (lat - best) ** 2
@@ -458,7 +458,7 @@ def test_latency_profile_is_j_at_each_latency_and_zero_is_the_plain_run(vp_dir):
     """On the first 200 scans: the profile's J at 0 is the calibration's J without the
     setting, to the bit; at 60 ms it differs (each scan is placed at another pose)."""
     from experiments.io.config_file import load_slam_config, preset_path
-    from experiments.paper.vp_calibration import BASE, START, latency_profile, objective
+    from experiments.paper.victoria_park.calibration import BASE, START, latency_profile, objective
 
     seq = load_victoria_park(vp_dir, n_scans=200)
     steering = load_slam_config(preset_path("victoria_park_ute")).vehicle.steering

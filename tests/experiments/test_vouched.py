@@ -84,7 +84,7 @@ def test_the_association_loop_table_and_the_victoria_park_table_agree(vp_dir):
     same scans (1-1500: the --quick head) are one run: equal GPS RMSE, over all fixes and over
     the vouched ones, and the vouched one is a real figure."""
     from experiments.paper import association_loop as al
-    from experiments.paper import victoria_park as vp
+    from experiments.paper.victoria_park import real_run as vp
 
     loop = al.victoria_park_trial((1500, al.LOOP_METHODS[0]))
     row, _ = vp.vp_trial(("x", "full", "detections", "ihgr", True, False))

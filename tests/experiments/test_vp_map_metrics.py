@@ -12,7 +12,7 @@ from experiments.eval.gospa import gospa
 from experiments.eval.map_quality import reference_in_our_frame
 from experiments.io.g2o import g2o_text, read_g2o
 from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
-from experiments.paper.victoria_park import head, reference_match, run_config
+from experiments.paper.victoria_park.real_run import head, reference_match, run_config
 from slam import run_slam, se2
 from slam.graph import graph_of_problem
 from slam.smoother import problem_from_log

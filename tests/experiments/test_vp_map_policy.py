@@ -1,6 +1,6 @@
-"""The map policy's settings from Victoria Park scans 1-2000 (experiments/paper/vp_map_policy.py):
-the rules on hand-made figures, the experiment on the data, and the preset's confirm_scans
-derived again."""
+"""The map policy's settings from Victoria Park scans 1-2000
+(experiments/paper/victoria_park/map_policy.py): the rules on hand-made figures, the
+experiment on the data, and the preset's confirm_scans derived again."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from experiments.paper.vp_map_policy import BIN_EDGES_M, derive, derive_confirm
+from experiments.paper.victoria_park.map_policy import BIN_EDGES_M, derive, derive_confirm
 
 
 def rates(established: list[float]) -> dict:
@@ -73,7 +73,7 @@ def test_the_presets_confirm_scans_is_derived_again_from_scans_1_2000(vp_dir):
     and the maximum is one: the F1 falls on both sides of it."""
     from experiments.io.config_file import load_slam_config, preset_path
     from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
-    from experiments.paper.vp_map_policy import FIT_SCANS, confirm_sweep
+    from experiments.paper.victoria_park.map_policy import FIT_SCANS, confirm_sweep
 
     cfg = load_slam_config(preset_path("victoria_park_ute"))
     rows = confirm_sweep(

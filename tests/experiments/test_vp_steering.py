@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from experiments.errors import DataError
-from experiments.paper.vp_steering import dead_reckoning_mse, fit_steering, stretches
+from experiments.paper.victoria_park.steering import dead_reckoning_mse, fit_steering, stretches
 from slam import AckermannModel, Odometry, Sequence, SteeringCalibration, se2
 from slam.vehicle import integrate
 

@@ -11,11 +11,18 @@ import pytest
 
 from experiments.bundled import presets_dir
 from experiments.errors import ConfigError
-from experiments.io.config_file import config_toml, load_slam_config, preset_path, presets
+from experiments.io.config_file import (
+    config_diff,
+    config_toml,
+    load_slam_config,
+    preset_path,
+    preset_toml,
+    presets,
+)
 from experiments.paper.slam import CYCAB_SLAM
 from features import ExtractorParams
 from slam import SlamConfig, SlamError
-from slam.config import MOVED, AssociationConfig, FeaturesConfig
+from slam.config import MOVED, AssociationConfig, FeaturesConfig, setting_sources
 
 
 def _toml(cfg: SlamConfig) -> str:
@@ -173,3 +180,92 @@ def test_a_configuration_made_for_another_car_is_warned(caplog):
         run_slam(seq, load_slam_config("victoria_park_ute").with_(**{"features.method": "paper"}))
     (msg,) = [r.message for r in caplog.records if "made for a car" in r.message]
     assert "wheelbase 2.83 m" in msg and "has 1.2 m (0 m)" in msg
+
+
+# ---- presets are diffs; every default has its source; one gate default --------------------------
+
+
+def _leaves(d: dict, path: str = "") -> set[str]:
+    out = set()
+    for k, v in d.items():
+        where = f"{path}.{k}" if path else k
+        out |= _leaves(v, where) if isinstance(v, dict) else {where}
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(presets()))
+def test_a_preset_holds_only_what_differs_from_the_defaults(name, tmp_path):
+    text = Path(str(presets_dir() / f"{name}.toml")).read_text()
+    assert len(text.splitlines()) < 60
+    cfg = load_slam_config(name)
+    stored = tomllib.loads(text)
+    assert stored == tomllib.loads(preset_toml(cfg))  # nothing a default already says
+    assert stored == config_diff(cfg.to_dict(), SlamConfig().to_dict())
+    # the file a run writes holds every setting, a preset's diff included
+    full = tomllib.loads(config_toml(cfg))
+    assert _leaves(full) >= _leaves(SlamConfig().to_dict()) - {"association.params"}
+    assert _leaves(stored) < _leaves(full)
+
+
+def test_a_preset_diff_reads_back_and_keeps_a_noise_model_whole():
+    cfg = SlamConfig().with_(**{"measurement.constant_noise.paper.range_sigma_m": 0.5})
+    diff = config_diff(cfg.to_dict(), SlamConfig().to_dict())
+    assert set(diff["measurement"]["constant_noise"]["paper"]) == {
+        "range_sigma_m",
+        "range_sigma_per_m",
+        "bearing_sigma_rad",
+        "cross_range_sigma_m",
+    }
+    assert SlamConfig.from_dict(tomllib.loads(preset_toml(cfg))) == cfg
+    assert tomllib.loads(preset_toml(SlamConfig())) == {}
+    no_claim = SlamConfig().with_(**{"vehicle.calibrated_for": None})  # None is no TOML value
+    with pytest.raises(ConfigError, match="diff"):
+        preset_toml(no_claim)
+
+
+def test_every_default_names_its_source():
+    """grep finds each default in slam/config.py (or, for the extractors' parameters, in
+    features/, which imports nothing of slam) with a one-line source."""
+    kinds = ("paper", "simulator", "sensor model", "calibration", "design")
+    rows = setting_sources()
+    assert len(rows) > 90
+    bad = [path for path, _, source in rows if source.split(":")[0] not in kinds]
+    assert not bad, f"settings without a source: {bad}"
+    assert all("\n" not in source for _, _, source in rows)
+    sources = {path: source for path, _, source in rows}
+    assert "Victoria Park" in sources["closure.tree_sd_m"]
+    assert sources["association.gate_prob"].startswith("simulator")
+
+
+def test_gate_prob_has_one_default():
+    """The association gate's one default is the config's; the associators take it from their
+    caller (the association study names its own)."""
+    import inspect
+
+    from association import SlidingWindowAssociator, associate, associate_detailed
+
+    for fn in (associate, associate_detailed, SlidingWindowAssociator):
+        param = inspect.signature(fn).parameters["gate_prob"]
+        assert param.default is inspect.Parameter.empty, fn
+    assert AssociationConfig().gate_prob == 0.999
+
+
+BEGIN, END = "<!-- settings: begin -->", "<!-- settings: end -->"
+
+
+def settings_table() -> str:
+    """The configuration reference's table: every setting, its default and its source."""
+    rows = ["| setting | default | source |", "|---|---|---|"]
+    for path, value, source in setting_sources():
+        shown = repr(value) if isinstance(value, str) else str(value).replace("|", "\\|")
+        rows.append(f"| `{path}` | `{shown}` | {source} |")
+    return "\n".join(rows)
+
+
+def test_the_configuration_page_shows_every_default_and_its_source():
+    page = Path(__file__).resolve().parents[2] / "docs" / "configuration.md"
+    text = page.read_text()
+    shown = text.split(BEGIN)[1].split(END)[0].strip()
+    assert shown == settings_table(), (
+        "regenerate the table: tests/slam/test_config.py settings_table()"
+    )

@@ -11,9 +11,8 @@ import pytest
 from experiments.eval.poses import nees, nees_bounds, pose_errors
 from features.types import Features
 from slam import SlamConfig, interpolate_poses, run_slam, se2
-from slam.config import MeasurementConfig, StartConfig
+from slam.config import MeasurementConfig, OdometryNoise, StartConfig
 from slam.measurement import NoiseModel
-from slam.vehicle import OdometryNoise
 
 from .test_run import LASER, drive_sequence
 

@@ -12,10 +12,11 @@ from hypothesis import strategies as st
 from scipy.stats import chi2
 from support import num_jac
 
+from slam.config import OdometryNoise
 from slam.ekf import EkfState, add_landmark, initial_state, observe_jacobian_full, predict, update
 from slam.measurement import polar_cov_from_xy
 from slam.se2 import inverse_observe, observe
-from slam.vehicle import AckermannModel, Odometry, OdometryNoise, integrate, wrap_angle
+from slam.vehicle import AckermannModel, Odometry, integrate, wrap_angle
 
 LASER = np.array([1.55, 0.2, 0.05])
 

@@ -14,15 +14,15 @@ from hypothesis import strategies as st
 from experiments.io.sequence_file import load_sequence, save_sequence
 from experiments.sim import CycabParams, simulate_cycab_run
 from slam import SlamError, interpolate_poses, run_slam, se2
+from slam.config import IncrementNoise, OdometryNoise, UnicycleNoise
 from slam.motion import (
+    AckermannMotion,
     IncrementMotion,
-    IncrementNoise,
     UnicycleMotion,
-    UnicycleNoise,
     increment_jacobians,
     unicycle_step,
 )
-from slam.vehicle import AckermannModel, Motion, Odometry, OdometryNoise
+from slam.vehicle import AckermannModel, Odometry
 
 STEP = 1e-6  # central differences: truncation ~ STEP^2, rounding ~ 1e-16 / STEP, both < 1e-9
 
@@ -84,7 +84,7 @@ def test_a_unicycle_is_the_car_seen_by_its_yaw_rate():
     """An Ackermann car with its encoder at the axle centre turns at v tan(alpha) / L: the same
     samples as a unicycle's (v, omega) give the same poses and the same F (to rounding)."""
     t, v, a = _samples(seed=3)
-    car = Motion(AckermannModel(1.2), Odometry(t, v, a), OdometryNoise())
+    car = AckermannMotion(AckermannModel(1.2), Odometry(t, v, a), OdometryNoise())
     uni = UnicycleMotion(t, v, v * np.tan(a) / 1.2)
     p0 = np.array([3.0, -1.0, 0.4])
     pc, Fc, _ = car.integrate(p0, t[5], t[180])

@@ -21,11 +21,20 @@ from slam import (
     run_slam,
     se2,
 )
-from slam.config import AssociationConfig, MeasurementConfig, StartConfig, VehicleConfig
+from slam.config import (
+    DEFAULT_CONSTANT_NOISE,
+    DEFAULT_FIT_FLOOR,
+    AssociationConfig,
+    MeasurementConfig,
+    OdometryNoise,
+    StartConfig,
+    VehicleConfig,
+)
 from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT
-from slam.measurement import DEFAULT_CONSTANT_NOISE, DEFAULT_FIT_FLOOR, NoiseModel
+from slam.measurement import NoiseModel
+from slam.motion import AckermannMotion
 from slam.tentatives import Tentatives
-from slam.vehicle import AckermannModel, Motion, Odometry, OdometryNoise, integrate
+from slam.vehicle import AckermannModel, Odometry, integrate
 
 CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
 LASER = (1.55, 0.0, 0.0)
@@ -405,7 +414,7 @@ def test_gps_start_fits_heading_and_position_through_noise_and_a_jump():
         (t.size, 2)
     )
     xy[20] += [15.0, 0.0]
-    motion = Motion(
+    motion = AckermannMotion(
         AckermannModel(1.2), Odometry(seq.odo_t, seq.odo_speed, seq.odo_steer), OdometryNoise()
     )
     ant = np.array(LASER)

@@ -22,12 +22,16 @@ from kernel_runs import EXTREMES, Bounded, slam_summary
 from subprocesses import error_line, trunkslam
 
 from slam import SlamConfig, SlamError
-from slam.checks import SETTING_TINY, SIGMA_LIMIT
-from slam.measurement import DEFAULT_CONSTANT_NOISE
-from slam.motion import IncrementNoise, UnicycleNoise
+from slam.config import (
+    DEFAULT_CONSTANT_NOISE,
+    IncrementNoise,
+    OdometryNoise,
+    SteeringCalibration,
+    UnicycleNoise,
+)
 from slam.sequence import MAX_VARIANCE
 from slam.smoother import MEAS_TENTATIVE
-from slam.vehicle import OdometryNoise, SteeringCalibration
+from slam.validators import SETTING_TINY, SIGMA_LIMIT
 
 TIMEOUT_S = 60.0  # a case's bound: the 6-scan drive runs in well under a second
 

@@ -12,7 +12,7 @@ from support import num_jac
 
 from features.types import Features
 from slam import SlamConfig, SlamError, interpolate_poses, run_slam, se2
-from slam.config import MeasurementConfig, StartConfig, VehicleConfig
+from slam.config import MeasurementConfig, OdometryNoise, StartConfig, VehicleConfig
 from slam.ekf import Filter, initial_state
 from slam.measurement import NoiseModel
 from slam.smoother import (
@@ -24,7 +24,7 @@ from slam.smoother import (
     smooth,
     solve_graph_file,
 )
-from slam.vehicle import AckermannModel, Odometry, OdometryNoise, integrate
+from slam.vehicle import AckermannModel, Odometry, integrate
 
 LASER = np.array([1.55, 0.4, 0.05])  # off the centre line and turned: every term of the offset
 CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}

@@ -9,11 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from slam.config import OdometryNoise, SteeringCalibration
 from slam.vehicle import (
     AckermannModel,
     Odometry,
-    OdometryNoise,
-    SteeringCalibration,
     arc_step,
     arc_step_jacobians,
     integrate,

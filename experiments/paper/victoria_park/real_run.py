@@ -57,6 +57,7 @@ from experiments.io.victoria_park import (
 from experiments.io.writers import json_types, write_atomic
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from slam import SlamConfig, SlamLog, run_slam, se2
 from slam.closure import closure_counts
 from slam.log import OUT_OF_RANGE, SKIPPED
@@ -337,8 +338,10 @@ def vp_trial(job: tuple, seed=None) -> tuple[dict, dict[str, bytes]]:
     if features != "detections":
         from features import extract_features
 
-        kwargs = cfg.features.extractor_kwargs()
-        given = [extract_features(seq.scan(k), features, **kwargs) for k in range(seq.n_scans)]
+        params, options = cfg.features.extractor_args()
+        given = [
+            extract_features(seq.scan(k), features, params, **options) for k in range(seq.n_scans)
+        ]
     if not keep:
         row, lg, _ = _one(label, seq, cfg, ref, given)
         return row, {} if lg.closures is None else {"vp_closures.png": _closure_map(lg, seq)}
@@ -350,6 +353,12 @@ def vp_trial(job: tuple, seed=None) -> tuple[dict, dict[str, bytes]]:
     return row, {"victoria_park.rrd": rec.data, **_figures(label, lg, sc, seq)}
 
 
+@experiment(
+    "victoria-park",
+    order=60,
+    page="victoria-park.md",
+    help="EKF-SLAM on the real run against GPS (needs the data), victoria_park.rrd",
+)
 def run(ctx) -> None:
     """The registered experiment `victoria-park`: its seven runs are trials (`vp_trial`); the
     first also makes the recording and the figures. The table is written after the other
@@ -593,23 +602,23 @@ def _antenna_path(lg) -> np.ndarray:
 def _closure_map(lg, seq) -> bytes:
     """vp_closures.png: a run with loop closure, where each constellation match was tried
     and how it ended."""
-    from experiments.render import plots
+    from experiments.paper.victoria_park import figures
 
     ant = _antenna_path(lg)
     matches = [(ant[e["scan"]], e["outcome"]) for e in lg.closures]
     title = "Victoria Park with loop closure: the constellation matches tried, by outcome"
     return products.png(
-        plots.plot_closure_map, seq.gps_xy, ant, lg.landmark_xy, matches, title=title
+        figures.plot_closure_map, seq.gps_xy, ant, lg.landmark_xy, matches, title=title
     )
 
 
 def _figures(label: str, lg, sc, full) -> dict[str, bytes]:
     """vp_map.png and vp_timeseries.png of the run `lg` (scored `sc`) over `full`, as bytes."""
-    from experiments.render import plots
+    from experiments.paper.victoria_park import figures
 
     ant = _antenna_path(lg)
     title = "Victoria Park: estimated antenna path and map over the GPS fixes"
-    vp_map = products.png(plots.plot_vp_map, full.gps_xy, {label: ant}, lg.landmark_xy, title)
+    vp_map = products.png(figures.plot_vp_map, full.gps_xy, {label: ant}, lg.landmark_xy, title)
     t_end = float(full.scan_t[-1])
     gaps = [
         (a, min(b, t_end))
@@ -631,7 +640,7 @@ def _figures(label: str, lg, sc, full) -> dict[str, bytes]:
     title = f"Victoria Park, {part} (IHGR)"
     errors, sizes = {label: sc.errors}, {label: lg.n_map}
     timeseries = products.png(
-        plots.plot_vp_timeseries,
+        figures.plot_vp_timeseries,
         sc.t_s,
         errors,
         jumps=sc.jump,

@@ -45,7 +45,8 @@ from experiments.errors import DataError, MissingDataError
 from experiments.io.config_file import load_slam_config, preset_path
 from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 from experiments.io.writers import write_tidy_table
-from experiments.paper.victoria_park import HALVES, reference_match
+from experiments.paper.registry import experiment
+from experiments.paper.victoria_park.real_run import HALVES, reference_match
 from slam import SlamConfig, SlamLog, run_slam, se2
 
 __all__ = [
@@ -186,6 +187,13 @@ def derive(rates: dict[str, np.ndarray], min_rate: float = 0.5, risk: float = 0.
     }
 
 
+@experiment(
+    "victoria-park-map-policy",
+    order=110,
+    page="victoria-park.md",
+    help="the map policy's confirm_scans and pruning settings from scans 1-2000 (only when named)",
+    default=False,
+)
 def run(ctx) -> None:
     """The registered experiment `victoria-park-map-policy`: the confirm_scans sweep and the
     pruning's detection rates, each with its table; the derived settings go to the manifest."""
@@ -223,7 +231,8 @@ def run(ctx) -> None:
             "within 1 m; F1: their harmonic mean, also of each half of scans 1-2000 alone "
             "(the trees seen and the landmarks that joined in it); one-tree pairs: landmarks "
             "within 1.5 m that the reference or the laser says are one tree. Derived "
-            f"(experiments/paper/vp_map_policy.py, the highest F1): confirm_scans = {confirm}; "
+            "(experiments/paper/victoria_park/map_policy.py, the highest F1): "
+            f"confirm_scans = {confirm}; "
             f"the preset holds {cfg.map_policy.confirm_scans}."
         ),
     )
@@ -267,7 +276,8 @@ def _pruning_table(ctx, seq, lg: SlamLog) -> dict:
             f"The preset without pruning, published detections, IHGR; {lg.landmark_id.size} "
             f"landmarks, {n_est} established (associated in more than {ESTABLISHED} scans), "
             f"{n_short} short-lived ({SHORT_LIVED} or fewer). Expected: in the field of view, "
-            "after the scan it joined the map. Derived (experiments/paper/vp_map_policy.py): "
+            "after the scan it joined the map. Derived "
+            "(experiments/paper/victoria_park/map_policy.py): "
             f"prune_range_m = {derived['prune_range_m']:g}, prune_hit_ratio = "
             f"{derived['prune_hit_ratio']:g}, prune_after_expected = "
             f"{derived['prune_after_expected']} (lowest established rate within range "

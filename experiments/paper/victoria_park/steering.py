@@ -10,7 +10,7 @@ Its three parameters are fitted here, outside the filter, to what the odometry a
 the path's shape (the approach of odometry calibration against an external reference): the GPS
 fixes of the first 2000 scans are cut into stretches of `STRETCH_S` seconds; in each, the
 antenna track dead-reckoned from the steering and speed readings is fitted rigidly (rotation and
-translation, `slam.start.procrustes_2d`) to the fixes, and the objective is the mean squared
+translation, `slam.se2.procrustes_2d`) to the fixes, and the objective is the mean squared
 distance left, each capped at `CAP_M` (GPS multipath) and without the fixes flagged as jumps.
 Stretches in which the antenna moves less than `MIN_EXTENT_M` say nothing of the shape and are
 not used. Nelder-Mead from the identity minimises it. The same figure on the stretches of scans
@@ -29,7 +29,7 @@ from scipy.optimize import minimize
 from experiments.errors import DataError
 from experiments.eval.gps import flag_jumps, top_speed
 from slam import AckermannModel, Odometry, SteeringCalibration, se2
-from slam.start import procrustes_2d
+from slam.se2 import procrustes_2d
 from slam.vehicle import integrate
 
 __all__ = ["STRETCH_S", "SteeringFit", "dead_reckoning_mse", "fit_steering", "stretches"]

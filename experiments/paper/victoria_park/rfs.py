@@ -42,8 +42,9 @@ from experiments.exec import spawn_seeds
 from experiments.io.writers import json_types
 from experiments.paper import products
 from experiments.paper.products import TableSpec
+from experiments.paper.registry import experiment
 from experiments.paper.runner import experiment_seed
-from experiments.paper.victoria_park import PRESET, run_config
+from experiments.paper.victoria_park.real_run import PRESET, run_config
 from slam import run_slam, se2
 
 __all__ = [
@@ -95,10 +96,10 @@ def protocol_input(full, raw, cfg, protocol: RfsProtocol = PROTOCOL) -> Protocol
     n_raw = min(raw.n_scans, full.n_scans)
     if not np.array_equal(raw.scan_t[:n_raw], full.scan_t[:n_raw]):
         raise MissingDataError("Victoria Park: the raw scans' times differ from the full run's")
-    kwargs = cfg.with_(**{"features.method": "bailey"}).features.extractor_kwargs()
+    params, options = cfg.with_(**{"features.method": "bailey"}).features.extractor_args()
     scan, rng_m, bearing, radius = [], [], [], []
     for k in range(n_raw):
-        c = extract_features(raw.scan(k), "bailey", **kwargs).circle_params
+        c = extract_features(raw.scan(k), "bailey", params, **options).circle_params
         scan.append(np.full(c.shape[0], k))
         rng_m.append(np.hypot(c[:, 0], c[:, 1]))
         bearing.append(np.arctan2(c[:, 1], c[:, 0]))
@@ -318,6 +319,14 @@ DRAWS = TableSpec(
 )
 
 
+@experiment(
+    "victoria-park-rfs",
+    order=70,
+    page="victoria-park-rfs.md",
+    help="the full run under the published RFS protocol, exactly (100 clutter draws; only "
+    "when named)",
+    default=False,
+)
 def run(ctx) -> None:
     """The registered experiment `victoria-park-rfs`: each run a trial on the executor (the
     clutter draws with seeds spawned from the experiment's); the tables are written after the

@@ -9,7 +9,7 @@ scans 2001-7249 stay untouched by it.
 
 First the steering calibration (`slam.SteeringCalibration`: alpha = offset + gain r +
 cubic r^3 from the reading r), fitted by dead reckoning against the GPS stretches of the same
-scans (experiments/paper/vp_steering.py; no filter involved), then held fixed.
+scans (experiments/paper/victoria_park/steering.py; no filter involved), then held fixed.
 
 Fixed before the fit (not fitted):
 - the filter: first-estimates Jacobians (FEJ), which keep the global heading unobservable as it
@@ -83,12 +83,16 @@ import numpy as np
 from scipy.optimize import minimize
 
 from experiments.errors import ConfigError, MissingDataError
-from experiments.io.config_file import config_toml
+from experiments.io.config_file import preset_toml
 from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 from experiments.io.writers import write_atomic
-from experiments.paper import products, vp_map_policy, vp_start, vp_steering
+from experiments.paper import products
 from experiments.paper.products import TableSpec
-from experiments.paper.vp_steering import fit_steering
+from experiments.paper.registry import experiment
+from experiments.paper.victoria_park import map_policy as vp_map_policy
+from experiments.paper.victoria_park import start as vp_start
+from experiments.paper.victoria_park import steering as vp_steering
+from experiments.paper.victoria_park.steering import fit_steering
 from slam import OdometryNoise, SlamConfig, SteeringCalibration, run_slam
 from slam.log import SKIPPED
 from slam.measurement import NoiseModel
@@ -531,7 +535,8 @@ def _calibration_notes(st: VpCalibration) -> str:
         f"over scans 1-{FIT_SCANS} with the published detections (IHGR, FEJ, GPS start fit "
         "over 50 m, scans at rest skipped). J: the negative log-likelihood of the "
         "innovations plus ln(80 m pi rad) per unexplained measurement "
-        "(experiments/paper/vp_calibration.py); BIC = 2 J + parameters x ln(measurements). "
+        "(experiments/paper/victoria_park/calibration.py); BIC = 2 J + parameters x "
+        "ln(measurements). "
         "Last row: the preset, the fit with the lower BIC, its measurement sigmas scaled by "
         "the factor that makes the NIS per dof 1 on the same scans (bisection). No GPS error "
         "enters it. Steering calibration, fixed in every row (experiments/paper/"
@@ -551,11 +556,19 @@ def _start_notes(st: VpCalibration) -> str:
         "IHGR) fitted rigidly to the GPS fixes of its first D metres (slam.start."
         f"fit_gps_start_to_track); last row: the whole path. Chosen: D = {st.start_fit_m:.0f} m, "
         f"the shortest D from which every longer fit is within {vp_start.TOLERANCE_DEG} deg "
-        "of the whole path's (experiments/paper/vp_start.py). No GPS error of a run enters "
+        "of the whole path's (experiments/paper/victoria_park/start.py). No GPS error of a run "
+        "enters "
         "it."
     )
 
 
+@experiment(
+    "victoria-park-calibration",
+    order=100,
+    page="victoria-park.md",
+    help="the ute's noise and laser yaw (only when named)",
+    default=False,
+)
 def run(ctx) -> None:
     """The registered experiment `victoria-park-calibration`."""
     try:
@@ -570,7 +583,7 @@ def run(ctx) -> None:
     ctx.config["victoria-park-calibration"] = _manifest_entry(st)
     products.tables(ctx, TABLES, st)
     ctx.outputs.append(
-        write_atomic(ctx.path("victoria_park_ute.toml"), config_toml(st.preset(), PRESET_HEADER))
+        write_atomic(ctx.path("victoria_park_ute.toml"), preset_toml(st.preset(), PRESET_HEADER))
     )
 
 
@@ -601,10 +614,11 @@ def preset_config(
 
 PRESET_HEADER = """\
 The Victoria Park ute: `trunkslam reproduce victoria-park-calibration`
-(experiments/paper/vp_calibration.py) fitted the steering calibration by dead reckoning against
-GPS stretches of scans 1-2000, then the laser yaw, odometry noise and measurement noise by
-maximum likelihood of the filter's own innovations on the same scans (no GPS error of a SLAM run
-is used), then scaled the measurement sigmas by the factor that makes the NIS per dof 1 there,
+(experiments/paper/victoria_park/calibration.py) fitted the steering calibration by dead
+reckoning against GPS stretches of scans 1-2000, then the laser yaw, odometry noise and
+measurement noise by maximum likelihood of the filter's own innovations on the same scans (no
+GPS error of a SLAM run is used), then scaled the measurement sigmas by the factor that makes
+the NIS per dof 1 there,
 then the laser latency from a profile of the same likelihood, then chose the metres of GPS the
 start is fitted to along the filter's own path (the shortest stretch from which longer ones
 agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
@@ -652,7 +666,8 @@ TABLES = (
         labels={"latency_ms": "laser latency (ms)", "j": "J"},
         title="Victoria Park: the calibration's J against the laser latency (scans 1-2000)",
         notes=lambda st: (
-            "J (experiments/paper/vp_calibration.py) with the preset's noise, each scan placed "
+            "J (experiments/paper/victoria_park/calibration.py) with the preset's noise, each "
+            "scan placed "
             "at the pose this long before its stamp (vehicle.laser_latency_s). Chosen: "
             f"{1e3 * st.latency_s:.1f} ms, the vertex of the parabola fitted to the whole "
             "profile (least squares). No GPS error of a run enters it."

@@ -1,0 +1,242 @@
+"""Landmark existence: the probability that a landmark is a real trunk, updated every scan from
+what the laser did and did not report (groundwork for issue 41; not yet wired into the loop).
+
+A landmark (tentative or mapped) carries r, the probability that it is a static trunk the
+extractor can see. Each scan:
+
+1. **Prediction.** r <- survival * r: a trunk is still there one scan later with probability
+   `survival` (1: trees do not move; below 1 to let a parked car or a standing person fade).
+2. **Detection probability** (`beam_evidence`, `detection_probability`). From the sensor
+   model, for each landmark at range d and bearing b with radius a, in the scan's beams:
+   - reach: the beams whose bearing lies within the trunk's angular half-width asin(a / d) of
+     b (with the landmark's bearing uncertainty added to the half-width if given); a trunk
+     at 30 m of radius 0.15 m spans 0.57 deg, one or two beams of 0.5 deg;
+   - occluded: of them, those whose return is nearer than d - a - `gap_m` (something in
+     front hides the trunk from that beam);
+   - see-through: of them, those with no return or a return beyond d + a + `gap_m` (the beam
+     passed where the trunk should be).
+   Pd = pd_max when at least `min_beams` of the reaching beams are not occluded (the
+   extractor needs that many beams on a trunk to fit a circle), else 0; and 0 out of the
+   field of view or beyond `max_range_m`.
+3. **Update** (`update_existence`), Bayes' rule on the two hypotheses "real" / "not real":
+   - detected (a measurement associated, with likelihood g = N(nu; 0, S) under "real"):
+     r' = r Pd g / (r Pd g + (1 - r) kappa), with kappa the clutter density (false
+     detections per m per rad, `clutter_density`): under "not real" the measurement is
+     clutter;
+   - missed: r' = r (1 - Pd) q^n / (r (1 - Pd) q^n + (1 - r)), where n is the number of
+     see-through beams and q (`see_through_q`) the chance that a beam passes a real trunk's
+     place (the landmark's position error, a beam grazing its edge); under "not real" the
+     beams pass freely (likelihood 1).
+   A landmark with Pd = 0 and no see-through beam keeps its r: nothing was learnt.
+4. **Decisions** (`decide`): a tentative joins the map when r >= `join_prob` ("at least this
+   probable that it is a real trunk"); a landmark is removed when r < `remove_prob` ("less
+   probable than this that it is real"). A new tentative starts at `initial_existence(birth,
+   kappa)` = b / (b + kappa): of the circles seen at a place where nothing was mapped, the
+   share that are new trunks, when new trunks appear with density b and clutter with kappa.
+
+Interface (all vectorised over L landmarks; arrays are numpy float64 unless said):
+    cfg = ExistenceConfig(pd_max=0.9, min_beams=2, see_through_q=0.1, ...)
+    ev = beam_evidence(ranges_m (B,), bearings_rad (B,), lm_range_m (L,), lm_bearing_rad (L,),
+                       radius_m (L,), cfg)       -> BeamEvidence(reach, occluded, through) (L,)
+    pd = detection_probability(ev, lm_range_m, in_fov (L,) bool, cfg)        -> (L,)
+    kappa = clutter_density(false_per_scan, max_range_m, fov_rad)           -> float
+    r = predict_existence(r, cfg)
+    r = update_existence(r, pd, detected (L,) bool, likelihood (L,), ev.through, kappa, cfg)
+    join, remove = decide(r, cfg)                                           -> (L,) bool each
+
+How it replaces the map policy's counts (to be wired in by the loop's owner): `confirm_scans`
+(a tentative joins after that many sightings) becomes `join_prob`, and the pruner's
+`prune_hit_ratio` / `prune_after_expected` / `prune_range_m` (remove a landmark seen in too
+few of the scans it was in view within a range) become `remove_prob` with Pd from the sensor
+model: a far thin object seen by one beam has Pd near 0, so missing it costs nothing, while a
+trunk that beams pass through loses existence fast. The pure-numpy functions here import
+nothing of the filter loop.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = [
+    "BeamEvidence",
+    "ExistenceConfig",
+    "beam_evidence",
+    "clutter_density",
+    "decide",
+    "detection_probability",
+    "gaussian_likelihood",
+    "initial_existence",
+    "predict_existence",
+    "update_existence",
+]
+
+
+@dataclass(frozen=True)
+class ExistenceConfig:
+    """Parameters of the existence model (module doc); probabilities in [0, 1].
+
+    pd_max: probability that the extractor reports a trunk that enough beams reach.
+    min_beams: beams the extractor needs on a trunk (>= 1).
+    gap_m: a return counts as in front of / beyond the trunk past this margin, m (>= 0).
+    see_through_q: probability that a beam passes a real trunk's place (in (0, 1]).
+    survival: probability that a real trunk is still there one scan later.
+    max_range_m: no detection at or beyond this range (the sensor's), m.
+    join_prob, remove_prob: the decisions' thresholds, remove_prob < join_prob.
+    """
+
+    pd_max: float = 0.9
+    min_beams: int = 2
+    gap_m: float = 0.3
+    see_through_q: float = 0.1
+    survival: float = 1.0
+    max_range_m: float = 80.0
+    join_prob: float = 0.99
+    remove_prob: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ("pd_max", "survival", "join_prob", "remove_prob"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and 0.0 <= v <= 1.0):
+                raise ValueError(f"ExistenceConfig.{name}: must be in [0, 1], got {v!r}")
+        if not (isinstance(self.see_through_q, (int, float)) and 0.0 < self.see_through_q <= 1.0):
+            raise ValueError(
+                f"ExistenceConfig.see_through_q: must be in (0, 1], got {self.see_through_q!r}"
+            )
+        if not (isinstance(self.min_beams, int) and self.min_beams >= 1):
+            raise ValueError(
+                f"ExistenceConfig.min_beams: must be an integer >= 1, got {self.min_beams!r}"
+            )
+        if not (isinstance(self.gap_m, (int, float)) and 0.0 <= self.gap_m < math.inf):
+            raise ValueError(f"ExistenceConfig.gap_m: must be finite and >= 0, got {self.gap_m!r}")
+        if not (isinstance(self.max_range_m, (int, float)) and self.max_range_m > 0):
+            raise ValueError(f"ExistenceConfig.max_range_m: must be > 0, got {self.max_range_m!r}")
+        if not self.remove_prob < self.join_prob:
+            raise ValueError(
+                f"ExistenceConfig.remove_prob: must be below join_prob ({self.join_prob!r}), "
+                f"got {self.remove_prob!r}"
+            )
+
+
+class BeamEvidence(NamedTuple):
+    """Per landmark (L,) int64: beams reaching its width, of them occluded by a nearer return,
+    and of them passing beyond it (no return or a farther one)."""
+
+    reach: np.ndarray
+    occluded: np.ndarray
+    through: np.ndarray
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def beam_evidence(
+    ranges_m: np.ndarray,
+    bearings_rad: np.ndarray,
+    lm_range_m: np.ndarray,
+    lm_bearing_rad: np.ndarray,
+    radius_m: np.ndarray,
+    cfg: ExistenceConfig,
+    bearing_sigma_rad: np.ndarray | float = 0.0,
+) -> BeamEvidence:
+    """The beams of one scan (ranges_m (B,), NaN = no return; bearings_rad (B,), laser frame)
+    that reach each landmark (lm_range_m, lm_bearing_rad, radius_m: (L,), laser frame) within
+    its angular half-width asin(radius / range) (+ bearing_sigma_rad), and how many of them are
+    occluded or pass through (module doc)."""
+    d = np.asarray(lm_range_m, dtype=np.float64)[:, None]
+    a = np.asarray(radius_m, dtype=np.float64)[:, None]
+    half = np.arcsin(np.clip(a / np.maximum(d, 1e-12), 0.0, 1.0))
+    half = half + np.asarray(bearing_sigma_rad, dtype=np.float64).reshape(-1, 1)
+    db = _wrap(np.asarray(bearings_rad)[None, :] - np.asarray(lm_bearing_rad)[:, None])
+    reach = np.abs(db) <= half  # (L, B)
+    r = np.asarray(ranges_m, dtype=np.float64)[None, :]
+    with np.errstate(invalid="ignore"):
+        near = r < d - a - cfg.gap_m
+        beyond = ~np.isfinite(r) | (r > d + a + cfg.gap_m)
+    return BeamEvidence(
+        reach.sum(axis=1).astype(np.int64),
+        (reach & near).sum(axis=1).astype(np.int64),
+        (reach & beyond).sum(axis=1).astype(np.int64),
+    )
+
+
+def detection_probability(
+    ev: BeamEvidence, lm_range_m: np.ndarray, in_fov: np.ndarray, cfg: ExistenceConfig
+) -> np.ndarray:
+    """(L,) Pd: pd_max where at least min_beams reaching beams are not occluded, in the field of
+    view and inside max_range_m; 0 elsewhere."""
+    free = ev.reach - ev.occluded
+    ok = (free >= cfg.min_beams) & np.asarray(in_fov, bool)
+    ok &= np.asarray(lm_range_m, dtype=np.float64) < cfg.max_range_m
+    return np.where(ok, cfg.pd_max, 0.0)
+
+
+def clutter_density(false_per_scan: float, max_range_m: float, fov_rad: float) -> float:
+    """Clutter density kappa, false detections per m per rad: the extractor's measured false
+    detections per scan spread evenly over the measurement space [0, max_range] x fov."""
+    if not (false_per_scan >= 0 and max_range_m > 0 and fov_rad > 0):
+        raise ValueError(
+            "clutter_density: needs false_per_scan >= 0, max_range_m > 0 and fov_rad > 0, got "
+            f"{false_per_scan!r}, {max_range_m!r}, {fov_rad!r}"
+        )
+    return float(false_per_scan) / (float(max_range_m) * float(fov_rad))
+
+
+def gaussian_likelihood(nu: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """(L,) N(nu; 0, S) of innovations nu (L, 2) [m, rad] with covariances S (L, 2, 2)."""
+    nu = np.asarray(nu, dtype=np.float64)
+    S = np.asarray(S, dtype=np.float64)
+    m = np.einsum("li,li->l", nu, np.linalg.solve(S, nu[..., None])[..., 0])
+    return np.exp(-0.5 * m) / (2.0 * np.pi * np.sqrt(np.linalg.det(S)))
+
+
+def initial_existence(birth_density: float, kappa: float) -> float:
+    """b / (b + kappa): the existence of a new tentative (module doc)."""
+    if not (birth_density >= 0 and kappa >= 0 and birth_density + kappa > 0):
+        raise ValueError(
+            f"initial_existence: needs densities >= 0, not both 0, got {birth_density!r}, {kappa!r}"
+        )
+    return birth_density / (birth_density + kappa)
+
+
+def predict_existence(r: np.ndarray, cfg: ExistenceConfig) -> np.ndarray:
+    """r * survival."""
+    return np.asarray(r, dtype=np.float64) * cfg.survival
+
+
+def update_existence(
+    r: np.ndarray,
+    pd: np.ndarray,
+    detected: np.ndarray,
+    likelihood: np.ndarray,
+    through: np.ndarray,
+    kappa: float,
+    cfg: ExistenceConfig,
+) -> np.ndarray:
+    """(L,) the existence after one scan (module doc, step 3). likelihood: N(nu; 0, S) of the
+    associated measurement where detected (ignored elsewhere); through: see-through beams."""
+    r = np.asarray(r, dtype=np.float64)
+    pd = np.asarray(pd, dtype=np.float64)
+    det = np.asarray(detected, bool)
+    if det.any() and not kappa > 0:
+        raise ValueError(
+            f"update_existence: a detection needs clutter density kappa > 0, got {kappa!r}"
+        )
+    g = np.where(det, np.asarray(likelihood, dtype=np.float64), 0.0)
+    yes_det, no_det = r * pd * g, (1.0 - r) * kappa
+    pass_through = cfg.see_through_q ** np.asarray(through, dtype=np.float64)
+    yes_miss, no_miss = r * (1.0 - pd) * pass_through, 1.0 - r
+    yes = np.where(det, yes_det, yes_miss)
+    no = np.where(det, no_det, no_miss)
+    total = yes + no
+    return np.where(total > 0, yes / np.where(total > 0, total, 1.0), r)
+
+
+def decide(r: np.ndarray, cfg: ExistenceConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(join, remove), (L,) bool each: r >= join_prob, r < remove_prob."""
+    r = np.asarray(r, dtype=np.float64)
+    return r >= cfg.join_prob, r < cfg.remove_prob
