@@ -19,10 +19,10 @@ from slam.ekf import EkfState, add_landmark, initial_state, predict, update
 from slam.errors import SlamError
 from slam.log import TIMING_KEYS, SlamLog
 from slam.loop import run_slam
-from slam.mapping import Tentatives
 from slam.measurement import measurements_from_features
 from slam.se2 import interpolate_poses, observe, wrap_angle
 from slam.sequence import Sequence
+from slam.tentatives import Tentatives
 from slam.vehicle import AckermannModel, Odometry, integrate
 from slam.visual import NullVisualiser
 

@@ -5,7 +5,7 @@ mapped long ago, their predictions lie in view, yet the per-scan association doe
 them (the drift has grown past its gate), and new landmarks are mapped beside them. The
 `LoopCloser` watches for it after each scan and, when it is there, matches the two maps:
 
-1. Revisit detection (`LoopCloser.hidden`, before each scan's association): an *old*
+1. Revisit detection (`LoopCloser.revisit`, before each scan's association): an *old*
    landmark (not seen for `old_s` seconds) whose prediction lies in view is hidden from the
    scan's association when its gate reaches half the distance to the nearest other tree in the
    map: the nearest landmark farther than `match_m`, and, within `SAME_TREE_M`, one the laser
@@ -13,12 +13,12 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    tree mapped again, and the association may take one for the other without harm). The
    trees of the way back are then mapped anew, as *recent* landmarks (joined the map in the
    last `recent_s` seconds).
-   The second signature (`LoopCloser._passed_by`) needs no wide gate: a filter sure of a
+   The second signature (`LoopCloser.passed_by`) needs no wide gate: a filter sure of a
    wrong pose passes mapped trees by and maps them again. Landmarks in view that no scan has
    updated for `recent_s` seconds, with recent landmarks within `max_offset_m` of them (the
    largest shift of the recent map's centroid that the match below allows), count as old
    for it.
-2. Constellation match (`LoopCloser.__call__`, `_hypotheses`): every `every_scans` scans while
+2. Constellation match (`LoopCloser.close`, `hypotheses`): every `every_scans` scans while
    at least `min_pairs` old landmarks are hidden, or else passed by (the per-scan
    association pairs the rest), the recent landmarks within the laser's range against the
    old ones in view, at least `min_pairs` of each. Every pair of the `BASIS` most-seen
@@ -29,7 +29,7 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    park look alike, so the best hypothesis must explain `min_pairs` landmarks and `margin`
    more than the best hypothesis that differs from it (moves the centroid elsewhere by more
    than `match_m`).
-3. Joint compatibility (`Filter.same_landmarks_nis`): the filter's own covariance must allow
+3. Joint compatibility (`slam.rigid.same_landmarks_nis`): the filter's own covariance must allow
    all the matched pairs to be the same trees at once (chi-square at `jc_prob`, 2 x pairs
    degrees of freedom). An EKF's covariance is too small after a long excursion (its
    heading's linearisation; in the simulated park, without closure, fewer than half of the
@@ -42,18 +42,18 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
      landmark update shrinks it), chi-square with 3 dof at `jc_prob`, else "beyond dead
      reckoning". In an orchard a match one row over is as good as the right one; this is
      what refuses it;
-   - the pairs must be the same trees up to one rigid motion (`Filter.rigid_fit`): the NIS
+   - the pairs must be the same trees up to one rigid motion (`slam.rigid.rigid_fit`): the NIS
      left by the least-squares rigid motion under the covariance of the centred residuals,
      with `tree_sd_m` added to each landmark (chi-square, 2 x pairs - 3 dof at `jc_prob`),
      else "not jointly compatible";
    - then the drift dead reckoning allows is given back to the filter (`_free_local_map`,
-     `Filter.free_rigid_motion`): the vehicle and every landmark mapped since the old
+     `slam.rigid.free_rigid_motion`): the vehicle and every landmark mapped since the old
      landmarks were last seen may move together by a rigid motion of that covariance, grown
      as a random walk (a landmark mapped halfway through the excursion shares half of it), so
      that the pairs, not the filter's belief, place the excursion's map.
-4. Applying it (`Filter.merge_landmarks`): one update with "each pair differs by 0", then the
+4. Applying it (`slam.rigid.merge_landmarks`): one update with "each pair differs by 0", then the
    recent duplicate is marginalised out; the log relabels its measurements with the old
-   landmark's id (`LogBuilder.merged`), so the smoother sees the closed loop as well. Then
+   landmark's id (`RunHistory.merged`), so the smoother sees the closed loop as well. Then
    the other landmarks of the excursion (mapped since the old landmarks were last seen)
    mapped a second time are swept up (`LoopCloser._sweep`): each with a single old landmark
    near it, individually and jointly compatible, goes too. When the match passed the
@@ -70,7 +70,7 @@ them (the drift has grown past its gate), and new landmarks are mapped beside th
    move. That is a motion of the world frame, which nothing observes, but it would move the
    map away from the path already logged; so the whole estimate is then moved back by the
    rigid motion that puts the old map where it was (`LoopCloser._hold_frame`,
-   `Filter.move_rigidly`), and held there at every scan after it (whenever it has moved by
+   `slam.rigid.move_rigidly`), and held there at every scan after it (whenever it has moved by
    more than `HOLD_TOL_M`): under first-estimates Jacobians the re-registration leaves the
    linearisation points of the old map and of the vehicle metres apart, and the updates that
    follow observe the world frame through them (on Victoria Park they turned the whole map
@@ -99,7 +99,7 @@ from numba import njit
 from scipy.spatial import cKDTree
 from scipy.stats import chi2
 
-from slam import se2
+from slam import rigid, se2
 from slam.config import ClosureConfig
 from slam.ekf import landmark_columns
 from slam.se2 import procrustes_2d
@@ -109,10 +109,13 @@ __all__ = [
     "HOLD_TOL_M",
     "OUTCOMES",
     "ClosureConfig",
+    "ClosureDecision",
     "ClosureEvent",
     "LoopCloser",
+    "Revisit",
     "closure_counts",
     "dead_reckoned_cov",
+    "hypotheses",
 ]
 
 OUTCOMES = ("accepted", "not jointly compatible", "beyond dead reckoning", "no margin", "too few")
@@ -164,6 +167,25 @@ class ClosureEvent:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+@dataclass(frozen=True, eq=False)
+class Revisit:
+    """Revisit detection's answer for one scan (`LoopCloser.revisit`, module doc step 1):
+    hidden (n,) bool over the state's landmarks, those the scan's association must not pair
+    (None: none); n_hidden how many."""
+
+    hidden: np.ndarray | None = None
+    n_hidden: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class ClosureDecision:
+    """What loop closure did after one scan (`LoopCloser.close`): the constellation match
+    tried (None: none), and the duplicate sweep's merges [(kept id, dropped id, scan)]."""
+
+    event: ClosureEvent | None = None
+    duplicates: tuple = ()
+
+
 def closure_counts(events: list[dict], duplicates: list | None = None) -> dict:
     """A run's matches (`ClosureEvent.to_dict()` each): how many were tried, how many ended in
     each outcome (keys with "_" for " "), and the landmarks they merged; duplicates: the
@@ -177,111 +199,105 @@ def closure_counts(events: list[dict], duplicates: list | None = None) -> dict:
 
 
 class LoopCloser:
-    """After each scan's map management: `closer(state, k, status)` (see the module doc)."""
+    """Loop closure as one component with two calls per scan (see the module doc): before
+    the scan's association, `revisit(state, k)` says which old landmarks it must not pair
+    (the predicted pose's view); after the scan's map management, `close(state, k, updated,
+    revisit)` tries a match and sweeps duplicates, and says what it did. `events` and
+    `duplicates` hold the run's decisions so far."""
 
-    def __init__(self, cfg: ClosureConfig, view, laser, book, *, gate_prob: float) -> None:
-        """book: the run's `LogBuilder` (scan times, first scans, sightings; merges go to it);
-        gate_prob: the new-feature gate's probability (revisit detection's gate)."""
-        self.cfg, self.view, self.laser, self.book = cfg, view, laser, book
-        self.scan_t = book.scan_t
+    def __init__(
+        self, cfg: ClosureConfig, view, laser, history, *, gate_prob: float, hold_frame=True
+    ) -> None:
+        """history: the run's `slam.history.RunHistory` (scan times, odometry, first scans,
+        sightings; merges go to it); gate_prob: the new-feature gate's probability (revisit
+        detection's gate); hold_frame False: leave the world frame free after a
+        re-registration (module doc, step 4, without holding the old map; to measure what
+        holding it does)."""
+        self.cfg, self.view, self.laser, self.history = cfg, view, laser, history
+        self.hold_frame = bool(hold_frame)
+        self.scan_t = history.scan_t
         self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
-        self._seen = np.full(256, np.nan)  # by landmark id: the time of its last update
         self.events: list[ClosureEvent] = []
         self._together: dict[int, set] = {}  # id -> ids within SAME_TREE_M seen in one scan
-        self.n_hidden = 0  # old landmarks hidden from the last scan's association
         self._frame = None  # after a re-registration: (ids, positions) of the old map held
         self.duplicates: list[tuple[int, int, int]] = []  # (kept id, dropped id, scan)
 
-    def mark_seen(self, ids, t: float, only_new: bool = False) -> None:
-        """Landmarks `ids` were updated at time t (only_new: those not seen before)."""
-        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-        if ids.size and ids.max() >= self._seen.size:
-            grown = np.full(max(2 * self._seen.size, int(ids.max()) + 1), np.nan)
-            grown[: self._seen.size] = self._seen
-            self._seen = grown
-        if only_new:
-            ids = ids[np.isnan(self._seen[ids])]
-        self._seen[ids] = t
+    def close(self, state, k: int, updated: np.ndarray, revisit: Revisit) -> ClosureDecision:
+        """After scan k's map management: `updated` the ids of the landmarks the scan updated,
+        `revisit` what `revisit(state, k)` said before its association. Returns the match tried
+        (if any) and the duplicates merged."""
+        n_dup = len(self.duplicates)
+        event = self._close(state, k, updated, revisit.n_hidden)
+        return ClosureDecision(event, tuple(self.duplicates[n_dup:]))
 
-    def seen_at(self, ids, default: float) -> np.ndarray:
-        """The time each landmark of `ids` was last updated (`default` if never)."""
-        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-        out = np.full(ids.size, default)
-        known = ids < self._seen.size
-        out[known] = self._seen[ids[known]]
-        return np.where(np.isnan(out), default, out)
-
-    def __call__(self, state, k: int, status: np.ndarray) -> ClosureEvent | None:
+    def _close(self, state, k: int, updated: np.ndarray, n_hidden: int) -> ClosureEvent | None:
         t = float(self.scan_t[k])
-        updated = status[status >= 0]
-        self.mark_seen(updated, t)
-        self.mark_seen(state.landmark_ids, t, only_new=True)  # joined this scan: seen now
-        self._seen_together(state, updated)
+        self.history.mark_seen(updated, t)
+        self.history.mark_seen(state.landmark_ids, t, only_new=True)  # joined this scan: seen now
+        self.seen_together(state, updated)
         if self._frame is not None:
             self._hold_frame(state, self._frame, tol_m=HOLD_TOL_M)
         if k % self.cfg.every_scans:
             return None
         self._sweep_duplicates(state, k)
         passed_by = None
-        if self.n_hidden < self.cfg.min_pairs:
-            passed_by = self._passed_by(state, t)
+        if n_hidden < self.cfg.min_pairs:
+            passed_by = self.passed_by(state, t)
             if passed_by.size < self.cfg.min_pairs:
                 return None  # the per-scan association can still pair what is in view
-        recent, old = self._candidates(state, t, passed_by=passed_by)
+        recent, old = self.candidates(state, t, passed_by=passed_by)
         if recent.size < self.cfg.min_pairs or old.size < self.cfg.min_pairs:
             return None
-        event = self._match(state, k, recent, old)
+        event = self.match(state, k, recent, old)
         self.events.append(event)
         return event
 
-    def hidden(self, state, k: int) -> np.ndarray | None:
+    def revisit(self, state, k: int) -> Revisit:
         """Revisit detection (module doc, step 1): the landmarks the scan's association must
-        not pair, a mask over the state's landmarks (None: none). An old landmark in view is
+        not pair, a mask over the state's landmarks (`Revisit`). An old landmark in view is
         hidden when its gate at the new-feature level (radius sqrt(chi2_2) x the largest
         metric sd of its predicted measurement, range and range x bearing) reaches half the
         distance to the nearest other tree in the map (the nearest landmark farther than
         match_m, and within SAME_TREE_M one seen in the same scan as this one,
-        `_seen_together`): a measurement of that tree could then fall in its gate, and the
+        `seen_together`): a measurement of that tree could then fall in its gate, and the
         per-scan association cannot tell them apart. Those are left to the constellation
         match, which pairs many at once."""
         t = float(self.scan_t[k])
         ids = state.landmark_ids
-        self.n_hidden = 0
         if ids.size < 2:
-            return None
-        cand = np.flatnonzero(self.seen_at(ids, t) < t - self.cfg.old_s)
+            return Revisit()
+        cand = np.flatnonzero(self.history.seen_at(ids, t) < t - self.cfg.old_s)
         if not cand.size:
-            return None
+            return Revisit()
         z_hat, H5 = se2.observe(state.pose, state.landmarks_xy[cand], self.laser)
         view = self.view.contains(z_hat)
         cand, z_hat, H5 = cand[view], z_hat[view], H5[view]
         if not cand.size:
-            return None
+            return Revisit()
         C5 = state.cov(landmark_columns(cand))
         S = np.einsum("nij,njk,nlk->nil", H5, C5, H5)
         sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[:, 0] ** 2 * S[:, 1, 1]))
         out = np.zeros(ids.size, bool)
         out[cand] = self.gate_radius * sd >= 0.5 * self._nearest_other_tree(state, cand)
-        self.n_hidden = int(out.sum())
-        return out if out.any() else None
+        n_hidden = int(out.sum())
+        return Revisit(out, n_hidden) if n_hidden else Revisit()
 
     def _nearest_other_tree(self, state, pos: np.ndarray) -> np.ndarray:
         """(len(pos),) the distance from each landmark at state positions `pos` to the
         nearest other tree in the map (inf if none): the nearest landmark farther than
         match_m, and within SAME_TREE_M only one the laser has seen in the same scan as this
-        one (`_seen_together`); a landmark closer, or never seen with it, is this tree mapped
+        one (`seen_together`); a landmark closer, or never seen with it, is this tree mapped
         again."""
         xy, ids = state.landmarks_xy, state.landmark_ids
         d, j = cKDTree(xy).query(xy[pos], k=min(NEIGHBOURS, ids.size))
         other = d > self.cfg.match_m
-        for r, c in enumerate(pos):
-            close = other[r] & (d[r] <= SAME_TREE_M)
-            if close.any():
-                together = self._together.get(int(ids[c]), ())
-                other[r, close] = [int(ids[q]) in together for q in j[r, close]]
+        close = other & (d <= SAME_TREE_M)
+        for r in np.flatnonzero(close.any(axis=1)).tolist():
+            together = self._together.get(int(ids[pos[r]]), ())
+            other[r, close[r]] = [int(ids[q]) in together for q in j[r, close[r]]]
         return np.where(other, d, np.inf).min(axis=1)
 
-    def _seen_together(self, state, updated: np.ndarray) -> None:
+    def seen_together(self, state, updated: np.ndarray) -> None:
         """Record the pairs of landmarks within SAME_TREE_M of each other that this scan
         updated both of: the laser saw them as two trees."""
         if updated.size < 2:
@@ -293,14 +309,14 @@ class LoopCloser:
             self._together.setdefault(ia, set()).add(ib)
             self._together.setdefault(ib, set()).add(ia)
 
-    def _passed_by(self, state, t: float) -> np.ndarray:
+    def passed_by(self, state, t: float) -> np.ndarray:
         """Revisit detection's second signature (module doc, step 1): the positions of the
         landmarks in view that no scan has updated for recent_s seconds while landmarks joined
         the map within max_offset_m of them (the largest shift of the recent map's centroid
         that the constellation match allows): the per-scan association passes them by and
         maps their trees again."""
         cfg, ids, xy = self.cfg, state.landmark_ids, state.landmarks_xy
-        stale = np.flatnonzero(self.seen_at(ids, t) < t - cfg.recent_s)
+        stale = np.flatnonzero(self.history.seen_at(ids, t) < t - cfg.recent_s)
         young = np.flatnonzero(self._joined_at(ids) >= t - cfg.recent_s)
         if stale.size < cfg.min_pairs or young.size < cfg.min_pairs:
             return np.zeros(0, np.int64)
@@ -311,7 +327,7 @@ class LoopCloser:
         d, _ = cKDTree(xy[young]).query(xy[stale], distance_upper_bound=cfg.max_offset_m)
         return stale[np.isfinite(d)]
 
-    def _candidates(
+    def candidates(
         self,
         state,
         t: float,
@@ -322,11 +338,11 @@ class LoopCloser:
         """(positions of recent landmarks within range, of old landmarks in view; with
         in_view False, every recent and old landmark). since: the excursion began then:
         recent means joined after it, and a landmark last seen by then is old too (a match on
-        passed-by landmarks, `_passed_by`, begins its excursion less than old_s ago);
+        passed-by landmarks, `passed_by`, begins its excursion less than old_s ago);
         passed_by: positions that count as old too."""
         cfg, ids = self.cfg, state.landmark_ids
         t_joined = self._joined_at(ids)
-        seen = self.seen_at(ids, t)
+        seen = self.history.seen_at(ids, t)
         old = seen < t - cfg.old_s
         if since is not None:
             old |= seen <= since
@@ -339,14 +355,17 @@ class LoopCloser:
             old &= self.view.contains(z_hat, margins=False)
         return np.flatnonzero(recent), np.flatnonzero(old)
 
-    def _match(self, state, k: int, recent: np.ndarray, old: np.ndarray) -> ClosureEvent:
+    def match(self, state, k: int, recent: np.ndarray, old: np.ndarray) -> ClosureEvent:
+        """The constellation match of scan k (module doc, steps 2-4) between the recent and
+        the old landmarks at state positions `recent` and `old` (`candidates`), and, when it
+        is accepted, the merges and the sweep: the decision as a `ClosureEvent`."""
         cfg = self.cfg
         xy = state.landmarks_xy
         # the most-seen recent landmarks first: they propose the hypotheses (BASIS of them)
-        seen = np.array([self.book.n_obs.get(int(i), 0) for i in state.landmark_ids[recent]])
+        seen = np.array([self.history.n_obs.get(int(i), 0) for i in state.landmark_ids[recent]])
         recent = recent[np.argsort(-seen, kind="stable")]
         centroid = xy[recent].mean(axis=0)
-        best, second, rot, txy, pairs = _hypotheses(
+        best, second, rot, txy, pairs = hypotheses(
             np.ascontiguousarray(xy[recent]),
             np.ascontiguousarray(xy[old]),
             np.array(
@@ -378,8 +397,8 @@ class LoopCloser:
             return ClosureEvent(**common, outcome="too few")
         keep = state.landmark_ids[old[pairs[:, 1]]].copy()
         drop = state.landmark_ids[recent[pairs[:, 0]]].copy()
-        t_from = float(self.seen_at(keep, math.nan).max())  # the excursion began
-        common["nis"] = state.same_landmarks_nis(keep, drop)
+        t_from = float(self.history.seen_at(keep, math.nan).max())  # the excursion began
+        common["nis"] = rigid.same_landmarks_nis(state, keep, drop)
         common["nis_bound"] = float(chi2.ppf(cfg.jc_prob, 2 * keep.size))
         if not common["nis"] <= common["nis_bound"]:
             if not cfg.re_register:
@@ -388,7 +407,7 @@ class LoopCloser:
             common |= self._drift_test(state, C, (rot, txy))
             if not common["drift_nis"] <= common["drift_bound"]:
                 return ClosureEvent(**common, outcome="beyond dead reckoning")
-            shape, _, _ = state.rigid_fit(keep, drop, cfg.tree_sd_m)
+            shape, _, _ = rigid.rigid_fit(state, keep, drop, cfg.tree_sd_m)
             common |= {
                 "shape_nis": shape,
                 "shape_bound": float(chi2.ppf(cfg.jc_prob, 2 * keep.size - 3)),
@@ -398,8 +417,8 @@ class LoopCloser:
             self._free_local_map(state, k, t_from, C)
             common["re_registered"] = True
         anchor = self._anchor(state, t_from) if common["re_registered"] else None
-        merged = self._merge(state, keep, drop, common["t_s"])
-        if anchor is not None:
+        merged = self.merge(state, keep, drop, common["t_s"])
+        if anchor is not None and self.hold_frame:
             self._hold_frame(state, anchor)
             self._frame = anchor
         merged += self._sweep(state, common["t_s"], t_from, local=common["re_registered"])
@@ -426,14 +445,14 @@ class LoopCloser:
         alone since time t_from (`dead_reckoned_cov`), plus the filter's pose covariance
         then."""
         a = int(np.searchsorted(self.scan_t, t_from))
-        C = dead_reckoned_cov(self.book.odo_delta, self.book.odo_cov, a, k)
-        c, s = math.cos(self.book.pred_pose[a][2]), math.sin(self.book.pred_pose[a][2])
+        C = dead_reckoned_cov(self.history.odo_delta, self.history.odo_cov, a, k)
+        c, s = math.cos(self.history.pred_pose[a][2]), math.sin(self.history.pred_pose[a][2])
         A = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # frame of scan a -> world
-        return A @ C @ A.T + self.book.pred_pose_cov[a]
+        return A @ C @ A.T + self.history.pred_pose_cov[a]
 
     def _joined_at(self, ids) -> np.ndarray:
         """The time each landmark joined the map (-inf if unknown)."""
-        joined = np.array([self.book.first_scan.get(int(i), -1) for i in ids], dtype=np.int64)
+        joined = np.array([self.history.first_scan.get(int(i), -1) for i in ids], dtype=np.int64)
         return np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
 
     def _free_local_map(self, state, k: int, t_from: float, cov: np.ndarray) -> None:
@@ -441,13 +460,13 @@ class LoopCloser:
         (when the matched old landmarks were last seen; cov from `_dead_reckoning`, a covariance
         of the vehicle's pose, so a rigid motion about the vehicle) is added to the vehicle and to
         every landmark mapped since, grown as a random walk: a landmark mapped at t_join
-        shares (t_join - t_from) / (t - t_from) of it (`Filter.free_rigid_motion`)."""
+        shares (t_join - t_from) / (t - t_from) of it (`slam.rigid.free_rigid_motion`)."""
         t = float(self.scan_t[k])
         ids = state.landmark_ids
         t_joined = self._joined_at(ids)
         sel = np.flatnonzero(t_joined > t_from)
         shares = np.clip((t_joined[sel] - t_from) / max(t - t_from, 1e-9), 0.0, 1.0)
-        state.free_rigid_motion(ids[sel], state.pose[:2].copy(), cov, shares)
+        rigid.free_rigid_motion(state, ids[sel], state.pose[:2].copy(), cov, shares)
 
     def _anchor(self, state, t_from: float) -> tuple[np.ndarray, np.ndarray] | None:
         """(ids, positions) of the landmarks mapped before t_from (the old map the excursion's
@@ -476,17 +495,20 @@ class LoopCloser:
         shift = se2.rotate(theta, now) + t - now
         if tol_m > 0.0 and math.sqrt(np.mean(np.sum(shift**2, axis=1))) <= tol_m:
             return
-        state.move_rigidly(theta, t)
+        rigid.move_rigidly(state, theta, t)
 
-    def _merge(self, state, keep, drop, t: float, update: bool = True) -> list[tuple[int, int]]:
+    def merge(self, state, keep, drop, t: float, update: bool = True) -> list[tuple[int, int]]:
+        """Landmarks `drop` are landmarks `keep` (ids, pair by pair), found at time t: merged by
+        an update (`slam.rigid.merge_landmarks`), or with update False only marginalised out;
+        the history relabels them. Returns the pairs [(kept, dropped)]."""
         if update:
-            state.merge_landmarks(keep, drop)
+            rigid.merge_landmarks(state, keep, drop)
         else:
             state.remove_landmarks(drop)
         merged = [(int(a), int(b)) for a, b in zip(keep, drop)]
         for a, b in merged:
-            self.book.merged(drop=b, keep=a)
-            self.mark_seen([a], t)
+            self.history.merged(drop=b, keep=a)
+            self.history.mark_seen([a], t)
         return merged
 
     def _in_range(self, state) -> np.ndarray:
@@ -496,7 +518,7 @@ class LoopCloser:
     def _sweep_duplicates(self, state, k: int) -> None:
         """The duplicate sweep (module doc, step 5): pairs of landmarks within the laser's
         range of the vehicle, closer than match_m to each other, that no scan has updated
-        both of (`_seen_together`), whose gate (2 dof at jc_prob, tree_sd_m added to each)
+        both of (`seen_together`), whose gate (2 dof at jc_prob, tree_sd_m added to each)
         stops short of half the way to the nearest other tree (`_nearest_other_tree`) and
         whose difference passes it: the one with fewer sightings is marginalised out and its
         measurements relabelled (no update). Nearest pairs first, each landmark in one pair
@@ -518,31 +540,31 @@ class LoopCloser:
             ia, ib = int(ids[a]), int(ids[b])
             if ia in used or ib in used or ib in self._together.get(ia, ()):
                 continue
-            d, S = state.pair_difference([ia], [ib], self.cfg.tree_sd_m)
+            d, S = rigid.pair_difference(state, [ia], [ib], self.cfg.tree_sd_m)
             # only a pair whose gate stops short of half the way to the nearest other tree
             # (revisit detection's rule): no other tree could pass it
             if gate * np.linalg.eigvalsh(S)[-1] >= reach**2:
                 continue
             if d @ np.linalg.solve(S, d) > gate:
                 continue
-            n_a, n_b = self.book.n_obs.get(ia, 0), self.book.n_obs.get(ib, 0)
+            n_a, n_b = self.history.n_obs.get(ia, 0), self.history.n_obs.get(ib, 0)
             kept, dropped = (ia, ib) if (n_a, -ia) >= (n_b, -ib) else (ib, ia)
             keep.append(kept)
             drop.append(dropped)
             used |= {ia, ib}
         if keep:
-            self._merge(state, keep, drop, float(self.scan_t[k]), update=False)
+            self.merge(state, keep, drop, float(self.scan_t[k]), update=False)
             self.duplicates += [(a, b, k) for a, b in zip(keep, drop)]
 
     def _sweep(self, state, t: float, since: float, local: bool) -> list[tuple[int, int]]:
         """After a closure, the other trees mapped twice (module doc, step 4): each landmark
-        mapped since `since` (not old) with exactly one old landmark (`_candidates`: unseen
+        mapped since `since` (not old) with exactly one old landmark (`candidates`: unseen
         for old_s or since `since`) within 2 x match_m, closer than match_m and individually
         compatible with it (2 dof at jc_prob), merged in one batch if the batch is jointly
         compatible too. local (after a re-registration): only landmarks within the laser's
         range of the vehicle, and the duplicates are marginalised out instead of merged by an
         update."""
-        recent, old = self._candidates(state, t, in_view=False, since=since)
+        recent, old = self.candidates(state, t, in_view=False, since=since)
         if local:
             inside = self._in_range(state)
             recent, old = recent[inside[recent]], old[inside[old]]
@@ -557,15 +579,15 @@ class LoopCloser:
             if near.size != 1 or d[i, near[0]] >= self.cfg.match_m:
                 continue
             a, b = int(ids[old[near[0]]]), int(ids[recent[i]])
-            if a in keep or state.same_landmarks_nis([a], [b]) > gate:
+            if a in keep or rigid.same_landmarks_nis(state, [a], [b]) > gate:
                 continue
             keep.append(a)
             drop.append(b)
         if not keep:
             return []
-        if state.same_landmarks_nis(keep, drop) > chi2.ppf(self.cfg.jc_prob, 2 * len(keep)):
+        if rigid.same_landmarks_nis(state, keep, drop) > chi2.ppf(self.cfg.jc_prob, 2 * len(keep)):
             return []
-        return self._merge(state, keep, drop, t, update=not local)
+        return self.merge(state, keep, drop, t, update=not local)
 
 
 @njit(cache=True, nogil=True)
@@ -589,7 +611,7 @@ def dead_reckoned_cov(delta: np.ndarray, cov: np.ndarray, a: int, b: int) -> np.
 
 
 @njit(cache=True, nogil=True)
-def _hypotheses(recent, old, prm):
+def hypotheses(recent, old, prm):
     """The constellation match of the module doc, step 2. recent (n, 2), old (m, 2); prm:
     [match_m, min_sep_m, max_rotation_rad, max_offset_m, basis]: pairs of the first `basis`
     recent landmarks propose the transforms, every recent one scores them. Returns (best

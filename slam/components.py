@@ -1,6 +1,9 @@
 """The components of a run, chosen once from its configuration (kiss-icp's `get_*` factories):
 the source of its measurements (`slam.sources`), the associator, the vehicle's motion
-(`slam.vehicle.Motion`), the laser's mounting and what the laser sees (`slam.maps.View`)."""
+(`slam.vehicle.Motion`), the laser's mounting and what the laser sees
+(`slam.map_managers.View`), and the sections the loop builds its per-run parts from (map
+manager, pruning, loop closure): the loop (`slam.loop.Slam`) reads these, never the whole
+configuration."""
 
 from __future__ import annotations
 
@@ -9,12 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from slam.checks import check_fit, check_runnable, check_types
-from slam.config import SlamConfig
+from slam.config import AssociationConfig, ClosureConfig, MapPolicy, SlamConfig
 from slam.errors import SlamError
-from slam.maps import View
+from slam.map_managers import View
 from slam.motion import AckermannMotion, IncrementMotion, UnicycleMotion
 from slam.sequence import Sequence
 from slam.sources import make_source
+from slam.start import antenna_of
 from slam.vehicle import AckermannModel, Odometry
 
 __all__ = ["Components", "components", "laser_pose", "make_motion"]
@@ -29,16 +33,24 @@ def laser_pose(seq: Sequence, cfg: SlamConfig) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class Components:
     """What a run is made of, chosen once from its configuration (`components`): the source of
-    its measurements, the associator, the vehicle's motion, the laser's mounting (T_vehicle_laser)
-    and what the laser sees."""
+    its measurements, the associator, the vehicle's motion, the laser's and the GPS antenna's
+    mounting (T_vehicle_laser, T_vehicle_antenna), what the laser sees; and the settings of
+    the parts the loop makes for each pass (`slam.loop.Slam.start`): the association and map
+    policy sections (map manager, pruning), the closure section, `vehicle.min_travel_m` and
+    `filter.first_estimates_jacobians`."""
 
     seq: Sequence
-    cfg: SlamConfig
     source: object  # slam.sources: (k, scan) -> (Features, z, R), with .method, .model, .count
     associator: object  # association.associate's signature minus `method`, with .method
     motion: object  # slam.vehicle.Motion or a model of slam.motion: integrate, distance
     T_vehicle_laser: np.ndarray
+    T_vehicle_antenna: np.ndarray
     view: View
+    association: AssociationConfig
+    map_policy: MapPolicy
+    closure: ClosureConfig
+    min_travel_m: float
+    first_estimates: bool
 
 
 def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) -> Components:
@@ -49,13 +61,19 @@ def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) 
     steer = check_runnable(seq, cfg, source.count)
     check_fit(seq, cfg)
     a0, da = float(seq.scan_angle_min), float(seq.scan_angle_increment)
+    laser = laser_pose(seq, cfg)
     return Components(
         seq=seq,
-        cfg=cfg,
         source=source,
         associator=_associator(cfg, association),
         motion=make_motion(seq, cfg, steer),
-        T_vehicle_laser=laser_pose(seq, cfg),
+        T_vehicle_laser=laser,
+        T_vehicle_antenna=antenna_of(seq, cfg, laser),
+        association=cfg.association,
+        map_policy=cfg.map_policy,
+        closure=cfg.closure,
+        min_travel_m=cfg.vehicle.min_travel_m,
+        first_estimates=cfg.filter.first_estimates_jacobians,
         view=View(
             fov=(a0, a0 + da * (seq.n_beams - 1)),
             max_range=min(float(seq.scan_max_range), cfg.measurement.max_range_m),

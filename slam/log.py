@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -16,7 +15,6 @@ __all__ = [
     "TENTATIVE_HIT",
     "TIMING_KEYS",
     "LogBuilder",
-    "ScanCounts",
     "SlamLog",
 ]
 
@@ -135,29 +133,16 @@ class SlamLog:
         return int(self.scan_t.shape[0])
 
 
-class ScanCounts(NamedTuple):
-    """A scan's update in figures: nis (batch NIS, NaN without an update), n_used (measurements
-    in the update), n_pending (tentatives or open window measurements after the scan)."""
-
-    nis: float
-    n_used: int
-    n_pending: int
-
-
 class LogBuilder:
-    """Collects a run's per-scan figures and measurement rows; `build` makes the `SlamLog`.
-
-    n_obs and first_scan (landmark id -> count / scan index) are kept here because only the
-    log needs them; the map-management step updates them as landmarks are seen and confirmed.
-    """
+    """Collects a run's per-scan figures and measurement rows; `build` makes the `SlamLog`
+    with what the run's `slam.history.RunHistory` holds (predictions, odometry, landmarks'
+    first scans, sightings and merges)."""
 
     def __init__(self, scan_t: np.ndarray) -> None:
         n = scan_t.shape[0]
         self.scan_t = scan_t
         self.pose = np.empty((n, 3))
         self.pose_cov = np.empty((n, 3, 3))
-        self.pred_pose = np.empty((n, 3))
-        self.pred_pose_cov = np.empty((n, 3, 3))
         self.nis = np.full(n, np.nan)
         self.nis_dof = np.zeros(n, np.int64)
         self.logdet = np.full(n, np.nan)
@@ -166,22 +151,18 @@ class LogBuilder:
             k: np.zeros(n, np.int64) for k in ("n_features", "n_associated", "n_tentative", "n_map")
         }
         self.timing = {k: np.zeros(n) for k in TIMING_KEYS}
+        # one array per scan (a block of rows), joined by `build`
         self.obs: dict[str, list] = {
             k: [] for k in ("scan", "feature", "landmark", "z", "innov", "S")
         }
         self.meas: dict[str, list] = {
             k: [] for k in ("scan", "feature", "z", "R", "status", "track", "radius")
         }
-        self.odo_delta = np.zeros((n, 3))
-        self.odo_cov = np.zeros((n, 3, 3))
+        self._block_of: dict[int, int] = {}  # scan -> its block in self.meas
         self.start_pose = np.zeros(3)
         self.start_cov = np.zeros((3, 3))
         self.laser_pose = np.zeros(3)
         self.antenna_pose = np.zeros(3)
-        self.n_obs: dict[int, int] = {}
-        self.first_scan: dict[int, int] = {}
-        self.alias: dict[int, int] = {}  # a landmark merged into another: its id -> the other's
-        self._meas_row0 = np.zeros(n, np.int64)  # first measurement row of each scan
 
     def started(self, pose: np.ndarray, cov: np.ndarray, laser_pose, antenna_pose) -> None:
         """The filter's prior at the first scan, the laser and antenna poses used."""
@@ -190,84 +171,56 @@ class LogBuilder:
         self.laser_pose = np.array(laser_pose, dtype=np.float64)
         self.antenna_pose = np.array(antenna_pose, dtype=np.float64)
 
-    def odometry(self, k: int, delta: np.ndarray, cov: np.ndarray) -> None:
-        """The odometry increment from scan k - 1 to k (frame of k - 1) and its covariance."""
-        self.odo_delta[k] = delta
-        self.odo_cov[k] = cov
+    def observations(self, k: int, features, landmarks, *, z, innov, S) -> None:
+        """The q measurements used in scan k's update: their indices in the scan (q,), the
+        landmark ids they updated (q,), z (q, 2), the innovations (q, 2) and the joint
+        innovation covariance S (2q, 2q), of which each one's (2, 2) block is kept."""
+        q = len(features)
+        self.obs["scan"].append(np.full(q, k, np.int64))
+        self.obs["feature"].append(np.asarray(features, np.int64))
+        self.obs["landmark"].append(np.asarray(landmarks, np.int64))
+        self.obs["z"].append(np.array(z).reshape(q, 2))
+        self.obs["innov"].append(np.array(innov).reshape(q, 2))
+        j = np.arange(q)
+        self.obs["S"].append(S.reshape(q, 2, q, 2)[j, :, j, :])
 
-    def predicted(self, k: int, pose: np.ndarray, cov: np.ndarray) -> None:
-        self.pred_pose[k] = pose
-        self.pred_pose_cov[k] = cov
-
-    def observation(self, k: int, feature: int, landmark: int, *, z, innov, S) -> None:
-        """One measurement used in scan k's update: z (2,), its innovation (2,) and the
-        innovation covariance S (2, 2)."""
-        self.n_obs[landmark] = self.n_obs.get(landmark, 0) + 1
-        self.obs["scan"].append(k)
-        self.obs["feature"].append(feature)
-        self.obs["landmark"].append(landmark)
-        self.obs["z"].append(z)
-        self.obs["innov"].append(innov)
-        self.obs["S"].append(S)
-
-    def scan_done(self, meas, state, track, counts: ScanCounts, times: list[float]) -> None:
-        """Scan k's (`meas.k`) estimate, counts, measurements with their status, track and
-        circle radius, and phase times (`times`: perf_counter at the start and after each of
-        the five steps)."""
+    def scan_done(self, result, state, times: list[float]) -> None:
+        """Scan k's estimate, counts, measurements with their status, track and circle radius
+        (`result`: the loop's `slam.loop.ScanResult`), and phase times (`times`: perf_counter
+        at the start and after each of the five steps)."""
+        meas = result.meas
         k, z = meas.k, meas.z
         self.pose[k] = state.pose
         self.pose_cov[k] = state.pose_cov
-        self.nis[k] = counts.nis
-        self.nis_dof[k] = 2 * counts.n_used
+        self.nis[k] = result.nis
+        self.nis_dof[k] = 2 * result.n_used
         m = z.shape[0]
-        self._meas_row0[k] = len(self.meas["scan"])
         self.counts["n_features"][k] = m
-        self.counts["n_associated"][k] = counts.n_used
-        self.counts["n_tentative"][k] = counts.n_pending
+        self.counts["n_associated"][k] = result.n_used
+        self.counts["n_tentative"][k] = result.n_pending
         self.counts["n_map"][k] = state.n_landmarks
-        radius = meas.radius_m
-        for i in range(m):
-            self.meas["scan"].append(k)
-            self.meas["feature"].append(i)
-            self.meas["z"].append(z[i])
-            self.meas["R"].append(meas.R[i])
-            self.meas["status"].append(int(meas.status[i]))
-            self.meas["track"].append(int(track[i]))
-            self.meas["radius"].append(float(radius[i]))
+        rows = self.meas
+        self._block_of[k] = len(rows["scan"])
+        rows["scan"].append(np.full(m, k, np.int64))
+        rows["feature"].append(np.arange(m, dtype=np.int64))
+        rows["z"].append(np.array(z).reshape(m, 2))
+        rows["R"].append(np.array(meas.R).reshape(m, 2, 2))
+        rows["status"].append(np.array(result.status, dtype=np.int64))
+        rows["track"].append(np.array(result.track, dtype=np.int64))
+        rows["radius"].append(np.array(meas.radius_m, dtype=np.float64))
         for key, a, b in zip(TIMING_KEYS[:5], times[:-1], times[1:]):
             self.timing[key][k] = b - a
         self.timing["total"][k] = times[-1] - times[0]
 
-    def merged(self, drop: int, keep: int) -> None:
-        """Landmark `drop` was found to be landmark `keep` (a loop closure): its sightings and
-        measurements count as `keep`'s, in this log and in the smoother's problem."""
-        self.alias[drop] = keep
-        self.n_obs[keep] = self.n_obs.get(keep, 0) + self.n_obs.pop(drop, 0)
-        self.first_scan[keep] = min(
-            self.first_scan.get(keep, 1 << 62), self.first_scan.pop(drop, 1 << 62)
-        )
-
-    def _resolved(self, ids: list) -> np.ndarray:
-        """Landmark ids with every merged one replaced by the one it was merged into."""
-        out = np.array(ids, np.int64)
-        if self.alias:
-            root = {}
-            for a in self.alias:
-                b = self.alias[a]
-                while b in self.alias:
-                    b = self.alias[b]
-                root[a] = b
-            out = np.array([root.get(int(v), int(v)) for v in out.tolist()], np.int64)
-        return out
-
     def retrack(self, k: int, feature: int, track: int) -> None:
         """Give measurement `feature` of the already logged scan k the track id `track` (a
         window's new landmark: its earlier sightings)."""
-        self.meas["track"][int(self._meas_row0[k]) + int(feature)] = int(track)
+        self.meas["track"][self._block_of[k]][int(feature)] = int(track)
 
     def build(
         self,
         state,
+        history,
         *,
         start: str,
         features_method: str,
@@ -278,31 +231,31 @@ class LogBuilder:
         closure_duplicates: list | None = None,
     ) -> SlamLog:
         ids = state.landmark_ids
-        obs, meas = self.obs, self.meas
+        obs, meas, h = _joined(self.obs, _OBS_SHAPES), _joined(self.meas, _MEAS_SHAPES), history
         return SlamLog(
             scan_t=self.scan_t,
             pose=self.pose,
             pose_cov=self.pose_cov,
-            pred_pose=self.pred_pose,
-            pred_pose_cov=self.pred_pose_cov,
+            pred_pose=h.pred_pose,
+            pred_pose_cov=h.pred_pose_cov,
             landmark_xy=state.landmarks_xy.copy(),
             landmark_cov=state.landmark_covs,
             landmark_id=ids.copy(),
-            landmark_first_scan=np.array([self.first_scan.get(int(i), -1) for i in ids], np.int64),
-            landmark_n_obs=np.array([self.n_obs.get(int(i), 0) for i in ids], np.int64),
-            obs_scan=np.array(obs["scan"], np.int64),
-            obs_feature=np.array(obs["feature"], np.int64),
-            obs_landmark=self._resolved(obs["landmark"]),
-            obs_z=np.array(obs["z"]).reshape(-1, 2),
-            obs_innov=np.array(obs["innov"]).reshape(-1, 2),
-            obs_innov_cov=np.array(obs["S"]).reshape(-1, 2, 2),
-            meas_scan=np.array(meas["scan"], np.int64),
-            meas_feature=np.array(meas["feature"], np.int64),
-            meas_z=np.array(meas["z"]).reshape(-1, 2),
-            meas_R=np.array(meas["R"]).reshape(-1, 2, 2),
-            meas_status=self._resolved(meas["status"]),
-            meas_track=self._resolved(meas["track"]),
-            meas_radius_m=np.array(meas["radius"], np.float64),
+            landmark_first_scan=np.array([h.first_scan.get(int(i), -1) for i in ids], np.int64),
+            landmark_n_obs=np.array([h.n_obs.get(int(i), 0) for i in ids], np.int64),
+            obs_scan=obs["scan"],
+            obs_feature=obs["feature"],
+            obs_landmark=h.resolved(obs["landmark"]),
+            obs_z=obs["z"],
+            obs_innov=obs["innov"],
+            obs_innov_cov=obs["S"],
+            meas_scan=meas["scan"],
+            meas_feature=meas["feature"],
+            meas_z=meas["z"],
+            meas_R=meas["R"],
+            meas_status=h.resolved(meas["status"]),
+            meas_track=h.resolved(meas["track"]),
+            meas_radius_m=meas["radius"],
             scan_nis=self.nis,
             scan_nis_dof=self.nis_dof,
             scan_logdet=self.logdet,
@@ -312,8 +265,8 @@ class LogBuilder:
             start_pose=self.start_pose,
             start_cov=self.start_cov,
             laser_pose=self.laser_pose,
-            odo_delta=self.odo_delta,
-            odo_cov=self.odo_cov,
+            odo_delta=h.odo_delta,
+            odo_cov=h.odo_cov,
             final_x=state.x.copy(),
             final_P=state.P.copy(),
             start=start,
@@ -324,5 +277,32 @@ class LogBuilder:
             antenna_pose=self.antenna_pose,
             closures=closures,
             closure_duplicates=closure_duplicates,
-            meas_track_unmerged=np.array(meas["track"], np.int64) if self.alias else None,
+            meas_track_unmerged=meas["track"].copy() if h.alias else None,
         )
+
+
+_OBS_SHAPES = {
+    "scan": ((), np.int64),
+    "feature": ((), np.int64),
+    "landmark": ((), np.int64),
+    "z": ((2,), np.float64),
+    "innov": ((2,), np.float64),
+    "S": ((2, 2), np.float64),
+}
+_MEAS_SHAPES = {
+    "scan": ((), np.int64),
+    "feature": ((), np.int64),
+    "z": ((2,), np.float64),
+    "R": ((2, 2), np.float64),
+    "status": ((), np.int64),
+    "track": ((), np.int64),
+    "radius": ((), np.float64),
+}
+
+
+def _joined(blocks: dict[str, list], shapes: dict) -> dict[str, np.ndarray]:
+    """Each column's blocks of rows as one array (empty, of its row shape, when none)."""
+    return {
+        k: np.concatenate(v) if v else np.zeros((0, *shapes[k][0]), shapes[k][1])
+        for k, v in blocks.items()
+    }

@@ -1,25 +1,34 @@
 """`slam.run_slam`: EKF-SLAM over one `Sequence`, scan by scan, as its configuration says.
 
-`Slam.step(k)` is the loop's body, five named steps with a record passed between them:
+`Slam.step(k)` is the loop's body, five named steps; each returns what it produced and the
+scan's record (`ScanResult`) collects it for the log and the visualiser:
 1. predict: integrate the odometry from the previous scan (zero-order hold, `slam.vehicle`);
 2. measure: the scan's circles as range-bearing measurements of their centres (the source,
-   `slam.sources`: an extractor, the sequence's detections, or given features);
-3. associate, 5. manage: the map manager (`slam.maps`: tentatives with a single-scan
-   associator, or the K-scan IHGR window) pairs measurements with landmarks and decides what
-   joins the map;
-4. update: all measurements paired with landmarks at once (Joseph form, `slam.ekf.Filter`).
+   `slam.sources`: an extractor, the sequence's detections, or given features), each
+   NEW_TENTATIVE or OUT_OF_RANGE;
+3. associate, 5. manage: the map manager (`slam.map_managers`: tentatives with a single-scan
+   associator, or the K-scan IHGR window; one contract) pairs measurements with landmarks
+   (`ScanAssociation`) and decides what joins the map (`MapDecisions`: every measurement's
+   final status and track, the landmarks that joined, earlier measurements re-tracked);
+4. update: all measurements paired with landmarks at once (Joseph form, `slam.ekf.Filter`);
+   returns the landmark each measurement updated.
 A scan after which the odometry has moved the vehicle less than `vehicle.min_travel_m` since
-the last scan used is predicted only: its measurements are logged with status SKIPPED.
-Pruning (`slam.maps.Pruner`) follows map management when the map policy asks for it, and
-loop closure (`slam.closure.LoopCloser`) when `[closure] enabled`.
+the last scan used is predicted only (`RestGate`): its measurements are logged SKIPPED.
+Pruning (`slam.map_managers.Pruner`) follows map management when the map policy asks for
+it, and loop closure (`slam.closure.LoopCloser`) when `[closure] enabled`: before the
+association it says which old landmarks the scan must not pair (`Revisit`), after map
+management what it matched and merged (`ClosureDecision`).
 
-The components are built once from the configuration (`Slam.__init__`); the start pose comes
-from `slam.start.initial_pose` and the run's checks from `slam.checks`. Before the timed loop
-the steps run over the first scans on a throwaway filter until one update has been made
-(`warm_up`): the first call of a step compiles or loads numba kernels and imports lazily,
-seconds that would otherwise be timed as the first scans'. The estimate does not depend on it.
-Everything the run did is returned as a `SlamLog`; the optional visualiser is any object with
-the methods of `NullVisualiser`.
+The loop's roles: the source, the motion, the laser (mounting and view), the filter, the
+map manager, pruning, loop closure, the rest gate, the run's history (`slam.history`: what
+the past scans did that closure and the log read) and the log (`slam.log.LogBuilder`).
+The components come from the configuration once (`slam.components`); `run_slam` builds one
+`Slam` and starts it from a prior (`Slam.start`): for the first pass a GPS start fits to
+(`slam.start.first_pass_wanted`), for the warm-up, and for the run. The warm-up runs the
+steps over the first scans until one update has been made: the first call of a step
+compiles or loads numba kernels and imports lazily, seconds that would otherwise be timed as
+the first scans'. The estimate does not depend on it. Everything the run did is returned as
+a `SlamLog`; the optional visualiser is any object with the methods of `NullVisualiser`.
 """
 
 from __future__ import annotations
@@ -33,16 +42,17 @@ import numpy as np
 
 from slam import se2
 from slam.checks import check_noise
-from slam.closure import LoopCloser
+from slam.closure import ClosureDecision, LoopCloser, Revisit
 from slam.components import Components, components
 from slam.config import SlamConfig
 from slam.ekf import Filter, initial_state
 from slam.errors import SlamError
-from slam.log import NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED, LogBuilder, ScanCounts, SlamLog
-from slam.maps import Association, Pruner, make_map_manager
+from slam.history import RunHistory
+from slam.log import NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED, LogBuilder, SlamLog
+from slam.map_managers import MapDecisions, Pruner, ScanAssociation, make_map_manager
 from slam.sequence import Sequence
 from slam.sources import Measurements
-from slam.start import antenna_of, initial_pose
+from slam.start import first_pass_wanted, initial_pose
 from slam.visual import NullVisualiser, show_scan
 
 __all__ = ["Slam", "run_slam"]
@@ -64,138 +74,204 @@ class _Clock:
         self.marks += [self.marks[-1]] * n
 
 
-class Slam:
-    """One pass over a run's scans from a prior (pose, covariance) at the first scan: the
-    filter, the map manager and the log, on the run's components."""
+@dataclass(frozen=True, eq=False)
+class ScanResult:
+    """What one scan's steps produced (`Slam.step`), the record the log and the visualiser
+    read: the measurements (as measured), each one's final status (`slam.log` codes) and
+    track, the update's figures (batch NIS or NaN, measurements used), the tentatives pending
+    after the scan and where they are, the association (None for a skipped scan), the map
+    manager's decisions and loop closure's (None when not run)."""
 
-    def __init__(self, c: Components, pose0: np.ndarray, cov0: np.ndarray) -> None:
-        self.c, self.seq, self.cfg = c, c.seq, c.cfg
-        self.laser, self.view = c.T_vehicle_laser, c.view
-        self.state = Filter(
-            initial_state(pose0, np.array(cov0, dtype=np.float64)),
-            first_estimates=c.cfg.filter.first_estimates_jacobians,
-        )
-        self.book = LogBuilder(np.asarray(c.seq.scan_t, dtype=np.float64))
-        self.book.started(pose0, cov0, self.laser, antenna_of(c.seq, c.cfg, self.laser))
-        self.maps = make_map_manager(c.cfg, self.laser, self.view, self.book, c.associator)
-        policy = c.cfg.map_policy
-        self.prune = Pruner(policy, self.view, self.laser) if policy.prunes else None
-        closure = c.cfg.closure
-        self.closer = (
-            LoopCloser(
-                closure,
-                self.view,
-                self.laser,
-                self.book,
-                gate_prob=c.cfg.association.new_feature_gate_prob,
-            )
-            if closure.enabled
-            else None
-        )
+    meas: Measurements
+    status: np.ndarray
+    track: np.ndarray
+    nis: float
+    n_used: int
+    n_pending: int
+    tentative_xy: np.ndarray
+    association: ScanAssociation | None = None
+    decisions: MapDecisions | None = None
+    closure: ClosureDecision | None = None
+
+
+class RestGate:
+    """`vehicle.min_travel_m`: a scan after which the odometry has moved the vehicle less than
+    that since the last scan used is predicted only; its prediction noise joins the next used
+    scan's drift."""
+
+    def __init__(self, motion, scan_t: np.ndarray, min_travel_m: float) -> None:
+        self.motion, self.scan_t, self.min_travel_m = motion, scan_t, min_travel_m
         self.travel_m = 0.0  # odometry distance since the last scan used
         self.Q_skipped = None  # prediction noise of the scans skipped since then
-        self.n_used = self.n_pending = 0
 
-    def step(self, k: int) -> Measurements:
-        """Scan k's five steps, timed and logged; returns its measurements (status set)."""
+    def __call__(self, k: int, Q: np.ndarray) -> np.ndarray | None:
+        """The drift (3, 3) scan k's association works with: its prediction noise Q and that
+        of the scans skipped before it; None when scan k is at rest (skipped)."""
+        min_travel = self.min_travel_m
+        if k > 0 and min_travel > 0:
+            self.travel_m += self.motion.distance(self.scan_t[k - 1], self.scan_t[k])
+        if k > 0 and self.travel_m < min_travel:
+            self.Q_skipped = Q if self.Q_skipped is None else self.Q_skipped + Q
+            return None
+        self.travel_m = 0.0
+        if self.Q_skipped is not None:
+            Q, self.Q_skipped = Q + self.Q_skipped, None
+        return Q
+
+
+class Slam:
+    """The run loop over a run's components (`slam.components.Components`), built once;
+    `start(pose, cov)` begins a pass over the scans from that prior at the first scan (the
+    filter, the history, the log, and the map manager, pruning and loop closure made anew),
+    `step(k)` runs scan k's five steps."""
+
+    def __init__(self, parts: Components) -> None:
+        self.parts = parts
+        self.seq, self.source, self.motion = parts.seq, parts.source, parts.motion
+        self.laser, self.view = parts.T_vehicle_laser, parts.view
+        self.scan_t = np.asarray(parts.seq.scan_t, dtype=np.float64)
+
+    def start(self, pose0: np.ndarray, cov0: np.ndarray) -> None:
+        """A new pass from the prior (pose0 (3,), cov0 (3, 3)) at the first scan."""
+        p = self.parts
+        self.state = Filter(
+            initial_state(pose0, np.array(cov0, dtype=np.float64)),
+            first_estimates=p.first_estimates,
+        )
+        self.history = RunHistory(self.scan_t)
+        self.log = LogBuilder(self.scan_t)
+        self.log.started(pose0, cov0, self.laser, p.T_vehicle_antenna)
+        self.map_manager = make_map_manager(
+            self.laser, self.view, p.association, p.map_policy, p.associator
+        )
+        prunes = p.map_policy.prunes
+        self.pruner = Pruner(p.map_policy, self.view, self.laser) if prunes else None
+        self.closer = (
+            LoopCloser(
+                p.closure,
+                self.view,
+                self.laser,
+                self.history,
+                gate_prob=p.association.new_feature_gate_prob,
+            )
+            if p.closure.enabled
+            else None
+        )
+        self.rest = RestGate(self.motion, self.scan_t, p.min_travel_m)
+
+    def step(self, k: int) -> ScanResult:
+        """Scan k's five steps, timed and logged; returns what they produced."""
         clock = _Clock()
         Q = self.predict(k)
         clock.lap()
         meas = self.measure(k)
         clock.lap()
-        if self._at_rest(k, Q):
-            meas.status[:] = SKIPPED
-            self.book.skipped[k] = True
+        drift = self.rest(k, Q)
+        if drift is None:
             clock.skip(3)
-            self._log(meas, np.full(meas.z.shape[0], -1, np.int64), (math.nan, 0), clock)
-            return meas
-        hidden = None if self.closer is None else self.closer.hidden(self.state, k)
-        a = self.maps.associate(self.state, meas, self._drift(Q), hidden)
+            return self._skipped(meas, clock)
+        revisit = Revisit() if self.closer is None else self.closer.revisit(self.state, k)
+        a = self.map_manager.associate(self.state, meas, drift, revisit.hidden)
         clock.lap()
-        nis_used = self.update(meas, a)
+        nis, paired = self.update(meas, a)
         clock.lap()
-        track = np.where(meas.status >= 0, meas.status, -1)
-        self.n_pending = self.maps.manage(self.state, meas, a, track)
-        if self.prune is not None:
-            self.prune(self.state, meas.status)
+        decisions = self.map_manager.manage(self.state, meas, a, paired)
+        self._record(k, decisions)
+        if self.pruner is not None:
+            self.pruner(self.state, decisions.status)
+        closure = None
         if self.closer is not None:
-            self.closer(self.state, meas.k, meas.status)
+            updated = decisions.status[decisions.status >= 0]
+            closure = self.closer.close(self.state, k, updated, revisit)
         clock.lap()
-        self._log(meas, track, nis_used, clock)
-        return meas
+        result = ScanResult(
+            meas=meas,
+            status=decisions.status,
+            track=decisions.track,
+            nis=nis,
+            n_used=int(np.count_nonzero(paired >= 0)),
+            n_pending=decisions.n_pending,
+            tentative_xy=self.map_manager.tentative_xy,
+            association=a,
+            decisions=decisions,
+            closure=closure,
+        )
+        self.log.scan_done(result, self.state, clock.marks)
+        return result
 
     def predict(self, k: int) -> np.ndarray:
         """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan).
 
-        The increment and its covariance in the frame of the pose at k - 1 go to the log (the
-        smoother's odometry factors): the motion model is invariant to where the car is, so
-        the world-frame Q is that covariance rotated by the heading. Returns Q (3, 3), world
+        The increment and its covariance in the frame of the pose at k - 1 go to the history
+        (the smoother's odometry factors): the motion model is invariant to where the car is,
+        so the world-frame Q is that covariance rotated by the heading. Returns Q (3, 3), world
         frame (zeros at k = 0)."""
         if k > 0:
-            t = self.seq.scan_t
+            t = self.scan_t
             T_world_prev = self.state.pose.copy()
-            T_world_next, F, Q = self.c.motion.integrate(T_world_prev, t[k - 1], t[k])
+            T_world_next, F, Q = self.motion.integrate(T_world_prev, t[k - 1], t[k])
             delta = se2.compose(se2.inverse(T_world_prev), T_world_next)
             delta[2] = float(se2.wrap_angle(delta[2]))
             c, s = math.cos(T_world_prev[2]), math.sin(T_world_prev[2])
             A = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])  # world -> frame at k - 1
-            self.book.odometry(k, delta, A @ Q @ A.T)
+            self.history.odometry(k, delta, A @ Q @ A.T)
             self.state.predict(T_world_next, F, Q)
         else:
             Q = np.zeros((3, 3))
-        self.book.predicted(k, self.state.pose, self.state.pose_cov)
+        self.history.predicted(k, self.state.pose, self.state.pose_cov)
         return Q
 
     def measure(self, k: int) -> Measurements:
         """Step 2: scan k's circles as measurements, each NEW_TENTATIVE until decided, or
         OUT_OF_RANGE beyond the usable range or not finite."""
         scan = self.seq.scan(k)
-        f, z, R = self.c.source(k, scan)
+        f, z, R = self.source(k, scan)
         status = np.full(z.shape[0], NEW_TENTATIVE, np.int64)
         usable = (z[:, 0] <= self.view.max_range) & np.all(np.isfinite(z), axis=1)
         status[~usable] = OUT_OF_RANGE
-        check_noise(k, R, usable, self.c.source.model.kind)
+        check_noise(k, R, usable, self.source.model.kind)
         return Measurements(k=k, scan=scan, features=f, z=z, R=R, status=status)
 
-    def update(self, meas: Measurements, a: Association) -> tuple[float, int]:
-        """Step 4: one batch update with the measurements paired with map landmarks; their
-        status becomes the landmark id. Returns (batch NIS or NaN, measurements used)."""
+    def update(self, meas: Measurements, a: ScanAssociation) -> tuple[float, np.ndarray]:
+        """Step 4: one batch update with the measurements paired with map landmarks. Returns
+        (batch NIS or NaN, the landmark id each measurement updated (m,), -1 for none)."""
+        paired = np.full(meas.z.shape[0], -1, np.int64)
         to_map = a.to_map()
         if not to_map.size:
-            return math.nan, 0
+            return math.nan, paired
         pos = a.lm_idx[a.assign[to_map]]
         res = self.state.update(pos, meas.z[to_map], meas.R[to_map], self.laser)
-        self.book.logdet[meas.k] = res.logdet
-        for j, i in enumerate(to_map):
-            lid = int(self.state.landmark_ids[pos[j]])
-            meas.status[i] = lid
-            S_j = res.S[2 * j : 2 * j + 2, 2 * j : 2 * j + 2]
-            self.book.observation(meas.k, int(i), lid, z=meas.z[i], innov=res.innovation[j], S=S_j)
-        return res.nis, int(to_map.size)
+        self.log.logdet[meas.k] = res.logdet
+        ids = self.state.landmark_ids[pos]
+        paired[to_map] = ids
+        for lid in ids.tolist():
+            self.history.observed(lid)
+        self.log.observations(meas.k, to_map, ids, z=meas.z[to_map], innov=res.innovation, S=res.S)
+        return res.nis, paired
 
-    def _at_rest(self, k: int, Q: np.ndarray) -> bool:
-        """Whether scan k is predicted only: the vehicle has not moved `min_travel_m` since the
-        last scan used (its Q then joins the next used scan's drift)."""
-        min_travel = self.cfg.vehicle.min_travel_m
-        if k > 0 and min_travel > 0:
-            self.travel_m += self.c.motion.distance(self.seq.scan_t[k - 1], self.seq.scan_t[k])
-        if k > 0 and self.travel_m < min_travel:
-            self.Q_skipped = Q if self.Q_skipped is None else self.Q_skipped + Q
-            return True
-        self.travel_m = 0.0
-        return False
+    def _record(self, k: int, decisions: MapDecisions) -> None:
+        """The map manager's decisions into the history and the log: the landmarks that
+        joined the map, the earlier measurements re-tracked to a new landmark."""
+        for lid, n_obs in decisions.joined:
+            self.history.joined(lid, k, n_obs)
+        for scan, feature, lid in decisions.retracks:
+            self.log.retrack(scan, feature, lid)
 
-    def _drift(self, Q: np.ndarray) -> np.ndarray:
-        """This scan's prediction noise, with that of the scans skipped before it."""
-        if self.Q_skipped is not None:
-            Q, self.Q_skipped = Q + self.Q_skipped, None
-        return Q
-
-    def _log(self, meas: Measurements, track: np.ndarray, nis_used, clock: _Clock) -> None:
-        nis, n_used = nis_used
-        counts = ScanCounts(nis, n_used, self.n_pending)
-        self.book.scan_done(meas, self.state, track, counts, clock.marks)
-        self.n_used = n_used
+    def _skipped(self, meas: Measurements, clock: _Clock) -> ScanResult:
+        """A scan at rest (`RestGate`): predicted only, its measurements SKIPPED."""
+        self.log.skipped[meas.k] = True
+        m = meas.z.shape[0]
+        result = ScanResult(
+            meas=meas,
+            status=np.full(m, SKIPPED, np.int64),
+            track=np.full(m, -1, np.int64),
+            nis=math.nan,
+            n_used=0,
+            n_pending=self.map_manager.n_pending,
+            tentative_xy=self.map_manager.tentative_xy,
+        )
+        self.log.scan_done(result, self.state, clock.marks)
+        return result
 
 
 def run_slam(
@@ -232,39 +308,40 @@ def run_slam(
             f"features.file {cfg.features.file!r}: read it and pass its features (the "
             "command line does: experiments.io.features_json.load_features_json)"
         )
-    c = components(
+    parts = components(
         sequence,
         cfg,
         None if isinstance(features, str) else features,
         None if isinstance(association, str) else association,
     )
+    loop = Slam(parts)
     if prior is None:
-        pose0, cov0, start = initial_pose(
-            sequence, cfg, c.motion, c.T_vehicle_laser, _first_pass(c)
-        )
+        wanted = first_pass_wanted(sequence, cfg)
+        track = None if wanted is None else _first_pass(loop, *wanted)
+        pose0, cov0, start = initial_pose(sequence, cfg, parts.motion, loop.laser, track)
     else:
         pose0, cov0, start = _given_prior(prior)
     if warm_up:
-        _warm_up(Slam(c, pose0, cov0))
-    loop = Slam(c, pose0, cov0)
+        _warm_up(loop, pose0, cov0)
+    loop.start(pose0, cov0)
     vis = visualiser or NullVisualiser()
     for k in range(sequence.n_scans):
-        meas = loop.step(k)
+        result = loop.step(k)
         if type(vis) is not NullVisualiser:
-            show_scan(vis, loop, meas)
+            show_scan(vis, sequence, loop.laser, loop.state, result)
         if progress is not None:
             progress(k + 1, sequence.n_scans)
-    return loop.book.build(
+    closer = loop.closer
+    return loop.log.build(
         loop.state,
+        loop.history,
         start=start,
-        features_method=c.source.method,
-        association_method=c.associator.method,
+        features_method=parts.source.method,
+        association_method=parts.associator.method,
         config=cfg.to_dict(),
-        window_stats=loop.maps.stats(),
-        closures=None if loop.closer is None else [e.to_dict() for e in loop.closer.events],
-        closure_duplicates=None
-        if loop.closer is None
-        else [list(d) for d in loop.closer.duplicates],
+        window_stats=loop.map_manager.stats(),
+        closures=None if closer is None else [e.to_dict() for e in closer.events],
+        closure_duplicates=None if closer is None else [list(d) for d in closer.duplicates],
     )
 
 
@@ -301,38 +378,34 @@ def _resolve(config, features, association) -> SlamConfig:
     return cfg.with_(**changes) if changes else cfg
 
 
-def _warm_up(loop: Slam) -> None:
-    """The steps over the first scans, until one update has been made (at most
-    `WARM_UP_SCANS`), on a filter that is then forgotten: numba compiling or loading its
-    kernels, lazy imports and first-use caches are paid here, not in the timed loop. Nothing
-    is shared with the run; only a features or association callable sees the first scans
+def _warm_up(loop: Slam, pose0: np.ndarray, cov0: np.ndarray) -> None:
+    """The steps over the first scans from the prior, until one update has been made (at most
+    `WARM_UP_SCANS`), in a pass that is then forgotten (`Slam.start` begins the run anew):
+    numba compiling or loading its kernels, lazy imports and first-use caches are paid here,
+    not in the timed loop. Only a features or association callable sees the first scans
     twice."""
+    loop.start(pose0, cov0)
     for k in range(min(WARM_UP_SCANS, loop.seq.n_scans)):
-        loop.step(k)
-        if loop.n_used > 0:
+        if loop.step(k).n_used > 0:
             break
 
 
-def _first_pass(c: Components):
-    """first_pass(cov0, fit_m) -> (scan times, poses) of the filter from the origin over the
+def _first_pass(loop: Slam, cov0: np.ndarray, fit_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(scan times, poses) of a pass of the filter from the origin (covariance cov0) over the
     scans until its antenna track has covered `fit_m` metres (and one scan more), for
-    `fit_gps_start_to_track`: the start's rigid fit to GPS along a path whose shape the
-    landmarks kept. The estimate of a run is the same up to rounding in any frame, so the
-    pass's frame only names where the track starts."""
-
-    def first_pass(cov0: np.ndarray, fit_m: float) -> tuple[np.ndarray, np.ndarray]:
-        loop = Slam(c, np.zeros(3), cov0)
-        seq, ant = c.seq, antenna_of(c.seq, c.cfg, c.T_vehicle_laser)
-        loop.step(0)
-        poses = [np.zeros(3)]  # the track starts at the prior: the start is the prior's mean
-        dist, last = 0.0, ant[:2].copy()
-        for k in range(1, seq.n_scans):
-            loop.step(k)
-            poses.append(loop.state.pose.copy())
-            a = se2.compose(poses[-1], ant)[:2]
-            dist, last = dist + float(np.hypot(*(a - last))), a
-            if dist > fit_m:
-                break
-        return np.asarray(seq.scan_t[: len(poses)], dtype=np.float64), np.array(poses)
-
-    return first_pass
+    `slam.start.initial_pose`'s fit to GPS along a path whose shape the landmarks kept
+    (`first_pass_wanted`). The estimate of a run is the same up to rounding in any frame, so
+    the pass's frame only names where the track starts."""
+    loop.start(np.zeros(3), cov0)
+    seq, ant = loop.seq, loop.parts.T_vehicle_antenna
+    loop.step(0)
+    poses = [np.zeros(3)]  # the track starts at the prior: the start is the prior's mean
+    dist, last = 0.0, ant[:2].copy()
+    for k in range(1, seq.n_scans):
+        loop.step(k)
+        poses.append(loop.state.pose.copy())
+        a = se2.compose(poses[-1], ant)[:2]
+        dist, last = dist + float(np.hypot(*(a - last))), a
+        if dist > fit_m:
+            break
+    return np.asarray(seq.scan_t[: len(poses)], dtype=np.float64), np.array(poses)

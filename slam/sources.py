@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from features.types import Features
-from slam.config import OWN_COVARIANCE, SlamConfig
+from slam.config import OWN_COVARIANCE, FeaturesConfig, MeasurementConfig, SlamConfig
 from slam.errors import SlamError
 from slam.measurement import MeasurementModel
 from slam.sequence import Sequence
@@ -32,7 +32,8 @@ class Measurements:
 
     scan: the `features.Scan` (None without raw ranges); features: its `Features` (for the
     log and the visualiser); z (m, 2) [range m, bearing rad] and R (m, 2, 2) from the source's
-    measurement model; status (m,) int64, filled in by the loop (`slam.log` codes)."""
+    measurement model; status (m,) int64 as measured: NEW_TENTATIVE, or OUT_OF_RANGE beyond
+    the usable range (`slam.log` codes; the scan's final status is `slam.loop.ScanResult`)."""
 
     k: int
     scan: object
@@ -50,15 +51,17 @@ class Measurements:
 class ExtractorSource:
     """Circles extracted from the raw scans by `method` with the configured parameters."""
 
-    def __init__(self, seq: Sequence, cfg: SlamConfig) -> None:
-        self.method = cfg.features.method
+    def __init__(
+        self, seq: Sequence, features: FeaturesConfig, measurement: MeasurementConfig
+    ) -> None:
+        self.method = features.method
         if not seq.has_ranges:
             raise SlamError(
                 f"features: {self.method!r} extracts from raw scans, and this sequence has none; "
                 "use the method 'detections'"
             )
-        self.params, self.options = cfg.features.extractor_args()
-        self.model = cfg.measurement.model_for(self.method)
+        self.params, self.options = features.extractor_args()
+        self.model = measurement.model_for(self.method)
         self.count = None  # not precomputed
 
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
@@ -73,7 +76,7 @@ class DetectionsSource:
     method), R their covariance plus the fit floor or the constant model of their method; the
     Features (circles at the detections) are for the log and the visualiser."""
 
-    def __init__(self, seq: Sequence, cfg: SlamConfig) -> None:
+    def __init__(self, seq: Sequence, measurement: MeasurementConfig) -> None:
         if not seq.has_detections:
             raise SlamError(
                 "features: 'detections' needs a sequence with precomputed detections (det_scan, "
@@ -81,7 +84,7 @@ class DetectionsSource:
             )
         self.seq = seq
         self.method = seq.det_method
-        self.model: MeasurementModel = cfg.measurement.model_for(
+        self.model: MeasurementModel = measurement.model_for(
             seq.det_method, seq.det_cov is not None
         )
         if self.model.kind == "fit" and seq.det_cov is None:
@@ -111,7 +114,7 @@ class GivenSource:
     -> Features. A list whose circles' covariances are all zero carries none of its own
     (measurement noise "auto" then takes the constant model, not the fit floors alone)."""
 
-    def __init__(self, given, cfg: SlamConfig) -> None:
+    def __init__(self, given, measurement: MeasurementConfig) -> None:
         if callable(given):
             self._get: Callable = given
             self.method = getattr(given, "method", "custom")
@@ -134,7 +137,7 @@ class GivenSource:
                 "features: expected a method name, a callable (k, scan) -> Features or a list "
                 f"of Features, got {type(given).__name__}"
             )
-        self.model = cfg.measurement.model_for(self.method, has_cov)
+        self.model = measurement.model_for(self.method, has_cov)
 
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
         f = self._get(k, scan)
@@ -149,7 +152,7 @@ def make_source(seq: Sequence, cfg: SlamConfig, given=None):
     """The run's source: `given` features (a list or a callable) when there are some, else the
     configuration's method ("detections" or an extractor)."""
     if given is not None:
-        return GivenSource(given, cfg)
+        return GivenSource(given, cfg.measurement)
     if cfg.features.method == "detections":
-        return DetectionsSource(seq, cfg)
-    return ExtractorSource(seq, cfg)
+        return DetectionsSource(seq, cfg.measurement)
+    return ExtractorSource(seq, cfg.features, cfg.measurement)

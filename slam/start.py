@@ -33,7 +33,14 @@ import numpy as np
 from slam import se2
 from slam.errors import SlamError
 
-__all__ = ["GpsStart", "antenna_of", "fit_gps_start", "fit_gps_start_to_track", "initial_pose"]
+__all__ = [
+    "GpsStart",
+    "antenna_of",
+    "fit_gps_start",
+    "fit_gps_start_to_track",
+    "first_pass_wanted",
+    "initial_pose",
+]
 
 log = logging.getLogger(__name__)
 
@@ -180,13 +187,30 @@ def antenna_of(seq, cfg, laser: np.ndarray) -> np.ndarray:
     return np.asarray(seq.gps_pose if seq.gps_pose is not None else laser, dtype=np.float64)
 
 
-def initial_pose(seq, cfg, motion, laser: np.ndarray, first_pass):
+def first_pass_wanted(seq, cfg) -> tuple[np.ndarray, float] | None:
+    """(cov0 (3, 3), fit_m) of the pass of the filter from the origin that `initial_pose` needs
+    (a GPS start fitted to the filter's track, `gps_track = "slam"`), None when it needs none:
+    the caller runs it over the scans until the antenna has covered fit_m metres."""
+    start = cfg.start
+    if _truth_covers(seq) or seq.gps_t is None or start.gps_track != "slam":
+        return None
+    floors = np.array([start.gps_sigma_m, start.gps_sigma_m, start.heading_sigma_rad]) ** 2
+    return np.diag(floors), start.gps_fit_m
+
+
+def _truth_covers(seq) -> bool:
+    """Whether the sequence's truth covers its first scan."""
+    t0, truth_t = float(seq.scan_t[0]), seq.truth_t
+    return truth_t is not None and bool(truth_t[0] <= t0 <= truth_t[-1])
+
+
+def initial_pose(seq, cfg, motion, laser: np.ndarray, track=None):
     """(pose (3,), covariance (3, 3), how) of the filter's prior at the first scan, how being
     "truth", "gps" or "origin" (`SlamConfig.start`).
 
-    motion: the run's motion model (`slam.motion`), for a dead-reckoned GPS fit; first_pass(cov0,
-    fit_m) -> (scan times, poses) of a pass of the filter from the origin, for
-    `gps_track = "slam"`."""
+    motion: the run's motion model (`slam.motion`), for a dead-reckoned GPS fit; track: (scan times,
+    poses) of the pass of the filter from the origin that `first_pass_wanted` asked for (for
+    `gps_track = "slam"`)."""
     start = cfg.start
     t0 = float(seq.scan_t[0])
     truth_t = seq.truth_t
@@ -205,12 +229,12 @@ def initial_pose(seq, cfg, motion, laser: np.ndarray, first_pass):
             log.warning("start.initial_heading_rad ignored: the run starts from the truth")
         return pose, np.diag(np.square(start.initial_pose_sigma)), "truth"
     if seq.gps_t is not None:
-        return _gps_start(seq, cfg, motion, antenna_of(seq, cfg, laser), first_pass)
+        return _gps_start(seq, cfg, motion, antenna_of(seq, cfg, laser), track)
     th = 0.0 if start.initial_heading_rad is None else float(start.initial_heading_rad)
     return np.array([0.0, 0.0, th]), np.diag(np.square(start.initial_pose_sigma)), "origin"
 
 
-def _gps_start(seq, cfg, motion, antenna: np.ndarray, first_pass):
+def _gps_start(seq, cfg, motion, antenna: np.ndarray, track):
     start = cfg.start
     t0 = float(seq.scan_t[0])
     if float(seq.gps_t[0]) - t0 > 1.0:
@@ -222,7 +246,9 @@ def _gps_start(seq, cfg, motion, antenna: np.ndarray, first_pass):
     floors = np.array([start.gps_sigma_m, start.gps_sigma_m, start.heading_sigma_rad]) ** 2
     heading = start.initial_heading_rad
     if start.gps_track == "slam":
-        track_t, track_pose = first_pass(np.diag(floors), start.gps_fit_m)
+        if track is None:
+            raise SlamError("start.gps_track = 'slam': needs the first pass's track")
+        track_t, track_pose = track
         fit = fit_gps_start_to_track(
             track_t,
             track_pose,

@@ -28,31 +28,33 @@ class NullVisualiser:
     def log_duplicates(self, pairs: list) -> None: ...
 
 
-def show_scan(vis, loop, meas) -> None:
-    """Scan `meas.k` of the run `loop` (`slam.loop.Slam`) and its measurements `meas`."""
-    seq, state, k = loop.seq, loop.state, meas.k
+def show_scan(vis, seq, laser: np.ndarray, state, result) -> None:
+    """One scan of a run of the sequence `seq`: what its steps produced (`result`, the loop's
+    `slam.loop.ScanResult`) and the filter `state` after it; laser: T_vehicle_laser."""
+    meas, k = result.meas, result.meas.k
     vis.set_scan(k, float(seq.scan_t[k]))
     T_world_vehicle = state.pose
-    T_world_laser = se2.compose(T_world_vehicle, loop.laser)
+    T_world_laser = se2.compose(T_world_vehicle, laser)
     vis.log_scan(meas.scan, T_world_laser)
     vis.log_features(meas.scan, meas.features, T_world_laser)
     vis.log_vehicle(T_world_vehicle, state.pose_cov)
     vis.log_landmarks(state.landmarks_xy, state.landmark_covs, state.landmark_ids)
-    vis.log_tentatives(loop.maps.tentative_xy)
+    vis.log_tentatives(result.tentative_xy)
     # (a landmark a loop closure merged away in this scan is no longer in the state)
-    used = np.flatnonzero((meas.status >= 0) & np.isin(meas.status, state.landmark_ids))
+    status = result.status
+    used = np.flatnonzero((status >= 0) & np.isin(status, state.landmark_ids))
     if used.size:
         ang = T_world_laser[2] + meas.z[used, 1]
         frm = T_world_laser[:2] + meas.z[used, 0:1] * np.stack([np.cos(ang), np.sin(ang)], 1)
-        to = np.array([state.landmarks_xy[state.index_of(int(i))] for i in meas.status[used]])
+        to = np.array([state.landmarks_xy[state.index_of(int(i))] for i in status[used]])
         vis.log_associations(frm, to)
     else:
         vis.log_associations(np.zeros((0, 2)), np.zeros((0, 2)))
     if seq.truth_t is not None:
         vis.log_truth(se2.interpolate_poses(seq.scan_t[k], seq.truth_t, seq.truth_pose)[0])
-    closer = loop.closer
-    if closer is not None and closer.events and closer.events[-1].scan == k:
-        if closer.events[-1].outcome != "too few":  # a match worth a mark on the timeline
-            vis.log_closure(closer.events[-1].to_dict())
-    if closer is not None and closer.duplicates and closer.duplicates[-1][2] == k:
-        vis.log_duplicates([(a, b) for a, b, scan in closer.duplicates if scan == k])
+    closure = result.closure
+    if closure is not None and closure.event is not None:
+        if closure.event.outcome != "too few":  # a match worth a mark on the timeline
+            vis.log_closure(closure.event.to_dict())
+    if closure is not None and closure.duplicates:
+        vis.log_duplicates([(a, b) for a, b, _ in closure.duplicates])

@@ -78,21 +78,13 @@ def test_after_a_re_registration_the_nearby_duplicates_are_swept_without_an_upda
 
 
 def test_the_local_sweep_marginalises_without_moving_the_map():
-    """`LoopCloser._merge(update=False)` (the sweep after a re-registration) removes the
-    duplicates from the state and relabels them in the log, and leaves every other estimate
+    """`LoopCloser.merge(update=False)` (the sweep after a re-registration) removes the
+    duplicates from the state and relabels them in the history, and leaves every other estimate
     and covariance entry as it was; the update merge moves the kept landmark."""
     from slam.closure import LoopCloser
     from slam.config import ClosureConfig
     from slam.ekf import Filter, initial_state
-
-    class Book:
-        scan_t = np.zeros(1)
-
-        def __init__(self):
-            self.relabelled = []
-
-        def merged(self, drop, keep):
-            self.relabelled.append((keep, drop))
+    from slam.history import RunHistory
 
     def state():
         f = Filter(initial_state(np.zeros(3), np.diag([0.1, 0.1, 0.01])))
@@ -100,17 +92,17 @@ def test_the_local_sweep_marginalises_without_moving_the_map():
             f.add_landmark(np.array(z), np.diag([0.04, 1e-4]), np.zeros(3), lid)
         return f
 
-    book = Book()
-    closer = LoopCloser(ClosureConfig(enabled=True), None, np.zeros(3), book, gate_prob=0.99)
+    history = RunHistory(np.zeros(1))
+    closer = LoopCloser(ClosureConfig(enabled=True), None, np.zeros(3), history, gate_prob=0.99)
     f = state()
     before = f.snapshot()
-    assert closer._merge(f, np.array([1]), np.array([2]), 0.0, update=False) == [(1, 2)]
-    assert book.relabelled == [(1, 2)] and f.landmark_ids.tolist() == [1, 3]
+    assert closer.merge(f, np.array([1]), np.array([2]), 0.0, update=False) == [(1, 2)]
+    assert history.alias == {2: 1} and f.landmark_ids.tolist() == [1, 3]
     keep = np.r_[0:5, 7:9]  # the pose, landmarks 1 and 3
     assert np.array_equal(f.x, before.x[keep])
     assert np.array_equal(f.P, before.P[np.ix_(keep, keep)])
     g = state()
-    closer._merge(g, np.array([1]), np.array([2]), 0.0)
+    closer.merge(g, np.array([1]), np.array([2]), 0.0)
     assert not np.allclose(g.x[3:5], before.x[3:5])
 
 

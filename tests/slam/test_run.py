@@ -31,9 +31,9 @@ from slam.config import (
     VehicleConfig,
 )
 from slam.log import AMBIGUOUS, CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT
-from slam.mapping import Tentatives
 from slam.measurement import NoiseModel
 from slam.motion import AckermannMotion
+from slam.tentatives import Tentatives
 from slam.vehicle import AckermannModel, Odometry, integrate
 
 CAR = {"model": "ackermann", "wheelbase_m": 1.2, "encoder_offset_m": 0.0}
@@ -527,7 +527,7 @@ def test_warm_up_takes_the_first_call_costs_out_of_the_timed_loop(monkeypatch):
     timing carries that cost; without it scan 0 does. The estimate is the same either way."""
     import importlib
 
-    from slam.maps import TentativeMap
+    from slam.map_managers import TentativeMap
 
     mod = importlib.import_module("slam.loop")  # its clock: the steps' timing
     clock = SimpleNamespace(t=0.0, seen=set())

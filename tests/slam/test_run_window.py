@@ -71,12 +71,12 @@ def test_window_says_when_it_cannot_wait_for_confirm_scans(caplog):
     ghost = {5: [(6.0, 1.0)], 6: [(5.76, 1.0)]}
     feats = point_features(seq, LANDMARKS, np.random.default_rng(1), extra=ghost)
     cfg = window(2).with_(**{"map_policy.confirm_scans": 4})
-    with caplog.at_level("WARNING", logger="slam.maps"):
+    with caplog.at_level("WARNING", logger="slam.map_managers"):
         log = run_slam(seq, features=feats, association="ihgr-window", config=cfg)
     assert "confirm_scans = 4 but the 'ihgr-window' association holds 2 scans" in caplog.text
     assert log.landmark_xy.shape[0] == 5
     caplog.clear()
-    with caplog.at_level("WARNING", logger="slam.maps"):
+    with caplog.at_level("WARNING", logger="slam.map_managers"):
         run_slam(seq, features=feats, association="ihgr-window", config=window(3))
     assert "ihgr-window" not in caplog.text  # the defaults, 3 and 3: nothing to say
 

@@ -9,13 +9,13 @@ from association import gate_matrix
 from association.inputs import chol2_solve
 from slam import se2
 from slam.ekf import _batch_blocks
-from slam.maps import _project_kernel, _sub_problem
+from slam.map_managers import _project_kernel, _sub_problem
 
 _PAIR = np.array([0, 1])
 
 
 def _sub_problem_numpy(H5, cand, P_lm, cov_t):
-    """The vectorised build `_sub_problem` replaced (`slam.maps.TentativeMap.associate`)."""
+    """The vectorised build `_sub_problem` replaced (`slam.map_managers.TentativeMap.associate`)."""
     nc = cand.size
     H = np.zeros((nc, 2, 3 + 2 * nc))
     H[:, :, :3] = H5[cand, :, :3]

@@ -1,12 +1,16 @@
 """Map managers: who associates a scan's measurements and decides what joins the map. One per
-run, chosen once from the configuration (`make_map_manager`), with the same two steps:
+run, chosen once from the `[association]` and `[map_policy]` sections (`make_map_manager`),
+interchangeable behind one contract (`MapManager`):
 
-- `associate(state, meas, drift)`: which landmark (or tentative) each measurement belongs to;
-- `manage(state, meas, a, track)`: tentatives seen again count a sighting, new measurements
-  start landmarks-to-be, confirmed ones join the filter's state; returns how many are pending.
+- `associate(state, meas, drift, hidden)`: which landmark (or tentative) each measurement
+  belongs to (`ScanAssociation`); `hidden`: landmarks it must not pair (loop closure's);
+- `manage(state, meas, a, paired)`: tentatives seen again count a sighting, new measurements
+  start landmarks-to-be, confirmed ones join the filter's state; returns its decisions
+  (`MapDecisions`) and changes no array of the loop's or the log's;
+- `n_pending`, `tentative_xy`, `stats()`: what is pending, where, and the run's figures.
 
 `TentativeMap` (association "ihgr", "jcbb", "nn") keeps new features as tentatives outside the
-state until they have been associated in `MapPolicy.confirm_scans` scans (`slam.mapping`).
+state until they have been associated in `MapPolicy.confirm_scans` scans (`slam.tentatives`).
 `WindowMap` ("ihgr-window") gives that job to the K-scan `association.SlidingWindowAssociator`:
 every scan it is offered the landmarks in view and the laser's world pose with the odometry
 drift over the window as its relative uncertainty; it commits the newest scan's pairings and
@@ -21,22 +25,31 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numba import njit
 
 from association import gate_matrix
 from slam import se2
-from slam.config import SlamConfig
 from slam.ekf import Filter, landmark_columns
 from slam.errors import SlamError
-from slam.log import AMBIGUOUS, CONFIRMED, OUT_OF_RANGE, TENTATIVE_HIT, LogBuilder
-from slam.mapping import MapPolicy, Tentatives, sighting
+from slam.log import AMBIGUOUS, CONFIRMED, OUT_OF_RANGE, TENTATIVE_HIT
 from slam.sources import Measurements
+from slam.tentatives import MapPolicy, Tentatives, sighting
 
 log = logging.getLogger(__name__)
 
-__all__ = ["Association", "Pruner", "TentativeMap", "View", "WindowMap", "make_map_manager"]
+__all__ = [
+    "MapDecisions",
+    "MapManager",
+    "ScanAssociation",
+    "Pruner",
+    "TentativeMap",
+    "View",
+    "WindowMap",
+    "make_map_manager",
+]
 
 _POSE = np.array([0, 1, 2], np.int64)
 
@@ -67,7 +80,7 @@ class View:
 
 
 @dataclass(frozen=True, eq=False)
-class Association:
+class ScanAssociation:
     """One scan's association: assign (m,) is an index into [landmarks in view, tentatives in
     view] or -1; ambiguous (m,) marks unassigned measurements inside the wider gate of something;
     lm_idx, t_idx: state positions of the landmarks in view and indices of the tentatives.
@@ -88,27 +101,79 @@ class Association:
         return i[self.assign[i] < self.lm_idx.size]
 
 
+@dataclass(frozen=True, eq=False)
+class MapDecisions:
+    """What a map manager decided for one scan (`manage`): status (m,) of each measurement
+    (`slam.log` codes: the landmark id it updated, or tentative seen again, confirmed,
+    ambiguous, new, out of range); track (m,) the landmark or tentative id it was paired with or
+    started (-1: none); joined [(landmark id, n_obs)] the landmarks that joined the map in this
+    scan and the scans each was seen in; retracks [(scan, measurement, landmark id)] earlier
+    measurements now known to be a new landmark's (the window's); n_pending tentatives (or open
+    window measurements) after the scan."""
+
+    status: np.ndarray
+    track: np.ndarray
+    joined: list
+    retracks: list
+    n_pending: int
+
+
+@runtime_checkable
+class MapManager(Protocol):
+    """The contract of a map manager (module doc): `TentativeMap` and `WindowMap`."""
+
+    n_pending: int
+    tentative_xy: np.ndarray
+
+    def associate(self, state, meas, drift, hidden=None) -> ScanAssociation: ...
+    def manage(self, state, meas, a: ScanAssociation, paired) -> MapDecisions: ...
+    def stats(self) -> dict | None: ...
+
+
 @dataclass(eq=False)
 class _Context:
-    """What a map manager shares with the loop: the configuration, the laser's mounting, the
-    view, the log (landmark counts and first scans), the next free landmark id."""
+    """What a map manager is made of: the laser's mounting, the view, the association and map
+    policy settings, the next free landmark id; and, while it manages a scan, the decisions."""
 
-    cfg: SlamConfig
     laser: np.ndarray
     view: View
-    book: LogBuilder
+    gate_new: float
+    gate_prob: float
+    params: dict
+    policy: MapPolicy
     next_id: int = 0
 
     def new_id(self) -> int:
         self.next_id += 1
         return self.next_id - 1
 
-    def map_landmark(self, state: Filter, meas: Measurements, i: int, lid: int, n_obs: int):
+
+@dataclass(eq=False)
+class _Deciding:
+    """A scan's decisions as a map manager makes them (`manage`), from the update's: status
+    and track start as the measure step's status with the landmark ids the update paired
+    (`paired` (m,): landmark id or -1)."""
+
+    meas: Measurements
+    laser: np.ndarray
+    status: np.ndarray
+    track: np.ndarray
+    joined: list = field(default_factory=list)
+    retracks: list = field(default_factory=list)
+
+    @classmethod
+    def after_update(cls, meas: Measurements, laser, paired: np.ndarray) -> _Deciding:
+        status = np.where(paired >= 0, paired, meas.status)
+        return cls(meas, laser, status, np.where(status >= 0, status, -1))
+
+    def map_landmark(self, state: Filter, i: int, lid: int, n_obs: int) -> None:
         """Measurement i of the scan initialises landmark `lid` (seen in `n_obs` scans)."""
-        state.add_landmark(meas.z[i], meas.R[i], self.laser, lid)
-        meas.status[i] = CONFIRMED
-        self.book.n_obs[lid] = int(n_obs)
-        self.book.first_scan[lid] = meas.k
+        state.add_landmark(self.meas.z[i], self.meas.R[i], self.laser, lid)
+        self.status[i] = CONFIRMED
+        self.joined.append((lid, int(n_obs)))
+
+    def done(self, n_pending: int) -> MapDecisions:
+        return MapDecisions(self.status, self.track, self.joined, self.retracks, n_pending)
 
 
 class TentativeMap:
@@ -124,12 +189,17 @@ class TentativeMap:
     def tentative_xy(self) -> np.ndarray:
         return self.tent.xy
 
+    @property
+    def n_pending(self) -> int:
+        """Tentatives after the last scan managed."""
+        return len(self.tent)
+
     def stats(self) -> None:
         return None
 
     def associate(
         self, state: Filter, meas: Measurements, drift: np.ndarray, hidden=None
-    ) -> Association:
+    ) -> ScanAssociation:
         """The usable measurements against the landmarks and tentatives that can be in view.
 
         Each candidate's innovation covariance comes from its 5 x 5 block [pose, point]
@@ -138,7 +208,7 @@ class TentativeMap:
         do not make anything ambiguous, so only the others are offered to the associator, on
         the sub-state [pose, those landmarks, those tentatives]: exact, and the cost no longer
         grows with the map."""
-        ctx, tent, acfg = self.ctx, self.tent, self.ctx.cfg.association
+        ctx, tent = self.ctx, self.tent
         z_lm, H_lm = se2.observe(state.pose, state.landmarks_xy, ctx.laser)
         z_t, H_t = se2.observe(state.pose, tent.xy, ctx.laser)
         lm_idx = np.flatnonzero(ctx.view.contains(z_lm) & _shown(hidden, z_lm.shape[0]))
@@ -149,7 +219,7 @@ class TentativeMap:
         ambiguous = np.zeros(m, bool)
         use = np.flatnonzero(meas.status != OUT_OF_RANGE)
         if not (use.size and n):
-            return Association(assign, ambiguous, lm_idx, t_idx)
+            return ScanAssociation(assign, ambiguous, lm_idx, t_idx)
         zh = np.concatenate([z_lm[lm_idx], z_t[t_idx]])
         H5 = np.concatenate([H_lm[lm_idx], H_t[t_idx]])  # (n, 2, 5)
         C5 = np.zeros((n, 5, 5))  # covariance of [pose, point] of each candidate
@@ -157,7 +227,7 @@ class TentativeMap:
         C5[n_l:, :3, :3] = state.pose_cov
         C5[n_l:, 3:, 3:] = tent.cov[t_idx]
         z_use, R_use = meas.z[use], meas.R[use]
-        gated = gate_matrix(z_use, R_use, zh, _project(H5, C5), acfg.gate_new)  # (m_use, n)
+        gated = gate_matrix(z_use, R_use, zh, _project(H5, C5), ctx.gate_new)  # (m_use, n)
         ambiguous[use] = gated.any(axis=1)
         cand = np.flatnonzero(gated.any(axis=0))
         if cand.size:
@@ -166,20 +236,24 @@ class TentativeMap:
             c_t = t_idx[cand[cand >= n_l] - n_l]  # the tentatives, after the landmarks
             H, P_sub = _sub_problem(H5, cand, state.cov(sub), tent.cov[c_t])
             a_use = self.associator(
-                z_use, R_use, zh[cand], H, P_sub, gate_prob=acfg.gate_prob, **acfg.params
+                z_use, R_use, zh[cand], H, P_sub, gate_prob=ctx.gate_prob, **ctx.params
             )
             a_use = np.asarray(a_use, dtype=np.int64)
             assign[use] = np.where(a_use >= 0, cand[np.maximum(a_use, 0)], -1)
         ambiguous &= assign < 0
-        return Association(assign, ambiguous, lm_idx, t_idx)
+        return ScanAssociation(assign, ambiguous, lm_idx, t_idx)
 
-    def manage(self, state: Filter, meas: Measurements, a: Association, track) -> int:
+    def manage(
+        self, state: Filter, meas: Measurements, a: ScanAssociation, paired: np.ndarray
+    ) -> MapDecisions:
         """Tentatives seen again count a sighting (and join the map at the policy's count), new
         measurements start tentatives, ambiguous ones are ignored, unseen tentatives drop out.
-        Sets each measurement's status and track (the id of the tentative it was paired with
-        or started); returns the number of tentatives."""
-        ctx, tent, z, R, status = self.ctx, self.tent, meas.z, meas.R, meas.status
-        policy = ctx.cfg.map_policy
+        paired (m,): the landmark id each measurement updated (-1: none). Returns each
+        measurement's status and track (the id of the tentative it was paired with or
+        started), the landmarks that joined the map and the number of tentatives."""
+        ctx, tent, z, R = self.ctx, self.tent, meas.z, meas.R
+        out = _Deciding.after_update(meas, ctx.laser, paired)
+        status, track, policy = out.status, out.track, ctx.policy
         n_l = a.lm_idx.size
         matched, matched_meas, new, new_meas = {}, {}, [], []
         for i in np.flatnonzero(a.assign >= n_l):
@@ -199,12 +273,12 @@ class TentativeMap:
             track[i] = lid
         if policy.confirm_scans == 1:  # every sighting joins the map at once
             for (_, _, lid), i in zip(new, new_meas):
-                ctx.map_landmark(state, meas, i, lid, 1)
+                out.map_landmark(state, i, lid, 1)
             new = []
         self.tent, confirm = tent.step(matched, new, meas.k, policy)
         for ti in confirm:
-            ctx.map_landmark(state, meas, matched_meas[ti], int(tent.ids[ti]), tent.hits[ti] + 1)
-        return len(self.tent)
+            out.map_landmark(state, matched_meas[ti], int(tent.ids[ti]), tent.hits[ti] + 1)
+        return out.done(len(self.tent))
 
 
 class WindowMap:
@@ -212,27 +286,27 @@ class WindowMap:
     remembers, for each of the last K - 1 scans, the positions of its usable measurements (the
     associator numbers only those) and the process noise of its prediction."""
 
-    def __init__(self, ctx: _Context) -> None:
+    def __init__(self, ctx: _Context, window_scans: int) -> None:
         from association import CostModel, SlidingWindowAssociator
         from association.rounding import ROUNDING_OPTIONS
 
-        acfg = ctx.cfg.association
+        params = ctx.params
         cost_keys = {f.name for f in dataclasses.fields(CostModel)}
-        unknown = set(acfg.params) - cost_keys - set(ROUNDING_OPTIONS)
+        unknown = set(params) - cost_keys - set(ROUNDING_OPTIONS)
         if unknown:
             raise SlamError(
                 f"association.params: {sorted(unknown)} are not parameters of 'ihgr-window' "
                 f"(allowed: {sorted(cost_keys | set(ROUNDING_OPTIONS))})"
             )
-        model = CostModel(**{k: v for k, v in acfg.params.items() if k in cost_keys})
-        rounding = {k: v for k, v in acfg.params.items() if k in ROUNDING_OPTIONS}
+        model = CostModel(**{k: v for k, v in params.items() if k in cost_keys})
+        rounding = {k: v for k, v in params.items() if k in ROUNDING_OPTIONS}
         self.ctx = ctx
-        self.assoc = SlidingWindowAssociator(acfg.window_scans, acfg.gate_prob, model, **rounding)
-        if ctx.cfg.map_policy.confirm_scans > self.assoc.K:  # `manage` takes the smaller
+        self.assoc = SlidingWindowAssociator(window_scans, ctx.gate_prob, model, **rounding)
+        if ctx.policy.confirm_scans > self.assoc.K:  # `manage` takes the smaller
             log.warning(
                 "map_policy.confirm_scans = %d but the 'ihgr-window' association holds %d "
                 "scans (association.window_scans): new landmarks join after %d sightings",
-                ctx.cfg.map_policy.confirm_scans,
+                ctx.policy.confirm_scans,
                 self.assoc.K,
                 self.assoc.K,
             )
@@ -242,6 +316,7 @@ class WindowMap:
         )
 
     tentative_xy = np.zeros((0, 2))
+    n_pending = 0  # open measurements after the last scan managed
 
     def stats(self) -> dict:
         """Window figures of the run: steps, how many first LPs were fractional, how many steps
@@ -250,7 +325,7 @@ class WindowMap:
 
     def associate(
         self, state: Filter, meas: Measurements, drift: np.ndarray, hidden=None
-    ) -> Association:
+    ) -> ScanAssociation:
         """Every landmark in view is offered (a track is not built where it could be a mapped
         landmark, so the window must see them all), on the sub-state [pose, those landmarks];
         the laser's world pose goes with the odometry drift over the window as its relative
@@ -264,7 +339,7 @@ class WindowMap:
         cols = landmark_columns(lm_idx)  # (n, 5)
         if use.size and n:
             S = _project(H_lm[lm_idx], state.cov(cols))
-            gate = ctx.cfg.association.gate_new
+            gate = ctx.gate_new
             ambiguous[use] = gate_matrix(meas.z[use], meas.R[use], z_lm[lm_idx], S, gate).any(1)
         H = np.zeros((n, 2, 3 + 2 * n))
         H[:, :, :3] = H_lm[lm_idx, :, :3]
@@ -295,7 +370,7 @@ class WindowMap:
         tracks = self._tracks(self.assoc.last, use)
         self.scans = (self.scans + [(use, drift)])[-(K - 1) :] if K > 1 else []
         ambiguous &= assign < 0
-        return Association(
+        return ScanAssociation(
             assign=assign,
             ambiguous=ambiguous,
             lm_idx=lm_idx,
@@ -325,12 +400,17 @@ class WindowMap:
                 ]
         return tracks
 
-    def manage(self, state: Filter, meas: Measurements, a: Association, track) -> int:
+    def manage(
+        self, state: Filter, meas: Measurements, a: ScanAssociation, paired: np.ndarray
+    ) -> MapDecisions:
         """An unpaired measurement whose track was seen in min(confirm_scans, K) scans of the
-        window joins the map; ambiguous ones are ignored and leave the window's pool like the
-        mapped ones; the rest stay open (status NEW_TENTATIVE). Returns the open ones."""
-        ctx, status = self.ctx, meas.status
-        need = min(ctx.cfg.map_policy.confirm_scans, self.assoc.K)
+        window joins the map, and its track's earlier measurements are re-tracked to it;
+        ambiguous ones are ignored and leave the window's pool like the mapped ones; the rest
+        stay open (status NEW_TENTATIVE). paired: as `TentativeMap.manage`."""
+        ctx = self.ctx
+        out = _Deciding.after_update(meas, ctx.laser, paired)
+        status, track = out.status, out.track
+        need = min(ctx.policy.confirm_scans, self.assoc.K)
         use = self.scans[-1][0] if self.scans else np.flatnonzero(status != OUT_OF_RANGE)
         use_pos = {int(i): j for j, i in enumerate(use)}
         closed, n_open = [], 0
@@ -343,15 +423,16 @@ class WindowMap:
                 n_open += 1
                 continue
             lid = ctx.new_id()
-            ctx.map_landmark(state, meas, int(i), lid, max(int(a.sightings[i]), 1))
+            out.map_landmark(state, int(i), lid, max(int(a.sightings[i]), 1))
             track[i] = lid
             for ago, j in a.tracks.get(int(i), []):
                 if ago > 0:
-                    ctx.book.retrack(meas.k - ago, j, lid)
+                    out.retracks.append((meas.k - ago, j, lid))
             closed.append(use_pos[int(i)])
         if closed:
             self.assoc.mark_mapped(closed)
-        return n_open
+        self.n_pending = n_open
+        return out.done(n_open)
 
 
 @dataclass(eq=False)
@@ -398,11 +479,21 @@ def _shown(hidden, n: int) -> np.ndarray:
     return np.ones(n, bool) if hidden is None else ~np.asarray(hidden, bool)
 
 
-def make_map_manager(cfg: SlamConfig, laser, view: View, book: LogBuilder, associator):
-    """The run's map manager (`WindowMap` for "ihgr-window", else `TentativeMap` around the
-    associator callable)."""
-    ctx = _Context(cfg, laser, view, book)
-    return WindowMap(ctx) if cfg.association.windowed else TentativeMap(ctx, associator)
+def make_map_manager(laser, view: View, association, policy: MapPolicy, associator) -> MapManager:
+    """The run's map manager from the `[association]` and `[map_policy]` sections: `WindowMap`
+    for "ihgr-window" (which associates by itself), else `TentativeMap` around the associator
+    callable. Both are used the same way (module doc)."""
+    ctx = _Context(
+        laser,
+        view,
+        gate_new=association.gate_new,
+        gate_prob=association.gate_prob,
+        params=association.params,
+        policy=policy,
+    )
+    if association.windowed:
+        return WindowMap(ctx, association.window_scans)
+    return TentativeMap(ctx, associator)
 
 
 def _project(H5: np.ndarray, C5: np.ndarray) -> np.ndarray:
