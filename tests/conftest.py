@@ -163,3 +163,20 @@ def noise_calibration_set(tmp_path_factory) -> Path:
     assert res.exit_code == 0, res.output
     assert (out / "noise_calibration.csv").is_file() and (out / "manifest.json").is_file()
     return out
+
+
+@pytest.fixture(scope="session")
+def quick_victoria_park_set(tmp_path_factory, vp_dir) -> Path:
+    """`trunkslam reproduce victoria-park --quick` on shorter data (the first 150 scans of the
+    full run and 100 raw scans, instead of 1500 and 400, so that it takes seconds), made once a
+    session: its tables (test_result_tables.py) and the configuration files it writes beside
+    them, which do not depend on the number of scans (test_run_is_its_config.py). Read-only."""
+    from experiments.paper.reproduce import run_experiments
+    from experiments.paper.victoria_park import real_run as vp
+
+    full, raw, ref = vp._data(True)
+    out = tmp_path_factory.mktemp("vp_tables")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(vp, "_data", lambda quick: (vp.head(full, 150), vp.head(raw, 100), ref))
+        run_experiments(["victoria-park"], out, quick=True, seed=0)
+    return out
