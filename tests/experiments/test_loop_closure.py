@@ -17,6 +17,7 @@ def _run(seed: int, kind: str, closure: bool):
     return seq, feats, run_slam(seq, loop_config(closure), features=feats)
 
 
+@pytest.mark.slow
 def test_a_closed_loop_recovers_the_map_of_the_stand():
     """Park drive 5: without closure the return maps the stand a second time (35 trees
     twice); with it, one closure merges the duplicates onto their own trees, no tree is
@@ -38,6 +39,7 @@ def test_a_closed_loop_recovers_the_map_of_the_stand():
     assert np.all(m2 <= chi2.ppf(0.999, 2))
 
 
+@pytest.mark.slow
 def test_a_return_the_filter_is_too_sure_of_is_closed_by_re_registration():
     """Park drive 2 comes back 3.2 m off with a covariance that refuses the true match (joint
     NIS above its bound): dead reckoning allows the drift and one rigid motion fits the pairs,
@@ -60,6 +62,7 @@ def test_a_return_the_filter_is_too_sure_of_is_closed_by_re_registration():
     assert err_off > 2.0 and err_on < 0.25 * err_off
 
 
+@pytest.mark.slow
 def test_after_a_re_registration_the_nearby_duplicates_are_swept_without_an_update():
     """Park drive 6: the match pairs 6 trees and re-registers the local map; the 4 other trees
     of the return mapped twice, within the laser's range, are swept up by marginalising the
