@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -12,8 +14,14 @@ from experiments.sim.loops import loop_scene
 from slam import interpolate_poses, run_slam
 
 
+@functools.cache  # a drive and its features, made once a module (several tests read them)
+def _drive_features(seed: int, kind: str) -> tuple:
+    return drive_features(seed, kind)
+
+
+@functools.cache  # deterministic, and the tests only read the run: one run per drive and setting
 def _run(seed: int, kind: str, closure: bool):
-    seq, feats = drive_features(seed, kind)
+    seq, feats = _drive_features(seed, kind)
     return seq, feats, run_slam(seq, loop_config(closure), features=feats)
 
 
@@ -117,6 +125,7 @@ def test_the_local_sweep_marginalises_without_moving_the_map():
     assert not np.allclose(g.x[3:5], before.x[3:5])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(4))
 def test_a_look_alike_orchard_gives_no_false_closure(seed):
     """Rows of identical trees one spacing apart: whatever the closure accepts pairs each
@@ -129,6 +138,7 @@ def test_a_look_alike_orchard_gives_no_false_closure(seed):
             assert all(ident.get(a) == ident.get(b) for a, b in e["merged"])
 
 
+@pytest.mark.slow
 def test_the_experiment_writes_its_table(tmp_path):
     """`trunkslam reproduce loop-closure --quick`: two drives of each kind, a row per scene,
     filter and closure setting, the run count in the manifest, the figure, and the recording
@@ -158,6 +168,7 @@ def test_the_experiment_writes_its_table(tmp_path):
     assert {"events/closures", "world/landmarks", "world/truth/trees"} <= set(rec["entities"])
 
 
+@pytest.mark.slow
 def test_the_smoother_sees_the_closed_loop():
     """The run log of the closed park drive 5 relabels the merged landmarks' measurements, so
     the smoother's graph has one landmark per tree of the final map, with the sightings of
@@ -198,7 +209,7 @@ def test_the_run_shows_its_closures():
         def log_duplicates(self, pairs):
             self.marks.append((self.scan, {"scan": self.scan, "outcome": "swept", "pairs": pairs}))
 
-    seq, feats = drive_features(5, "park")
+    seq, feats = _drive_features(5, "park")
     vis = Marks()
     lg = run_slam(seq, loop_config(True), features=feats, visualiser=vis)
     shown = [e for e in lg.closures if e["outcome"] != "too few"]
