@@ -190,6 +190,7 @@ def test_the_smoother_sees_the_closed_loop():
     assert err < max(0.5, 1.5 * np.hypot(*(on.pose[-1, :2] - truth[-1, :2])))
 
 
+@pytest.mark.slow
 def test_the_run_shows_its_closures():
     """A visualiser of the run gets each match worth marking (`log_closure`) at its scan,
     here the accepted closure of park drive 5, and each duplicate sweep's merges
