@@ -90,11 +90,12 @@ EXPERIMENTS = [p for p in FILES if p.relative_to(ROOT).parts[0] == "experiments"
 @pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(ROOT)))
 def test_imports_flow_one_way(path):
     pkg = path.relative_to(ROOT).parts[0]
-    bad = (top_level(path) & OURS) - ALLOWED[pkg]
+    tops = top_level(path)  # parsed once: six confined libraries are checked below
+    bad = (tops & OURS) - ALLOWED[pkg]
     assert not bad, f"{path.relative_to(ROOT)} imports {sorted(bad)}"
     rel = str(path.relative_to(ROOT))
     for lib, home in CONFINED.items():
-        if lib in top_level(path):
+        if lib in tops:
             assert rel == home, f"{rel} imports {lib}; only {home} may"
     if "matplotlib" in top_level(path):
         assert FIGURE_MODULES.fullmatch(rel), f"{rel} imports matplotlib; only figure modules may"
@@ -113,7 +114,7 @@ def test_rooms_import_only_rooms_below(path):
 @pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(ROOT)))
 def test_no_private_names_cross_modules(path):
     own = ".".join(path.relative_to(ROOT).with_suffix("").parts)
-    tree = ast.parse(path.read_text(), filename=str(path))
+    tree = TREES[path]  # parsed once, at import (below)
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             if node.module.split(".")[0] not in OURS or node.module == own:
@@ -139,7 +140,7 @@ def test_library_code_never_points_into_tests():
     """No path into tests/ is built in library code (golden files are written by
     tests/regenerate_golden.py); docstrings may name a test file."""
     for path in FILES:
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in ast.walk(TREES[path]):
             if isinstance(node, ast.Constant) and isinstance(node.value, str):
                 v = node.value
                 assert v != "tests" and "tests/golden" not in v, f"{path}: {v[:60]!r}"

@@ -144,6 +144,7 @@ def test_wrap_angle_range():
 # ---- order invariance (hypothesis) ---------------------------------------------------------
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     seed=st.integers(0, 2**32 - 1),
@@ -175,6 +176,7 @@ def test_result_does_not_depend_on_order(seed, n_lm, n_clutter, sigma_xy, data):
         assert used.size == np.unique(used).size  # each feature at most once
 
 
+@pytest.mark.slow
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), n_clutter=st.integers(0, 8), data=st.data())
 def test_window_does_not_depend_on_order(seed, n_clutter, data):

@@ -68,6 +68,7 @@ def random_assignment(rng, m, n, density):
     return c, A, e
 
 
+@pytest.mark.slow
 def test_single_scan_like_problems_are_solved_exactly_in_one_lp():
     rng = np.random.default_rng(3)
     for _ in range(120):
@@ -102,6 +103,7 @@ def random_multiscan(rng, K=3):
     return c, A, np.ones(A.shape[0], bool)
 
 
+@pytest.mark.slow
 def test_multiscan_ihgr_is_feasible_and_bounded_by_lp_and_milp():
     rng = np.random.default_rng(5)
     fractional = 0

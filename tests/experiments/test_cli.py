@@ -182,6 +182,7 @@ def test_features_json_records_resolved_parameters_and_files_are_readable(tmp_pa
     assert scan.stat().st_mode & 0o777 == 0o644
 
 
+@pytest.mark.slow
 def test_simulate_drive_then_slam(tmp_path):
     run = tmp_path / "run.npz"
     res = runner.invoke(app, ["simulate-drive", "--scans", "60", "--seed", "2", "--out", str(run)])
@@ -207,6 +208,7 @@ def test_simulate_drive_then_slam(tmp_path):
         assert s["landmarks"] >= 3 and max(s["truth"]["mean_abs_error"].values()) < 0.05
 
 
+@pytest.mark.slow
 def test_slam_with_loop_closure_reports_its_matches(tmp_path):
     """[closure] in a configuration file turns loop closure on: the summary counts the
     constellation matches by outcome. A lap and a half of the tree park maps every tree on

@@ -361,6 +361,7 @@ def test_sweep_file_errors_name_the_key(tmp_path, text, message):
     assert message in str(info.value) and str(path) in str(info.value)
 
 
+@pytest.mark.slow
 def test_sweep_keeps_the_other_trials_when_one_fails(tmp_path, monkeypatch):
     """A point whose trials fail (a failure no check before the trials can foresee: here the
     simulation itself raising on one scene; a wrong scene name is refused before any trial,

@@ -70,11 +70,16 @@ FINDINGS = {
 _LISTS = {"rosbag": rosbag_cases, "links": links_cases, "options": option_cases}
 
 
+# the cases over about 1 s (pyproject.toml's `slow` marker): a sweep of its own
+SLOW_FINDINGS = {"a sweep grid key of 5,000 dotted parts"}
+
+
 def _finding_cases():
     for kind, labels in FINDINGS.items():
         by_label = {c.label: c for c in _LISTS[kind]()}
         for label in labels:
-            yield pytest.param(by_label[label], id=f"{kind}: {label}")
+            marks = pytest.mark.slow if label in SLOW_FINDINGS else ()
+            yield pytest.param(by_label[label], id=f"{kind}: {label}", marks=marks)
 
 
 @pytest.mark.parametrize("case", list(_finding_cases()))

@@ -478,6 +478,7 @@ def hostile_file(draw):
 FLOATS = st.sampled_from(["nan", "inf", "-inf", "1e300", "-1", "0", "1e-300", "0.02", "5"])
 
 
+@pytest.mark.slow
 @settings(
     max_examples=40,
     deadline=None,

@@ -216,6 +216,7 @@ def test_slam_refuses_a_result_folder_holding_a_foreign_file(made, tmp_path):
     assert snapshot(prev) == old
 
 
+@pytest.mark.slow
 def test_every_result_folder_lists_its_files_in_its_manifest(made, tmp_path):
     """slam, smooth (adding its files to the run's), export-reference, sweep and reproduce."""
     out = copy(made / "prev", tmp_path / "run")
@@ -236,6 +237,7 @@ def test_every_result_folder_lists_its_files_in_its_manifest(made, tmp_path):
     assert "smoother.json" not in snapshot(out)
 
 
+@pytest.mark.slow
 def test_folders_not_wholly_ours_are_refused_and_named(made, tmp_path, noise_calibration_set):
     """A foreign file in a subfolder or hidden, a folder without a manifest (an older output),
     a manifest that is not JSON, and another command's result set: each refused, named."""

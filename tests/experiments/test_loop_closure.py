@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from scipy.stats import chi2
@@ -12,11 +14,18 @@ from experiments.sim.loops import loop_scene
 from slam import interpolate_poses, run_slam
 
 
+@functools.cache  # a drive and its features, made once a module (several tests read them)
+def _drive_features(seed: int, kind: str) -> tuple:
+    return drive_features(seed, kind)
+
+
+@functools.cache  # deterministic, and the tests only read the run: one run per drive and setting
 def _run(seed: int, kind: str, closure: bool):
-    seq, feats = drive_features(seed, kind)
+    seq, feats = _drive_features(seed, kind)
     return seq, feats, run_slam(seq, loop_config(closure), features=feats)
 
 
+@pytest.mark.slow
 def test_a_closed_loop_recovers_the_map_of_the_stand():
     """Park drive 5: without closure the return maps the stand a second time (35 trees
     twice); with it, one closure merges the duplicates onto their own trees, no tree is
@@ -38,6 +47,7 @@ def test_a_closed_loop_recovers_the_map_of_the_stand():
     assert np.all(m2 <= chi2.ppf(0.999, 2))
 
 
+@pytest.mark.slow
 def test_a_return_the_filter_is_too_sure_of_is_closed_by_re_registration():
     """Park drive 2 comes back 3.2 m off with a covariance that refuses the true match (joint
     NIS above its bound): dead reckoning allows the drift and one rigid motion fits the pairs,
@@ -60,6 +70,7 @@ def test_a_return_the_filter_is_too_sure_of_is_closed_by_re_registration():
     assert err_off > 2.0 and err_on < 0.25 * err_off
 
 
+@pytest.mark.slow
 def test_after_a_re_registration_the_nearby_duplicates_are_swept_without_an_update():
     """Park drive 6: the match pairs 6 trees and re-registers the local map; the 4 other trees
     of the return mapped twice, within the laser's range, are swept up by marginalising the
@@ -106,6 +117,7 @@ def test_the_local_sweep_marginalises_without_moving_the_map():
     assert not np.allclose(g.x[3:5], before.x[3:5])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(4))
 def test_a_look_alike_orchard_gives_no_false_closure(seed):
     """Rows of identical trees one spacing apart: whatever the closure accepts pairs each
@@ -118,6 +130,7 @@ def test_a_look_alike_orchard_gives_no_false_closure(seed):
             assert all(ident.get(a) == ident.get(b) for a, b in e["merged"])
 
 
+@pytest.mark.slow
 def test_the_experiment_writes_its_table(tmp_path):
     """`trunkslam reproduce loop-closure --quick`: two drives of each kind, a row per scene,
     filter and closure setting, the run count in the manifest, the figure, and the recording
@@ -147,6 +160,7 @@ def test_the_experiment_writes_its_table(tmp_path):
     assert {"events/closures", "world/landmarks", "world/truth/trees"} <= set(rec["entities"])
 
 
+@pytest.mark.slow
 def test_the_smoother_sees_the_closed_loop():
     """The run log of the closed park drive 5 relabels the merged landmarks' measurements, so
     the smoother's graph has one landmark per tree of the final map, with the sightings of
@@ -168,6 +182,7 @@ def test_the_smoother_sees_the_closed_loop():
     assert err < max(0.5, 1.5 * np.hypot(*(on.pose[-1, :2] - truth[-1, :2])))
 
 
+@pytest.mark.slow
 def test_the_run_shows_its_closures():
     """A visualiser of the run gets each match worth marking (`log_closure`) at its scan,
     here the accepted closure of park drive 5, and each duplicate sweep's merges
@@ -187,7 +202,7 @@ def test_the_run_shows_its_closures():
         def log_duplicates(self, pairs):
             self.marks.append((self.scan, {"scan": self.scan, "outcome": "swept", "pairs": pairs}))
 
-    seq, feats = drive_features(5, "park")
+    seq, feats = _drive_features(5, "park")
     vis = Marks()
     lg = run_slam(seq, loop_config(True), features=feats, visualiser=vis)
     shown = [e for e in lg.closures if e["outcome"] != "too few"]

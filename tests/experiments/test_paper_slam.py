@@ -120,6 +120,7 @@ def test_quick_run_matches_golden_numbers():
         assert sum(got[m]["smoother_table3_mean"]) <= sum(got[m]["table3_mean"]), m
 
 
+@pytest.mark.slow
 def test_experiment2_writes_every_output(tmp_path):
     ctx = RunContext(out_dir=tmp_path, seed=3)
     cfg = Exp2Config(n_runs=2, cycab=CycabParams(n_scans=40), sensitivity=False)
@@ -171,6 +172,7 @@ def test_experiment2_writes_every_output(tmp_path):
     assert assert_tidy_tables(tmp_path) == {"table3.csv", "table4.csv", "consistency.csv"}
 
 
+@pytest.mark.slow
 def test_table3_and_table4_are_one_run_with_the_config_under_both_names(tmp_path, monkeypatch):
     calls = []
     monkeypatch.setattr(

@@ -179,18 +179,9 @@ def test_range_biases_in_use_are_the_calibrations_lines(quick_tables):
 
 
 @pytest.fixture(scope="module")
-def quick_victoria_park(tmp_path_factory, vp_dir):
-    """`trunkslam reproduce victoria-park --quick` on shorter data (the first 150 scans of the
-    full run and 100 raw scans, instead of 1500 and 400), so that it takes seconds."""
-    from experiments.paper.reproduce import run_experiments
-    from experiments.paper.victoria_park import real_run as vp
-
-    full, raw, ref = vp._data(True)
-    out = tmp_path_factory.mktemp("vp_tables")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(vp, "_data", lambda quick: (vp.head(full, 150), vp.head(raw, 100), ref))
-        run_experiments(["victoria-park"], out, quick=True, seed=0)
-    return out
+def quick_victoria_park(quick_victoria_park_set):
+    """`trunkslam reproduce victoria-park --quick` on shorter data (tests/conftest.py)."""
+    return quick_victoria_park_set
 
 
 @pytest.mark.slow

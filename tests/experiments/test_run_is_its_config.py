@@ -93,14 +93,16 @@ def test_a_features_file_run_is_its_config(tmp_path):
     assert s["features"] == "bailey" and s["features_file"] == str(feats)
 
 
-def test_the_victoria_park_experiment_writes_the_config_of_each_run(tmp_path, vp_seq):
+def test_the_victoria_park_experiment_writes_the_config_of_each_run(
+    tmp_path, vp_seq, quick_victoria_park_set
+):
     """The configuration file the experiment writes beside its table, given to `trunkslam
-    slam`, gives the table's row (the geometric extractor on scans 1-2000)."""
-    from experiments.paper.reproduce import run_experiments
+    slam`, gives the table's row (the geometric extractor on scans 1-2000). The experiment's
+    run is the session's shortened quick one (tests/conftest.py): the files it writes are the
+    same whatever the number of scans."""
     from experiments.paper.victoria_park.real_run import vp_trial
 
-    out = tmp_path / "r"
-    run_experiments(["victoria-park"], out_dir=out, quick=True)
+    out = quick_victoria_park_set
     name = "victoria_park_config_scans_1_2000_geometric_ihgr.toml"
     assert (out / name).is_file()
     assert len(list(out.glob("victoria_park_config_*.toml"))) == 8

@@ -464,6 +464,7 @@ def test_malformed_input_raises_value_error():
         detect_trees(np.zeros(361), params=3)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(
     arrays(

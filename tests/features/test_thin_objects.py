@@ -99,6 +99,7 @@ def test_wall_ends_box_corners_and_bushes_are_not_circles(rates):
         assert np.mean(made) <= 0.05, (names[obj], np.mean(made))
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),

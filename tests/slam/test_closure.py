@@ -448,6 +448,7 @@ def test_freeing_with_shares_is_a_random_walk_of_the_motion():
         rigid.free_rigid_motion(f, [10, 11], np.zeros(2), T, shares=[0.5])
 
 
+@pytest.mark.slow
 def test_dead_reckoned_cov_is_the_composed_odometry_noise():
     """Straight increments of 1 m with independent noise: after n steps the along-track
     variance is n q_x, the heading's n q_theta, and the cross-track variance

@@ -61,6 +61,7 @@ def runs():
     return [_one_run(g) for g in rng.spawn(12)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("told", [True, False], ids=["bias-known", "bias-unknown"])
 def test_known_range_bias_keeps_the_pose_nees_inside_its_bounds(runs, told):
     cfg = SlamConfig(

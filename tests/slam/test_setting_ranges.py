@@ -158,6 +158,7 @@ def test_the_start_sigmas_stay_where_the_prior_keeps_the_measurements(index, val
     assert f"start.initial_pose_sigma[{index}]" in str(err.value) and limit in str(err.value)
 
 
+@pytest.mark.slow
 def test_the_largest_and_smallest_sigmas_run(worker):
     for value in (SIGMA_LIMIT, SETTING_TINY, 0.0):
         doc = {"measurement": {"fit_floor_range_m": value}}
