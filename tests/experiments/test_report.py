@@ -31,7 +31,8 @@ def project(tmp_path) -> Path:
     shutil.copytree(REPO / "docs", root / "docs")
     shutil.copy(REPO / "mkdocs.yml", root / "mkdocs.yml")
     shutil.copy(REPO / "README.md", root / "README.md")
-    for included in ("datasets", "experiments"):  # the pages include files from these
+    # the pages include files from these (examples/: the tutorial notebook the site renders)
+    for included in ("datasets", "examples", "experiments"):
         os.symlink(REPO / included, root / included)
     return root
 
