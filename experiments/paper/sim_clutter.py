@@ -78,7 +78,7 @@ def _map_figures(lg, scene, seq, feats) -> dict:
     out |= {f"mapped_{c}": 0 for c in CLASSES}
     for k in kinds:
         out[f"objects_{CLUTTER_CLASSES[k]}"] += 1
-    right, held = 0, set()
+    right, held, found = 0, set(), set()
     for lid, xy in zip(lg.landmark_id.tolist(), lg.landmark_xy):
         lab = obj.get(int(lid))
         cls = "none" if lab is None else CLUTTER_CLASSES[kinds[lab]]
@@ -88,14 +88,9 @@ def _map_figures(lg, scene, seq, feats) -> dict:
         held.add(lab)
         if lab in trunks and np.hypot(*(xy - scene.circles[lab].center_xy)) <= MATCH_M:
             right += 1
+            found.add(lab)
     for lab in held:
         out[f"mapped_{CLUTTER_CLASSES[kinds[lab]]}"] += 1
-    found = {
-        obj[int(i)]
-        for i, xy in zip(lg.landmark_id.tolist(), lg.landmark_xy)
-        if obj.get(int(i)) in trunks
-        and np.hypot(*(xy - scene.circles[obj[int(i)]].center_xy)) <= MATCH_M
-    }
     out["landmarks"] = int(lg.landmark_id.size)
     out["right"] = right
     out["trunks"] = len(trunks)
