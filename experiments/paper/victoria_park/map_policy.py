@@ -56,6 +56,7 @@ __all__ = [
     "derive",
     "derive_confirm",
     "detection_rates",
+    "f1_score",
     "run",
 ]
 
@@ -100,18 +101,18 @@ def _confirm_record(k: int, lg: SlamLog, ref: tuple[np.ndarray, np.ndarray]) -> 
         "landmarks": int(lg.landmark_id.size),
         "recall": recall,
         "precision": precision,
-        "f1": _f1(recall, precision),
+        "f1": f1_score(recall, precision),
     }
     for a, b in HALVES:
-        row[f"f1_{a + 1}_{b}"] = _f1(
+        row[f"f1_{a + 1}_{b}"] = f1_score(
             m[f"reference_trees_seen_1m_{a + 1}_{b}"], m[f"precision_{a + 1}_{b}"]
         )
     row["one_tree_pairs"] = m["one_tree_pairs"]
     return row
 
 
-def _f1(recall: float, precision: float) -> float:
-    """The harmonic mean of recall and precision (NaN when either is)."""
+def f1_score(recall: float, precision: float) -> float:
+    """The harmonic mean of recall and precision (NaN when either is; 0 when both are 0)."""
     if not (math.isfinite(recall) and math.isfinite(precision)):
         return math.nan
     return 2.0 * recall * precision / (recall + precision) if recall + precision > 0 else 0.0

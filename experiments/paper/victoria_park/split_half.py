@@ -37,7 +37,7 @@ from experiments.io.victoria_park import load_ss2002_reference, load_victoria_pa
 from experiments.paper import products
 from experiments.paper.products import TableSpec
 from experiments.paper.registry import experiment
-from experiments.paper.victoria_park.map_policy import CONFIRM_CANDIDATES, derive_confirm
+from experiments.paper.victoria_park.map_policy import CONFIRM_CANDIDATES, derive_confirm, f1_score
 from experiments.paper.victoria_park.real_run import HALVES, reference_match, run_config
 from slam import run_slam
 
@@ -53,13 +53,6 @@ _FEATURES: dict = {}  # (extractor, scans) -> features, shared by a worker's tri
 
 def _half_tag(half: tuple[int, int]) -> str:
     return f"{half[0] + 1}_{half[1]}"
-
-
-def _f1(recall: float, precision: float) -> float:
-    """The harmonic mean of recall and precision (NaN when either is; 0 when both are 0)."""
-    if not (math.isfinite(recall) and math.isfinite(precision)):
-        return math.nan
-    return 2.0 * recall * precision / (recall + precision) if recall + precision > 0 else 0.0
 
 
 def _features(seq, extractor: str, cfg):
@@ -98,7 +91,7 @@ def split_trial(job: tuple, seed=None) -> dict:
             ((lg.landmark_first_scan >= half[0]) & (lg.landmark_first_scan < half[1])).sum()
         )
     for t in ("", *(f"_{_half_tag(h)}" for h in HALVES)):
-        row[f"f1{t}"] = _f1(row[f"recall{t}"], row[f"precision{t}"])
+        row[f"f1{t}"] = f1_score(row[f"recall{t}"], row[f"precision{t}"])
     return row
 
 
