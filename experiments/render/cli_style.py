@@ -10,6 +10,12 @@ mends these four in one place, so that the commands themselves stay plain typer:
 - a refused value's message loses the "Value error, " prefix;
 - `-v`/`--verbose` anywhere before a `--` is taken as the app's option (`trunkslam slam run.npz
   -v` works as `trunkslam -v slam run.npz`); no subcommand has an option of that name.
+
+It also keeps pydantic (0.1 s to import) off the answers that need no value checked: typer
+checks every value with a pydantic adapter, built on first use, even a value left out (None),
+which it passes through unchecked. An option or argument left out is passed through here
+without building one, so `trunkslam slam --help` and `trunkslam presets` never import pydantic
+(the app's own `--threads` is left out in both).
 """
 
 from __future__ import annotations
@@ -23,8 +29,36 @@ VERBOSE_FLAGS = ("-v", "--verbose")
 _PYDANTIC_PREFIX = "Value error, "
 
 
+def _process_left_out(self, ctx: typer.Context, value):
+    """`process_value` of a parameter whose value, when left out (None), is passed on without
+    typer's pydantic adapter: typer's coercion returns None (or `()` for a multi-valued one)
+    before it would use the adapter, but builds the adapter first
+    (`typer.core._TyperParameter`)."""
+    cls = type(self).__mro__[1]  # typer's class
+    if value is not None or getattr(self, "_runtime_param", True) is not None:
+        return cls.process_value(self, ctx, value)  # a given value, or an older typer
+    from typer._coercion import PassThroughRuntimeParam  # loaded with typer.core
+
+    desc = self.type_descriptor
+    self._runtime_param = PassThroughRuntimeParam(desc.parameter_info, desc.annotation)
+    try:  # typer's own path (required check, callback), with a stand-in that checks nothing
+        return cls.process_value(self, ctx, value)
+    finally:
+        self._runtime_param = None  # a value given later still gets the real adapter
+
+
+class _Option(TyperOption):
+    """An option whose left-out value imports no pydantic. (One base only: `_tidy` swaps
+    the class of typer's objects, which a mixin's layout would refuse.)"""
+
+    process_value = _process_left_out
+
+
 class _Argument(TyperArgument):
-    """An argument shown as click shows it: `INPUT`, `[INPUT]` when optional."""
+    """An argument shown as click shows it: `INPUT`, `[INPUT]` when optional; its left-out
+    value imports no pydantic."""
+
+    process_value = _process_left_out
 
     def _usage_display_name(self) -> str:
         name = self.display_name_raw.upper()
@@ -51,6 +85,8 @@ def _tidy(command) -> None:
     for param in command.params:
         if isinstance(param, TyperOption) and param.is_flag and param.metavar is None:
             param.metavar = ""
+        if type(param) is TyperOption:
+            param.__class__ = _Option  # only `process_value` differs
         elif isinstance(param, TyperArgument) and type(param) is TyperArgument:
             param.__class__ = _Argument  # only display methods differ
     own_help = command.get_help_option  # --help is made when first asked for
@@ -59,6 +95,8 @@ def _tidy(command) -> None:
         option = own_help(ctx)
         if option is not None and option.metavar is None:
             option.metavar = ""
+        if type(option) is TyperOption:
+            option.__class__ = _Option  # not given (None) on every command's way: no pydantic
         return option
 
     command.get_help_option = get_help_option
