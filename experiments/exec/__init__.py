@@ -14,19 +14,26 @@ the same numbers, bit for bit, on one core, on all local cores or on a Dask clus
 - `make_executor(workers, dask)`: what `--workers` / `--dask` ask for
 
 Nothing here imports numpy at module level: a worker process sets its thread limits before
-numpy loads.
+numpy loads. The names above load on first use (`__getattr__`), so importing one small module of
+the package (`once`, `threads`, `signals`) loads no executor.
 """
 
-from experiments.exec.choose import make_executor
-from experiments.exec.trials import (
-    Batch,
-    Executor,
-    SerialExecutor,
-    TrialFailure,
-    TrialsFailed,
-    describe_seed,
-    spawn_seeds,
-)
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from experiments.exec.choose import make_executor
+    from experiments.exec.trials import (
+        Batch,
+        Executor,
+        SerialExecutor,
+        TrialFailure,
+        TrialsFailed,
+        describe_seed,
+        spawn_seeds,
+    )
 
 __all__ = [
     "Batch",
@@ -38,3 +45,13 @@ __all__ = [
     "make_executor",
     "spawn_seeds",
 ]
+
+
+def __getattr__(name: str):
+    """The package's names, loaded when first asked for: the command line imports
+    `experiments.exec.once`, `threads` and `signals` on every command, and would otherwise pay
+    for the executors (multiprocessing, concurrent.futures) it mostly does not use."""
+    if name not in __all__:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    module = "choose" if name == "make_executor" else "trials"
+    return getattr(importlib.import_module(f"experiments.exec.{module}"), name)
