@@ -132,6 +132,10 @@ def slam_cmd(
     and the run log the smoother reads (`trunkslam smooth`)."""
     if config is None and not dump_config:  # a --config's errors are said first, as ever
         check_input(input, "sequence file")
+    if input is not None and not dump_config:
+        from experiments.render.cold_start import say_if_cold
+
+        say_if_cold()  # a first run's first line, before the imports below (seconds)
     from experiments.io.config_file import config_toml, load_slam_config
     from experiments.pipeline.slam import run_slam_file
     from experiments.render.progress import Progress

@@ -42,6 +42,9 @@ def extract(
 ) -> None:
     """Extract circles, lines, edges and clutter from every scan of a sequence file."""
     check_input(input, "sequence file")
+    from experiments.render.cold_start import say_if_cold
+
+    say_if_cold(("features/extract.py",))  # a first run's first line, before the imports
     from experiments.pipeline.extract import run_extract
     from experiments.render.progress import Progress
     from experiments.render.rerun_sink import rerun_target

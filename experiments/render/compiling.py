@@ -18,7 +18,7 @@ import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["COMPILING_NOTICE", "compile_seconds", "compiling_now", "watch_compiles"]
+__all__ = ["COMPILING_NOTICE", "claim_notice", "compile_seconds", "compiling_now", "watch_compiles"]
 
 COMPILING_NOTICE = (
     "compiling kernels (first run after an install only, then cached; a minute or two, with "
@@ -34,6 +34,7 @@ class _Clock:
         self.depth = 0
         self.started = 0.0
         self.said = False
+        self.said_early_at: float | None = None  # when `claim_notice` took the notice
         self.say: Callable[[str], None] | None = None
         self.registered = False
         self.lock = threading.Lock()
@@ -85,6 +86,24 @@ def watch_compiles(say: Callable[[str], None] | None = None) -> bool:
         event.register("numba:compile", _Listener())
         _CLOCK.registered = True
     return True
+
+
+def claim_notice() -> bool:
+    """Take the one-time notice to say it now, before any compile (`experiments.render.
+    cold_start`): whether it was still unsaid; the first compile then says nothing."""
+    with _CLOCK.lock:
+        unsaid, _CLOCK.said = not _CLOCK.said, True
+        if unsaid:
+            _CLOCK.said_early_at = time.perf_counter()
+    return unsaid
+
+
+def take_early_notice() -> float | None:
+    """The `time.perf_counter()` of a notice said by `claim_notice` that no progress display
+    has counted its silence from yet (then no longer), else None."""
+    with _CLOCK.lock:
+        at, _CLOCK.said_early_at = _CLOCK.said_early_at, None
+    return at
 
 
 def compile_seconds() -> float:

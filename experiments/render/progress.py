@@ -31,7 +31,12 @@ from rich.progress import (
 )
 from rich.progress import Progress as RichProgress
 
-from experiments.render.compiling import compile_seconds, compiling_now, watch_compiles
+from experiments.render.compiling import (
+    compile_seconds,
+    compiling_now,
+    take_early_notice,
+    watch_compiles,
+)
 
 __all__ = ["CONSOLE", "ETA_AFTER", "Progress"]
 
@@ -64,7 +69,8 @@ class Progress:
         self._compiled: dict[str, float] = {}  # compile_seconds() when each task started
         self._counts: dict[str, tuple[int, int]] = {}  # the last (done, total) of each task
         self._last_line: dict[str, float] = {}
-        self._last_said = self._last_event = time.perf_counter()
+        early = take_early_notice()  # a notice said before the imports: silent since then
+        self._last_said = self._last_event = time.perf_counter() if early is None else early
         self._compiled_at_event = compile_seconds()  # as of _last_event
         self._lock = threading.RLock()
         self._stop = threading.Event()
