@@ -147,3 +147,15 @@ def test_a_cold_slam_says_the_notice_first(tmp_path, monkeypatch):
     _fill()
     res = _slam([str(bad)], tmp_path / "warm")
     assert res.returncode == 1 and res.stderr.splitlines()[0].startswith("error:"), res.stderr
+
+
+def test_first_line_times_the_first_line_then_stops_the_command(tmp_path):
+    from experiments.bench.startup import first_line
+
+    talk = "import sys, time; time.sleep(0.3); print('x', file=sys.stderr, flush=True); "
+    t0 = time.perf_counter()
+    wall, cpu = first_line([sys.executable, "-c", talk + "time.sleep(60)"], tmp_path, {})
+    assert 0.3 <= wall < time.perf_counter() - t0 < 30  # stopped, not waited for
+    assert 0 < cpu < wall
+    with pytest.raises(RuntimeError, match="no line"):
+        first_line([sys.executable, "-c", "pass"], tmp_path, {})
