@@ -18,7 +18,14 @@ import threading
 import time
 from collections.abc import Callable
 
-__all__ = ["COMPILING_NOTICE", "claim_notice", "compile_seconds", "compiling_now", "watch_compiles"]
+__all__ = [
+    "COMPILING_NOTICE",
+    "claim_notice",
+    "compile_seconds",
+    "compiling_now",
+    "take_early_notice",
+    "watch_compiles",
+]
 
 COMPILING_NOTICE = (
     "compiling kernels (first run after an install only, then cached; a minute or two, with "
