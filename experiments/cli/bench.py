@@ -345,7 +345,8 @@ BENCHES = (
     Bench(
         "startup",
         """Seconds until `trunkslam presets`, `trunkslam slam --help` and `trunkslam slam
-    missing.npz` answer, each in fresh processes (median; target under 0.5 s).""",
+    missing.npz` answer, each in fresh processes (median; target under 0.5 s), and until a
+    first `trunkslam slam` (empty numba cache) says its first line (target under 2 s).""",
         (
             (
                 "repeats",
