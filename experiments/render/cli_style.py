@@ -29,18 +29,26 @@ VERBOSE_FLAGS = ("-v", "--verbose")
 _PYDANTIC_PREFIX = "Value error, "
 
 
+def _pass_through_class():
+    """typer's coercion that checks nothing (typer 0.2x's internals; None in a typer without)."""
+    try:
+        from typer._coercion import PassThroughRuntimeParam  # loaded with typer.core
+    except ImportError:
+        return None
+    return PassThroughRuntimeParam
+
+
 def _process_left_out(self, ctx: typer.Context, value):
     """`process_value` of a parameter whose value, when left out (None), is passed on without
     typer's pydantic adapter: typer's coercion returns None (or `()` for a multi-valued one)
     before it would use the adapter, but builds the adapter first
     (`typer.core._TyperParameter`)."""
     cls = type(self).__mro__[1]  # typer's class
-    if value is not None or getattr(self, "_runtime_param", True) is not None:
-        return cls.process_value(self, ctx, value)  # a given value, or an older typer
-    from typer._coercion import PassThroughRuntimeParam  # loaded with typer.core
-
+    stand_in = _pass_through_class()
+    if value is not None or stand_in is None or getattr(self, "_runtime_param", 0) is not None:
+        return cls.process_value(self, ctx, value)  # a given value, or another typer
     desc = self.type_descriptor
-    self._runtime_param = PassThroughRuntimeParam(desc.parameter_info, desc.annotation)
+    self._runtime_param = stand_in(desc.parameter_info, desc.annotation)
     try:  # typer's own path (required check, callback), with a stand-in that checks nothing
         return cls.process_value(self, ctx, value)
     finally:
