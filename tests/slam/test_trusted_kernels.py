@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from association import gate_matrix
 from association.inputs import chol2_solve
 from slam import se2
+from slam.closure import _k_nearest
 from slam.ekf import _batch_blocks
 from slam.map_managers import _project_kernel, _sub_problem
 
@@ -122,3 +124,29 @@ def test_batch_blocks_equal_the_vectorised_build(seed):
     R = _spd(rng, k, 2, 0.01)
     for a, b in zip(_batch_blocks(idx, H5, R), _batch_blocks_numpy(idx, H5, R)):
         assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_k_nearest_is_the_k_d_trees_query_to_the_bit(seed):
+    """Loop closure's nearest-other-tree search (`_k_nearest`) against the `cKDTree` query it
+    replaced: the same distances to the bit and the same neighbours; with ties (odd seeds:
+    points on a 25 m grid, duplicates) the same ones nearer than the k-th distance, and each
+    neighbour at its distance (which of several tied points comes first is the tree's own)."""
+    rng = np.random.default_rng(110 + seed)
+    n = int(rng.integers(1, 400))
+    xy = rng.uniform(-200.0, 200.0, (n, 2))
+    if seed % 2:
+        xy = np.round(2.0 * xy / 50.0) / 2.0  # many equal distances and coincident points
+    pos = rng.choice(n, int(rng.integers(1, min(n, 40) + 1)), replace=False)
+    k = min(16, n)
+    want_d, want_j = cKDTree(xy).query(xy[pos], k=k)
+    got_d, got_j = _k_nearest(xy, xy[pos], k)
+    want_d, want_j = want_d.reshape(pos.size, k), want_j.reshape(pos.size, k)
+    assert got_d.tobytes() == want_d.tobytes()
+    if seed % 2 == 0:
+        assert np.array_equal(got_j, want_j)
+    diff = xy[pos][:, None, :] - xy[got_j]
+    assert np.array_equal(np.sqrt(diff[..., 0] ** 2 + diff[..., 1] ** 2), got_d)
+    for r in range(pos.size):
+        inner = got_d[r] < got_d[r, -1]
+        assert set(got_j[r, inner].tolist()) == set(want_j[r, inner].tolist())
