@@ -12,6 +12,7 @@ from slam import se2
 from slam.closure import _k_nearest
 from slam.ekf import _batch_blocks
 from slam.map_managers import _project_kernel, _sub_problem
+from slam.vehicle import _pieces
 
 _PAIR = np.array([0, 1])
 
@@ -150,3 +151,31 @@ def test_k_nearest_is_the_k_d_trees_query_to_the_bit(seed):
     for r in range(pos.size):
         inner = got_d[r] < got_d[r, -1]
         assert set(got_j[r, inner].tolist()) == set(want_j[r, inner].tolist())
+
+
+def _pieces_numpy(t, speed, steer, t0_s, t1_s):
+    """The vectorised `Odometry.pieces` that `_pieces` replaced."""
+    a = int(np.searchsorted(t, t0_s, side="right"))
+    b = max(int(np.searchsorted(t, t1_s, side="left")), a)
+    edges = np.concatenate([[t0_s], t[a:b], [t1_s]])
+    idx = np.maximum(np.arange(a - 1, b), 0)
+    dt = np.diff(edges)
+    keep = dt > 0
+    return dt[keep], speed[idx[keep]], steer[idx[keep]]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_pieces_equal_the_vectorised_build(seed):
+    """The odometry's hold pieces over intervals before, across, between and after the
+    samples, on a sample and of zero length."""
+    rng = np.random.default_rng(140 + seed)
+    m = int(rng.integers(1, 30))
+    t = np.cumsum(rng.uniform(0.01, 0.1, m)) + 1.0
+    speed, steer = rng.normal(size=m), rng.normal(size=m)
+    ends = np.concatenate([t, rng.uniform(0.5, t[-1] + 0.5, 20), [0.0, t[-1] + 1.0]])
+    for _ in range(40):
+        t0, t1 = np.sort(rng.choice(ends, 2))
+        if seed % 4 == 0:
+            t1 = t0
+        for a, b in zip(_pieces(t, speed, steer, t0, t1), _pieces_numpy(t, speed, steer, t0, t1)):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
