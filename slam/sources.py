@@ -30,10 +30,12 @@ __all__ = ["DetectionsSource", "ExtractorSource", "GivenSource", "Measurements",
 class Measurements:
     """Scan k's circles as measurements of their centres, laser frame.
 
-    scan: the `features.Scan` (None without raw ranges); features: its `Features` (for the
-    log and the visualiser); z (m, 2) [range m, bearing rad] and R (m, 2, 2) from the source's
-    measurement model; status (m,) int64 as measured: NEW_TENTATIVE, or OUT_OF_RANGE beyond
-    the usable range (`slam.log` codes; the scan's final status is `slam.loop.ScanResult`)."""
+    scan: the `features.Scan` (None without raw ranges, and from a source that does not read
+    it, `needs_scan` False: `slam.visual.show_scan` then builds it); features: its `Features`
+    (for the log and the visualiser); z (m, 2) [range m, bearing rad] and R (m, 2, 2) from the
+    source's measurement model; status (m,) int64 as measured: NEW_TENTATIVE, or OUT_OF_RANGE
+    beyond the usable range (`slam.log` codes; the scan's final status is
+    `slam.loop.ScanResult`)."""
 
     k: int
     scan: object
@@ -64,6 +66,8 @@ class ExtractorSource:
         self.model = measurement.model_for(self.method)
         self.count = None  # not precomputed
 
+    needs_scan = True  # the loop passes scan k as a `features.Scan`
+
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
         from features import extract_features
 
@@ -92,6 +96,8 @@ class DetectionsSource:
         # the arrays of no lines, edges or segments, shared by every scan's Features (read-only)
         self._empty = Features.empty(0.0, seq.det_method, seq.n_beams)
         self.count = None
+
+    needs_scan = False  # the detections are read from the sequence: the loop builds no Scan
 
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
         stored, radius, cov = self.seq.detections(k)
@@ -138,6 +144,8 @@ class GivenSource:
                 f"of Features, got {type(given).__name__}"
             )
         self.model = measurement.model_for(self.method, has_cov)
+
+    needs_scan = True  # a callable may read it
 
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
         f = self._get(k, scan)
