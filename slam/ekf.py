@@ -273,7 +273,7 @@ class Filter(_Estimate):
             return UpdateResult(np.zeros((0, 2)), np.zeros((0, 0)), math.nan)
         z = np.asarray(z, dtype=np.float64).reshape(k, 2)
         R = np.asarray(R, dtype=np.float64).reshape(k, 2, 2)
-        if np.unique(idx).size != k:
+        if len(set(idx.tolist())) != k:
             raise SlamError("update.idx: a landmark appears twice in one batch")
         z_hat, H5 = observe(self.pose, self.landmarks_xy[idx], laser_pose)
         if self.first_estimates:  # FEJ: Jacobians at the landmarks' first estimates
