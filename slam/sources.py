@@ -11,7 +11,6 @@ measurement model of the configuration (`slam.measurement.MeasurementModel.measu
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -104,13 +103,26 @@ class DetectionsSource:
         z, R = self.model.measure(stored, cov)
         n = z.shape[0]
         c, s = np.cos(z[:, 1]), np.sin(z[:, 1])
-        f = dataclasses.replace(
-            self._empty,
+        e = self._empty  # written out, not `dataclasses.replace` (its field loop, every scan)
+        f = Features(
             stamp_s=float(self.seq.scan_t[k]),
             circle_params=np.column_stack([stored[:, 0] * c, stored[:, 0] * s, radius]),
             circle_cov=np.zeros((n, 3, 3)),
             circle_beams=np.zeros((n, 2), np.int64),
             circle_rms_m=np.full(n, np.nan),
+            line_params=e.line_params,
+            line_cov=e.line_cov,
+            line_endpoints=e.line_endpoints,
+            line_beams=e.line_beams,
+            line_rms_m=e.line_rms_m,
+            edge_xy=e.edge_xy,
+            edge_cov=e.edge_cov,
+            edge_beam=e.edge_beam,
+            segment_beams=e.segment_beams,
+            segment_kind=e.segment_kind,
+            segment_innov=e.segment_innov,
+            method=e.method,
+            n_beams=e.n_beams,
         )
         return f, z, R
 
