@@ -303,8 +303,7 @@ class LoopCloser:
         if updated.size < 2:
             return
         xy = state.landmarks_xy[state.positions_of(updated)]
-        d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
-        for a, b in zip(*np.nonzero(np.triu(d <= SAME_TREE_M, 1))):
+        for a, b in _pairs_within(xy, SAME_TREE_M).tolist():
             ia, ib = int(updated[a]), int(updated[b])
             self._together.setdefault(ia, set()).add(ib)
             self._together.setdefault(ib, set()).add(ia)
@@ -588,6 +587,22 @@ class LoopCloser:
         if rigid.same_landmarks_nis(state, keep, drop) > chi2.ppf(self.cfg.jc_prob, 2 * len(keep)):
             return []
         return self.merge(state, keep, drop, t, update=not local)
+
+
+@njit(cache=True)
+def _pairs_within(xy: np.ndarray, r: float) -> np.ndarray:
+    """(p, 2) the pairs [a, b], a < b, in row order, of the points xy (n, 2) at most r apart
+    (np.hypot's distance): one pass, where the n x n distance matrix cost more than the few
+    points it holds."""
+    n = xy.shape[0]
+    out = np.empty((n * (n - 1) // 2, 2), np.int64)
+    p = 0
+    for a in range(n):
+        for b in range(a + 1, n):
+            if np.hypot(xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1]) <= r:
+                out[p, 0], out[p, 1] = a, b
+                p += 1
+    return out[:p]
 
 
 @njit(cache=True)

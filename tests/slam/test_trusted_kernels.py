@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 from association import gate_matrix
 from association.inputs import chol2_solve
 from slam import se2
-from slam.closure import _k_nearest
+from slam.closure import _k_nearest, _pairs_within
 from slam.ekf import _batch_blocks
 from slam.map_managers import _project_kernel, _sub_problem
 from slam.vehicle import _pieces
@@ -179,3 +179,19 @@ def test_pieces_equal_the_vectorised_build(seed):
             t1 = t0
         for a, b in zip(_pieces(t, speed, steer, t0, t1), _pieces_numpy(t, speed, steer, t0, t1)):
             assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_pairs_within_are_the_distance_matrix_pairs(seed):
+    """Loop closure's pairs of landmarks seen together within SAME_TREE_M (`_pairs_within`)
+    against the n x n np.hypot matrix it replaced, points on a grid (distances exactly at the
+    bound) included."""
+    rng = np.random.default_rng(170 + seed)
+    for _ in range(50):
+        n = int(rng.integers(0, 25))
+        xy = rng.uniform(0.0, 5.0, (n, 2))
+        if seed % 2:
+            xy = np.round(2.0 * xy) / 2.0
+        d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+        want = np.transpose(np.nonzero(np.triu(d <= 1.5, 1)))
+        assert np.array_equal(_pairs_within(xy, 1.5), want)
