@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+from numba import njit
 
 from slam.config import SlamConfig
 from slam.errors import SlamError
@@ -120,14 +121,27 @@ def check_noise(k: int, R: np.ndarray, usable: np.ndarray, model: str) -> None:
     """Every usable measurement's R is finite and positive definite. The association gets the
     loop's inputs unchecked (its trusted path), so a degenerate R (the "fit" model of a
     degenerate fit with no floors) is named here rather than failing inside the solver."""
-    a, b, c = R[:, 0, 0], 0.5 * (R[:, 0, 1] + R[:, 1, 0]), R[:, 1, 1]
-    with np.errstate(invalid="ignore"):
-        ok = np.isfinite(R).all(axis=(1, 2)) & (a > 0) & (c > 0) & (a * c - b * b > 0)
-    bad = np.flatnonzero(usable & ~ok)
-    if bad.size:
-        i = int(bad[0])
+    i = _first_bad_noise(np.ascontiguousarray(R, np.float64), np.asarray(usable, np.bool_))
+    if i >= 0:
         raise SlamError(
             f"measurement noise: scan {k}, feature {i} has a covariance R that is not positive "
             f"definite ({R[i].tolist()}; noise model {model!r}); give the fit floors "
             "(measurement.fit_floor_range_m, fit_floor_bearing_rad) or a constant noise model"
         )
+
+
+@njit(cache=True)
+def _first_bad_noise(R: np.ndarray, usable: np.ndarray) -> int:
+    """The first usable measurement whose R (m, 2, 2) is not finite and positive definite
+    (a > 0, c > 0, a c - b^2 > 0 with b the mean of the off-diagonal pair), or -1 (one pass:
+    the check runs every scan)."""
+    for i in range(R.shape[0]):
+        if not usable[i]:
+            continue
+        a, c = R[i, 0, 0], R[i, 1, 1]
+        b = 0.5 * (R[i, 0, 1] + R[i, 1, 0])
+        finite = np.isfinite(a) and np.isfinite(c) and np.isfinite(R[i, 0, 1])
+        finite = finite and np.isfinite(R[i, 1, 0])
+        if not (finite and a > 0 and c > 0 and a * c - b * b > 0):
+            return i
+    return -1

@@ -289,7 +289,7 @@ class LoopCloser:
         one (`seen_together`); a landmark closer, or never seen with it, is this tree mapped
         again."""
         xy, ids = state.landmarks_xy, state.landmark_ids
-        d, j = cKDTree(xy).query(xy[pos], k=min(NEIGHBOURS, ids.size))
+        d, j = _k_nearest(np.ascontiguousarray(xy), xy[pos], min(NEIGHBOURS, ids.size))
         other = d > self.cfg.match_m
         close = other & (d <= SAME_TREE_M)
         for r in np.flatnonzero(close.any(axis=1)).tolist():
@@ -303,8 +303,7 @@ class LoopCloser:
         if updated.size < 2:
             return
         xy = state.landmarks_xy[state.positions_of(updated)]
-        d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
-        for a, b in zip(*np.nonzero(np.triu(d <= SAME_TREE_M, 1))):
+        for a, b in _pairs_within(xy, SAME_TREE_M).tolist():
             ia, ib = int(updated[a]), int(updated[b])
             self._together.setdefault(ia, set()).add(ib)
             self._together.setdefault(ib, set()).add(ia)
@@ -588,6 +587,49 @@ class LoopCloser:
         if rigid.same_landmarks_nis(state, keep, drop) > chi2.ppf(self.cfg.jc_prob, 2 * len(keep)):
             return []
         return self.merge(state, keep, drop, t, update=not local)
+
+
+@njit(cache=True)
+def _pairs_within(xy: np.ndarray, r: float) -> np.ndarray:
+    """(p, 2) the pairs [a, b], a < b, in row order, of the points xy (n, 2) at most r apart
+    (np.hypot's distance): one pass, where the n x n distance matrix cost more than the few
+    points it holds."""
+    n = xy.shape[0]
+    out = np.empty((n * (n - 1) // 2, 2), np.int64)
+    p = 0
+    for a in range(n):
+        for b in range(a + 1, n):
+            if np.hypot(xy[a, 0] - xy[b, 0], xy[a, 1] - xy[b, 1]) <= r:
+                out[p, 0], out[p, 1] = a, b
+                p += 1
+    return out[:p]
+
+
+@njit(cache=True)
+def _k_nearest(xy: np.ndarray, query: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(d (q, k), j (q, k)): the k points of xy (n, 2) nearest each of query (q, 2), nearest
+    first (equal distances in index order), their Euclidean distances and indices; k <= n.
+    A brute-force pass over the n points (the map holds hundreds) in place of building a k-d
+    tree every scan: the squared distance is summed as `scipy.spatial.cKDTree` sums it
+    (0 + dx^2, + dy^2), so the distances are its own to the bit."""
+    q, n = query.shape[0], xy.shape[0]
+    d2 = np.full((q, k), np.inf)
+    j = np.zeros((q, k), np.int64)
+    for r in range(q):
+        for i in range(n):
+            dx = query[r, 0] - xy[i, 0]
+            dy = query[r, 1] - xy[i, 1]
+            s = dx * dx + dy * dy
+            if not s < d2[r, k - 1]:
+                continue
+            p = k - 1  # insertion into the sorted k nearest, after equal ones
+            for _ in range(k - 1):
+                if d2[r, p - 1] <= s:
+                    break
+                d2[r, p], j[r, p] = d2[r, p - 1], j[r, p - 1]
+                p -= 1
+            d2[r, p], j[r, p] = s, i
+    return np.sqrt(d2), j
 
 
 @njit(cache=True, nogil=True)

@@ -40,7 +40,7 @@ class Components:
     `filter.first_estimates_jacobians`."""
 
     seq: Sequence
-    source: object  # slam.sources: (k, scan) -> (Features, z, R), with .method, .model, .count
+    source: object  # slam.sources: (k, scan) -> (Features, z, R); method, model, count, needs_scan
     associator: object  # association.associate's signature minus `method`, with .method
     motion: object  # slam.vehicle.Motion or a model of slam.motion: integrate, distance
     T_vehicle_laser: np.ndarray

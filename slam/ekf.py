@@ -122,6 +122,12 @@ class _Estimate:
         flat = np.ascontiguousarray(idx.reshape(math.prod(idx.shape[:-1]), idx.shape[-1]))
         return _sym_blocks(self._lower, flat).reshape(idx.shape + idx.shape[-1:])
 
+    def rows(self, idx) -> np.ndarray:
+        """P[idx, :] (k, d): whole rows of the covariance at state positions idx (k,), a copy
+        (a `Filter` reads them from its lower triangle when the upper one lags, as `P` would
+        after mirroring it, so the reading costs O(k d), not the O(d^2) mirror)."""
+        return self.P[np.asarray(idx, dtype=np.int64).reshape(-1)]
+
     def index_of(self, landmark_id: int) -> int:
         """Position (0..n-1) of a landmark id in the state."""
         hits = np.flatnonzero(self.landmark_ids == landmark_id)
@@ -222,6 +228,10 @@ class Filter(_Estimate):
     def _lower(self) -> np.ndarray:
         return self._P
 
+    def rows(self, idx) -> np.ndarray:
+        idx = np.ascontiguousarray(idx, dtype=np.int64).reshape(-1)
+        return self._P[idx] if self._mirrored else _sym_rows(self._P, idx)
+
     def snapshot(self) -> EkfState:
         return EkfState(self.x, self.P, self.landmark_ids)
 
@@ -263,7 +273,7 @@ class Filter(_Estimate):
             return UpdateResult(np.zeros((0, 2)), np.zeros((0, 0)), math.nan)
         z = np.asarray(z, dtype=np.float64).reshape(k, 2)
         R = np.asarray(R, dtype=np.float64).reshape(k, 2, 2)
-        if np.unique(idx).size != k:
+        if len(set(idx.tolist())) != k:
             raise SlamError("update.idx: a landmark appears twice in one batch")
         z_hat, H5 = observe(self.pose, self.landmarks_xy[idx], laser_pose)
         if self.first_estimates:  # FEJ: Jacobians at the landmarks' first estimates

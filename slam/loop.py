@@ -224,7 +224,7 @@ class Slam:
     def measure(self, k: int) -> Measurements:
         """Step 2: scan k's circles as measurements, each NEW_TENTATIVE until decided, or
         OUT_OF_RANGE beyond the usable range or not finite."""
-        scan = self.seq.scan(k)
+        scan = self.seq.scan(k) if self.source.needs_scan else None
         f, z, R = self.source(k, scan)
         status = np.full(z.shape[0], NEW_TENTATIVE, np.int64)
         usable = (z[:, 0] <= self.view.max_range) & np.all(np.isfinite(z), axis=1)

@@ -182,7 +182,6 @@ def _pair_constraint(state: Filter, keep_ids, drop_ids, sigma_m: float):
     pd = np.array([state.index_of(int(i)) for i in drop], np.int64)
     ck = ((3 + 2 * pk)[:, None] + np.arange(2)).reshape(-1)
     cd = ((3 + 2 * pd)[:, None] + np.arange(2)).reshape(-1)
-    P = state.P
-    HP = P[ck] - P[cd]
+    HP = state.rows(ck) - state.rows(cd)  # P[ck] - P[cd], P not mirrored for it
     S = HP[:, ck] - HP[:, cd] + sigma_m**2 * np.eye(ck.size)
     return state.x[ck] - state.x[cd], HP, 0.5 * (S + S.T), ck, cd

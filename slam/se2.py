@@ -51,7 +51,11 @@ def sinc_and_derivative(h: float) -> tuple[float, float]:
 
 
 def wrap_angle(a):
-    """Angles (rad) wrapped to (-pi, pi]; scalars or arrays."""
+    """Angles (rad) wrapped to (-pi, pi]; scalars or arrays. A single float takes Python's
+    float arithmetic (`%` is numpy's `mod` for floats, fmod and the same sign fix: the same
+    number to the bit, without numpy's per-call cost; the loop wraps a few headings a scan)."""
+    if type(a) is float or type(a) is np.float64:
+        return np.float64(math.pi - (math.pi - float(a)) % (2.0 * math.pi))
     return np.pi - np.mod(np.pi - np.asarray(a, dtype=np.float64), 2.0 * np.pi)
 
 

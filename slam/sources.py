@@ -11,7 +11,6 @@ measurement model of the configuration (`slam.measurement.MeasurementModel.measu
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -30,10 +29,12 @@ __all__ = ["DetectionsSource", "ExtractorSource", "GivenSource", "Measurements",
 class Measurements:
     """Scan k's circles as measurements of their centres, laser frame.
 
-    scan: the `features.Scan` (None without raw ranges); features: its `Features` (for the
-    log and the visualiser); z (m, 2) [range m, bearing rad] and R (m, 2, 2) from the source's
-    measurement model; status (m,) int64 as measured: NEW_TENTATIVE, or OUT_OF_RANGE beyond
-    the usable range (`slam.log` codes; the scan's final status is `slam.loop.ScanResult`)."""
+    scan: the `features.Scan` (None without raw ranges, and from a source that does not read
+    it, `needs_scan` False: `slam.visual.show_scan` then builds it); features: its `Features`
+    (for the log and the visualiser); z (m, 2) [range m, bearing rad] and R (m, 2, 2) from the
+    source's measurement model; status (m,) int64 as measured: NEW_TENTATIVE, or OUT_OF_RANGE
+    beyond the usable range (`slam.log` codes; the scan's final status is
+    `slam.loop.ScanResult`)."""
 
     k: int
     scan: object
@@ -64,6 +65,8 @@ class ExtractorSource:
         self.model = measurement.model_for(self.method)
         self.count = None  # not precomputed
 
+    needs_scan = True  # the loop passes scan k as a `features.Scan`
+
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
         from features import extract_features
 
@@ -93,18 +96,33 @@ class DetectionsSource:
         self._empty = Features.empty(0.0, seq.det_method, seq.n_beams)
         self.count = None
 
+    needs_scan = False  # the detections are read from the sequence: the loop builds no Scan
+
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
         stored, radius, cov = self.seq.detections(k)
         z, R = self.model.measure(stored, cov)
         n = z.shape[0]
         c, s = np.cos(z[:, 1]), np.sin(z[:, 1])
-        f = dataclasses.replace(
-            self._empty,
+        e = self._empty  # written out, not `dataclasses.replace` (its field loop, every scan)
+        f = Features(
             stamp_s=float(self.seq.scan_t[k]),
             circle_params=np.column_stack([stored[:, 0] * c, stored[:, 0] * s, radius]),
             circle_cov=np.zeros((n, 3, 3)),
             circle_beams=np.zeros((n, 2), np.int64),
             circle_rms_m=np.full(n, np.nan),
+            line_params=e.line_params,
+            line_cov=e.line_cov,
+            line_endpoints=e.line_endpoints,
+            line_beams=e.line_beams,
+            line_rms_m=e.line_rms_m,
+            edge_xy=e.edge_xy,
+            edge_cov=e.edge_cov,
+            edge_beam=e.edge_beam,
+            segment_beams=e.segment_beams,
+            segment_kind=e.segment_kind,
+            segment_innov=e.segment_innov,
+            method=e.method,
+            n_beams=e.n_beams,
         )
         return f, z, R
 
@@ -138,6 +156,8 @@ class GivenSource:
                 f"of Features, got {type(given).__name__}"
             )
         self.model = measurement.model_for(self.method, has_cov)
+
+    needs_scan = True  # a callable may read it
 
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
         f = self._get(k, scan)

@@ -35,8 +35,9 @@ def show_scan(vis, seq, laser: np.ndarray, state, result) -> None:
     vis.set_scan(k, float(seq.scan_t[k]))
     T_world_vehicle = state.pose
     T_world_laser = se2.compose(T_world_vehicle, laser)
-    vis.log_scan(meas.scan, T_world_laser)
-    vis.log_features(meas.scan, meas.features, T_world_laser)
+    scan = seq.scan(k) if meas.scan is None else meas.scan  # a detections source reads none
+    vis.log_scan(scan, T_world_laser)
+    vis.log_features(scan, meas.features, T_world_laser)
     vis.log_vehicle(T_world_vehicle, state.pose_cov)
     vis.log_landmarks(state.landmarks_xy, state.landmark_covs, state.landmark_ids)
     vis.log_tentatives(result.tentative_xy)

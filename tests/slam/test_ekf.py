@@ -271,9 +271,14 @@ def test_filter_reads_blocks_from_the_lower_triangle_while_the_upper_lags():
         np.testing.assert_array_equal(f.cov(sub), s.P[np.ix_(sub, sub)])
         np.testing.assert_array_equal(f.pose_cov, s.pose_cov)
         np.testing.assert_array_equal(f.landmark_covs, s.landmark_covs)
+        rows = np.array([4, 0, 9, 10, 2])
+        np.testing.assert_array_equal(f.rows(rows), s.P[rows])
+        np.testing.assert_array_equal(s.rows(rows), s.P[rows])
+        assert not f._mirrored  # `rows` read the lower triangle, P was not mirrored for it
     np.testing.assert_array_equal(f.x, s.x)
     np.testing.assert_array_equal(f.P, s.P)  # mirrored on reading
     assert f._mirrored
+    np.testing.assert_array_equal(f.rows(rows), s.P[rows])  # mirrored: P's own rows
     np.testing.assert_array_equal(f.P, f.P.T)
     assert f.cov(np.zeros((0, 5), np.int64)).shape == (0, 5, 5)
 

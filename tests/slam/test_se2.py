@@ -75,6 +75,22 @@ def test_wrap_angle_range():
     assert se2.wrap_angle(-np.pi) == np.pi
 
 
+def test_a_single_angle_is_wrapped_as_an_array_of_them_to_the_bit():
+    """The float fast path of `wrap_angle` against its array arithmetic: the same number and
+    type (numpy float64) for floats, numpy scalars, multiples of pi, signed zeros, tiny and
+    large angles."""
+    rng = np.random.default_rng(3)
+    pi = np.pi
+    edge = [0.0, -0.0, pi, -pi, 2 * pi, -2 * pi, 3 * pi, 1e-300, -1e-300, 1e9, -1e9]
+    edge += [np.nextafter(pi, 4.0), np.nextafter(-pi, -4.0)]
+    angles = np.concatenate([rng.normal(0.0, 4.0, 2000), rng.normal(0.0, 1e4, 500), edge])
+    want = se2.wrap_angle(angles)
+    for a, w in zip(angles, want):
+        for x in (float(a), np.float64(a)):
+            got = se2.wrap_angle(x)
+            assert type(got) is np.float64 and got.tobytes() == w.tobytes(), (x, got, w)
+
+
 def observe_numpy(pose, landmarks_xy, sensor_pose):
     """The plain-numpy twin of `se2.observe` (its numba kernel's test oracle)."""
     m = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)

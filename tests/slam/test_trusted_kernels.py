@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from association import gate_matrix
 from association.inputs import chol2_solve
 from slam import se2
+from slam.closure import _k_nearest, _pairs_within
 from slam.ekf import _batch_blocks
 from slam.map_managers import _project_kernel, _sub_problem
+from slam.vehicle import _pieces
 
 _PAIR = np.array([0, 1])
 
@@ -122,3 +125,73 @@ def test_batch_blocks_equal_the_vectorised_build(seed):
     R = _spd(rng, k, 2, 0.01)
     for a, b in zip(_batch_blocks(idx, H5, R), _batch_blocks_numpy(idx, H5, R)):
         assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_k_nearest_is_the_k_d_trees_query_to_the_bit(seed):
+    """Loop closure's nearest-other-tree search (`_k_nearest`) against the `cKDTree` query it
+    replaced: the same distances to the bit and the same neighbours; with ties (odd seeds:
+    points on a 25 m grid, duplicates) the same ones nearer than the k-th distance, and each
+    neighbour at its distance (which of several tied points comes first is the tree's own)."""
+    rng = np.random.default_rng(110 + seed)
+    n = int(rng.integers(1, 400))
+    xy = rng.uniform(-200.0, 200.0, (n, 2))
+    if seed % 2:
+        xy = np.round(2.0 * xy / 50.0) / 2.0  # many equal distances and coincident points
+    pos = rng.choice(n, int(rng.integers(1, min(n, 40) + 1)), replace=False)
+    k = min(16, n)
+    want_d, want_j = cKDTree(xy).query(xy[pos], k=k)
+    got_d, got_j = _k_nearest(xy, xy[pos], k)
+    want_d, want_j = want_d.reshape(pos.size, k), want_j.reshape(pos.size, k)
+    assert got_d.tobytes() == want_d.tobytes()
+    if seed % 2 == 0:
+        assert np.array_equal(got_j, want_j)
+    diff = xy[pos][:, None, :] - xy[got_j]
+    assert np.array_equal(np.sqrt(diff[..., 0] ** 2 + diff[..., 1] ** 2), got_d)
+    for r in range(pos.size):
+        inner = got_d[r] < got_d[r, -1]
+        assert set(got_j[r, inner].tolist()) == set(want_j[r, inner].tolist())
+
+
+def _pieces_numpy(t, speed, steer, t0_s, t1_s):
+    """The vectorised `Odometry.pieces` that `_pieces` replaced."""
+    a = int(np.searchsorted(t, t0_s, side="right"))
+    b = max(int(np.searchsorted(t, t1_s, side="left")), a)
+    edges = np.concatenate([[t0_s], t[a:b], [t1_s]])
+    idx = np.maximum(np.arange(a - 1, b), 0)
+    dt = np.diff(edges)
+    keep = dt > 0
+    return dt[keep], speed[idx[keep]], steer[idx[keep]]
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_pieces_equal_the_vectorised_build(seed):
+    """The odometry's hold pieces over intervals before, across, between and after the
+    samples, on a sample and of zero length."""
+    rng = np.random.default_rng(140 + seed)
+    m = int(rng.integers(1, 30))
+    t = np.cumsum(rng.uniform(0.01, 0.1, m)) + 1.0
+    speed, steer = rng.normal(size=m), rng.normal(size=m)
+    ends = np.concatenate([t, rng.uniform(0.5, t[-1] + 0.5, 20), [0.0, t[-1] + 1.0]])
+    for _ in range(40):
+        t0, t1 = np.sort(rng.choice(ends, 2))
+        if seed % 4 == 0:
+            t1 = t0
+        for a, b in zip(_pieces(t, speed, steer, t0, t1), _pieces_numpy(t, speed, steer, t0, t1)):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_pairs_within_are_the_distance_matrix_pairs(seed):
+    """Loop closure's pairs of landmarks seen together within SAME_TREE_M (`_pairs_within`)
+    against the n x n np.hypot matrix it replaced, points on a grid (distances exactly at the
+    bound) included."""
+    rng = np.random.default_rng(170 + seed)
+    for _ in range(50):
+        n = int(rng.integers(0, 25))
+        xy = rng.uniform(0.0, 5.0, (n, 2))
+        if seed % 2:
+            xy = np.round(2.0 * xy) / 2.0
+        d = np.hypot(*(xy[:, None, :] - xy[None, :, :]).transpose(2, 0, 1))
+        want = np.transpose(np.nonzero(np.triu(d <= 1.5, 1)))
+        assert np.array_equal(_pairs_within(xy, 1.5), want)

@@ -73,6 +73,10 @@ def test_the_scan_is_shown_from_its_record():
     assert vis.calls["log_closure"][0][0]["outcome"] == "accepted"
     assert vis.calls["log_duplicates"][0][0] == [(7, 9), (2, 5)]
     assert vis.calls["set_scan"][0] == (3, float(seq.scan_t[3]))
+    # a record without the scan (a detections source reads none): the sequence's scan 3
+    scan = vis.calls["log_scan"][0][0]
+    assert np.array_equal(scan.raw_ranges_m, seq.scan(3).raw_ranges_m, equal_nan=True)
+    assert vis.calls["log_features"][0][0] is scan
     f, res = _result(np.array([-1, -1]), ClosureDecision(_event("too few")))
     vis = Calls()
     show_scan(vis, seq, LASER, f, res)
