@@ -436,19 +436,21 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
 
 @pytest.mark.slow
 @pytest.mark.data
-def test_the_preset_pass_offset_is_what_the_criterion_derives_on_scans_1_2000(vp_dir):
-    """The preset's measurement.pass_offset_sd_m is the leave-one-pass-out derivation
-    (`vp_pass_offset.derive`) on scans 1-2000 with the preset's other settings, white errors;
-    at it, each axis's median statistic is the chi-square(1) median."""
+def test_the_pass_offset_criterion_sees_correlated_error_on_scans_1_2000(vp_dir):
+    """The leave-one-pass-out derivation (`vp_pass_offset.derive`) on scans 1-2000 with the
+    preset's settings: the white model's median statistic is far above the chi-square(1)
+    median on both axes, and the derived s brings each to it. The preset does not adopt it
+    (calibration module doc): it keeps white errors."""
     from experiments.eval.pass_offsets import CHI2_1_MEDIAN
     from experiments.io.config_file import load_slam_config, preset_path
     from experiments.paper.victoria_park import pass_offset as vp_pass_offset
 
     cfg = load_slam_config(preset_path("victoria_park_ute"))
+    assert cfg.measurement.pass_offset_sd_m == (0.0, 0.0)
     po = vp_pass_offset.derive(load_victoria_park(vp_dir, n_scans=2000), cfg)
-    np.testing.assert_allclose(po.sd_m, cfg.measurement.pass_offset_sd_m, rtol=1e-9)
     np.testing.assert_allclose(po.median_derived, CHI2_1_MEDIAN, atol=1e-3)
-    assert min(po.median_white) > CHI2_1_MEDIAN and po.landmarks > 50
+    assert min(po.median_white) > 4 * CHI2_1_MEDIAN and po.landmarks > 50
+    assert 0.02 < min(po.sd_m) and max(po.sd_m) < 0.1
 
 
 # ---- the laser latency (experiments/paper/victoria_park/calibration.py) ----------------------

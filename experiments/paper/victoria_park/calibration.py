@@ -75,6 +75,10 @@ Last, with every setting above (the preset, white measurement errors), the trunk
 offset shared by a pass (`measurement.pass_offset_sd_m`) by leave-one-pass-out prediction of
 the landmarks' passes on the same scans (`pass_offset.derive`,
 `experiments.eval.pass_offsets`): J cannot see it, it assumes white errors. No GPS either.
+It is derived and reported (manifest, page), not put in the preset: the filter model it
+feeds, each sighting's covariance inflated so that a pass carries at most 1 / (r/n + s^2),
+is not a consistent model of a view-dependent offset (simulated oval trunks: the trunk-shape
+page and the lab notebook), and the preset keeps white errors until one is.
 """
 
 from __future__ import annotations
@@ -418,8 +422,7 @@ class VpCalibration:
             self.start_fit_m,
             self.confirm_scans,
             latency_s=self.latency_s,
-            pass_offset_sd_m=self.pass_offset.sd_m,
-        )
+        )  # the pass offset is derived, not adopted (module doc)
 
 
 def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpCalibration:
