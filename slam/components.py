@@ -37,7 +37,8 @@ class Components:
     mounting (T_vehicle_laser, T_vehicle_antenna), what the laser sees; and the settings of
     the parts the loop makes for each pass (`slam.loop.Slam.start`): the association and map
     policy sections (map manager, pruning), the closure section, `vehicle.min_travel_m` and
-    `filter.first_estimates_jacobians`."""
+    `filter.first_estimates_jacobians`; the pass offset of the update's measurements
+    (`measurement.pass_offset_sd_m`, `measurement.pass_gap_s`)."""
 
     seq: Sequence
     source: object  # slam.sources: (k, scan) -> (Features, z, R), with .method, .model, .count
@@ -51,6 +52,8 @@ class Components:
     closure: ClosureConfig
     min_travel_m: float
     first_estimates: bool
+    pass_offset_sd_m: tuple[float, float] = (0.0, 0.0)
+    pass_gap_s: float = 2.0
 
 
 def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) -> Components:
@@ -74,6 +77,8 @@ def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) 
         closure=cfg.closure,
         min_travel_m=cfg.vehicle.min_travel_m,
         first_estimates=cfg.filter.first_estimates_jacobians,
+        pass_offset_sd_m=cfg.measurement.pass_offset_sd_m,
+        pass_gap_s=cfg.measurement.pass_gap_s,
         view=View(
             fov=(a0, a0 + da * (seq.n_beams - 1)),
             max_range=min(float(seq.scan_max_range), cfg.measurement.max_range_m),

@@ -16,7 +16,7 @@ with its source), since `features` imports nothing of `slam`.
                     [features.bailey] (the Bailey detector's noise model and constants)
     [association]   method, gate_prob, new_feature_gate_prob, window_scans, view margins, params
     [measurement]   noise ("auto" | "fit" | "constant"), constant_noise.<method>, fit floors,
-                    range_bias.<method>, max_range_m
+                    range_bias.<method>, max_range_m, pass_offset_sd_m, pass_gap_s
     [vehicle]       odometry_noise, steering, laser_pose, laser_latency_s, gps_antenna,
                     max_odometry_gap_s, min_travel_m
     [start]         initial_pose_sigma, initial_heading_rad, GPS start fit
@@ -91,6 +91,8 @@ GPS_START_TRACKS = ("dead-reckoning", "slam")  # StartConfig.gps_track
 OWN_COVARIANCE = ("geometric", "paper")
 
 
+MAX_PASS_OFFSET_M = 10.0  # a trunk's centre offset shared by a pass: above a trunk's size
+MAX_PASS_GAP_S = 1e6  # s, longer than any run: one pass per landmark
 MAX_LATENCY_S = 1.0  # a laser stamped a second or more off its measurement is a clock fault
 
 
@@ -659,6 +661,12 @@ class MeasurementConfig:
         (a_m, b_per_m), subtracted from its ranges; methods not given keep their
         `DEFAULT_RANGE_BIAS` entry ((0, 0) when it has none).
     max_range_m: circles farther away are not used (the laser's own maximum applies too).
+    pass_offset_sd_m: (range, across) standard deviations in metres of an offset of a trunk's
+        centre shared by the sightings of one pass (along and across the line of sight), on top
+        of the white noise above: the filter and the smoother weigh a pass of n sightings as
+        at most 1 / (r/n + s^2) per axis (`slam.measurement.pass_variance`). (0, 0): white
+        errors, nothing is computed.
+    pass_gap_s: a landmark's pass ends after this long without a sighting of it.
     """
 
     noise: str = default(
@@ -686,6 +694,12 @@ class MeasurementConfig:
     max_range_m: float = default(
         math.inf, "sensor model: inf, the laser's own maximum range applies"
     )
+    pass_offset_sd_m: tuple[float, float] = default(
+        (0.0, 0.0), "design: (0, 0), white measurement errors (today's model)"
+    )
+    pass_gap_s: float = default(
+        2.0, "design: 2 s, the pass of experiments/eval/trunk_offsets.view_offset"
+    )
 
     def __post_init__(self) -> None:
         _choice("measurement", "noise", self.noise, ("auto", "fit", "constant"))
@@ -698,6 +712,7 @@ class MeasurementConfig:
                 f"measurement.max_range_m: must be at least {SETTING_TINY:g} (inf: no limit), "
                 f"got {self.max_range_m!r}"
             )
+        self._check_pass_model()
         models = dict(DEFAULT_CONSTANT_NOISE)  # the given methods replace their defaults
         for method, model in dict(self.constant_noise).items():
             m = NoiseModel(*model)
@@ -717,6 +732,20 @@ class MeasurementConfig:
                 )
             biases[method] = (float(v[0]), float(v[1]))
         object.__setattr__(self, "range_bias", types.MappingProxyType(biases))
+
+    def _check_pass_model(self) -> None:
+        v = self.pass_offset_sd_m
+        if not isinstance(v, (tuple, list)) or len(v) != 2 or any(isinstance(x, bool) for x in v):
+            raise SlamError(
+                f"measurement.pass_offset_sd_m: expected (range, across) in metres, got {v!r}"
+            )
+        for i, x in enumerate(v):
+            setting(f"measurement.pass_offset_sd_m[{i}]", x, limit=MAX_PASS_OFFSET_M)
+        object.__setattr__(self, "pass_offset_sd_m", (float(v[0]), float(v[1])))
+        g = self.pass_gap_s
+        setting("measurement.pass_gap_s", g, limit=MAX_PASS_GAP_S)
+        if not g > 0:
+            raise SlamError(f"measurement.pass_gap_s: must be > 0 s, got {g!r}")
 
     def model_for(self, method: str, has_cov: bool | None = None) -> MeasurementModel:
         """The measurement model of circles from `method`. has_cov: whether they carry their own

@@ -5,7 +5,8 @@ Per scan: its time, the filter's pose and covariance after the prediction, the o
 increment from the scan before (frame of that scan) and its covariance. Per landmark (by id):
 the scan it joined the map, the scans it was associated in (its tentative sightings
 included), the time it was last seen (kept by loop closure, `mark_seen`), and, after a loop
-closure, the landmark it was merged into.
+closure, the landmark it was merged into; and the pass each landmark's updates belong to
+(`pass_index`, for `measurement.pass_offset_sd_m`).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ class RunHistory:
         self.n_obs: dict[int, int] = {}  # landmark id -> scans it was associated in
         self.alias: dict[int, int] = {}  # a landmark merged into another: its id -> the other's
         self._seen = np.full(256, np.nan)  # by landmark id: the time it was last seen
+        self._pass: dict[int, tuple[float, int]] = {}  # id -> (last update's time, index)
 
     def odometry(self, k: int, delta: np.ndarray, cov: np.ndarray) -> None:
         """The odometry increment from scan k - 1 to k (frame of k - 1) and its covariance."""
@@ -48,6 +50,17 @@ class RunHistory:
     def observed(self, landmark: int) -> None:
         """Landmark `landmark` was used in an update."""
         self.n_obs[landmark] = self.n_obs.get(landmark, 0) + 1
+
+    def pass_index(self, ids, t: float, gap_s: float) -> np.ndarray:
+        """Landmarks `ids` are updated at time t: each one's index (1, 2, ...) within its
+        current pass, a pass ending after more than `gap_s` without an update of it."""
+        out = np.empty(len(ids), np.int64)
+        for i, lid in enumerate(np.asarray(ids, dtype=np.int64).tolist()):
+            last, k = self._pass.get(lid, (-np.inf, 0))
+            k = k + 1 if t - last <= gap_s else 1
+            self._pass[lid] = (t, k)
+            out[i] = k
+        return out
 
     def mark_seen(self, ids, t: float, only_new: bool = False) -> None:
         """Landmarks `ids` were seen (updated) at time t (only_new: those not seen before)."""

@@ -50,6 +50,7 @@ from slam.errors import SlamError
 from slam.history import RunHistory
 from slam.log import NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED, LogBuilder, SlamLog
 from slam.map_managers import MapDecisions, Pruner, ScanAssociation, make_map_manager
+from slam.measurement import pass_inflation
 from slam.sequence import Sequence
 from slam.sources import Measurements
 from slam.start import first_pass_wanted, initial_pose
@@ -240,14 +241,24 @@ class Slam:
         if not to_map.size:
             return math.nan, paired
         pos = a.lm_idx[a.assign[to_map]]
-        res = self.state.update(pos, meas.z[to_map], meas.R[to_map], self.laser)
-        self.log.logdet[meas.k] = res.logdet
         ids = self.state.landmark_ids[pos]
+        res = self.state.update(pos, meas.z[to_map], self._update_R(meas, to_map, ids), self.laser)
+        self.log.logdet[meas.k] = res.logdet
         paired[to_map] = ids
         for lid in ids.tolist():
             self.history.observed(lid)
         self.log.observations(meas.k, to_map, ids, z=meas.z[to_map], innov=res.innovation, S=res.S)
         return res.nis, paired
+
+    def _update_R(self, meas: Measurements, rows: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """The covariances the update uses for measurements `rows` of landmarks `ids`: as
+        measured, plus the pass offset (`slam.measurement.pass_inflation`) when one is set
+        (gating and new landmarks keep the white model)."""
+        sd = self.parts.pass_offset_sd_m
+        if sd[0] == 0.0 and sd[1] == 0.0:
+            return meas.R[rows]
+        k = self.history.pass_index(ids, float(self.scan_t[meas.k]), self.parts.pass_gap_s)
+        return pass_inflation(meas.z[rows], meas.R[rows], k, sd)
 
     def _record(self, k: int, decisions: MapDecisions) -> None:
         """The map manager's decisions into the history and the log: the landmarks that

@@ -8,6 +8,10 @@ Two noise models (`SlamConfig.measurement_noise`):
   values (`slam.config.DEFAULT_CONSTANT_NOISE`) for extractors that give no covariance.
 A known mean range error of an extractor (`slam.config.DEFAULT_RANGE_BIAS`,
 `SlamConfig.measurement.range_bias`) is subtracted from its ranges before either model is applied.
+
+A trunk's centre offset shared by the sightings of one pass (`measurement.pass_offset_sd_m`):
+`pass_variance` (the filter's k-th sighting of a pass, and a batch's n sightings) and
+`pass_inflation` (what it adds to a measurement's covariance, per axis of the line of sight).
 """
 
 from __future__ import annotations
@@ -22,6 +26,9 @@ __all__ = [
     "NoiseModel",
     "constant_noise",
     "measurements_from_features",
+    "pass_inflation",
+    "pass_sizes",
+    "pass_variance",
     "polar_cov_from_xy",
 ]
 
@@ -114,3 +121,62 @@ def polar_cov_from_xy(center_xy: np.ndarray, cov_xy: np.ndarray) -> tuple[np.nda
     J[:, 1, 1] = c[:, 0] / r2
     Rz = J @ C @ np.transpose(J, (0, 2, 1))
     return z, 0.5 * (Rz + np.transpose(Rz, (0, 2, 1)))
+
+
+def pass_variance(r, k, s, batch: bool = False):
+    """The variance of one axis of a sighting whose white variance is r (m^2) when the n
+    sightings of a pass share an offset b ~ N(0, s^2) on that axis (s in m): the pass then
+    carries 1 / (r/n + s^2) of information, not n / r.
+
+    Sequential (the filter, `batch` False): the k-th sighting of the pass (k = 1, 2, ...) gets
+        v_k = (r + k s^2)(r + (k - 1) s^2) / r (k = 1: r + s^2), so that the first k sightings
+        together carry sum 1/v_j = k / (r + k s^2), the information of k sightings that share
+        the offset (telescoping: 1/v_j = j/(r + j s^2) - (j - 1)/(r + (j - 1) s^2)).
+    Batch (the smoother, `batch` True): each of the n = k sightings of a pass gets r + n s^2.
+    Arrays broadcast; s = 0 returns r."""
+    return np.asarray(r, dtype=np.float64) + _pass_extra(r, k, s, batch)
+
+
+def _pass_extra(r, k, s, batch: bool):
+    """pass_variance - r, computed so that s = 0 adds exactly 0: batch n s^2; sequential
+    (2k - 1) s^2 + k (k - 1) s^4 / r (v_k expanded)."""
+    r = np.asarray(r, dtype=np.float64)
+    k = np.asarray(k, dtype=np.float64)
+    s2 = float(s) ** 2
+    if batch:
+        return k * s2
+    return (2.0 * k - 1.0) * s2 + k * (k - 1.0) * s2 * s2 / r
+
+
+def pass_inflation(z, R, k, sd, batch: bool = False) -> np.ndarray:
+    """Covariances R (m, 2, 2) of range-bearing measurements z (m, 2) with the pass offset
+    added: sd = (range, across) standard deviations (m); k (m,) each measurement's index in its
+    pass (`batch`: its pass's size). Range axis: r = R_rr; across the line of sight: r = range^2
+    R_bb (the bearing variance in metres), its extra variance divided back by range^2. The
+    extra is added to the diagonal, so a correlation of R is kept. Returns a new array."""
+    z = np.asarray(z, dtype=np.float64).reshape(-1, 2)
+    out = np.array(R, dtype=np.float64).reshape(-1, 2, 2)
+    rng2 = z[:, 0] ** 2
+    r_range = out[:, 0, 0]
+    r_across = rng2 * out[:, 1, 1]
+    out[:, 0, 0] += _pass_extra(r_range, k, sd[0], batch)
+    out[:, 1, 1] += _pass_extra(r_across, k, sd[1], batch) / rng2
+    return out
+
+
+def pass_sizes(t_s, landmark, gap_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The passes of sightings at times t_s (m,) of landmarks `landmark` (m,): a landmark's
+    pass ends after more than `gap_s` without a sighting of it (the filter's rule,
+    `slam.history.RunHistory.pass_index`). Returns (pass number of each sighting (m,), numbered
+    0.. over all landmarks, and the size of its pass (m,))."""
+    t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+    lm = np.asarray(landmark, dtype=np.int64).reshape(-1)
+    order = np.lexsort((t, lm))
+    ts, ls = t[order], lm[order]
+    new = np.ones(t.size, bool)
+    new[1:] = (ls[1:] != ls[:-1]) | (np.diff(ts) > gap_s)
+    number = np.cumsum(new) - 1
+    size = np.bincount(number)[number] if t.size else np.zeros(0, np.int64)
+    out_n, out_size = np.empty(t.size, np.int64), np.empty(t.size, np.int64)
+    out_n[order], out_size[order] = number, size
+    return out_n, out_size

@@ -55,6 +55,7 @@ import numpy as np
 from slam.errors import SlamError
 from slam.graph import PoseGraph2D
 from slam.log import CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT, SlamLog
+from slam.measurement import pass_inflation, pass_sizes
 
 __all__ = [
     "MEAS_INIT",
@@ -287,7 +288,12 @@ def problem_from_log(log: SlamLog, measurements: str = "ekf") -> Problem:
     measurements: "ekf" (the measurements the filter used: its updates and each landmark's
         initialising measurement) or "all" (also the tentative sightings of the landmarks that
         joined the map, which the filter never uses).
-    Measurements of landmarks that left the map (`MapPolicy` pruning) are left out.
+    Measurements of landmarks that left the map (`MapPolicy` pruning) are left out. With a
+    pass offset in the run's configuration (`measurement.pass_offset_sd_m`), each measurement
+    of a pass of n sightings of its landmark (all its sightings in the log, tentative ones
+    included, with the filter's gap rule) gets the batch pass variance r + n s^2 per axis
+    (`slam.measurement.pass_inflation`): the covariance the smoother and an exported graph
+    use.
     """
     if measurements not in ("ekf", "all"):
         raise SlamError(f"measurements: expected 'ekf' or 'all', got {measurements!r}")
@@ -312,12 +318,29 @@ def problem_from_log(log: SlamLog, measurements: str = "ekf") -> Problem:
         meas_scan=log.meas_scan[use],
         meas_landmark=log.meas_track[use],
         meas_z=log.meas_z[use],
-        meas_R=log.meas_R[use],
+        meas_R=_pass_R(log, use),
         meas_kind=kind[use],
         init_pose=log.pose,
         landmark_id=log.landmark_id,
         init_landmark=log.landmark_xy,
     )
+
+
+def _pass_R(log: SlamLog, use: np.ndarray) -> np.ndarray:
+    """The covariances of measurements `use` of `log`, with the run's pass offset (batch)."""
+    cfg = log.config.get("measurement", {}) if isinstance(log.config, dict) else {}
+    sd = tuple(float(v) for v in cfg.get("pass_offset_sd_m", (0.0, 0.0)))
+    if sd == (0.0, 0.0):
+        return log.meas_R[use]
+    st = log.meas_status
+    sighting = (st >= 0) | (st == CONFIRMED) | (st == NEW_TENTATIVE) | (st == TENTATIVE_HIT)
+    sighting &= np.isin(log.meas_track, log.landmark_id)
+    rows = np.flatnonzero(sighting)
+    t = log.scan_t[log.meas_scan[rows]]
+    _, size = pass_sizes(t, log.meas_track[rows], float(cfg.get("pass_gap_s", 2.0)))
+    n = np.zeros(st.shape, np.int64)
+    n[rows] = size
+    return pass_inflation(log.meas_z[use], log.meas_R[use], n[use], sd, batch=True)
 
 
 @dataclass(frozen=True)
