@@ -15,11 +15,17 @@ per-pass offset), the same drives for every shape, and reports per shape and met
   variance;
 - the filter's consistency (`experiments.eval.poses.consistency`): the pose NEES's mean and
   the share of scans inside its 95% bounds, the NIS per dof, the smoother's NEES share, and
-  the mean absolute pose error.
+  the mean absolute pose error;
+
+each with the white measurement model and with the pass-offset model
+(`measurement.pass_offset_sd_m`, `slam.measurement.pass_variance`) given the truth's per-pass
+offset sd (range, across) of the shape and method, measured on calibration drives of their
+own (`CALIBRATION_RUNS`, seeds apart from the reported runs').
 """
 
 from __future__ import annotations
 
+import copy
 import logging
 from dataclasses import replace
 
@@ -46,6 +52,8 @@ log = logging.getLogger(__name__)
 METHODS = ("paper", "geometric")
 RUNS = 50  # experiment 2's count (docs/method.md section 5)
 QUICK_RUNS = 4
+CALIBRATION_RUNS = 10  # drives that give the truth's per-pass offset sd (2 with --quick)
+MODELS = ("white", "pass offset, truth's s")
 # The shapes compared. The oval's per-pass offset (0.03-0.07 m per axis, the table) is of the
 # order of Victoria Park's 0.05 m (`closure.tree_sd_m`); chosen from that, not from any NEES.
 SHAPES = {
@@ -64,28 +72,65 @@ def shape_config(shape: TrunkShape, n_runs: int, quick: bool = False) -> Exp2Con
     )
 
 
-def shape_trial(job: tuple, seed) -> dict:
-    """Run r of one shape's study (`job` = (shape name, Exp2Config, r)): experiment 2's trial
-    (`slam_trial`) and, on the same drive, each method's sightings (`sighting_offsets`)."""
-    name, cfg, r = job
-    runs = slam_trial((cfg, r, False), seed)["runs"]
-    # slam_trial's drive: its generator's first draws
-    seq = simulate_cycab_run(np.random.default_rng(seed), cfg.scene, cfg.cycab)
+def _fresh(seed):
+    """A copy of `seed`: a SeedSequence that a generator spawns from counts its children
+    (`simulate_cycab_run` spawns), so reused in one process it would give another drive."""
+    return copy.deepcopy(seed)
+
+
+def drive_sightings(cfg: Exp2Config, seed) -> dict:
+    """{method: `sighting_offsets`} of the drive `slam_trial` makes from `seed` (its
+    generator's first draws)."""
+    seq = simulate_cycab_run(np.random.default_rng(_fresh(seed)), cfg.scene, cfg.cycab)
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
     laser = np.array([se2.compose(p, seq.laser_pose) for p in truth])
     sightings = {}
-    for m in cfg.methods:
+    for m in METHODS:
         params, options = run_config(cfg, m).features.extractor_args()
         feats = [extract_features(seq.scan(k), m, params, **options) for k in range(seq.n_scans)]
         sightings[m] = sighting_offsets(seq, feats, laser, cfg.false_match_m)
+    return {"n_landmarks": int(seq.truth_landmarks.shape[0]), "sightings": sightings}
+
+
+def calibration_trial(job: tuple, seed) -> dict:
+    """A calibration drive of one shape (`job` = (shape name, Exp2Config)): its sightings."""
+    name, cfg = job
+    return {"shape": name} | drive_sightings(cfg, seed)
+
+
+def truth_pass_sd(records: list[dict], shape: str) -> dict[str, tuple[float, float]]:
+    """{method: (range, across) per-pass offset sd, m} of `shape`'s calibration drives."""
+    rs = [r for r in records if r["shape"] == shape]
+    out = {}
+    for m in METHODS:
+        st = pass_statistics(_pooled(rs, m))
+        out[m] = (st["range"].pass_sd_m, st["across"].pass_sd_m)
+    return out
+
+
+def shape_trial(job: tuple, seed) -> dict:
+    """Run r of one shape's study (`job` = (shape name, model name, {method: Exp2Config}, r)):
+    experiment 2's trial (`slam_trial`) of each method with its configuration and, for the
+    white model, each method's sightings on the same drive (`drive_sightings`)."""
+    name, model, cfgs, r = job
     keep = ("nees", "nis", "nis_dof", "sm_nees", "abs_err")
-    return {
-        "shape": name,
-        "run": r,
-        "n_landmarks": int(seq.truth_landmarks.shape[0]),
-        "runs": {m: {k: runs[m][k] for k in keep} for m in cfg.methods},
-        "sightings": sightings,
-    }
+    runs = {m: slam_trial((cfg, r, False), _fresh(seed))["runs"][m] for m, cfg in cfgs.items()}
+    out = {"shape": name, "model": model, "run": r}
+    out["runs"] = {m: {k: o[k] for k in keep} for m, o in runs.items()}
+    out["sd"] = {m: cfg.slam.measurement.pass_offset_sd_m for m, cfg in cfgs.items()}
+    if model == MODELS[0]:
+        out |= drive_sightings(next(iter(cfgs.values())), seed)
+    return out
+
+
+def _model_config(cfg: Exp2Config, method: str, model: str, sd: tuple[float, float]) -> Exp2Config:
+    """`cfg` with the measurement model `model` (white, or the pass offset of sd (range,
+    across) m), for `method` alone."""
+    if model == MODELS[0]:
+        sd = (0.0, 0.0)
+    return replace(
+        cfg, methods=(method,), slam=cfg.slam.with_(**{"measurement.pass_offset_sd_m": sd})
+    )
 
 
 def _pooled(records: list[dict], method: str) -> dict[str, np.ndarray]:
@@ -99,12 +144,12 @@ def _pooled(records: list[dict], method: str) -> dict[str, np.ndarray]:
     }
 
 
-def _row(records: list[dict], shape: str, method: str) -> dict:
-    """The table's row of one shape and method."""
+def _row(records: list[dict], shape: str, method: str, model: str) -> dict:
+    """The table's row of one shape, method and model (`records`: the shape's runs)."""
     s = SHAPES[shape]
-    row = {"shape": shape, "method": method, "runs": len(records)}
+    row = {"shape": shape, "method": method, "model": model}
     row |= {"aspect": s.aspect, "lobes": s.lobes, "lobe_amplitude": s.lobe_amplitude}
-    stats = pass_statistics(_pooled(records, method))
+    stats = pass_statistics(_pooled([r for r in records if "sightings" in r], method))
     for axis in AXES:
         st = stats[axis]
         row |= {
@@ -114,6 +159,10 @@ def _row(records: list[dict], shape: str, method: str) -> dict:
             f"{axis}_pass_share": st.share,
         }
     row["passes"] = stats["range"].passes
+    records = [r for r in records if r["model"] == model]
+    row["runs"] = len(records)
+    sd = records[0]["sd"][method]
+    row |= {"model_range_sd_m": sd[0], "model_across_sd_m": sd[1]}
 
     def stack(key):
         return np.stack([r["runs"][method][key] for r in records])
@@ -136,17 +185,20 @@ def _row(records: list[dict], shape: str, method: str) -> dict:
 
 
 def summary(records: list[dict]) -> list[dict]:
-    """One row per shape and method (module doc)."""
+    """One row per shape, method and model (module doc)."""
     return [
-        _row([r for r in records if r["shape"] == shape], shape, m)
+        _row([r for r in records if r["shape"] == shape], shape, m, model)
         for shape in SHAPES
-        if any(r["shape"] == shape for r in records)
         for m in METHODS
+        for model in MODELS
+        if any(r["shape"] == shape and r["model"] == model for r in records)
     ]
 
 
 LABELS = {
     "runs": "runs",
+    "model_range_sd_m": "model's s: range (m)",
+    "model_across_sd_m": "model's s: across (m)",
     "aspect": "aspect",
     "lobes": "lobes",
     "lobe_amplitude": "lobe depth",
@@ -173,12 +225,12 @@ _OFFSETS = tuple(k for k in LABELS if k.startswith(AXES))
 TABLE = TableSpec(
     "trunk_shape",
     summary,
-    index=("shape", "method"),
+    index=("shape", "method", "model"),
     values=tuple(LABELS),
     parts=(
-        ("Shape", ("runs", "aspect", "lobes", "lobe_amplitude", "passes")),
+        ("Shape and model", tuple(LABELS)[:7]),
         ("Fitted centre minus true centre, per pass", _OFFSETS),
-        ("Consistency of the white measurement model", tuple(LABELS)[-7:]),
+        ("Consistency", tuple(LABELS)[-7:]),
     ),
     labels=LABELS,
     title="Trunks that are not circles: correlated centre errors and the filter's NEES",
@@ -192,8 +244,11 @@ TABLE = TableSpec(
         "of sight (range) and across it, pooled over the runs; a pass is a trunk's sightings "
         "with no gap over 2 s (passes of at least 5 sightings); per-pass offset sd: the spread "
         "of the passes' mean offsets less white noise's share (experiments/eval/"
-        "centre_offsets.py). NEES: the vehicle pose's (3 dof) run average inside its 95% "
-        "chi-square bounds, as the consistency table."
+        "centre_offsets.py); the offsets are those of the white model's runs. Models: white "
+        "(experiment 2's filter) and the pass-offset model (measurement.pass_offset_sd_m) with "
+        "s the per-pass offset sd of the same shape and method on "
+        f"{CALIBRATION_RUNS} calibration drives of their own. NEES: the vehicle pose's (3 dof) "
+        "run average inside its 95% chi-square bounds, as the consistency table."
     ),
 )
 
@@ -209,19 +264,28 @@ TABLE = TableSpec(
 def run(ctx) -> None:
     """The registered experiment `trunk-shape` (only when named)."""
     n = QUICK_RUNS if ctx.quick else RUNS
+    n_cal = 2 if ctx.quick else CALIBRATION_RUNS
+    cfgs = {name: shape_config(shape, n, ctx.quick) for name, shape in SHAPES.items()}
+    cal_seeds = spawn_seeds(ctx.rng("trunk-shape-calibration"), n_cal)
+    cal_jobs = [(name, cfg) for name, cfg in cfgs.items() for _ in range(n_cal)]
+    cal = ctx.map(calibration_trial, cal_jobs, cal_seeds * len(cfgs), desc="trunk-shape s")
+    truth_sd = {name: truth_pass_sd(cal, name) for name in cfgs}
     seeds = spawn_seeds(ctx.rng("trunk-shape"), n)  # the same drives for every shape
     jobs, job_seeds = [], []
-    for name, shape in SHAPES.items():
-        cfg = shape_config(shape, n, ctx.quick)
-        jobs += [(name, cfg, r) for r in range(n)]
-        job_seeds += seeds
+    for name, cfg in cfgs.items():
+        for model in MODELS:
+            by_method = {m: _model_config(cfg, m, model, truth_sd[name][m]) for m in METHODS}
+            jobs += [(name, model, by_method, r) for r in range(n)]
+            job_seeds += seeds
     batch = ctx.submit(shape_trial, jobs, job_seeds, desc="trunk-shape runs", chunksize=1)
 
     def finish(records: list) -> None:
         ctx.config["trunk-shape"] = {
             "runs": n,
+            "calibration_runs": n_cal,
             "methods": list(METHODS),
             "shapes": {k: vars(s) for k, s in SHAPES.items()},
+            "truth_pass_offset_sd_m": truth_sd,
         }
         products.tables(ctx, [TABLE], records)
 
