@@ -370,7 +370,11 @@ def test_calibration_writes_what_the_preset_holds():
     ]
     assert preset.start.gps_track == "slam" and not preset.vehicle.steering.is_identity
     got = preset_config(
-        theta, preset.vehicle.steering, preset.start.gps_fit_m, preset.map_policy.confirm_scans
+        theta,
+        preset.vehicle.steering,
+        preset.start.gps_fit_m,
+        preset.map_policy.confirm_scans,
+        pass_offset_sd_m=preset.measurement.pass_offset_sd_m,
     ).to_dict()
     want = preset.to_dict()
 
@@ -420,6 +424,23 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
     later = [h for d, h, _ in rows if d >= cfg.start.gps_fit_m]
     assert max(later) - min(later) <= 2 * vp_start.TOLERANCE_DEG
     assert rows[-1][0] > 900  # scans 1-2000 drive about a kilometre
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_the_preset_pass_offset_is_what_the_criterion_derives_on_scans_1_2000(vp_dir):
+    """The preset's measurement.pass_offset_sd_m is the leave-one-pass-out derivation
+    (`vp_pass_offset.derive`) on scans 1-2000 with the preset's other settings, white errors;
+    at it, each axis's median statistic is the chi-square(1) median."""
+    from experiments.eval.pass_offsets import CHI2_1_MEDIAN
+    from experiments.io.config_file import load_slam_config, preset_path
+    from experiments.paper.victoria_park import pass_offset as vp_pass_offset
+
+    cfg = load_slam_config(preset_path("victoria_park_ute"))
+    po = vp_pass_offset.derive(load_victoria_park(vp_dir, n_scans=2000), cfg)
+    np.testing.assert_allclose(po.sd_m, cfg.measurement.pass_offset_sd_m, rtol=1e-9)
+    np.testing.assert_allclose(po.median_derived, CHI2_1_MEDIAN, atol=1e-3)
+    assert min(po.median_white) > CHI2_1_MEDIAN and po.landmarks > 50
 
 
 # ---- the laser latency (experiments/paper/victoria_park/calibration.py) ----------------------

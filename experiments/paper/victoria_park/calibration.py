@@ -66,14 +66,20 @@ vertex of the parabola fitted to the whole profile by least squares, kept inside
 The probe of 2026-11-26 (lab notebook) found J about 340 lower at 60 ms
 than at 0. No GPS error enters it; the noise is not refitted at the new latency.
 
-Last, with the fitted noise, latency and start, the map policy's `confirm_scans` (every fit
+Then, with the fitted noise, latency and start, the map policy's `confirm_scans` (every fit
 above uses the paper's 3): the number with the best map against the 2002 SLAM school's
 reference trees of the same scans (`vp_map_policy.confirm_sweep`, `derive_confirm`; no GPS
 either).
+
+Last, with every setting above (the preset, white measurement errors), the trunk's centre
+offset shared by a pass (`measurement.pass_offset_sd_m`) by leave-one-pass-out prediction of
+the landmarks' passes on the same scans (`pass_offset.derive`,
+`experiments.eval.pass_offsets`): J cannot see it, it assumes white errors. No GPS either.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -90,6 +96,7 @@ from experiments.paper import products
 from experiments.paper.products import TableSpec
 from experiments.paper.registry import experiment
 from experiments.paper.victoria_park import map_policy as vp_map_policy
+from experiments.paper.victoria_park import pass_offset as vp_pass_offset
 from experiments.paper.victoria_park import start as vp_start
 from experiments.paper.victoria_park import steering as vp_steering
 from experiments.paper.victoria_park.steering import fit_steering
@@ -383,7 +390,8 @@ class VpCalibration:
     latency_rows: `latency_profile` at the preset's noise, latency_s: its `derive_latency`;
     start_rows: `vp_start.headings` along the preset's path; start_fit_m: the metres of GPS the
     start is fitted to (`vp_start.derive`); confirm_rows: `vp_map_policy.confirm_sweep` with
-    that noise and start, confirm_scans: its `derive_confirm`; seconds: the time it took.
+    that noise and start, confirm_scans: its `derive_confirm`; pass_offset: the pass offset
+    derived with all of these (`vp_pass_offset.derive`); seconds: the time it took.
     """
 
     steer: object
@@ -399,12 +407,18 @@ class VpCalibration:
     start_fit_m: float
     confirm_rows: list
     confirm_scans: int
+    pass_offset: object
     seconds: float
 
     def preset(self) -> SlamConfig:
         """The preset's configuration (`preset_config`)."""
         return preset_config(
-            self.theta, self.steer.steering, self.start_fit_m, self.confirm_scans, self.latency_s
+            self.theta,
+            self.steer.steering,
+            self.start_fit_m,
+            self.confirm_scans,
+            latency_s=self.latency_s,
+            pass_offset_sd_m=self.pass_offset.sd_m,
         )
 
 
@@ -438,6 +452,8 @@ def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpC
     confirm_rows = vp_map_policy.confirm_sweep(
         seq, preset_config(theta, steer.steering, start_fit_m, latency_s=latency), ref
     )
+    confirm = vp_map_policy.derive_confirm(confirm_rows)
+    white = preset_config(theta, steer.steering, start_fit_m, confirm, latency_s=latency)
     return VpCalibration(
         steer=steer,
         fits=fits,
@@ -451,7 +467,8 @@ def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpC
         start_rows=start_rows,
         start_fit_m=start_fit_m,
         confirm_rows=confirm_rows,
-        confirm_scans=vp_map_policy.derive_confirm(confirm_rows),
+        confirm_scans=confirm,
+        pass_offset=vp_pass_offset.derive(seq, white),
         seconds=time.perf_counter() - t0,
     )
 
@@ -486,6 +503,8 @@ def _manifest_entry(st: VpCalibration) -> dict:
         "start_headings_deg": st.start_rows,
         "confirm_scans": st.confirm_scans,
         "confirm_sweep": st.confirm_rows,
+        "pass_offset_sd_m": list(st.pass_offset.sd_m),
+        "pass_offset_median_white": list(st.pass_offset.median_white),
         "consistency_evaluations": st.consistency["evaluations"],
         "seconds": round(st.seconds, 1),
     }
@@ -593,12 +612,13 @@ def preset_config(
     start_fit_m: float,
     confirm_scans: int | None = None,
     latency_s: float = 0.0,
+    pass_offset_sd_m=(0.0, 0.0),
 ) -> SlamConfig:
     """The preset: the fixed settings (BASE), the fitted parameters `theta` (the model's 6 or
     8), the steering calibration, the start fitted along the filter's own path over the
     first `start_fit_m` metres of GPS (`vp_start`), the map policy's `confirm_scans`
-    (`vp_map_policy.derive_confirm`; None: BASE's, the paper's 3) and the laser latency
-    (`derive_latency`)."""
+    (`vp_map_policy.derive_confirm`; None: BASE's, the paper's 3), the laser latency
+    (`derive_latency`) and the pass offset (`vp_pass_offset.derive`)."""
     confirm = BASE.map_policy.confirm_scans if confirm_scans is None else int(confirm_scans)
     base = BASE.with_(
         **{
@@ -607,6 +627,7 @@ def preset_config(
             "start.gps_fit_m": float(start_fit_m),
             "map_policy.confirm_scans": confirm,
             "vehicle.laser_latency_s": float(latency_s),
+            "measurement.pass_offset_sd_m": [float(v) for v in pass_offset_sd_m],
         }
     )
     return config_from(theta, base)
@@ -623,7 +644,9 @@ then the laser latency from a profile of the same likelihood, then chose the met
 start is fitted to along the filter's own path (the shortest stretch from which longer ones
 agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
 the same constant measurement model for every extractor, scans at rest skipped (1 mm).
-Last, the map policy's confirm_scans: the best map (F1) against the 2002 reference trees.
+Then the map policy's confirm_scans: the best map (F1) against the 2002 reference trees.
+Last, the trunk's offset shared by a pass (measurement.pass_offset_sd_m): derived by the
+leave-one-pass-out criterion on scans 1-2000 (experiments/eval/pass_offsets.py).
 Its extractor parameters are the defaults, short trunks included: most real trunks span 1-3 beams.
 Use: trunkslam slam vp_full.npz --config victoria_park_ute"""
 
@@ -672,6 +695,9 @@ TABLES = (
             f"{1e3 * st.latency_s:.1f} ms, the vertex of the parabola fitted to the whole "
             "profile (least squares). No GPS error of a run enters it."
         ),
+    ),
+    dataclasses.replace(
+        vp_pass_offset.TABLE, records=lambda st: vp_pass_offset.pass_offset_records(st.pass_offset)
     ),
     TableSpec(
         "victoria_park_start",
