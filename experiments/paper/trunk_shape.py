@@ -18,9 +18,11 @@ per-pass offset), the same drives for every shape, and reports per shape and met
   the mean absolute pose error;
 
 each with the white measurement model and with the pass-offset model
-(`measurement.pass_offset_sd_m`, `slam.measurement.pass_variance`) given the truth's per-pass
-offset sd (range, across) of the shape and method, measured on calibration drives of their
-own (`CALIBRATION_RUNS`, seeds apart from the reported runs').
+(`measurement.pass_offset_sd_m`, `slam.measurement.pass_variance`) given s = (range, across)
+two ways, both on calibration drives of their own (`CALIBRATION_RUNS`, seeds apart from the
+reported runs'), per shape and method: the truth's per-pass offset sd (`pass_statistics`),
+and the leave-one-pass-out criterion (`experiments.eval.pass_offsets.pass_offset`) on the
+white filter's logs of those drives, their passes pooled (no truth enters it).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from dataclasses import replace
 import numpy as np
 
 from experiments.eval.centre_offsets import AXES, pass_statistics, sighting_offsets
+from experiments.eval.pass_offsets import Passes, pass_offset, passes_of
 from experiments.eval.poses import consistency
 from experiments.exec import spawn_seeds
 from experiments.paper import products
@@ -43,7 +46,7 @@ from experiments.sim.scene import shape_trunks
 from experiments.sim.shapes import TrunkShape
 from experiments.sim.trajectory import simulate_cycab_run
 from features import extract_features
-from slam import interpolate_poses, se2
+from slam import interpolate_poses, run_slam, se2
 
 __all__ = ["METHODS", "RUNS", "SHAPES", "TABLE", "run", "shape_config", "shape_trial", "summary"]
 
@@ -53,7 +56,7 @@ METHODS = ("paper", "geometric")
 RUNS = 50  # experiment 2's count (docs/method.md section 5)
 QUICK_RUNS = 4
 CALIBRATION_RUNS = 10  # drives that give the truth's per-pass offset sd (2 with --quick)
-MODELS = ("white", "pass offset, truth's s")
+MODELS = ("white", "pass offset, truth's s", "pass offset, criterion's s")
 # The shapes compared. The oval's per-pass offset (0.03-0.07 m per axis, the table) is of the
 # order of Victoria Park's 0.05 m (`closure.tree_sd_m`); chosen from that, not from any NEES.
 SHAPES = {
@@ -78,24 +81,30 @@ def _fresh(seed):
     return copy.deepcopy(seed)
 
 
-def drive_sightings(cfg: Exp2Config, seed) -> dict:
-    """{method: `sighting_offsets`} of the drive `slam_trial` makes from `seed` (its
-    generator's first draws)."""
+def drive_sightings(cfg: Exp2Config, seed, with_passes: bool = False) -> dict:
+    """{"sightings": {method: `sighting_offsets`}} of the drive `slam_trial` makes from `seed`
+    (its generator's first draws); `with_passes`: also {"passes": {method: `passes_of`}} of
+    the white filter's log on it."""
     seq = simulate_cycab_run(np.random.default_rng(_fresh(seed)), cfg.scene, cfg.cycab)
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
     laser = np.array([se2.compose(p, seq.laser_pose) for p in truth])
-    sightings = {}
+    out: dict = {"n_landmarks": int(seq.truth_landmarks.shape[0]), "sightings": {}}
     for m in METHODS:
         params, options = run_config(cfg, m).features.extractor_args()
         feats = [extract_features(seq.scan(k), m, params, **options) for k in range(seq.n_scans)]
-        sightings[m] = sighting_offsets(seq, feats, laser, cfg.false_match_m)
-    return {"n_landmarks": int(seq.truth_landmarks.shape[0]), "sightings": sightings}
+        out["sightings"][m] = sighting_offsets(seq, feats, laser, cfg.false_match_m)
+        if with_passes:
+            white = run_config(cfg, m).with_(**{"measurement.pass_offset_sd_m": (0.0, 0.0)})
+            lg = run_slam(seq, white, features=feats)
+            gap = white.measurement.pass_gap_s
+            out.setdefault("passes", {})[m] = passes_of(lg, gap_s=gap)
+    return out
 
 
 def calibration_trial(job: tuple, seed) -> dict:
     """A calibration drive of one shape (`job` = (shape name, Exp2Config)): its sightings."""
     name, cfg = job
-    return {"shape": name} | drive_sightings(cfg, seed)
+    return {"shape": name} | drive_sightings(cfg, seed, with_passes=True)
 
 
 def truth_pass_sd(records: list[dict], shape: str) -> dict[str, tuple[float, float]]:
@@ -105,6 +114,24 @@ def truth_pass_sd(records: list[dict], shape: str) -> dict[str, tuple[float, flo
     for m in METHODS:
         st = pass_statistics(_pooled(rs, m))
         out[m] = (st["range"].pass_sd_m, st["across"].pass_sd_m)
+    return out
+
+
+def criterion_sd(records: list[dict], shape: str) -> dict[str, tuple[float, float]]:
+    """{method: s (range, across), m} of the leave-one-pass-out criterion on the passes of
+    `shape`'s calibration drives, pooled (each drive's landmarks numbered apart)."""
+    rs = [r for r in records if r["shape"] == shape]
+    out = {}
+    for m in METHODS:
+        parts, base = [], 0
+        for r in rs:
+            p = r["passes"][m]
+            parts.append(replace(p, landmark=p.landmark + base))
+            base += int(p.landmark.max()) + 1 if p.landmark.size else 0
+        pooled = Passes(
+            *(np.concatenate([getattr(p, f) for p in parts]) for f in Passes.__dataclass_fields__)
+        )
+        out[m] = pass_offset(pooled).sd_m
     return out
 
 
@@ -123,7 +150,7 @@ def shape_trial(job: tuple, seed) -> dict:
     return out
 
 
-def _model_config(cfg: Exp2Config, method: str, model: str, sd: tuple[float, float]) -> Exp2Config:
+def _model_config(cfg: Exp2Config, method: str, model: str, sd: tuple | None) -> Exp2Config:
     """`cfg` with the measurement model `model` (white, or the pass offset of sd (range,
     across) m), for `method` alone."""
     if model == MODELS[0]:
@@ -246,9 +273,10 @@ TABLE = TableSpec(
         "of the passes' mean offsets less white noise's share (experiments/eval/"
         "centre_offsets.py); the offsets are those of the white model's runs. Models: white "
         "(experiment 2's filter) and the pass-offset model (measurement.pass_offset_sd_m) with "
-        "s the per-pass offset sd of the same shape and method on "
-        f"{CALIBRATION_RUNS} calibration drives of their own. NEES: the vehicle pose's (3 dof) "
-        "run average inside its 95% chi-square bounds, as the consistency table."
+        "s the truth's per-pass offset sd of the same shape and method, or s from the "
+        "leave-one-pass-out criterion (experiments/eval/pass_offsets.py) on the white filter's "
+        f"runs, both on {CALIBRATION_RUNS} calibration drives of their own. NEES: the vehicle "
+        "pose's (3 dof) run average inside its 95% chi-square bounds, as the consistency table."
     ),
 )
 
@@ -269,12 +297,16 @@ def run(ctx) -> None:
     cal_seeds = spawn_seeds(ctx.rng("trunk-shape-calibration"), n_cal)
     cal_jobs = [(name, cfg) for name, cfg in cfgs.items() for _ in range(n_cal)]
     cal = ctx.map(calibration_trial, cal_jobs, cal_seeds * len(cfgs), desc="trunk-shape s")
-    truth_sd = {name: truth_pass_sd(cal, name) for name in cfgs}
+    given = {
+        name: {MODELS[1]: truth_pass_sd(cal, name), MODELS[2]: criterion_sd(cal, name)}
+        for name in cfgs
+    }
     seeds = spawn_seeds(ctx.rng("trunk-shape"), n)  # the same drives for every shape
     jobs, job_seeds = [], []
     for name, cfg in cfgs.items():
         for model in MODELS:
-            by_method = {m: _model_config(cfg, m, model, truth_sd[name][m]) for m in METHODS}
+            sd = given[name].get(model, {})
+            by_method = {m: _model_config(cfg, m, model, sd.get(m)) for m in METHODS}
             jobs += [(name, model, by_method, r) for r in range(n)]
             job_seeds += seeds
     batch = ctx.submit(shape_trial, jobs, job_seeds, desc="trunk-shape runs", chunksize=1)
@@ -285,7 +317,7 @@ def run(ctx) -> None:
             "calibration_runs": n_cal,
             "methods": list(METHODS),
             "shapes": {k: vars(s) for k, s in SHAPES.items()},
-            "truth_pass_offset_sd_m": truth_sd,
+            "pass_offset_sd_m": given,
         }
         products.tables(ctx, [TABLE], records)
 
