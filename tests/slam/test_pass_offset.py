@@ -147,3 +147,16 @@ def test_the_smoother_weighs_a_pass_as_one_offset_and_solves():
     assert max(n.values()) > 10
     res = smooth(p)
     assert np.isfinite(res.chi2) and res.landmark_xy.shape == (LANDMARKS.shape[0], 2)
+
+
+def test_the_run_log_carries_the_pass_model_to_trunkslam_smooth(tmp_path):
+    """The run log holds the covariances with the pass offset (all sightings count in a
+    pass), so what `trunkslam smooth` and export-graph read is what the in-memory smoother
+    solves."""
+    from experiments.io.run_log import read_run_log, write_run_log
+
+    log = _run((0.03, 0.05))
+    problem, _ = read_run_log(write_run_log(tmp_path / "run_log.npz", log))
+    np.testing.assert_array_equal(problem.meas_R, problem_from_log(log).meas_R)
+    white = problem_from_log(_run((0.0, 0.0)))
+    assert np.all(problem.meas_R[:, 0, 0] > white.meas_R[:, 0, 0])
