@@ -156,6 +156,7 @@ def base_scene() -> dict:
         d["scan_position_names"][:2],
     )
     d["description"] = "the test yard, cut down"
+    d["trunk_shape"] = {"aspect": 1.2, "lobes": 3, "lobe_amplitude": 0.05, "seed": 1}
     return d
 
 
@@ -703,6 +704,10 @@ def scene_cases() -> list[Case]:
             "walls",
             "bushes",
             "circles",
+            "trunk_shape",
+            "aspect",
+            "lobe_amplitude",
+            "seed",
         ):
             return True  # defaults
         if path == ("description",) and mutation == "a mixed list":

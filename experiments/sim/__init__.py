@@ -35,7 +35,9 @@ from experiments.sim.scene import (
     make_bush,
     scene_from_dict,
     scenes_dir,
+    shape_trunks,
 )
+from experiments.sim.shapes import TrunkShape
 from experiments.sim.simulate import (
     SENSOR_PRESETS,
     SensorModel,
@@ -57,6 +59,8 @@ __all__ = [
     "list_scenes",
     "scenes_dir",
     "make_bush",
+    "TrunkShape",
+    "shape_trunks",
     "NO_RETURN_LABEL",
     "MIXED_LABEL",
     "CIRCLE_KINDS",

@@ -33,7 +33,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib.resources.abc import Traversable
 from pathlib import Path
 from typing import Any
@@ -42,6 +42,7 @@ import numpy as np
 
 from experiments.bundled import SCENE_SUFFIX, scene_names, scenes_dir
 from experiments.errors import ConfigError, DataError
+from experiments.sim.shapes import TrunkShape, trunk_outline
 from slam.sequence import MIXED_LABEL, NO_RETURN_LABEL  # datasets/FORMAT.md's values
 
 __all__ = [
@@ -54,6 +55,7 @@ __all__ = [
     "list_scenes",
     "make_bush",
     "scenes_dir",
+    "shape_trunks",
     "NO_RETURN_LABEL",
     "MIXED_LABEL",
     "CIRCLE_KINDS",
@@ -109,6 +111,9 @@ class CircleObject:
 
     center_xy: (2,) m, world frame. radius_m: > 0. kind: "pillar" or "trunk".
     height_m: above the ground (inf = always in the scan plane).
+    outline_xy: None (a circle), or (P, 2) m, world frame: the vertices of a cross-section
+        that is not a circle (`experiments.sim.shapes`), ray-cast as a polygon with this
+        object's label; then center_xy is its centroid and radius_m its equal-area radius.
     """
 
     name: str
@@ -116,6 +121,7 @@ class CircleObject:
     radius_m: float
     kind: str = "trunk"
     height_m: float = math.inf
+    outline_xy: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         owner = f"CircleObject({self.name!r})"
@@ -133,6 +139,14 @@ class CircleObject:
         if self.kind not in CIRCLE_KINDS:
             raise ConfigError(f"{owner}.kind: must be one of {CIRCLE_KINDS}, got {self.kind!r}")
         object.__setattr__(self, "height_m", _check_height(owner, self.height_m))
+        if self.outline_xy is not None:
+            object.__setattr__(self, "outline_xy", _points_array(owner, self.outline_xy, 3))
+
+    @property
+    def segments_xy(self) -> np.ndarray:
+        """(P, 2, 2) the outline's edges, m (only when `outline_xy` is given)."""
+        p = self.outline_xy
+        return np.stack([p, np.roll(p, -1, axis=0)], axis=1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -342,7 +356,8 @@ class Scene:
         """Flat arrays of the objects that reach above `plane_height_m`, cached per height.
 
         circ_xyr (Lc, 3) [x, y, r] m, circ_label (Lc,); seg_p (S, 2) segment starts, seg_e (S, 2)
-        end - start, m, seg_label (S,): every wall segment and every bush edge. Also column
+        end - start, m, seg_label (S,): every wall segment and every bush edge, then the edges
+        of the circles given an `outline_xy` (with the circle's label). Also column
         forms for `raycast`: pts_x, pts_y (Lc + 2S,) circle centres, segment starts, segment
         ends; circ_r2; seg_ex, seg_ey; seg_tol (collinearity tolerance); obj_label (Lc + S,).
         """
@@ -351,12 +366,15 @@ class Scene:
         if key in cache:
             return cache[key]
         L, W = len(self.circles), len(self.walls)
-        circ = [(i, c) for i, c in enumerate(self.circles) if c.height_m > key]
+        circ = [
+            (i, c) for i, c in enumerate(self.circles) if c.height_m > key and c.outline_xy is None
+        ]
         circ_xyr = np.array([[*c.center_xy, c.radius_m] for _, c in circ]).reshape(-1, 3)
         circ_label = np.array([i for i, _ in circ], dtype=np.int64)
         segs, seg_label = [np.zeros((0, 2, 2))], [np.zeros(0, dtype=np.int64)]
         polys = [(L + j, w) for j, w in enumerate(self.walls)]
         polys += [(L + W + k, b) for k, b in enumerate(self.bushes)]
+        polys += [(i, c) for i, c in enumerate(self.circles) if c.outline_xy is not None]
         for lab, o in polys:
             if o.height_m > key:
                 sg = o.segments_xy
@@ -389,6 +407,7 @@ class Scene:
     def bounds_xy(self) -> np.ndarray:
         """(2, 2) [[xmin, ymin], [xmax, ymax]] of all objects and scan positions, m."""
         pts = [c.center_xy + s * c.radius_m for c in self.circles for s in (-1, 1)]
+        pts += [p for c in self.circles if c.outline_xy is not None for p in c.outline_xy]
         pts += [p for o in (*self.walls, *self.bushes) for p in o.points_xy]
         pts += list(self.scan_positions[:, :2])
         if not pts:
@@ -410,7 +429,9 @@ _TOP_KEYS = {
     "bushes",
     "scan_positions",
     "scan_position_names",
+    "trunk_shape",
 }
+_SHAPE_KEYS = {"aspect", "lobes", "lobe_amplitude", "seed", "n_vertices", "note"}
 _CIRCLE_KEYS = {"name", "kind", "center_xy", "radius_m", "height_m", "note"}
 _WALL_KEYS = {"name", "kind", "points_xy", "closed", "height_m", "note"}
 _BUSH_KEYS = {"name", "points_xy", "height_m", "note"}
@@ -626,7 +647,7 @@ def scene_from_dict(data: Mapping, source: str = "<dict>", default_name: str = "
         description = _text(data, "description", "", source, lines=True) or ""
         _text(data, "notes", "", source, lines=True)
         _text(data, "frame", "", source)
-        return Scene(
+        scene = Scene(
             circles=tuple(circles),
             walls=tuple(walls),
             bushes=tuple(bushes),
@@ -635,10 +656,48 @@ def scene_from_dict(data: Mapping, source: str = "<dict>", default_name: str = "
             name=str(name),
             description=str(description),
         )
+        return shape_trunks(scene, _trunk_shape(data, source))
     except DataError:
         raise
     except ValueError as exc:  # an object's own validation (names, zero-length segments, ...)
         raise DataError(_where(source, str(exc))) from None
+
+
+def _trunk_shape(data: Mapping, source: str) -> TrunkShape:
+    """The file's "trunk_shape" (absent: circles)."""
+    v = data.get("trunk_shape", {})
+    _check_keys(v, _SHAPE_KEYS, "trunk_shape", source)
+    _text(v, "note", "trunk_shape.", source)
+    try:
+        return TrunkShape(**{k: x for k, x in v.items() if k != "note"})
+    except ConfigError as exc:
+        raise DataError(_where(source, f"trunk_shape: {exc}")) from None
+
+
+def shape_trunks(scene: Scene, shape: TrunkShape) -> Scene:
+    """`scene` with every circle of kind "trunk" given `shape`'s outline
+    (`experiments.sim.shapes`; centre and equal-area radius kept, so the truth tables are
+    unchanged); the scene itself when the shape is a circle. Labels and order are kept."""
+    if not isinstance(shape, TrunkShape):
+        raise ConfigError(f"shape_trunks.shape: expected a TrunkShape, got {type(shape).__name__}")
+    if shape.is_circle:
+        return scene
+    trunks = [i for i, c in enumerate(scene.circles) if c.kind == "trunk"]
+    draws = shape.draws(len(trunks))
+    circles = list(scene.circles)
+    for i, (orientation, phase) in zip(trunks, draws):
+        c = circles[i]
+        outline = trunk_outline(c.center_xy, c.radius_m, shape, orientation, phase)
+        circles[i] = replace(c, outline_xy=outline)
+    return Scene(
+        circles=tuple(circles),
+        walls=scene.walls,
+        bushes=scene.bushes,
+        scan_positions=scene.scan_positions,
+        scan_position_names=scene.scan_position_names,
+        name=scene.name,
+        description=scene.description,
+    )
 
 
 def make_bush(
