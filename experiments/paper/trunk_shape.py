@@ -283,7 +283,7 @@ TABLE = TableSpec(
 
 @experiment(
     "trunk-shape",
-    order=130,
+    order=135,
     page="trunk-shape.md",
     help="experiment 2 with trunks that are not circles: per-pass centre offsets and the NEES "
     "of the white model (only when named)",

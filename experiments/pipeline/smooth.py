@@ -13,12 +13,13 @@ from experiments.eval.gps import score_sequence
 from experiments.eval.missing import null_scores
 from experiments.eval.poses import nees, pose_errors
 from experiments.eval.vouched import vouched_for_sequence
+from experiments.io.config_file import load_slam_config
 from experiments.io.outputs import add_to_manifest, check_output_file, lock_folder
 from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.run_log import RUN_LOG_NAME, read_run_log
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import dumps_json, write_atomic
-from slam import SlamConfig, interpolate_poses
+from slam import interpolate_poses
 from slam.smoother import MEAS_INIT, Problem, SmootherOptions, SmootherResult, smooth
 
 __all__ = ["smooth_run", "smoother_summary"]
@@ -141,12 +142,13 @@ def _map(problem: Problem, r: SmootherResult) -> str:
     return map_csv(r.landmark_id, r.landmark_xy, r.landmark_cov, first, n_obs)
 
 
-def _vouched(seq, summary: dict):
-    """The fixes the run's odometry vouches for (experiments/eval/vouched.py), or None when the
-    run's configuration cannot be read back."""
+def _vouched(seq, run_dir: Path):
+    """The fixes the run's odometry vouches for (experiments/eval/vouched.py) under the run's
+    own configuration (its config.toml: the summary's JSON cannot hold an infinite setting such
+    as `measurement.max_range_m`), or None when it cannot be read back."""
     try:
-        cfg = SlamConfig.from_dict(summary["config"])
-    except (KeyError, TypeError, ValueError):
+        cfg = load_slam_config(run_dir / "config.toml")
+    except (OSError, DataError, ValueError):  # the config errors are ValueErrors
         return None
     return vouched_for_sequence(seq, cfg)
 
@@ -166,7 +168,7 @@ def _scores(run_dir: Path, problem: Problem, r: SmootherResult) -> dict:
     out: dict = {"scored": summary["input"]}
     if seq.gps_t is not None:
         out["gps"] = score_sequence(
-            seq, problem.scan_t, r.pose, _antenna(seq, problem), vouched=_vouched(seq, summary)
+            seq, problem.scan_t, r.pose, _antenna(seq, problem), vouched=_vouched(seq, run_dir)
         ).to_dict()
     if seq.truth_t is not None:
         t = problem.scan_t  # the poses' own times

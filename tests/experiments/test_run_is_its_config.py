@@ -120,6 +120,11 @@ def test_the_victoria_park_experiment_writes_the_config_of_each_run(
     # the odometry-vouched fixes: the same rule from the run's summary and the table
     assert s["gps"]["vouched"] == row["fixes_vouched"] > 0.8 * s["gps"]["matched"]
     assert s["gps"]["vouched_rmse"] == pytest.approx(row["rmse_vouched_m"], rel=0, abs=5e-5)
+    # the smoother after the fact scores the same fixes (the run's config.toml, whose infinite
+    # max_range_m the summary's JSON cannot hold)
+    _cli("smooth", tmp_path / "again")
+    sm = json.loads((tmp_path / "again" / "smoother.json").read_text())
+    assert sm["gps"]["vouched"] == s["gps"]["vouched"] and sm["gps"]["vouched_rmse"] > 0
 
 
 def test_experiment_2_writes_each_methods_filter(tmp_path):
