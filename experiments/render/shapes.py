@@ -4,13 +4,20 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["circle_polyline", "ellipse_polyline", "ellipse_polylines"]
+__all__ = ["circle_polyline", "circle_polylines", "ellipse_polyline", "ellipse_polylines"]
 
 
 def circle_polyline(cx: float, cy: float, r: float, n: int = 48) -> np.ndarray:
     """(n + 1, 2) closed polyline of a circle."""
     t = np.linspace(0.0, 2.0 * np.pi, n + 1)
     return np.stack([cx + r * np.cos(t), cy + r * np.sin(t)], axis=1)
+
+
+def circle_polylines(circles_xyr, n: int = 48) -> np.ndarray:
+    """(m, n + 1, 2) the `circle_polyline` of each of m circles (m, 3) [x, y, r] at once."""
+    c = np.asarray(circles_xyr, float).reshape(-1, 3)
+    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    return np.stack([c[:, :1] + c[:, 2:] * np.cos(t), c[:, 1:2] + c[:, 2:] * np.sin(t)], axis=-1)
 
 
 def ellipse_polyline(center_xy, cov_2x2, n_sigma: float = 2.4477, n: int = 40) -> np.ndarray:
