@@ -104,7 +104,7 @@ def test_the_map_at_the_last_scan_is_whole(recorded):
 def test_the_docs_state_the_rule():
     from pathlib import Path
 
-    page = (Path(__file__).parents[2] / "docs" / "rerun.md").read_text()
+    page = " ".join((Path(__file__).parents[2] / "docs" / "rerun.md").read_text().split())
     assert f"once {viz.ELLIPSES_EVERY_S:g} s of the sequence's time" in page
     assert f"drawn with {viz.ELLIPSE_POINTS} points" in page
     sides = viz.ELLIPSE_POINTS - 1
