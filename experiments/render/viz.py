@@ -83,8 +83,10 @@ KINDS = ("slam", "features", "circles")
 RECORDING_MIN_FREE_BYTES = 16 * 1024 * 1024
 RECORDING_STOP_FREE_BYTES = 1024 * 1024
 FLUSH_TIMEOUT_S = 120.0
-# The scene's rows are sent in batches (`_Batch`) of this many scans, or of what this many
-# seconds brought (a live viewer is behind the run by at most that); 1: each row as it comes.
+# The scene's rows are sent in batches (`_Batch`) of this many scans, or, streamed to a live
+# viewer, of what this many seconds brought (the viewer is behind the run by at most that; a
+# file has no such limit: on a loaded machine it made batches of a few scans, and the cost of a
+# send is mostly per call); 1: each row as it comes.
 BATCH_SCANS = 64
 BATCH_S = 0.25
 # The map's ellipses (`world/landmarks/ellipses`) are logged again when a landmark joined or left
@@ -299,9 +301,10 @@ class _Batch:
     each of 7,249 scans. The rows are those `rec.log` would have logged, at the same times
     (`tests/experiments/test_live_viewer.py` compares the two row for row)."""
 
-    def __init__(self, rec: rr.RecordingStream, scans: int) -> None:
+    def __init__(self, rec: rr.RecordingStream, scans: int, max_s: float | None = None) -> None:
         self.rec = rec
         self.scans = scans
+        self.max_s = max_s
         self.rows: dict[str, list] = {}
         self._n = 0
         self._since = time.monotonic()
@@ -312,7 +315,8 @@ class _Batch:
     def next_scan(self) -> None:
         """A scan is complete: send the batch when it is full or old."""
         self._n += 1
-        if self._n >= self.scans or time.monotonic() - self._since > BATCH_S:
+        old = self.max_s is not None and time.monotonic() - self._since > self.max_s
+        if self._n >= self.scans or old:
             self.send()
 
     def send(self) -> None:
@@ -390,6 +394,7 @@ class Recorder(NullRecorder):
     file deleted."""
 
     min_free_bytes = RECORDING_MIN_FREE_BYTES
+    batch_s = None  # a batch is sent after BATCH_SCANS scans, however long they took
 
     def __init__(
         self,
@@ -464,7 +469,7 @@ class Recorder(NullRecorder):
         for frame in _VIEW_FRAMES[self.kind]:
             self.rec.log(_y_up(frame), rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
         if self._batch_scans > 1:
-            self._batch = _Batch(self.rec, self._batch_scans)
+            self._batch = _Batch(self.rec, self._batch_scans, self.batch_s)
 
     def _send_batch(self) -> None:
         """The map's ellipses at the last scan, when not yet logged; then the batch goes."""
@@ -938,6 +943,8 @@ class LiveRecorder(Recorder):
     checked before the run (`rerun_sink.rerun_target`); one that stops answering during the
     run loses the rest of the stream, and `close` says so as a warning, not an error: the run's
     own files are still written."""
+
+    batch_s = BATCH_S  # a batch is sent at least this often: the viewer lags by at most that
 
     def __init__(
         self,
