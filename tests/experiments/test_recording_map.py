@@ -110,3 +110,7 @@ def test_the_docs_state_the_rule():
     sides = viz.ELLIPSE_POINTS - 1
     gap = 1 - np.cos(np.pi / sides)  # an inscribed polygon's largest gap to its ellipse
     assert f"{sides} sides, within {100 * gap:.1f}% of the ellipse" in page
+    from experiments.bench.slam import RECORDING_PAIRS
+
+    words = {1: "one", 2: "two", 3: "three", 4: "four", 5: "five"}
+    assert f"{words[RECORDING_PAIRS]} such pairs (`bench.slam.RECORDING_PAIRS`" in page
