@@ -17,6 +17,7 @@ import functools
 
 import numpy as np
 import pyarrow as pa  # rerun's own dependency: its columns are arrow arrays
+import pyarrow.compute as pc
 
 __all__ = [
     "Described",
@@ -26,6 +27,7 @@ __all__ = [
     "color",
     "colors",
     "columns",
+    "id_labels",
     "labels",
     "radii_ui",
     "row",
@@ -99,6 +101,16 @@ class _Texts(_Kind):
 
     def arrow(self, data) -> pa.Array:
         return pa.array(data, pa.string())
+
+
+class _IdLabels(_Kind):
+    """(n,) int64 ids labelled `prefix` + id ("L12"), the text made in one call a batch."""
+
+    def __init__(self, prefix: str) -> None:
+        self.prefix = pa.scalar(prefix, pa.string())
+
+    def arrow(self, data) -> pa.Array:
+        return pc.binary_join_element_wise(self.prefix, pc.cast(pa.array(data), pa.string()), "")
 
 
 class _Strips(_Kind):
@@ -255,3 +267,13 @@ def radii_ui(points: float) -> Field:
 def labels(texts) -> Field:
     """Text labels as rerun's Text components."""
     return Field(_TEXTS, list(texts))
+
+
+@functools.cache
+def _id_labels(prefix: str) -> _IdLabels:
+    return _IdLabels(prefix)
+
+
+def id_labels(prefix: str, ids) -> Field:
+    """The labels `prefix` + id of integer ids (`labels([f"{prefix}{i}" for i in ids])`)."""
+    return Field(_id_labels(prefix), np.array(ids, np.int64).reshape(-1))

@@ -705,7 +705,7 @@ class Recorder(NullRecorder):
                 positions=rows.vectors(xy),
                 radii=rows.radii_ui(3.0),
                 colors=rows.color(40, 200, 90),
-                labels=rows.labels([f"L{int(i)}" for i in ids]),
+                labels=rows.id_labels("L", ids),
             ),
         )
         ids = np.array(ids, np.int64)

@@ -41,6 +41,14 @@ def test_points_with_labels_colour_and_radius():
     )
     theirs = rr.Points2D(xy, radii=rr.Radius.ui_points(3.0), colors=[[40, 200, 90]], labels=ids)
     _same(ours, theirs)
+    ours = rows.row(
+        rr.Points2D,
+        positions=rows.vectors(xy),
+        radii=rows.radii_ui(3.0),
+        colors=rows.color(40, 200, 90),
+        labels=rows.id_labels("L", np.arange(7)),
+    )
+    _same(ours, theirs)
 
 
 @pytest.mark.parametrize("shape", ["array", "list", "empty"])
