@@ -29,7 +29,9 @@ SLAM runs (slam.run_slam's visualiser interface):
   world/follow               the vehicle's position without its heading, y mirrored (the
                              following map view's origin; rerun draws 2D views y down)
   .../y_up                   static y mirror under each view's frame: every view reads y up
-  world/landmarks            map landmarks: centres, ids; `ellipses`: 95% ellipses, scaled
+  world/landmarks            map landmarks: centres, ids; `ellipses`: 95% ellipses, scaled,
+                             logged when the map's landmarks change, every ELLIPSES_EVERY_S of
+                             the sequence's time and at the last scan
   world/tentative            tentative features (not yet in the map)
   world/associations         lines from each associated measurement to its landmark
   series/...                 the time series
@@ -295,8 +297,9 @@ class _Track:
 
 
 class _Batch:
-    """The scene's rows of the last scans, kept until BATCH_SCANS scans or BATCH_S seconds have
-    passed and then sent with one `send_columns` an entity: rerun's cost of a logged row is
+    """The scene's rows of the last scans, kept until BATCH_SCANS scans (or, with `max_s`, that
+    many seconds) have passed and then sent with one `send_columns` an entity, each component's
+    values of every row joined in one arrow array (`rows.columns`): rerun's cost of a logged row is
     mostly that of the call (a chunk each), and a Victoria Park run logs some 15 entities at
     each of 7,249 scans. The rows are those `rec.log` would have logged, at the same times
     (`tests/experiments/test_live_viewer.py` compares the two row for row)."""
