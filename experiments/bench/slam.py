@@ -107,8 +107,10 @@ def recorded_row(seq, cfg, bins, progress, pairs: int = RECORDING_PAIRS) -> dict
     with one; "recording ratio" and "recording CPU ratio": the medians over the pairs of the
     recorded run's wall seconds over the plain run's, and of its CPU seconds (this process's,
     rerun's own threads included) over the plain run's; "run seconds": the recorded runs'
-    median wall seconds; the file's size."""
+    median wall seconds; the file's size; "load": the machine's 1-minute load average before
+    and after the pairs (other processes share the cores)."""
     walls, ratios, cpu_ratios = [], [], []
+    load_before = os.getloadavg()[0]
     for i in range(pairs):
         c0, t0 = time.process_time(), time.perf_counter()
         run_slam(seq, cfg, progress=_scans(progress, f"slam, Victoria Park, pair {i + 1}"))
@@ -121,6 +123,7 @@ def recorded_row(seq, cfg, bins, progress, pairs: int = RECORDING_PAIRS) -> dict
     row["recording ratio"] = round(float(np.median(ratios)), 2)
     row["recording CPU ratio"] = round(float(np.median(cpu_ratios)), 2)
     row["recording MiB"] = round(size / 2**20, 1)
+    row["load"] = f"{load_before:.1f}-{os.getloadavg()[0]:.1f}"
     return row
 
 

@@ -8,6 +8,7 @@ window: its one call into rerun (`viz._spawn`) is replaced by a connection to th
 from __future__ import annotations
 
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -289,6 +290,7 @@ def test_bench_slam_row_of_a_recorded_run(run_file, monkeypatch):
     assert row["recording CPU ratio"] == 2.0
     assert row["run seconds"] == 3.0  # the recorded runs' median
     assert 0 < row["recording MiB"] < 50
+    assert re.fullmatch(r"\d+\.\d-\d+\.\d", row["load"])
 
 
 def test_the_path_is_a_trail_of_pieces_that_make_the_whole_path(run_file, tmp_path):
