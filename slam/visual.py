@@ -43,7 +43,8 @@ def show_scan(vis, seq, laser: np.ndarray, state, result) -> None:
     vis.log_tentatives(result.tentative_xy)
     # (a landmark a loop closure merged away in this scan is no longer in the state)
     status = result.status
-    used = np.flatnonzero((status >= 0) & np.isin(status, state.landmark_ids))
+    in_map = set(state.landmark_ids.tolist())  # (a set: np.isin sorts, at every scan)
+    used = np.array([i for i, s in enumerate(status.tolist()) if s >= 0 and s in in_map], int)
     if used.size:
         ang = T_world_laser[2] + meas.z[used, 1]
         frm = T_world_laser[:2] + meas.z[used, 0:1] * np.stack([np.cos(ang), np.sin(ang)], 1)

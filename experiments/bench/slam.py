@@ -28,6 +28,10 @@ __all__ = ["bench", "bench_victoria_park", "format_table", "recorded_row", "reco
 
 
 BINS = (0, 25, 50, 100, 200, 300, 400, 600, 800, 1200)
+# The recorded run's cost is measured over this many pairs (the plain run, then the recorded
+# run): a shared machine's load changes while the bench runs, and a pair's two runs see about
+# the same load.
+RECORDING_PAIRS = 3
 
 
 def _scans(progress, desc: str):
@@ -66,7 +70,7 @@ def bench_victoria_park(
     """The full Victoria Park run (7249 scans, published detections, preset victoria_park_ute):
     the same rows, and the whole run's seconds (of a second run: the first loads the caches), at
     this process's threads (`trunkslam --threads`, default 1), once more with a rerun recording
-    of every scan (`recorded_row`: its time against the plain run's), with loop closure on
+    of every scan (`recorded_row`: its cost against the plain run's), with loop closure on
     (`[closure] enabled`), and once more without it with the BLAS at every core, the library's
     own default before commands set it."""
     from experiments.io.config_file import load_slam_config
@@ -81,7 +85,7 @@ def bench_victoria_park(
     t0 = time.perf_counter()
     log = run_slam(seq, cfg, progress=_scans(progress, "slam, Victoria Park"))
     rows = _rows(log, time.perf_counter() - t0, bins, "Victoria Park")
-    rows.append(recorded_row(seq, cfg, rows[-1]["run seconds"], bins, progress))
+    rows.append(recorded_row(seq, cfg, bins, progress))
     from threadpoolctl import threadpool_limits
 
     t0 = time.perf_counter()
@@ -96,27 +100,46 @@ def bench_victoria_park(
     return rows
 
 
-def recorded_row(seq, cfg, plain_s: float, bins, progress) -> dict:
+def recorded_row(seq, cfg, bins, progress, pairs: int = RECORDING_PAIRS) -> dict:
     """The whole-run row of the same run recorded as `trunkslam slam --rerun FILE` records it
     (`experiments.render.viz.Recorder`, every scan, the time series at the end, the file
-    closed), its seconds against the run's without a recording (`plain_s`): "recording
-    ratio", and the file's size."""
+    closed), and what the recording costs: `pairs` times the run without a recording, then
+    with one; "recording ratio" and "recording CPU ratio": the medians over the pairs of the
+    recorded run's wall seconds over the plain run's, and of its CPU seconds (this process's,
+    rerun's own threads included) over the plain run's; "run seconds": the recorded runs'
+    median wall seconds; the file's size; "load": the machine's 1-minute load average before
+    and after the pairs (other processes share the cores)."""
+    walls, ratios, cpu_ratios = [], [], []
+    load_before = os.getloadavg()[0]
+    for i in range(pairs):
+        c0, t0 = time.process_time(), time.perf_counter()
+        run_slam(seq, cfg, progress=_scans(progress, f"slam, Victoria Park, pair {i + 1}"))
+        plain_cpu, plain_wall = time.process_time() - c0, time.perf_counter() - t0
+        log, wall, cpu, size = _recorded(seq, cfg, progress, f"recorded, pair {i + 1}")
+        walls.append(wall)
+        ratios.append(wall / plain_wall)
+        cpu_ratios.append(cpu / plain_cpu)
+    row = _rows(log, float(np.median(walls)), bins, "Victoria Park, with a recording")[-1]
+    row["recording ratio"] = round(float(np.median(ratios)), 2)
+    row["recording CPU ratio"] = round(float(np.median(cpu_ratios)), 2)
+    row["recording MiB"] = round(size / 2**20, 1)
+    row["load"] = f"{load_before:.1f}-{os.getloadavg()[0]:.1f}"
+    return row
+
+
+def _recorded(seq, cfg, progress, desc: str):
+    """(log, wall s, CPU s, file bytes) of the run recorded to a temporary file."""
     from experiments.eval.series import slam_panels, slam_series
     from experiments.render.viz import open_recording
 
     with tempfile.TemporaryDirectory(prefix="trunkslam-bench-") as tmp:
         path = Path(tmp) / "victoria_park.rrd"
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         with open_recording(path, "slam", series=slam_panels(False)) as rec:
-            desc = "slam, Victoria Park, recorded"
             log = run_slam(seq, cfg, visualiser=rec, progress=_scans(progress, desc))
             rec.log_series(log.scan_t, slam_series(log, seq.truth_t, seq.truth_pose))
-        wall = time.perf_counter() - t0
-        size = path.stat().st_size
-    row = _rows(log, wall, bins, "Victoria Park, with a recording")[-1]
-    row["recording ratio"] = round(wall / plain_s, 2)
-    row["recording MiB"] = round(size / 2**20, 1)
-    return row
+        cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+        return log, wall, cpu, path.stat().st_size
 
 
 def _rows(log, wall: float, bins, label: str) -> list[dict]:

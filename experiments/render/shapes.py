@@ -2,9 +2,20 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
-__all__ = ["circle_polyline", "ellipse_polyline", "ellipse_polylines"]
+__all__ = ["circle_polyline", "circle_polylines", "ellipse_polyline", "ellipse_polylines"]
+
+
+@functools.cache
+def _unit_circle(n: int) -> np.ndarray:
+    """(n + 1, 2) [cos t, sin t] at n + 1 angles t from 0 to 2 pi (read only: shared)."""
+    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
+    unit = np.stack([np.cos(t), np.sin(t)], axis=1)
+    unit.flags.writeable = False
+    return unit
 
 
 def circle_polyline(cx: float, cy: float, r: float, n: int = 48) -> np.ndarray:
@@ -13,11 +24,17 @@ def circle_polyline(cx: float, cy: float, r: float, n: int = 48) -> np.ndarray:
     return np.stack([cx + r * np.cos(t), cy + r * np.sin(t)], axis=1)
 
 
+def circle_polylines(circles_xyr, n: int = 48) -> np.ndarray:
+    """(m, n + 1, 2) the `circle_polyline` of each of m circles (m, 3) [x, y, r] at once."""
+    c = np.asarray(circles_xyr, float).reshape(-1, 3)
+    unit = _unit_circle(n)
+    return c[:, None, :2] + c[:, 2:, None] * unit[None]
+
+
 def ellipse_polyline(center_xy, cov_2x2, n_sigma: float = 2.4477, n: int = 40) -> np.ndarray:
     """(n + 1, 2) closed polyline of the n_sigma ellipse of a 2D Gaussian (2.4477: 95%)."""
     w, v = np.linalg.eigh(0.5 * (np.asarray(cov_2x2) + np.asarray(cov_2x2).T))
-    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
-    circle = np.stack([np.cos(t), np.sin(t)], axis=1) * (n_sigma * np.sqrt(np.maximum(w, 0.0)))
+    circle = _unit_circle(n) * (n_sigma * np.sqrt(np.maximum(w, 0.0)))
     return np.asarray(center_xy, float) + circle @ v.T
 
 
@@ -27,7 +44,5 @@ def ellipse_polylines(centers_xy, covs_2x2, n_sigma: float = 2.4477, n: int = 40
     centers = np.asarray(centers_xy, float).reshape(-1, 2)
     covs = np.asarray(covs_2x2, float).reshape(-1, 2, 2)
     w, v = np.linalg.eigh(0.5 * (covs + np.swapaxes(covs, 1, 2)))
-    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
-    unit = np.stack([np.cos(t), np.sin(t)], axis=1)  # (n + 1, 2)
-    circle = unit[None] * (n_sigma * np.sqrt(np.maximum(w, 0.0)))[:, None, :]
+    circle = _unit_circle(n)[None] * (n_sigma * np.sqrt(np.maximum(w, 0.0)))[:, None, :]
     return centers[:, None, :] + circle @ np.swapaxes(v, 1, 2)

@@ -29,7 +29,9 @@ SLAM runs (slam.run_slam's visualiser interface):
   world/follow               the vehicle's position without its heading, y mirrored (the
                              following map view's origin; rerun draws 2D views y down)
   .../y_up                   static y mirror under each view's frame: every view reads y up
-  world/landmarks            map landmarks: centres, ids; `ellipses`: 95% ellipses, scaled
+  world/landmarks            map landmarks: centres, ids; `ellipses`: 95% ellipses, scaled,
+                             logged when the map's landmarks change, every ELLIPSES_EVERY_S of
+                             the sequence's time and at the last scan
   world/tentative            tentative features (not yet in the map)
   world/associations         lines from each associated measurement to its landmark
   series/...                 the time series
@@ -51,15 +53,15 @@ try:
 except ImportError:  # pragma: no cover  (not POSIX)
     resource = None
 import numpy as np
-import pyarrow as pa  # rerun's own dependency: its columns are arrow arrays
 import rerun as rr
 import rerun.blueprint as rrb
 
 from experiments.errors import ConfigError, DataError, WriteError
 from experiments.io.outputs import check_output_file
 from experiments.io.writers import interruption_point
+from experiments.render import rows
 from experiments.render.rerun_sink import Viewer, viewer_program
-from experiments.render.shapes import circle_polyline, ellipse_polyline, ellipse_polylines
+from experiments.render.shapes import circle_polylines, ellipse_polyline, ellipse_polylines
 from features.types import Features, Scan
 from slam import se2
 
@@ -83,10 +85,20 @@ KINDS = ("slam", "features", "circles")
 RECORDING_MIN_FREE_BYTES = 16 * 1024 * 1024
 RECORDING_STOP_FREE_BYTES = 1024 * 1024
 FLUSH_TIMEOUT_S = 120.0
-# The scene's rows are sent in batches (`_Batch`) of this many scans, or of what this many
-# seconds brought (a live viewer is behind the run by at most that); 1: each row as it comes.
+# The scene's rows are sent in batches (`_Batch`) of this many scans, or, streamed to a live
+# viewer, of what this many seconds brought (the viewer is behind the run by at most that; a
+# file has no such limit: on a loaded machine it made batches of a few scans, and the cost of a
+# send is mostly per call); 1: each row as it comes.
 BATCH_SCANS = 64
 BATCH_S = 0.25
+# The map's ellipses (`world/landmarks/ellipses`) are logged again when a landmark joined or left
+# the map, else once this many seconds of the sequence's time have passed since they last were,
+# and at the last scan: they shrink slowly, and at every scan of a long run they were most of a
+# recording's bytes and time (a Victoria Park run: 550 MiB). The centres and ids: every scan.
+ELLIPSES_EVERY_S = 1.0
+# The map's ellipses are drawn with this many points (24 sides: the outline is within 0.9% of
+# the ellipse, unseen at map scale; the PNG figures keep 41).
+ELLIPSE_POINTS = 25
 _NO_SCAN = object()
 FLUSH_STEP_S = 1.0
 _FULL_BYTES = 1024 * 1024  # a write error with less free than this: the disk is full
@@ -130,11 +142,23 @@ def _transform(xy: np.ndarray, pose: np.ndarray | None) -> np.ndarray:
     return se2.transform_points(pose, xy)
 
 
-def _pose_transform(pose) -> rr.Transform3D:
+def _pose_transform(pose) -> rows.Row:
     """A 2D pose [x, y, theta] as a rerun transform (rotation about z)."""
     x, y, th = (float(v) for v in pose)
-    return rr.Transform3D(
-        translation=[x, y, 0.0], rotation=rr.RotationAxisAngle(axis=[0, 0, 1], radians=th)
+    return rows.row(
+        rr.Transform3D,
+        translation=rows.vectors([[x, y, 0.0]]),
+        rotation_axis_angle=rows.axis_angles_z([th]),
+    )
+
+
+def _strips(pieces, rgb: tuple[int, int, int], radius_ui: float) -> rows.Row:
+    """Line strips (`rows.strips`) of one colour and one on-screen width (UI points)."""
+    return rows.row(
+        rr.LineStrips2D,
+        strips=rows.strips(pieces),
+        radii=rows.radii_ui(radius_ui),
+        colors=rows.color(*rgb),
     )
 
 
@@ -272,69 +296,54 @@ class _Track:
         return part
 
 
-class _Described:
-    """An arrow array with its component's descriptor (what `rr.ComponentColumn` reads)."""
-
-    def __init__(self, descriptor, array) -> None:
-        self._descriptor = descriptor
-        self._array = array
-
-    def as_arrow_array(self):
-        return self._array
-
-    def component_descriptor(self):
-        return self._descriptor
-
-
 class _Batch:
-    """The scene's rows of the last scans, kept until BATCH_SCANS scans or BATCH_S seconds have
-    passed and then sent with one `send_columns` an entity: rerun's cost of a logged row is
+    """The scene's rows of the last scans, kept until BATCH_SCANS scans (or, with `max_s`, that
+    many seconds) have passed and then sent with one `send_columns` an entity, each component's
+    values of every row joined in one arrow array (`rows.columns`): rerun's cost of a logged row is
     mostly that of the call (a chunk each), and a Victoria Park run logs some 15 entities at
     each of 7,249 scans. The rows are those `rec.log` would have logged, at the same times
     (`tests/experiments/test_live_viewer.py` compares the two row for row)."""
 
-    def __init__(self, rec: rr.RecordingStream, scans: int) -> None:
+    def __init__(self, rec: rr.RecordingStream, scans: int, max_s: float | None = None) -> None:
         self.rec = rec
         self.scans = scans
+        self.max_s = max_s
         self.rows: dict[str, list] = {}
         self._n = 0
         self._since = time.monotonic()
 
     def add(self, path: str, k: int, stamp_s: float | None, archetype) -> None:
-        self.rows.setdefault(path, []).append((k, stamp_s, archetype.as_component_batches()))
+        self.rows.setdefault(path, []).append((k, stamp_s, rows.Row.of(archetype)))
 
     def next_scan(self) -> None:
         """A scan is complete: send the batch when it is full or old."""
         self._n += 1
-        if self._n >= self.scans or time.monotonic() - self._since > BATCH_S:
+        old = self.max_s is not None and time.monotonic() - self._since > self.max_s
+        if self._n >= self.scans or old:
             self.send()
 
     def send(self) -> None:
-        rows, self.rows = self.rows, {}
+        batch, self.rows = self.rows, {}
         self._n, self._since = 0, time.monotonic()
-        for path, entity_rows in rows.items():
+        for path, entity_rows in batch.items():
             self._send(path, entity_rows)
 
-    def _send(self, path: str, rows: list) -> None:
-        stamps = [s for _, s, _ in rows]
-        columns: dict = {}
-        for _, _, batches in rows:
-            for b in batches:
-                columns.setdefault(b.component_descriptor(), []).append(b.as_arrow_array())
-        same = all(len(a) == len(rows) for a in columns.values())
-        if not same or (None in stamps and any(s is not None for s in stamps)):
-            for k, stamp_s, batches in rows:  # rows unlike each other: one at a time
+    def _send(self, path: str, entity_rows: list) -> None:
+        stamps = [s for _, s, _ in entity_rows]
+        columns = rows.columns([r for _, _, r in entity_rows])
+        if columns is None or (None in stamps and any(s is not None for s in stamps)):
+            for k, stamp_s, row in entity_rows:  # rows unlike each other: one at a time
                 self.rec.set_time("scan", sequence=k)
                 if stamp_s is not None:
                     self.rec.set_time("time", duration=stamp_s)
-                self.rec.log(path, batches)
+                self.rec.log(path, row.as_component_batches())
             return
-        indexes = [rr.TimeColumn("scan", sequence=[k for k, _, _ in rows])]
+        indexes = [rr.TimeColumn("scan", sequence=[k for k, _, _ in entity_rows])]
         if None not in stamps:
             indexes.append(rr.TimeColumn("time", duration=stamps))
         cols = [
-            rr.ComponentColumn(d, _Described(d, pa.concat_arrays(a)), lengths=[len(x) for x in a])
-            for d, a in columns.items()
+            rr.ComponentColumn(d, rows.Described(d, array), lengths=lengths)
+            for d, array, lengths in columns
         ]
         self.rec.send_columns(path, indexes=indexes, columns=cols)
 
@@ -388,6 +397,7 @@ class Recorder(NullRecorder):
     file deleted."""
 
     min_free_bytes = RECORDING_MIN_FREE_BYTES
+    batch_s = None  # a batch is sent after BATCH_SCANS scans, however long they took
 
     def __init__(
         self,
@@ -454,15 +464,21 @@ class Recorder(NullRecorder):
         self._batch_scans = BATCH_SCANS if batch_scans == 0 else int(batch_scans)
         self._est_path = _Track()
         self._truth_path = _Track()
+        self._map = None  # the map's (ids, centres, scaled covariances) at its last scan
+        self._map_logged = (None, None)  # (ids, time s) of the ellipses last logged
 
     def _log_frames(self) -> None:
         """The static y mirrors under the views' frames (`_y_up`); the batch starts."""
         for frame in _VIEW_FRAMES[self.kind]:
             self.rec.log(_y_up(frame), rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
         if self._batch_scans > 1:
-            self._batch = _Batch(self.rec, self._batch_scans)
+            self._batch = _Batch(self.rec, self._batch_scans, self.batch_s)
 
     def _send_batch(self) -> None:
+        """The map's ellipses at the last scan, when not yet logged; then the batch goes."""
+        if self._map is not None:
+            self._log_ellipses(*self._map)
+            self._map = None
         if self._batch is not None:
             self._batch.send()
 
@@ -566,7 +582,13 @@ class Recorder(NullRecorder):
         self._log_pose(_parent(path), pose)
         pts = scan.points_xy[scan.valid]
         self._log(
-            path, rr.Points2D(pts, radii=rr.Radius.ui_points(SCAN_POINT_PX), colors=[200, 200, 200])
+            path,
+            rows.row(
+                rr.Points2D,
+                positions=rows.vectors(pts),
+                radii=rows.radii_ui(SCAN_POINT_PX),
+                colors=rows.color(200, 200, 200),
+            ),
         )
 
     def log_features(self, scan: Scan, features: Features, pose=None, path="world/laser/features"):
@@ -576,24 +598,35 @@ class Recorder(NullRecorder):
             return
         self._log_pose(_parent(path), pose)
         pts = scan.points_xy
-        strips, colors = [], []
-        for (a, b), k in zip(features.segment_beams, features.segment_kind):
-            strips.append(pts[features.beams(a, b)])
-            colors.append(KIND_COLORS[int(k)])
+        strips = [pts[features.beams(a, b)] for a, b in features.segment_beams]
+        kinds = np.asarray(features.segment_kind, np.int64).reshape(-1)
         self._log(
             f"{path}/segments",
-            rr.LineStrips2D(strips, colors=colors, radii=rr.Radius.ui_points(1.5)),
+            rows.row(
+                rr.LineStrips2D,
+                strips=rows.strips(strips),
+                radii=rows.radii_ui(1.5),
+                colors=rows.colors(KIND_COLORS[kinds]),
+            ),
         )
         self.log_circles(f"{path}/circles", features.circle_params, None, features.method)
         self._log(
             f"{path}/lines",
-            rr.LineStrips2D(
-                list(features.line_endpoints), colors=[60, 120, 255], radii=rr.Radius.ui_points(2)
+            rows.row(
+                rr.LineStrips2D,
+                strips=rows.strips(np.asarray(features.line_endpoints, float).reshape(-1, 2, 2)),
+                radii=rows.radii_ui(2.0),
+                colors=rows.color(60, 120, 255),
             ),
         )
         self._log(
             f"{path}/edges",
-            rr.Points2D(features.edge_xy, radii=rr.Radius.ui_points(4.0), colors=[255, 40, 40]),
+            rows.row(
+                rr.Points2D,
+                positions=rows.vectors(np.asarray(features.edge_xy, float).reshape(-1, 2)),
+                radii=rows.radii_ui(4.0),
+                colors=rows.color(255, 40, 40),
+            ),
         )
 
     def log_circles(
@@ -602,21 +635,19 @@ class Recorder(NullRecorder):
         """Circles (C, 3) [x, y, r] as outlines labelled with their radius (or `labels`; [] for
         none); `pose` transforms them into the world; static: for all times (truth)."""
         circles_xyr = np.asarray(circles_xyr, float).reshape(-1, 3)
-        strips = [_transform(circle_polyline(*c), pose) for c in circles_xyr]
+        strips = circle_polylines(circles_xyr)
+        if pose is not None and len(strips):
+            strips = _transform(strips.reshape(-1, 2), pose).reshape(strips.shape)
         if labels is None:
             labels = [f"r={c[2]:.2f} m" for c in circles_xyr]
-        elif len(labels) == 0:
-            labels = None
-        self._log(
-            path,
-            rr.LineStrips2D(
-                strips,
-                colors=METHOD_COLORS.get(method, [255, 255, 255]),
-                labels=labels,
-                radii=rr.Radius.ui_points(1.5),
-            ),
-            static=static,
-        )
+        fields = {
+            "strips": rows.strips(strips),
+            "radii": rows.radii_ui(1.5),
+            "colors": rows.color(*METHOD_COLORS.get(method, [255, 255, 255])),
+        }
+        if len(labels):
+            fields["labels"] = rows.labels(labels)
+        self._log(path, rows.row(rr.LineStrips2D, **fields), static=static)
 
     # ---- SLAM (the visualiser interface of slam.run_slam; world frame) -----------------------
 
@@ -644,32 +675,26 @@ class Recorder(NullRecorder):
         self._log("world/vehicle", _pose_transform(pose))
         self._log(  # y mirrored: see _y_up
             "world/follow",
-            rr.Transform3D(translation=[pose[0], pose[1], 0.0], scale=[1.0, -1.0, 1.0]),
+            rows.row(
+                rr.Transform3D,
+                translation=rows.vectors([[pose[0], pose[1], 0.0]]),
+                scale=rows.vectors([[1.0, -1.0, 1.0]]),
+            ),
         )
         self._log(
             "world/vehicle/arrow",
-            rr.Arrows2D(
-                origins=[[0.0, 0.0]],
-                vectors=[[2.0, 0.0]],
-                colors=[[255, 80, 80]],
-                radii=rr.Radius.ui_points(2.0),
-                labels=[f"heading +-{np.degrees(3 * sig_th):.2f} deg (3 sigma)"],
+            rows.row(
+                rr.Arrows2D,
+                vectors=rows.vectors([[2.0, 0.0]]),
+                origins=rows.vectors([[0.0, 0.0]]),
+                radii=rows.radii_ui(2.0),
+                colors=rows.color(255, 80, 80),
+                labels=rows.labels([f"heading +-{np.degrees(3 * sig_th):.2f} deg (3 sigma)"]),
             ),
         )
-        self._log(
-            "world/vehicle_ellipse",
-            rr.LineStrips2D(
-                [ellipse_polyline(pose[:2], cov[:2, :2] * self.ellipse_scale**2)],
-                colors=[[255, 80, 80]],
-                radii=rr.Radius.ui_points(1.0),
-            ),
-        )
-        self._log(
-            "world/path",
-            rr.LineStrips2D(
-                [self._est_path.piece()], colors=[[255, 80, 80]], radii=rr.Radius.ui_points(1.5)
-            ),
-        )
+        ellipse = ellipse_polyline(pose[:2], cov[:2, :2] * self.ellipse_scale**2)
+        self._log("world/vehicle_ellipse", _strips(ellipse[None], (255, 80, 80), 1.0))
+        self._log("world/path", _strips([self._est_path.piece()], (255, 80, 80), 1.5))
 
     def log_landmarks(self, xy, cov, ids) -> None:
         if self._skip():
@@ -678,18 +703,32 @@ class Recorder(NullRecorder):
         cov = np.asarray(cov, float).reshape(-1, 2, 2) * self.ellipse_scale**2
         self._log(
             "world/landmarks",
-            rr.Points2D(
-                xy,
-                radii=rr.Radius.ui_points(3.0),
-                colors=[[40, 200, 90]],
-                labels=[f"L{int(i)}" for i in ids],
+            rows.row(
+                rr.Points2D,
+                positions=rows.vectors(xy),
+                radii=rows.radii_ui(3.0),
+                colors=rows.color(40, 200, 90),
+                labels=rows.id_labels("L", ids),
             ),
         )
+        ids = np.array(ids, np.int64)
+        last_ids, last_s = self._map_logged
+        self._map = (ids, xy.copy(), cov)
+        if (
+            not isinstance(self._stamp, float)
+            or last_s is None
+            or not np.array_equal(ids, last_ids)
+            or self._stamp - last_s >= ELLIPSES_EVERY_S
+        ):
+            self._log_ellipses(*self._map)
+            self._map = None
+
+    def _log_ellipses(self, ids, xy, cov) -> None:
+        """The map's ellipses (scaled covariances `cov`) at this scan (see ELLIPSES_EVERY_S)."""
+        self._map_logged = (ids, self._stamp)
         self._log(
             "world/landmarks/ellipses",
-            rr.LineStrips2D(
-                ellipse_polylines(xy, cov), colors=[[40, 200, 90]], radii=rr.Radius.ui_points(1.0)
-            ),
+            _strips(ellipse_polylines(xy, cov, n=ELLIPSE_POINTS - 1), (40, 200, 90), 1.0),
         )
 
     def log_tentatives(self, xy) -> None:
@@ -698,7 +737,12 @@ class Recorder(NullRecorder):
         xy = np.asarray(xy, float).reshape(-1, 2)
         self._log(
             "world/tentative",
-            rr.Points2D(xy, radii=rr.Radius.ui_points(3.0), colors=[[255, 200, 0]]),
+            rows.row(
+                rr.Points2D,
+                positions=rows.vectors(xy),
+                radii=rows.radii_ui(3.0),
+                colors=rows.color(255, 200, 0),
+            ),
         )
 
     def log_associations(self, from_xy, to_xy) -> None:
@@ -706,14 +750,7 @@ class Recorder(NullRecorder):
             return
         a = np.asarray(from_xy, float).reshape(-1, 2)
         b = np.asarray(to_xy, float).reshape(-1, 2)
-        self._log(
-            "world/associations",
-            rr.LineStrips2D(
-                [np.stack([p, q]) for p, q in zip(a, b)],
-                colors=[[0, 200, 255]],
-                radii=rr.Radius.ui_points(1.0),
-            ),
-        )
+        self._log("world/associations", _strips(np.stack([a, b], axis=1), (0, 200, 255), 1.0))
 
     def log_closure(self, event: dict) -> None:
         """A loop-closure match (`slam.closure.ClosureEvent.to_dict()`) as a line of the text
@@ -753,19 +790,15 @@ class Recorder(NullRecorder):
             return
         self._log(
             "world/truth/vehicle",
-            rr.Arrows2D(
-                origins=[pose[:2]],
-                vectors=[[2 * np.cos(pose[2]), 2 * np.sin(pose[2])]],
-                colors=[[255, 255, 255]],
-                radii=rr.Radius.ui_points(1.5),
+            rows.row(
+                rr.Arrows2D,
+                vectors=rows.vectors([[2 * np.cos(pose[2]), 2 * np.sin(pose[2])]]),
+                origins=rows.vectors([pose[:2]]),
+                radii=rows.radii_ui(1.5),
+                colors=rows.color(255, 255, 255),
             ),
         )
-        self._log(
-            "world/truth/path",
-            rr.LineStrips2D(
-                [self._truth_path.piece()], colors=[[255, 255, 255]], radii=rr.Radius.ui_points(1.0)
-            ),
-        )
+        self._log("world/truth/path", _strips([self._truth_path.piece()], (255, 255, 255), 1.0))
 
     # ---- time series -----------------------------------------------------------------------------
 
@@ -913,6 +946,8 @@ class LiveRecorder(Recorder):
     checked before the run (`rerun_sink.rerun_target`); one that stops answering during the
     run loses the rest of the stream, and `close` says so as a warning, not an error: the run's
     own files are still written."""
+
+    batch_s = BATCH_S  # a batch is sent at least this often: the viewer lags by at most that
 
     def __init__(
         self,

@@ -8,6 +8,7 @@ window: its one call into rerun (`viz._spawn`) is replaced by a connection to th
 from __future__ import annotations
 
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -256,19 +257,40 @@ def test_ellipses_drawn_at_once_are_those_drawn_one_by_one():
     assert ellipse_polylines(np.zeros((0, 2)), np.zeros((0, 2, 2))).shape == (0, 41, 2)
 
 
-def test_bench_slam_row_of_a_recorded_run(run_file):
-    """`bench slam`'s recorded row: the run recorded as `slam --rerun FILE` records it, its
-    seconds against the plain run's given ("recording ratio") and the file's size."""
-    from experiments.bench.slam import BINS, recorded_row
+def test_bench_slam_row_of_a_recorded_run(run_file, monkeypatch):
+    """`bench slam`'s recorded row: the run recorded as `slam --rerun FILE` records it, and the
+    medians over pairs (plain run, recorded run) of the recorded run's wall and CPU seconds over
+    the plain run's ("recording ratio", "recording CPU ratio"), and the file's size. The clocks
+    are scripted: each run takes the seconds given."""
+    from experiments.bench import slam as bench_slam
     from experiments.io.sequence_file import load_sequence
 
+    # (plain, recorded) wall and CPU seconds of three pairs: wall ratios 2, 1.25, 1.5; CPU 3, 1, 2
+    walls = iter([1.0, 2.0, 4.0, 5.0, 2.0, 3.0])
+    cpus = iter([1.0, 3.0, 2.0, 2.0, 1.0, 2.0])
+
+    def clock(seconds):
+        now = [0.0, 0]
+
+        def read():  # each run reads its clock twice: start and end
+            now[1] += 1
+            if now[1] % 2 == 0:
+                now[0] += next(seconds)
+            return now[0]
+
+        return read
+
+    fake = type("T", (), {"perf_counter": clock(walls), "process_time": clock(cpus)})
+    monkeypatch.setattr(bench_slam, "time", fake)
     seq = load_sequence(run_file)
-    row = recorded_row(seq, CFG, 0.5, BINS, None)
+    row = bench_slam.recorded_row(seq, CFG, bench_slam.BINS, None, pairs=3)
     assert row["map size"] == "whole run (Victoria Park, with a recording)"
     assert row["scans"] == seq.n_scans
-    # both are rounded to 2 decimals from the unrounded seconds: 0.005 / 0.5 + 0.005 apart at most
-    assert row["recording ratio"] == pytest.approx(row["run seconds"] / 0.5, abs=0.015)
+    assert row["recording ratio"] == 1.5
+    assert row["recording CPU ratio"] == 2.0
+    assert row["run seconds"] == 3.0  # the recorded runs' median
     assert 0 < row["recording MiB"] < 50
+    assert re.fullmatch(r"\d+\.\d-\d+\.\d", row["load"])
 
 
 def test_the_path_is_a_trail_of_pieces_that_make_the_whole_path(run_file, tmp_path):
