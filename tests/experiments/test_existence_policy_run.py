@@ -1,0 +1,51 @@
+"""Map policy "existence" in the run loop (`slam.existence_map`), on a drive through the
+simulated park with clutter (`experiments.sim.clutter`): what the log says of each landmark's
+existence and of the landmarks that left, and that the default policy ignores its settings."""
+
+import numpy as np
+import pytest
+
+from experiments.paper.sim_clutter import _map_figures
+from experiments.paper.slam import Exp2Config, run_config
+from experiments.sim.clutter import clutter_park
+from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
+from features import extract_features
+from slam import run_slam
+
+
+@pytest.fixture(scope="module")
+def drive():
+    scene = clutter_park()
+    seq = simulate_cycab_run(np.random.default_rng(3), scene, CycabParams(**MONTE_CARLO_PATH))
+    cfg = run_config(Exp2Config(), "geometric")
+    kw = cfg.features.extractor_kwargs()
+    feats = [extract_features(seq.scan(k), "geometric", **kw) for k in range(seq.n_scans)]
+    return scene, seq, cfg, feats
+
+
+@pytest.mark.parametrize("method", ["ihgr", "ihgr-window"])
+def test_every_landmark_carries_its_existence_and_those_that_left_say_why(drive, method):
+    scene, seq, cfg, feats = drive
+    c = cfg.with_(**{"map_policy.policy": "existence", "association.method": method})
+    lg = run_slam(seq, c, features=feats)
+    pol = c.map_policy
+    assert lg.landmark_existence.shape == lg.landmark_id.shape
+    assert np.all(lg.landmark_existence >= pol.existence_remove_prob)
+    assert lg.departures, "a landmark whose existence fell must have left the map"
+    for lid, k, why, r in lg.departures:
+        assert why == "existence" and r < pol.existence_remove_prob
+        assert lid not in lg.landmark_id.tolist() and 0 <= k < seq.n_scans
+        # it left after its last update: none of its measurements was used after that scan
+        used = lg.obs_scan[lg.obs_landmark == lid]
+        assert used.size == 0 or used.max() <= k
+    f = _map_figures(lg, scene, seq, feats)
+    assert f["trunks_found"] == f["trunks"]  # the trunks stay
+
+
+def test_the_confirm_policy_ignores_the_existence_settings(drive):
+    _, seq, cfg, feats = drive
+    a = run_slam(seq, cfg, features=feats)
+    b = run_slam(seq, cfg.with_(**{"map_policy.existence_pd_max": 0.3}), features=feats)
+    np.testing.assert_array_equal(a.landmark_xy, b.landmark_xy)
+    np.testing.assert_array_equal(a.pose, b.pose)
+    assert a.landmark_existence is None and a.departures == []
