@@ -95,6 +95,8 @@ class ScanResult:
     association: ScanAssociation | None = None
     decisions: MapDecisions | None = None
     closure: ClosureDecision | None = None
+    existence: np.ndarray | None = None  # map policy "existence": the map's, after the scan
+    departed_existence: tuple = ()  # and that of each landmark the decisions removed
 
 
 class RestGate:
@@ -212,9 +214,19 @@ class Slam:
             association=a,
             decisions=decisions,
             closure=closure,
+            **self._existence_after(decisions),
         )
         self.log.scan_done(result, self.state, clock.marks)
         return result
+
+    def _existence_after(self, decisions: MapDecisions) -> dict:
+        """Map policy "existence": the ScanResult's existence fields, else none."""
+        if self.existence is None:
+            return {}
+        return {
+            "existence": self.existence.of(self.state.landmark_ids),
+            "departed_existence": tuple(self.existence.of([i for i, _ in decisions.removed])),
+        }
 
     def predict(self, k: int) -> np.ndarray:
         """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan).

@@ -49,3 +49,42 @@ def test_the_confirm_policy_ignores_the_existence_settings(drive):
     np.testing.assert_array_equal(a.landmark_xy, b.landmark_xy)
     np.testing.assert_array_equal(a.pose, b.pose)
     assert a.landmark_existence is None and a.departures == []
+
+
+def test_the_visualiser_and_the_run_log_show_each_landmarks_existence_and_departures(
+    drive, tmp_path
+):
+    from experiments.io.run_log import DEPARTURE_REASONS, read_existence, write_run_log
+    from slam.visual import NullVisualiser
+
+    _, seq, cfg, feats = drive
+
+    class Seen(NullVisualiser):
+        def __init__(self):
+            self.existence, self.departures = [], []
+
+        def log_landmarks(self, xy, cov, ids, existence=None):
+            assert existence is not None and len(existence) == len(ids)
+            self.existence.append(np.asarray(existence))
+
+        def log_departures(self, departures):
+            self.departures += departures
+
+    vis = Seen()
+    c = cfg.with_(**{"map_policy.policy": "existence"})
+    lg = run_slam(seq, c, features=feats, visualiser=vis)
+    np.testing.assert_array_equal(vis.existence[-1], lg.landmark_existence)
+    assert [(lid, why) for lid, why, _ in vis.departures] == [
+        (lid, why) for lid, _, why, _ in lg.departures
+    ]
+    np.testing.assert_array_equal([r for *_, r in vis.departures], [d[3] for d in lg.departures])
+    write_run_log(tmp_path / "run_log.npz", lg)
+    got = read_existence(tmp_path)
+    np.testing.assert_array_equal(got["landmark_existence"], lg.landmark_existence)
+    np.testing.assert_array_equal(got["landmark_id"], lg.landmark_id)
+    assert got["departed_landmark"].tolist() == [d[0] for d in lg.departures]
+    assert got["departed_scan"].tolist() == [d[1] for d in lg.departures]
+    assert [DEPARTURE_REASONS[i] for i in got["departed_reason"]] == [d[2] for d in lg.departures]
+    # a run of the paper's policy writes none of them
+    write_run_log(tmp_path / "plain.npz", run_slam(seq, cfg, features=feats))
+    assert read_existence(tmp_path / "plain.npz") == {}
