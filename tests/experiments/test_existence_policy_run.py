@@ -88,3 +88,52 @@ def test_the_visualiser_and_the_run_log_show_each_landmarks_existence_and_depart
     # a run of the paper's policy writes none of them
     write_run_log(tmp_path / "plain.npz", run_slam(seq, cfg, features=feats))
     assert read_existence(tmp_path / "plain.npz") == {}
+
+
+def test_the_existence_settings_derived_from_a_run_recover_what_the_extractor_needs(drive):
+    """`derive_existence` on the paper's policy run of the drive, no truth used: the fewest
+    free beams it detects a trunk with is the extractor's min_circle_points (a circle needs
+    that many beams; geometric without short trunks), the trunks it keeps seeing are detected
+    in nearly every scan they are well in view, and birth_prob is the share of the started
+    tentatives that became the map's landmarks."""
+    from experiments.eval.existence_rates import WELL_SEEN, derive_existence
+
+    _, seq, cfg, feats = drive
+    lg = run_slam(seq, cfg, features=feats)
+    d = derive_existence(lg, seq, (0, seq.n_scans))
+    s = d["settings"]
+    assert s["map_policy.existence_min_beams"] == cfg.features.extractor.min_circle_points
+    e, det = np.array(d["expected_by_free_beams"]), np.array(d["detected_by_free_beams"])
+    assert det[: s["map_policy.existence_min_beams"] - 1].sum() <= 0.1 * e[:3].sum()
+    assert s["map_policy.existence_pd_max"] > 0.9
+    assert det[WELL_SEEN:].sum() / e[WELL_SEEN:].sum() > 0.9
+    assert d["tracks_joined"] == lg.landmark_id.size  # nothing left the map in this run
+    assert s["map_policy.existence_birth_prob"] == d["tracks_joined"] / d["tracks_started"]
+    assert 0 < s["map_policy.existence_false_per_scan"] < 5
+
+
+def test_the_existence_table_has_a_row_per_extractor_and_protocol(tmp_path):
+    from experiments.paper.victoria_park.existence_policy import TABLE, existence_rows
+
+    row = {
+        "precision": 0.9, "recall": 0.95, "f1": 0.92, "landmarks": 80, "removed": 3,
+        "existence_pd_max": 0.8, "existence_min_beams": 2, "existence_false_per_scan": 1.5,
+        "existence_birth_prob": 0.3,
+    }  # fmt: skip
+    results = [
+        {
+            "extractor": ex,
+            "rows": [
+                row | {"extractor": ex, "derived_on": f"scans {a}", "judged_on": f"scans {b}"}
+                for a, b in (
+                    ("1-1000", "1001-2000"),
+                    ("1001-2000", "1-1000"),
+                    ("1-2000", "1-2000 (in-sample)"),
+                )
+            ],
+        }  # fmt: skip
+        for ex in ("bailey", "geometric")
+    ]
+    md, csv_path = TABLE.write(tmp_path, existence_rows(results))
+    assert csv_path.read_text().count("\n") == 1 + 3 * 2
+    assert "scans 1-2000 (in-sample)" in md.read_text() and "removed by existence" in md.read_text()
