@@ -214,18 +214,19 @@ class Slam:
             association=a,
             decisions=decisions,
             closure=closure,
-            **self._existence_after(decisions),
+            **self._existence_after(decisions.removed),
         )
         self.log.scan_done(result, self.state, clock.marks)
         return result
 
-    def _existence_after(self, decisions: MapDecisions) -> dict:
-        """Map policy "existence": the ScanResult's existence fields, else none."""
+    def _existence_after(self, removed: list) -> dict:
+        """Map policy "existence": the ScanResult's existence fields (removed: the decisions'
+        [(landmark id, reason)]), else none."""
         if self.existence is None:
             return {}
         return {
             "existence": self.existence.of(self.state.landmark_ids),
-            "departed_existence": tuple(self.existence.of([i for i, _ in decisions.removed])),
+            "departed_existence": tuple(self.existence.of([i for i, _ in removed])),
         }
 
     def predict(self, k: int) -> np.ndarray:
@@ -304,6 +305,7 @@ class Slam:
             n_used=0,
             n_pending=self.map_manager.n_pending,
             tentative_xy=self.map_manager.tentative_xy,
+            **self._existence_after([]),
         )
         self.log.scan_done(result, self.state, clock.marks)
         return result
