@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from experiments.errors import DataError
 from slam import se2
 from slam.existence import ExistenceConfig, beam_evidence
 from slam.existence_map import DEFAULT_RADIUS_M
@@ -76,7 +77,11 @@ def derive_existence(lg, seq, scans: tuple[int, int], established: int = ESTABLI
     e, d = beam_detection_rates(lg, seq, scans, established)
     well = e[WELL_SEEN:].sum()
     if not well:
-        raise ValueError(f"derive_existence: no well-seen landmark in scans {scans}")
+        raise DataError(
+            f"derive_existence: no landmark of the run seen in more than {established} scans "
+            f"was in view with {WELL_SEEN} free beams or more in scans {scans}: no detection "
+            "rate to derive Pd from"
+        )
     full = d[WELL_SEEN:].sum() / well
     rate = np.where(e > 0, d / np.maximum(e, 1), 0.0)
     min_beams = next(b for b in range(1, MAX_BEAMS + 1) if rate[b] >= full / 2 or b >= WELL_SEEN)

@@ -137,3 +137,13 @@ def test_the_existence_table_has_a_row_per_extractor_and_protocol(tmp_path):
     md, csv_path = TABLE.write(tmp_path, existence_rows(results))
     assert csv_path.read_text().count("\n") == 1 + 3 * 2
     assert "scans 1-2000 (in-sample)" in md.read_text() and "removed by existence" in md.read_text()
+
+
+def test_a_run_with_no_well_seen_landmark_derives_nothing_and_says_why(drive):
+    from experiments.errors import DataError
+    from experiments.eval.existence_rates import derive_existence
+
+    _, seq, cfg, feats = drive
+    lg = run_slam(seq, cfg, features=feats)
+    with pytest.raises(DataError, match="no landmark of the run seen in more than 10000 scans"):
+        derive_existence(lg, seq, (0, seq.n_scans), established=10000)
