@@ -11,7 +11,8 @@ of the sequence `seq` with the paper's map policy (confirm_scans), on the scans 
    rate is at least half the rate of the well-seen (>= `WELL_SEEN` free beams); pd_max: the
    rate pooled over min_beams free beams and more.
 2. The clutter: false_per_scan, the circles the filter considered (not out of range, not in a
-   skipped scan, not ambiguous) whose track never became a landmark, per scan used. It is the
+   skipped scan, not ambiguous) whose track never became a landmark, per scan used (none:
+   half a circle over those scans, as the model needs a density above 0). It is the
    extractor's false-detection rate on the data at hand, where the simulator's (Table 4) is
    that of simulated parks without this park's clutter.
 3. birth_prob: of the tracks started (a new tentative), the share that joined the map.
@@ -93,7 +94,9 @@ def derive_existence(lg, seq, scans: tuple[int, int], established: int = ESTABLI
     gone = [row[0] for row in (lg.departures or [])]
     mapped |= np.isin(lg.meas_track, gone) & (lg.meas_track >= 0)
     n_scans = int(np.count_nonzero(~lg.scan_skipped[scans[0] : scans[1]]))
-    false_per_scan = float(np.count_nonzero(considered & ~mapped) / max(n_scans, 1))
+    # none seen: half a circle over the scans used, a rate a run of that length cannot tell
+    # from zero (the model needs a clutter density above 0)
+    false_per_scan = max(int(np.count_nonzero(considered & ~mapped)), 0.5) / max(n_scans, 1)
     started = in_half & (st == NEW_TENTATIVE) & (lg.meas_track >= 0)
     tracks = np.unique(lg.meas_track[started])  # a tentative's id is its landmark's if it joins
     n_started = int(tracks.size)

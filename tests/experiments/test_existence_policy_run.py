@@ -147,3 +147,19 @@ def test_a_run_with_no_well_seen_landmark_derives_nothing_and_says_why(drive):
     lg = run_slam(seq, cfg, features=feats)
     with pytest.raises(DataError, match="no landmark of the run seen in more than 10000 scans"):
         derive_existence(lg, seq, (0, seq.n_scans), established=10000)
+
+
+def test_a_run_without_a_false_circle_gives_half_a_circle_over_its_scans(drive):
+    """The clutter density must be above 0: a run whose every considered circle became a
+    landmark derives half a circle over the scans it used."""
+    import dataclasses
+
+    from experiments.eval.existence_rates import derive_existence
+    from slam.log import AMBIGUOUS
+
+    _, seq, cfg, feats = drive
+    lg = run_slam(seq, cfg, features=feats)
+    explained = np.isin(lg.meas_track, lg.landmark_id) & (lg.meas_track >= 0)
+    clean = dataclasses.replace(lg, meas_status=np.where(explained, lg.meas_status, AMBIGUOUS))
+    d = derive_existence(clean, seq, (0, seq.n_scans))
+    assert d["settings"]["map_policy.existence_false_per_scan"] == 0.5 / d["scans_used"]
