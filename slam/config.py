@@ -367,6 +367,19 @@ class MapPolicy:
         `prune_hit_ratio` of them. Expected: its predicted position lies inside the laser's
         field of view (no margins) and within `prune_range_m` and the usable range. 0 (the
         default): never; the map keeps whatever joined it.
+    policy: "confirm" (the above) or "existence": every landmark and tentative carries the
+        probability that it is a real trunk, updated every scan from the scan's beams and the
+        association (`slam.existence`, `slam.existence_map`); a tentative joins the map when
+        it reaches `existence_join_prob`, any landmark leaves it below
+        `existence_remove_prob` (confirm_scans no longer decides; tentatives are still dropped
+        after drop_after_missed scans unseen, and the pruner still runs when asked for).
+    existence_pd_max, existence_min_beams, existence_see_through_q: the sensor model's
+        detection probability, the returns a trunk needs to be seen, the chance that a beam
+        passes a real trunk's place (`slam.existence.ExistenceConfig`).
+    existence_false_per_scan: the extractor's false circles per scan (the clutter density is
+        that spread over the view's range and field of view).
+    existence_birth_prob: the existence of a new tentative: of the circles seen where nothing
+        was mapped, the share that are trunks.
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -376,8 +389,27 @@ class MapPolicy:
     )
     prune_hit_ratio: float = default(0.0, "design: 0, no pruning")
     prune_range_m: float = default(math.inf, "design: inf, no range limit on pruning")
+    policy: str = default(
+        "confirm", "paper: 'confirm', a tentative joins after confirm_scans sightings"
+    )
+    existence_pd_max: float = default(
+        0.9, "design: placeholder; derived from a run's detection rates (split-half)"
+    )
+    existence_min_beams: int = default(3, "sensor model: a circle is fitted to at least 3 returns")
+    existence_false_per_scan: float = default(
+        1.0, "design: placeholder; derived as the rate of circles that never join (split-half)"
+    )
+    existence_birth_prob: float = default(
+        0.2, "design: placeholder; derived as the share of new circles that join (split-half)"
+    )
+    existence_see_through_q: float = default(
+        0.1, "design: 1 in 10 beams passes a real trunk's place (position error, grazing)"
+    )
+    existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
+    existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
 
     def __post_init__(self) -> None:
+        self._check_existence()
         for name in ("confirm_scans", "drop_after_missed"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
@@ -396,6 +428,38 @@ class MapPolicy:
     def prunes(self) -> bool:
         """Whether landmarks can leave the map."""
         return self.prune_after_expected > 0 and self.prune_hit_ratio > 0.0
+
+    @property
+    def by_existence(self) -> bool:
+        """Whether landmarks join and leave the map by their existence (`slam.existence`)."""
+        return self.policy == "existence"
+
+    def _check_existence(self) -> None:
+        if self.policy not in ("confirm", "existence"):
+            raise SlamError(
+                f"map_policy.policy: must be 'confirm' or 'existence', got {self.policy!r}"
+            )
+        for name in ("existence_pd_max", "existence_see_through_q", "existence_birth_prob"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v <= 1.0:
+                raise SlamError(f"map_policy.{name}: must be in (0, 1], got {v!r}")
+        for name in ("existence_join_prob", "existence_remove_prob"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
+                raise SlamError(f"map_policy.{name}: must be in [0, 1], got {v!r}")
+        if not self.existence_remove_prob < self.existence_join_prob:
+            raise SlamError(
+                "map_policy.existence_remove_prob: must be below existence_join_prob "
+                f"({self.existence_join_prob!r}), got {self.existence_remove_prob!r}"
+            )
+        v = self.existence_min_beams
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+            raise SlamError(f"map_policy.existence_min_beams: must be an integer >= 1, got {v!r}")
+        v = self.existence_false_per_scan
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_false_per_scan: must be finite and > 0, got {v!r}"
+            )
 
 
 # The smallest match_m: the match bins landmark pairs by length in steps of match_m, so a

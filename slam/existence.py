@@ -1,5 +1,6 @@
 """Landmark existence: the probability that a landmark is a real trunk, updated every scan from
-what the laser did and did not report (groundwork for issue 41; not yet wired into the loop).
+what the laser did and did not report (issue 41; the run loop uses it through
+`slam.existence_map`, map policy "existence").
 
 A landmark (tentative or mapped) carries r, the probability that it is a static trunk the
 extractor can see. Each scan:
@@ -44,7 +45,7 @@ Interface (all vectorised over L landmarks; arrays are numpy float64 unless said
     r = update_existence(r, pd, detected (L,) bool, likelihood (L,), ev.through, kappa, cfg)
     join, remove = decide(r, cfg)                                           -> (L,) bool each
 
-How it replaces the map policy's counts (to be wired in by the loop's owner): `confirm_scans`
+How it replaces the map policy's counts (`slam.existence_map`): `confirm_scans`
 (a tentative joins after that many sightings) becomes `join_prob`, and the pruner's
 `prune_hit_ratio` / `prune_after_expected` / `prune_range_m` (remove a landmark seen in too
 few of the scans it was in view within a range) become `remove_prob` with Pd from the sensor

@@ -77,6 +77,12 @@ class SlamLog:
         then holds the tracks as they were before any merge (None when nothing was merged).
     closure_duplicates: with `[closure] enabled`, the landmarks the duplicate sweep
         marginalised out, [kept id, dropped id, scan] each (`slam.closure`, step 5).
+    landmark_existence (n,): map policy "existence" only, the existence of each landmark of
+        the final map (`slam.existence_map`; None otherwise).
+    departures: the landmarks that left the map other than by a closure merge, [landmark id,
+        scan, reason, existence] each: reason "existence" (its existence fell below
+        map_policy.existence_remove_prob, the figure logged) or "pruned" (the map policy's
+        pruner; existence NaN). Merged landmarks are in `closures` / `closure_duplicates`.
     """
 
     scan_t: np.ndarray
@@ -127,6 +133,8 @@ class SlamLog:
     closure_duplicates: list | None = None
     meas_track_unmerged: np.ndarray | None = None
     antenna_pose: np.ndarray | None = None
+    landmark_existence: np.ndarray | None = None
+    departures: list | None = None
 
     @property
     def n_scans(self) -> int:
@@ -163,6 +171,11 @@ class LogBuilder:
         self.start_cov = np.zeros((3, 3))
         self.laser_pose = np.zeros(3)
         self.antenna_pose = np.zeros(3)
+        self.departures: list = []
+
+    def departed(self, k: int, lid: int, reason: str, existence: float) -> None:
+        """Landmark lid left the map after scan k, for `reason` (`SlamLog.departures`)."""
+        self.departures.append([int(lid), int(k), str(reason), float(existence)])
 
     def started(self, pose: np.ndarray, cov: np.ndarray, laser_pose, antenna_pose) -> None:
         """The filter's prior at the first scan, the laser and antenna poses used."""
@@ -229,7 +242,10 @@ class LogBuilder:
         window_stats: dict | None = None,
         closures: list | None = None,
         closure_duplicates: list | None = None,
+        existence=None,
     ) -> SlamLog:
+        """The `SlamLog`; existence: the run's `slam.existence_map.LandmarkExistence` (None
+        without map policy "existence")."""
         ids = state.landmark_ids
         obs, meas, h = _joined(self.obs, _OBS_SHAPES), _joined(self.meas, _MEAS_SHAPES), history
         return SlamLog(
@@ -278,6 +294,8 @@ class LogBuilder:
             closures=closures,
             closure_duplicates=closure_duplicates,
             meas_track_unmerged=meas["track"].copy() if h.alias else None,
+            landmark_existence=None if existence is None else existence.of(ids),
+            departures=list(self.departures),
         )
 
 

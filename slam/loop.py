@@ -14,10 +14,12 @@ scan's record (`ScanResult`) collects it for the log and the visualiser:
    returns the landmark each measurement updated.
 A scan after which the odometry has moved the vehicle less than `vehicle.min_travel_m` since
 the last scan used is predicted only (`RestGate`): its measurements are logged SKIPPED.
-Pruning (`slam.map_managers.Pruner`) follows map management when the map policy asks for
-it, and loop closure (`slam.closure.LoopCloser`) when `[closure] enabled`: before the
-association it says which old landmarks the scan must not pair (`Revisit`), after map
-management what it matched and merged (`ClosureDecision`).
+With map policy "existence" every landmark's and tentative's existence is updated after the
+association, on the predicted state (`slam.existence_map`), and the landmarks the map manager
+removes for it are marginalised out. Pruning (`slam.map_managers.Pruner`) follows map
+management when the map policy asks for it, and loop closure (`slam.closure.LoopCloser`)
+when `[closure] enabled`: before the association it says which old landmarks the scan must
+not pair (`Revisit`), after map management what it matched and merged (`ClosureDecision`).
 
 The loop's roles: the source, the motion, the laser (mounting and view), the filter, the
 map manager, pruning, loop closure, the rest gate, the run's history (`slam.history`: what
@@ -47,6 +49,7 @@ from slam.components import Components, components
 from slam.config import SlamConfig
 from slam.ekf import Filter, initial_state
 from slam.errors import SlamError
+from slam.existence_map import LandmarkExistence
 from slam.history import RunHistory
 from slam.log import NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED, LogBuilder, SlamLog
 from slam.map_managers import MapDecisions, Pruner, ScanAssociation, make_map_manager
@@ -93,6 +96,8 @@ class ScanResult:
     association: ScanAssociation | None = None
     decisions: MapDecisions | None = None
     closure: ClosureDecision | None = None
+    existence: np.ndarray | None = None  # map policy "existence": the map's, after the scan
+    departed_existence: tuple = ()  # and that of each landmark the decisions removed
 
 
 class RestGate:
@@ -142,8 +147,18 @@ class Slam:
         self.history = RunHistory(self.scan_t)
         self.log = LogBuilder(self.scan_t)
         self.log.started(pose0, cov0, self.laser, p.T_vehicle_antenna)
+        self.existence = (
+            LandmarkExistence(p.map_policy, self.view, self.laser)
+            if p.map_policy.by_existence
+            else None
+        )
         self.map_manager = make_map_manager(
-            self.laser, self.view, p.association, p.map_policy, p.associator
+            self.laser,
+            self.view,
+            p.association,
+            p.map_policy,
+            p.associator,
+            existence=self.existence,
         )
         prunes = p.map_policy.prunes
         self.pruner = Pruner(p.map_policy, self.view, self.laser) if prunes else None
@@ -173,13 +188,17 @@ class Slam:
             return self._skipped(meas, clock)
         revisit = Revisit() if self.closer is None else self.closer.revisit(self.state, k)
         a = self.map_manager.associate(self.state, meas, drift, revisit.hidden)
+        if self.existence is not None:  # on the predicted state, before the update
+            tent = getattr(self.map_manager, "tent", None)
+            self.existence.update(self.state, meas, a, tent, revisit.hidden)
         clock.lap()
         nis, paired = self.update(meas, a)
         clock.lap()
         decisions = self.map_manager.manage(self.state, meas, a, paired)
         self._record(k, decisions)
         if self.pruner is not None:
-            self.pruner(self.state, decisions.status)
+            for lid in self.pruner(self.state, decisions.status):
+                self.log.departed(k, lid, "pruned", math.nan)
         closure = None
         if self.closer is not None:
             updated = decisions.status[decisions.status >= 0]
@@ -196,9 +215,20 @@ class Slam:
             association=a,
             decisions=decisions,
             closure=closure,
+            **self._existence_after(decisions.removed),
         )
         self.log.scan_done(result, self.state, clock.marks)
         return result
+
+    def _existence_after(self, removed: list) -> dict:
+        """Map policy "existence": the ScanResult's existence fields (removed: the decisions'
+        [(landmark id, reason)]), else none."""
+        if self.existence is None:
+            return {}
+        return {
+            "existence": self.existence.of(self.state.landmark_ids),
+            "departed_existence": tuple(self.existence.of([i for i, _ in removed])),
+        }
 
     def predict(self, k: int) -> np.ndarray:
         """Step 1: the odometry from scan k - 1 to scan k (nothing before the first scan).
@@ -267,6 +297,12 @@ class Slam:
             self.history.joined(lid, k, n_obs)
         for scan, feature, lid in decisions.retracks:
             self.log.retrack(scan, feature, lid)
+        if decisions.removed:  # map policy "existence": marginalised out
+            ids = [lid for lid, _ in decisions.removed]
+            self.state.remove_landmarks(ids)
+            r = self.existence.of(ids)
+            for (lid, why), r_lid in zip(decisions.removed, r.tolist()):
+                self.log.departed(k, lid, why, r_lid)
 
     def _skipped(self, meas: Measurements, clock: _Clock) -> ScanResult:
         """A scan at rest (`RestGate`): predicted only, its measurements SKIPPED."""
@@ -280,6 +316,7 @@ class Slam:
             n_used=0,
             n_pending=self.map_manager.n_pending,
             tentative_xy=self.map_manager.tentative_xy,
+            **self._existence_after([]),
         )
         self.log.scan_done(result, self.state, clock.marks)
         return result
@@ -351,6 +388,7 @@ def run_slam(
         association_method=parts.associator.method,
         config=cfg.to_dict(),
         window_stats=loop.map_manager.stats(),
+        existence=loop.existence,
         closures=None if closer is None else [e.to_dict() for e in closer.events],
         closure_duplicates=None if closer is None else [list(d) for d in closer.duplicates],
     )

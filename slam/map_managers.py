@@ -17,6 +17,8 @@ drift over the window as its relative uncertainty; it commits the newest scan's 
 re-decides, over the window, which earlier unpaired measurements are first sightings of one new
 landmark, which a mapped landmark missed by its own scan explains, and which are clutter.
 `Pruner` removes landmarks the laser should see and does not (`MapPolicy.prunes`).
+With map policy "existence" (`slam.existence_map`) both join by existence instead of counts
+and report the landmarks whose existence fell below remove_prob (`MapDecisions.removed`).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from association import gate_matrix
 from slam import se2
 from slam.ekf import Filter, landmark_columns
 from slam.errors import SlamError
+from slam.existence_map import LandmarkExistence, radii
 from slam.log import AMBIGUOUS, CONFIRMED, OUT_OF_RANGE, TENTATIVE_HIT
 from slam.sources import Measurements
 from slam.tentatives import MapPolicy, Tentatives, sighting
@@ -109,13 +112,16 @@ class MapDecisions:
     started (-1: none); joined [(landmark id, n_obs)] the landmarks that joined the map in this
     scan and the scans each was seen in; retracks [(scan, measurement, landmark id)] earlier
     measurements now known to be a new landmark's (the window's); n_pending tentatives (or open
-    window measurements) after the scan."""
+    window measurements) after the scan; removed [(landmark id, reason)] landmarks of the map
+    that must leave it (map_policy "existence": reason "existence"), for the loop to
+    marginalise."""
 
     status: np.ndarray
     track: np.ndarray
     joined: list
     retracks: list
     n_pending: int
+    removed: list = field(default_factory=list)
 
 
 @runtime_checkable
@@ -142,6 +148,7 @@ class _Context:
     params: dict
     policy: MapPolicy
     next_id: int = 0
+    existence: LandmarkExistence | None = None  # map_policy "existence" only
 
     def new_id(self) -> int:
         self.next_id += 1
@@ -160,6 +167,7 @@ class _Deciding:
     track: np.ndarray
     joined: list = field(default_factory=list)
     retracks: list = field(default_factory=list)
+    removed: list = field(default_factory=list)
 
     @classmethod
     def after_update(cls, meas: Measurements, laser, paired: np.ndarray) -> _Deciding:
@@ -172,8 +180,19 @@ class _Deciding:
         self.status[i] = CONFIRMED
         self.joined.append((lid, int(n_obs)))
 
+    def remove_unlikely(self, state: Filter, book: LandmarkExistence | None) -> None:
+        """Map policy "existence": the landmarks of the map whose existence fell below
+        remove_prob leave it (reported, `MapDecisions.removed`)."""
+        if book is None:
+            return
+        ids = state.landmark_ids
+        for lid in ids[book.leaves(ids)].tolist():
+            self.removed.append((int(lid), "existence"))
+
     def done(self, n_pending: int) -> MapDecisions:
-        return MapDecisions(self.status, self.track, self.joined, self.retracks, n_pending)
+        return MapDecisions(
+            self.status, self.track, self.joined, self.retracks, n_pending, removed=self.removed
+        )
 
 
 class TentativeMap:
@@ -251,7 +270,7 @@ class TentativeMap:
         paired (m,): the landmark id each measurement updated (-1: none). Returns each
         measurement's status and track (the id of the tentative it was paired with or
         started), the landmarks that joined the map and the number of tentatives."""
-        ctx, tent, z, R = self.ctx, self.tent, meas.z, meas.R
+        ctx, tent, z, R, book = self.ctx, self.tent, meas.z, meas.R, self.ctx.existence
         out = _Deciding.after_update(meas, ctx.laser, paired)
         status, track, policy = out.status, out.track, ctx.policy
         n_l = a.lm_idx.size
@@ -268,14 +287,22 @@ class TentativeMap:
                 continue
             mxy, C = sighting(state.pose, state.pose_cov, z[i], R[i], ctx.laser)
             lid = ctx.new_id()
+            if book is not None:
+                book.born(lid, float(radii(meas)[i]))
             new.append((mxy, C, lid))
             new_meas.append(int(i))
             track[i] = lid
-        if policy.confirm_scans == 1:  # every sighting joins the map at once
+        if policy.confirm_scans == 1 and book is None:  # every sighting joins the map at once
             for (_, _, lid), i in zip(new, new_meas):
                 out.map_landmark(state, i, lid, 1)
             new = []
-        self.tent, confirm = tent.step(matched, new, meas.k, policy)
+        join = gone = None
+        if book is not None:  # existence decides: joins in a scan it was seen in
+            seen = np.zeros(len(tent), bool)
+            seen[list(matched)] = True
+            join, gone = book.joins(tent.ids) & seen, book.leaves(tent.ids)
+        out.remove_unlikely(state, book)
+        self.tent, confirm = tent.step(matched, new, meas.k, policy, join=join, gone=gone)
         for ti in confirm:
             out.map_landmark(state, matched_meas[ti], int(tent.ids[ti]), tent.hits[ti] + 1)
         return out.done(len(self.tent))
@@ -407,8 +434,9 @@ class WindowMap:
         window joins the map, and its track's earlier measurements are re-tracked to it;
         ambiguous ones are ignored and leave the window's pool like the mapped ones; the rest
         stay open (status NEW_TENTATIVE). paired: as `TentativeMap.manage`."""
-        ctx = self.ctx
+        ctx, book = self.ctx, self.ctx.existence
         out = _Deciding.after_update(meas, ctx.laser, paired)
+        out.remove_unlikely(state, book)
         status, track = out.status, out.track
         need = min(ctx.policy.confirm_scans, self.assoc.K)
         use = self.scans[-1][0] if self.scans else np.flatnonzero(status != OUT_OF_RANGE)
@@ -419,10 +447,13 @@ class WindowMap:
                 status[i] = AMBIGUOUS
                 closed.append(use_pos[int(i)])
                 continue
-            if a.sightings[i] < need:
+            r = None if book is None else book.track_existence(int(a.sightings[i]), meas.R[i])
+            if (a.sightings[i] < need) if r is None else (r < book.cfg.join_prob):
                 n_open += 1
                 continue
             lid = ctx.new_id()
+            if book is not None:
+                book.track(lid, r, float(radii(meas)[i]))
             out.map_landmark(state, int(i), lid, max(int(a.sightings[i]), 1))
             track[i] = lid
             for ago, j in a.tracks.get(int(i), []):
@@ -448,10 +479,11 @@ class Pruner:
     # landmark id -> [scans expected in view, scans associated] since it joined the map
     count: dict[int, list[int]] = field(default_factory=dict)
 
-    def __call__(self, state: Filter, status: np.ndarray) -> None:
+    def __call__(self, state: Filter, status: np.ndarray) -> list[int]:
+        """Returns the ids removed."""
         ids = state.landmark_ids
         if not ids.size:
-            return
+            return []
         z_hat, _ = se2.observe(state.pose, state.landmarks_xy, self.laser)
         expected = self.view.contains(z_hat, margins=False, max_range=self.policy.prune_range_m)
         seen = set(status[status >= 0].tolist())
@@ -471,6 +503,7 @@ class Pruner:
             state.remove_landmarks(drop)
             for lid in drop:
                 del self.count[lid]
+        return drop
 
 
 def _shown(hidden, n: int) -> np.ndarray:
@@ -479,10 +512,13 @@ def _shown(hidden, n: int) -> np.ndarray:
     return np.ones(n, bool) if hidden is None else ~np.asarray(hidden, bool)
 
 
-def make_map_manager(laser, view: View, association, policy: MapPolicy, associator) -> MapManager:
+def make_map_manager(
+    laser, view: View, association, policy: MapPolicy, associator, existence=None
+) -> MapManager:
     """The run's map manager from the `[association]` and `[map_policy]` sections: `WindowMap`
     for "ihgr-window" (which associates by itself), else `TentativeMap` around the associator
-    callable. Both are used the same way (module doc)."""
+    callable. Both are used the same way (module doc). existence: the run's
+    `slam.existence_map.LandmarkExistence` (map policy "existence"; None: confirm_scans)."""
     ctx = _Context(
         laser,
         view,
@@ -490,6 +526,7 @@ def make_map_manager(laser, view: View, association, policy: MapPolicy, associat
         gate_prob=association.gate_prob,
         params=association.params,
         policy=policy,
+        existence=existence,
     )
     if association.windowed:
         return WindowMap(ctx, association.window_scans)

@@ -72,13 +72,18 @@ class Tentatives:
         new: list[tuple[np.ndarray, np.ndarray, int]],
         scan_index: int,
         policy: MapPolicy,
+        join: np.ndarray | None = None,
+        gone: np.ndarray | None = None,
     ) -> tuple[Tentatives, list[int]]:
         """One scan of bookkeeping.
 
         matched: tentative position -> (xy, cov) of this scan's sighting of it.
         new: [(xy, cov, id)] first sightings to add.
+        join, gone: (t,) bool, the tentatives that join the map and those dropped, decided
+        by the caller (map policy "existence"); None: by `policy.confirm_scans`, nothing more.
         Returns the new set and the positions (in `self`) of the tentatives that reached
-        `policy.confirm_scans` and must join the map (they are removed from the set).
+        `policy.confirm_scans` (or `join`) and must join the map (they are removed from the
+        set).
         """
         t = len(self)
         hits = self.hits.copy()
@@ -90,10 +95,15 @@ class Tentatives:
             missed[i] = 0
             xy[i] = m
             cov[i] = C
-        confirm = [i for i in range(t) if hits[i] >= policy.confirm_scans]
+        if join is None:
+            confirm = [i for i in range(t) if hits[i] >= policy.confirm_scans]
+        else:
+            confirm = np.flatnonzero(join).tolist()
         keep = np.ones(t, bool)
         keep[confirm] = False
         keep &= missed < policy.drop_after_missed
+        if gone is not None:
+            keep &= ~np.asarray(gone, bool)
         n_new = len(new)
         out = Tentatives(
             xy=np.concatenate([xy[keep], np.array([m for m, _, _ in new]).reshape(n_new, 2)]),

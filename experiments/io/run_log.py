@@ -12,6 +12,10 @@ Format (datasets/FORMAT.md, "Run log"): one compressed `.npz` with `format` =
         meas_R (M, 2, 2); kind 0 = used in an EKF update, 1 = initialised its landmark,
         2 = a tentative sighting of a landmark that later joined the map (unused by the EKF);
     init_pose (N, 3): the EKF's path; landmark_id (L,), init_landmark (L, 2): its map.
+    Map policy "existence" only (optional): landmark_existence (L,) each landmark's existence;
+    departed_landmark, departed_scan, departed_reason (D,) int, departed_existence (D,) float:
+    the landmarks that left the map, after which scan, why (`DEPARTURE_REASONS`) and their
+    existence then (NaN for "pruned").
 """
 
 from __future__ import annotations
@@ -26,7 +30,15 @@ from experiments.io.writers import write_atomic
 from slam import SlamError, SlamLog
 from slam.smoother import MEAS_TENTATIVE, Problem, problem_from_log
 
-__all__ = ["RUN_LOG_FORMAT", "RUN_LOG_NAME", "SCHEMA", "read_run_log", "write_run_log"]
+__all__ = [
+    "DEPARTURE_REASONS",
+    "RUN_LOG_FORMAT",
+    "RUN_LOG_NAME",
+    "SCHEMA",
+    "read_existence",
+    "read_run_log",
+    "write_run_log",
+]
 
 RUN_LOG_FORMAT = "trunkslam.run_log/1"
 RUN_LOG_NAME = "run_log.npz"
@@ -51,6 +63,15 @@ SCHEMA: dict[str, Var] = {
     "landmark_id": Var("int", ("L",), required=True),
     "init_landmark": Var("float", ("L", 2), required=True),
 }
+SCHEMA |= {
+    "landmark_existence": Var("float", ("L",)),
+    "departed_landmark": Var("int", ("D",)),
+    "departed_scan": Var("int", ("D",)),
+    "departed_reason": Var("int", ("D",)),
+    "departed_existence": Var("float", ("D",)),
+}
+# departed_reason codes: SlamLog.departures' reasons
+DEPARTURE_REASONS = ("existence", "pruned")
 _NAMES = ("features", "association")  # the run's methods, for the smoother's summary
 
 
@@ -62,8 +83,23 @@ def write_run_log(path: Path | str, log: SlamLog) -> Path:
         "features": np.array(log.features_method),
         "association": np.array(log.association_method),
         **p.arrays(),
+        **_existence_arrays(log),
     }
     return write_atomic(path, lambda fh: np.savez_compressed(fh, **arrays))
+
+
+def _existence_arrays(log: SlamLog) -> dict:
+    """The optional existence variables (module doc) of a run with departures or existence."""
+    out = {}
+    if log.landmark_existence is not None:
+        out["landmark_existence"] = np.asarray(log.landmark_existence, np.float64)
+    dep = log.departures or []
+    if dep or log.landmark_existence is not None:
+        out["departed_landmark"] = np.array([d[0] for d in dep], np.int64)
+        out["departed_scan"] = np.array([d[1] for d in dep], np.int64)
+        out["departed_reason"] = np.array([DEPARTURE_REASONS.index(d[2]) for d in dep], np.int64)
+        out["departed_existence"] = np.array([d[3] for d in dep], np.float64)
+    return out
 
 
 def read_run_log(path: Path | str, measurements: str = "ekf") -> tuple[Problem, dict]:
@@ -96,3 +132,14 @@ def read_run_log(path: Path | str, measurements: str = "ekf") -> tuple[Problem, 
         return Problem(**arrays), names
     except SlamError as exc:
         raise DataError(f"{path}: {exc}") from None
+
+
+def read_existence(path: Path | str) -> dict[str, np.ndarray]:
+    """The existence variables of a run log (module doc; {} for a run without them), checked
+    against `SCHEMA` like `read_run_log`."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / RUN_LOG_NAME
+    data = read_npz(path, SCHEMA, "run log", signature=("format", RUN_LOG_FORMAT))
+    keys = ("landmark_id", "landmark_existence", *(k for k in SCHEMA if k.startswith("departed")))
+    return {k: data[k] for k in keys if k in data} if "departed_landmark" in data else {}

@@ -51,6 +51,11 @@ VARIANTS = (
     ("paper, short trunks", "paper", True),
     ("geometric, short trunks", "geometric", True),
 )
+# Table 3's extractors again with map policy "existence" (`slam.existence_map`), its settings
+# derived from the same drive's confirm_scans run without the truth
+# (`experiments.eval.existence_rates.derive_existence` over all its scans)
+EXISTENCE = tuple(m for m, _, short in VARIANTS if not short)
+LABELS_RUN = (*(v[0] for v in VARIANTS), *(f"{m}, existence" for m in EXISTENCE))
 
 
 def landmark_objects(lg, labels: np.ndarray, feats) -> dict[int, int]:
@@ -117,7 +122,22 @@ def clutter_trial(job: tuple, seed) -> list[dict]:
             rows.append(
                 {"scene": name, "method": label, "run": index} | _map_figures(lg, scene, seq, feats)
             )
+            if label in EXISTENCE:
+                rows.append(_existence_row(name, label, index, (scene, seq, scfg, feats), lg))
     return rows
+
+
+def _existence_row(name: str, label: str, index: int, run: tuple, lg) -> dict:
+    """The drive again with map policy "existence", its settings derived from `lg` (the
+    confirm_scans run of the same drive) without the truth."""
+    from experiments.eval.existence_rates import derive_existence
+
+    scene, seq, scfg, feats = run
+    derived = derive_existence(lg, seq, (0, seq.n_scans))
+    cfg = scfg.with_(**{"map_policy.policy": "existence", **derived["settings"]})
+    ex = run_slam(seq, cfg, features=feats)
+    row = {"scene": name, "method": f"{label}, existence", "run": index}
+    return row | _map_figures(ex, scene, seq, feats)
 
 
 def summary_records(rows: list[dict]) -> list[dict]:
@@ -125,7 +145,7 @@ def summary_records(rows: list[dict]) -> list[dict]:
     landmarks per run and the share of the class's objects mapped."""
     out = []
     for scene in SCENES:
-        for m, _, _ in VARIANTS:
+        for m in LABELS_RUN:
             rs = [r for r in rows if r["scene"] == scene and r["method"] == m]
             if not rs:
                 continue

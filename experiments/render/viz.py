@@ -359,7 +359,8 @@ class NullRecorder:
     ) -> None: ...
     def log_truth_trees(self, circles_xyr) -> None: ...
     def log_vehicle(self, pose, cov) -> None: ...
-    def log_landmarks(self, xy, cov, ids) -> None: ...
+    def log_landmarks(self, xy, cov, ids, existence=None) -> None: ...
+    def log_departures(self, departures: list) -> None: ...
     def log_tentatives(self, xy) -> None: ...
     def log_associations(self, from_xy, to_xy) -> None: ...
     def log_truth(self, pose) -> None: ...
@@ -696,19 +697,28 @@ class Recorder(NullRecorder):
         self._log("world/vehicle_ellipse", _strips(ellipse[None], (255, 80, 80), 1.0))
         self._log("world/path", _strips([self._est_path.piece()], (255, 80, 80), 1.5))
 
-    def log_landmarks(self, xy, cov, ids) -> None:
+    def log_landmarks(self, xy, cov, ids, existence=None) -> None:
+        """The map; existence (n,): map policy "existence", each landmark's, in its label and
+        its colour (green at 1, through yellow, to red at 0)."""
         if self._skip():
             return
         xy = np.asarray(xy, float).reshape(-1, 2)
         cov = np.asarray(cov, float).reshape(-1, 2, 2) * self.ellipse_scale**2
+        labels = colors = None  # without existence: one colour, the ids' labels
+        if existence is not None:
+            r = np.clip(np.nan_to_num(np.asarray(existence, float), nan=0.0), 0.0, 1.0)
+            labels = [f"L{int(i)} r={v:.3f}" for i, v in zip(ids, r)]
+            colors = np.column_stack(
+                [255 * np.minimum(1.0, 2 * (1 - r)), 200 * np.minimum(1.0, 2 * r), 60 + 0 * r]
+            ).astype(np.uint8)
         self._log(
             "world/landmarks",
             rows.row(
                 rr.Points2D,
                 positions=rows.vectors(xy),
                 radii=rows.radii_ui(3.0),
-                colors=rows.color(40, 200, 90),
-                labels=rows.id_labels("L", ids),
+                colors=rows.color(40, 200, 90) if colors is None else rows.colors(colors),
+                labels=rows.id_labels("L", ids) if labels is None else rows.labels(labels),
             ),
         )
         ids = np.array(ids, np.int64)
@@ -773,6 +783,14 @@ class Recorder(NullRecorder):
             text += f"; {len(e['merged'])} landmarks merged"
         level = rr.TextLogLevel.INFO if e["outcome"] == "accepted" else rr.TextLogLevel.DEBUG
         self.rec.log("events/closures", rr.TextLog(text, level=level))
+
+    def log_departures(self, departures: list) -> None:
+        """The landmarks that left the map at this scan, (id, reason, existence) each (map
+        policy "existence", `slam.log.SlamLog.departures`), as lines of the text log
+        `events/map`, whatever the decimation."""
+        for lid, why, r in departures:
+            text = f"L{int(lid)} left the map: {why} (existence {float(r):.4f})"
+            self.rec.log("events/map", rr.TextLog(text, level=rr.TextLogLevel.INFO))
 
     def log_duplicates(self, pairs: list) -> None:
         """The duplicate sweep's merges at this scan (`slam.closure`, step 5: (kept id,

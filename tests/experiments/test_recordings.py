@@ -188,3 +188,15 @@ def test_a_duplicate_sweep_is_marked_on_the_timeline(tmp_path):
         rec.set_scan(7, 1.4)
         rec.log_duplicates([(2, 159)])
     assert "events/closures" in read_recording(path)["entities"]
+
+
+def test_landmark_existence_colours_the_map_and_departures_are_marked(tmp_path):
+    """Map policy "existence": `log_landmarks` takes each landmark's existence (its label and
+    colour) and `log_departures` writes who left and why to the text log `events/map`."""
+    path = tmp_path / "e.rrd"
+    with Recorder(path, kind="slam", decimate=1) as rec:
+        rec.set_scan(3, 0.6)
+        rec.log_landmarks(np.zeros((2, 2)), np.tile(np.eye(2), (2, 1, 1)), [4, 5], [0.99, 0.2])
+        rec.log_departures([(6, "existence", 0.004)])
+    e = read_recording(path)["entities"]
+    assert "events/map" in e and "world/landmarks" in e

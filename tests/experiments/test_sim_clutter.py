@@ -69,6 +69,9 @@ def test_a_drive_through_the_clutter_park_counts_each_class():
         "bailey",
         "paper, short trunks",
         "geometric, short trunks",
+        "paper, existence",
+        "geometric, existence",
+        "bailey, existence",
     }
     for r in clutter:
         assert r["objects_trunk"] == 8 and r["objects_post"] == 6 and r["objects_person"] == 6

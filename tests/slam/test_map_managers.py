@@ -57,3 +57,123 @@ def test_both_managers_keep_the_contract_and_leave_the_measurements_alone(method
     assert decisions.track[:2].tolist() == joined and decisions.track[2] == -1
     assert decisions.n_pending == manager.n_pending == 0 and decisions.retracks == []
     np.testing.assert_allclose(state.landmarks_xy[0], [10 * math.cos(0.1), 10 * math.sin(0.1)])
+
+
+# map policy "existence" (slam.existence_map): joins and removals by probability
+
+
+def _existence_manager(method: str, **policy):
+    from slam.existence_map import LandmarkExistence
+
+    changes = {"association.method": method, "map_policy.policy": "existence"}
+    changes |= {f"map_policy.{k}": v for k, v in policy.items()}
+    cfg = SlamConfig().with_(**changes)
+    view = View(fov=(-math.pi / 2, math.pi / 2), max_range=50.0)
+
+    def nearest(z, R, z_hat, H, P, gate_prob=0.99, **params):  # within 1 m of range-bearing
+        d = np.hypot(z[:, None, 0] - z_hat[None, :, 0], 10 * (z[:, None, 1] - z_hat[None, :, 1]))
+        return np.where(d.min(axis=1) < 1.0, d.argmin(axis=1), -1).astype(np.int64)
+
+    book = LandmarkExistence(cfg.map_policy, view, LASER)
+    manager = make_map_manager(
+        LASER, view, cfg.association, cfg.map_policy, nearest, existence=book
+    )
+    return manager, book
+
+
+def _trunk_scan(k: int, seen: bool = True) -> Measurements:
+    z = np.array([[10.0, 0.1]]) if seen else np.zeros((0, 2))
+    R = np.tile(np.diag([1e-2, 1e-4]), (z.shape[0], 1, 1))
+    return Measurements(k, None, None, z, R, np.full(z.shape[0], NEW_TENTATIVE, np.int64))
+
+
+def _existence_scan(manager, book, state, meas):
+    a = manager.associate(state, meas, np.eye(3) * 1e-6, None)
+    book.update(state, meas, a, getattr(manager, "tent", None))
+    paired = np.full(meas.z.shape[0], -1, np.int64)
+    to_map = a.to_map()
+    paired[to_map] = state.landmark_ids[a.lm_idx[a.assign[to_map]]]
+    d = manager.manage(state, meas, a, paired)
+    if d.removed:
+        state.remove_landmarks([lid for lid, _ in d.removed])
+    return d
+
+
+@pytest.mark.parametrize("method", ["ihgr", "ihgr-window"])
+def test_existence_joins_a_trunk_at_join_prob_not_at_a_count(method):
+    """A trunk seen every scan joins the map in the first scan its existence reaches
+    join_prob (confirm_scans 10 plays no part), and not before; its existence rose with each
+    sighting."""
+    manager, book = _existence_manager(method, confirm_scans=10)
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    history = []
+    for k in range(6):
+        d = _existence_scan(manager, book, state, _trunk_scan(k))
+        if d.joined:
+            break
+        assert state.n_landmarks == 0
+        if method == "ihgr":  # the tentative's existence, below join_prob until it joins
+            history.append(book.r[0])
+            assert history[-1] < book.cfg.join_prob
+    assert d.joined and state.n_landmarks == 1 and k + 1 < 10
+    lid = d.joined[0][0]
+    assert book.r[lid] >= book.cfg.join_prob
+    assert all(b > a for a, b in zip(history, history[1:]))
+    if method == "ihgr-window":  # the window's rule: the existence of its sightings
+        R = _trunk_scan(0).R[0]
+        assert book.track_existence(k + 1, R) >= book.cfg.join_prob
+        assert book.track_existence(k, R) < book.cfg.join_prob
+    else:
+        assert len(history) == k >= 1
+
+
+def test_a_circle_no_likelier_than_clutter_never_joins_and_is_dropped():
+    """With a clutter density that explains a sighting better than a trunk does, the tentative's
+    existence falls with each sighting: it never joins and leaves below remove_prob."""
+    manager, book = _existence_manager("ihgr", existence_false_per_scan=1e5)
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    rs = []
+    for k in range(10):
+        d = _existence_scan(manager, book, state, _trunk_scan(k))
+        assert not d.joined
+        rs.append(book.r[0])
+    assert rs[0] == book.birth and rs[1] < rs[0] and rs[-1] < book.cfg.remove_prob
+    assert state.n_landmarks == 0 and 0 not in manager.tent.ids.tolist()
+
+
+@pytest.mark.parametrize("method", ["ihgr", "ihgr-window"])
+def test_a_landmark_missed_in_view_leaves_when_its_existence_falls_below_remove_prob(method):
+    """Once mapped, a landmark in view and no longer reported loses odds by (1 - pd_max) per
+    scan (no beams given: Pd = pd_max in view); the map manager reports it removed, reason
+    "existence", in the first scan its existence falls below remove_prob, not before."""
+    manager, book = _existence_manager(method)
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    k = 0
+    while state.n_landmarks == 0:
+        _existence_scan(manager, book, state, _trunk_scan(k))
+        k += 1
+    lid = int(state.landmark_ids[0])
+    odds = book.r[lid] / (1 - book.r[lid])
+    misses = 0
+    while odds / (1 + odds) >= book.cfg.remove_prob:
+        odds *= 1 - book.cfg.pd_max
+        misses += 1
+    for i in range(misses):
+        d = _existence_scan(manager, book, state, _trunk_scan(k + i, seen=False))
+        assert d.removed == ([(lid, "existence")] if i == misses - 1 else [])
+    assert state.n_landmarks == 0 and book.r[lid] < book.cfg.remove_prob
+
+
+def test_a_landmark_out_of_view_keeps_its_existence():
+    manager, book = _existence_manager("ihgr")
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    k = 0
+    while state.n_landmarks == 0:
+        _existence_scan(manager, book, state, _trunk_scan(k))
+        k += 1
+    lid = int(state.landmark_ids[0])
+    r = book.r[lid]
+    state.x[2] = math.pi  # turned round: the landmark is behind the laser
+    for i in range(5):
+        assert _existence_scan(manager, book, state, _trunk_scan(k + i, seen=False)).removed == []
+    assert book.r[lid] == r and state.n_landmarks == 1

@@ -194,6 +194,9 @@ def run(ctx) -> None:
     candidates = (3, 4, 5) if ctx.quick else CONFIRM_CANDIDATES
     jobs = [(ex, k, FIT_SCANS) for ex in EXTRACTORS for k in candidates]
     batch = ctx.submit(split_trial, jobs, desc="split-half runs", chunksize=1)
+    from experiments.paper.victoria_park import existence_policy
+
+    existence_policy.submit(ctx, EXTRACTORS, FIT_SCANS, NAME)  # the existence policy's rows
 
     def finish(records: list) -> None:
         derived = derive_per_half(records)

@@ -1,0 +1,182 @@
+"""`map_policy.policy = "existence"`: every landmark and tentative of a run carries its existence,
+the probability that it is a real trunk (`slam.existence` holds the model), kept here by id.
+
+Each scan, after the association and before the filter's update (`LandmarkExistence.update`,
+called by the loop), on the predicted state:
+1. the landmarks and tentatives predicted inside the view (no margins) are placed in the laser
+   frame and the scan's beams give each its reach, occlusion and see-through counts
+   (`slam.existence.beam_evidence`), its radius the last circle associated with it;
+2. the association says which were detected; each detection's likelihood is N(nu; 0, S) with
+   S = H C H^T + R of the candidate's [pose, point] block, as the association gated it;
+3. Bayes' rule updates their existence (`slam.existence.update_existence`); landmarks the loop
+   closure hid from the association learn nothing in that scan.
+The map managers read it (`slam.map_managers`): a tentative joins the map when its existence
+reaches `join_prob` (in a scan it was seen in), a window track joins when the existence of its
+sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`
+leaves the map, reported in `MapDecisions.removed` for the loop to marginalise. A new
+tentative starts at `map_policy.existence_birth_prob`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from slam import se2
+from slam.config import MapPolicy
+from slam.ekf import Filter, landmark_columns
+from slam.existence import (
+    BeamEvidence,
+    ExistenceConfig,
+    beam_evidence,
+    clutter_density,
+    detection_probability,
+    gaussian_likelihood,
+    update_existence,
+)
+
+__all__ = ["DEFAULT_RADIUS_M", "LandmarkExistence", "radii"]
+
+# A landmark's radius before a circle with one was associated with it (published detections
+# give diameters; a source without them gets this): a Victoria Park trunk's, 0.15 m.
+DEFAULT_RADIUS_M = 0.15
+
+
+def radii(meas) -> np.ndarray:
+    """(m,) the radius of each circle of a scan's measurements (NaN where unknown)."""
+    if meas.features is None:
+        return np.full(meas.z.shape[0], math.nan)
+    return meas.radius_m
+
+
+class LandmarkExistence:
+    """The existence of every landmark and tentative of a run, by id (module doc). view: the
+    laser's `View` (fov, max_range); laser: T_vehicle_laser (3,)."""
+
+    def __init__(self, policy: MapPolicy, view, laser: np.ndarray) -> None:
+        self.view, self.laser = view, np.asarray(laser, dtype=np.float64)
+        self.cfg = ExistenceConfig(
+            pd_max=float(policy.existence_pd_max),
+            min_beams=int(policy.existence_min_beams),
+            see_through_q=float(policy.existence_see_through_q),
+            max_range_m=float(view.max_range),
+            join_prob=float(policy.existence_join_prob),
+            remove_prob=float(policy.existence_remove_prob),
+        )
+        fov = float(view.fov[1] - view.fov[0])
+        self.kappa = clutter_density(
+            float(policy.existence_false_per_scan), float(view.max_range), max(fov, 1e-9)
+        )
+        self.birth = float(policy.existence_birth_prob)
+        self.r: dict[int, float] = {}
+        self.radius: dict[int, float] = {}
+
+    def born(self, lid: int, radius_m: float) -> None:
+        """A new tentative `lid` seen with a circle of radius_m (NaN: unknown)."""
+        self.r[int(lid)] = self.birth
+        self._radius(lid, radius_m)
+
+    def of(self, ids) -> np.ndarray:
+        """(n,) the existence of these ids (NaN for an id never seen)."""
+        return np.array([self.r.get(int(i), math.nan) for i in ids], np.float64)
+
+    def joins(self, ids) -> np.ndarray:
+        """(n,) bool: existence at or above join_prob."""
+        return self.of(ids) >= self.cfg.join_prob
+
+    def leaves(self, ids) -> np.ndarray:
+        """(n,) bool: existence below remove_prob."""
+        return self.of(ids) < self.cfg.remove_prob
+
+    def track_existence(self, n_sightings: int, R: np.ndarray) -> float:
+        """The existence of a window track seen in n_sightings scans, each a detection with the
+        likelihood of an innovation of NIS 2 (its mean) under S = 2 R (two sightings' noise)."""
+        S = 2.0 * np.asarray(R, dtype=np.float64)
+        g = math.exp(-1.0) / (2.0 * math.pi * math.sqrt(max(np.linalg.det(S), 1e-300)))
+        ratio = self.cfg.pd_max * g / self.kappa
+        odds = self.birth / max(1.0 - self.birth, 1e-300) * ratio ** max(n_sightings - 1, 0)
+        return 1.0 if math.isinf(odds) else odds / (1.0 + odds)
+
+    def track(self, lid: int, r: float, radius_m: float) -> None:
+        """A window track joined the map as landmark lid with existence r."""
+        self.r[int(lid)] = float(r)
+        self._radius(lid, radius_m)
+
+    def _radius(self, lid: int, radius_m: float) -> None:
+        if math.isfinite(radius_m) and radius_m > 0:
+            self.radius[int(lid)] = float(radius_m)
+
+    def update(self, state: Filter, meas, a, tentatives=None, hidden=None) -> None:
+        """One scan's update (module doc) on the predicted state, with the association `a`
+        (`slam.map_managers.ScanAssociation`); tentatives: the `slam.tentatives.Tentatives`
+        (None: none, the window's); hidden: the landmarks closure hid (mask or None)."""
+        n_lm = state.landmark_ids.size
+        ids = state.landmark_ids.astype(np.int64)
+        xy = state.landmarks_xy
+        t_ids = np.zeros(0, np.int64) if tentatives is None else tentatives.ids
+        if tentatives is not None and len(tentatives):
+            xy = np.concatenate([xy, tentatives.xy])
+            ids = np.concatenate([ids, t_ids])
+        if not ids.size:
+            return
+        z_hat, H5 = se2.observe(state.pose, xy, self.laser)
+        look = self.view.contains(z_hat, margins=False)
+        if hidden is not None:
+            look[:n_lm] &= ~np.asarray(hidden, bool)
+        detected, g = self._detections(state, meas, a, tentatives, z_hat=z_hat, H5=H5)
+        look |= detected
+        idx = np.flatnonzero(look)
+        if not idx.size:
+            return
+        radius = np.array([self.radius.get(int(i), DEFAULT_RADIUS_M) for i in ids[idx]])
+        scan = meas.scan
+        if scan is None:  # no beams: in view means reachable, nothing seen through
+            n = idx.size
+            reach, through = np.full(n, self.cfg.min_beams, np.int64), np.zeros(n, np.int64)
+            ev = BeamEvidence(reach, np.zeros(n, np.int64), through)
+        else:
+            ranges = np.asarray(scan.ranges_m, dtype=np.float64)
+            bearings = scan.angle_min_rad + scan.angle_increment_rad * np.arange(ranges.size)
+            ev = beam_evidence(ranges, bearings, z_hat[idx, 0], z_hat[idx, 1], radius, cfg=self.cfg)
+        pd = detection_probability(ev, z_hat[idx, 0], np.ones(idx.size, bool), self.cfg)
+        # a landmark the association paired was seen, whatever the beams say of its reach
+        pd = np.where(detected[idx], self.cfg.pd_max, pd)
+        r = self.of(ids[idx])
+        r = np.where(np.isfinite(r), r, self.birth)
+        r = update_existence(
+            r, pd, detected[idx], g[idx], ev.through, kappa=self.kappa, cfg=self.cfg
+        )
+        for lid, v in zip(ids[idx].tolist(), r.tolist()):
+            self.r[lid] = v
+
+    def _detections(self, state, meas, a, tentatives, *, z_hat, H5):
+        """(detected (L,) bool, likelihood (L,)) of [landmarks, tentatives] from the association;
+        the radii of the detecting circles are remembered."""
+        L, n_lm = z_hat.shape[0], state.landmark_ids.size
+        detected, g = np.zeros(L, bool), np.zeros(L)
+        rows = np.flatnonzero(a.assign >= 0)
+        if not rows.size:
+            return detected, g
+        n_l = a.lm_idx.size
+        j = a.assign[rows]
+        cand = np.concatenate([a.lm_idx, n_lm + a.t_idx]).astype(np.int64)[j]  # into z_hat
+        C5 = np.zeros((rows.size, 5, 5))
+        is_lm = j < n_l
+        if is_lm.any():
+            C5[is_lm] = state.cov(landmark_columns(cand[is_lm]))
+        if (~is_lm).any():
+            C5[~is_lm, :3, :3] = state.pose_cov
+            C5[~is_lm, 3:, 3:] = tentatives.cov[cand[~is_lm] - n_lm]
+        H = H5[cand]
+        S = np.einsum("nij,njk,nlk->nil", H, C5, H) + meas.R[rows]
+        nu = meas.z[rows] - z_hat[cand]
+        nu[:, 1] = (nu[:, 1] + np.pi) % (2.0 * np.pi) - np.pi
+        detected[cand] = True
+        g[cand] = gaussian_likelihood(nu, S)
+        ids = np.concatenate(
+            [state.landmark_ids, np.zeros(0, np.int64) if tentatives is None else tentatives.ids]
+        )
+        for c, rad in zip(cand.tolist(), radii(meas)[rows].tolist()):
+            self._radius(int(ids[c]), rad)
+        return detected, g
