@@ -95,8 +95,10 @@ class LandmarkExistence:
         S = 2.0 * np.asarray(R, dtype=np.float64)
         g = math.exp(-1.0) / (2.0 * math.pi * math.sqrt(max(np.linalg.det(S), 1e-300)))
         ratio = self.cfg.pd_max * g / self.kappa
-        odds = self.birth / max(1.0 - self.birth, 1e-300) * ratio ** max(n_sightings - 1, 0)
-        return 1.0 if math.isinf(odds) else odds / (1.0 + odds)
+        # in log-odds: ratio ** n overflows (an OverflowError, not inf) for tiny clutter rates
+        lo = math.log(max(self.birth, 1e-300)) - math.log(max(1.0 - self.birth, 1e-300))
+        lo += max(n_sightings - 1, 0) * math.log(max(ratio, 1e-300))
+        return 1.0 / (1.0 + math.exp(-lo)) if lo > -700.0 else 0.0
 
     def track(self, lid: int, r: float, radius_m: float) -> None:
         """A window track joined the map as landmark lid with existence r."""

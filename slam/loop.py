@@ -255,7 +255,9 @@ class Slam:
     def measure(self, k: int) -> Measurements:
         """Step 2: scan k's circles as measurements, each NEW_TENTATIVE until decided, or
         OUT_OF_RANGE beyond the usable range or not finite."""
-        scan = self.seq.scan(k) if self.source.needs_scan else None
+        # the raw scan: for the extractor, and for existence's beams whatever the source
+        wanted = self.source.needs_scan or self.existence is not None
+        scan = self.seq.scan(k) if wanted else None
         f, z, R = self.source(k, scan)
         status = np.full(z.shape[0], NEW_TENTATIVE, np.int64)
         usable = (z[:, 0] <= self.view.max_range) & np.all(np.isfinite(z), axis=1)

@@ -132,7 +132,7 @@ def slam_cmd(
     and the run log the smoother reads (`trunkslam smooth`)."""
     if config is None and not dump_config:  # a --config's errors are said first, as ever
         check_input(input, "sequence file")
-    if input is not None and not dump_config:
+    if input is not None and not dump_config and Path(input).is_file():  # else: its error first
         from experiments.render.cold_start import say_if_cold
 
         say_if_cold()  # a first run's first line, before the imports below (seconds)

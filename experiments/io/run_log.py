@@ -12,10 +12,10 @@ Format (datasets/FORMAT.md, "Run log"): one compressed `.npz` with `format` =
         meas_R (M, 2, 2); kind 0 = used in an EKF update, 1 = initialised its landmark,
         2 = a tentative sighting of a landmark that later joined the map (unused by the EKF);
     init_pose (N, 3): the EKF's path; landmark_id (L,), init_landmark (L, 2): its map.
-    Map policy "existence" only (optional): landmark_existence (L,) each landmark's existence;
-    departed_landmark, departed_scan, departed_reason (D,) int, departed_existence (D,) float:
-    the landmarks that left the map, after which scan, why (`DEPARTURE_REASONS`) and their
-    existence then (NaN for "pruned").
+    Optional: landmark_existence (L,) each landmark's existence (map policy "existence");
+    departed_landmark, departed_scan, departed_reason (D,) int, departed_existence (D,) float
+    (map policy "existence", or a run that prunes): the landmarks that left the map, after
+    which scan, why (`DEPARTURE_REASONS`) and their existence then (NaN for "pruned").
 """
 
 from __future__ import annotations

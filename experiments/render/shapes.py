@@ -6,7 +6,7 @@ import functools
 
 import numpy as np
 
-__all__ = ["circle_polyline", "circle_polylines", "ellipse_polyline", "ellipse_polylines"]
+__all__ = ["circle_polylines", "ellipse_polyline", "ellipse_polylines"]
 
 
 @functools.cache
@@ -18,14 +18,8 @@ def _unit_circle(n: int) -> np.ndarray:
     return unit
 
 
-def circle_polyline(cx: float, cy: float, r: float, n: int = 48) -> np.ndarray:
-    """(n + 1, 2) closed polyline of a circle."""
-    t = np.linspace(0.0, 2.0 * np.pi, n + 1)
-    return np.stack([cx + r * np.cos(t), cy + r * np.sin(t)], axis=1)
-
-
 def circle_polylines(circles_xyr, n: int = 48) -> np.ndarray:
-    """(m, n + 1, 2) the `circle_polyline` of each of m circles (m, 3) [x, y, r] at once."""
+    """(m, n + 1, 2) closed polylines of m circles (m, 3) [x, y, r], n sides each."""
     c = np.asarray(circles_xyr, float).reshape(-1, 3)
     unit = _unit_circle(n)
     return c[:, None, :2] + c[:, 2:, None] * unit[None]

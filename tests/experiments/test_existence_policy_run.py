@@ -163,3 +163,22 @@ def test_a_run_without_a_false_circle_gives_half_a_circle_over_its_scans(drive):
     clean = dataclasses.replace(lg, meas_status=np.where(explained, lg.meas_status, AMBIGUOUS))
     d = derive_existence(clean, seq, (0, seq.n_scans))
     assert d["settings"]["map_policy.existence_false_per_scan"] == 0.5 / d["scans_used"]
+
+
+@pytest.mark.data
+def test_existence_reads_the_beams_with_published_detections_too(vp_dir):
+    """A detections source needs no raw scan for its circles, but existence needs the beams:
+    with them, the published detections give the same existence as our `bailey` extractor on
+    the same raw scans (the reimplementation reproduces the detections on these scans)."""
+    from experiments.io.config_file import load_slam_config, preset_path
+    from experiments.io.victoria_park import load_victoria_park
+
+    seq = load_victoria_park(vp_dir, n_scans=300)
+    cfg = load_slam_config(preset_path("victoria_park_ute")).with_(
+        **{"map_policy.policy": "existence"}
+    )
+    logs = {m: run_slam(seq, cfg.with_(**{"features.method": m})) for m in ("detections", "bailey")}
+    a, b = logs["detections"], logs["bailey"]
+    assert a.landmark_id.size > 10
+    np.testing.assert_array_equal(a.landmark_id, b.landmark_id)
+    np.testing.assert_allclose(a.landmark_existence, b.landmark_existence, rtol=1e-9, atol=0)

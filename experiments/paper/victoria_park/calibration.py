@@ -621,7 +621,8 @@ def preset_config(
     8), the steering calibration, the start fitted along the filter's own path over the
     first `start_fit_m` metres of GPS (`vp_start`), the map policy's `confirm_scans`
     (`vp_map_policy.derive_confirm`; None: BASE's, the paper's 3), the laser latency
-    (`derive_latency`) and the pass offset (`vp_pass_offset.derive`)."""
+    (`derive_latency`); white errors unless `pass_offset_sd_m` is given (the calibration derives
+    the pass offset, `vp_pass_offset.derive`, and does not set it)."""
     confirm = BASE.map_policy.confirm_scans if confirm_scans is None else int(confirm_scans)
     base = BASE.with_(
         **{
@@ -648,8 +649,9 @@ start is fitted to along the filter's own path (the shortest stretch from which 
 agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
 the same constant measurement model for every extractor, scans at rest skipped (1 mm).
 Then the map policy's confirm_scans: the best map (F1) against the 2002 reference trees.
-Last, the trunk's offset shared by a pass (measurement.pass_offset_sd_m): derived by the
-leave-one-pass-out criterion on scans 1-2000 (experiments/eval/pass_offsets.py).
+Last, the trunk's offset shared by a pass: derived by the leave-one-pass-out criterion on
+scans 1-2000 (experiments/eval/pass_offsets.py) and reported in the manifest, not set here:
+white errors (measurement.pass_offset_sd_m = [0, 0]; its page says why).
 Its extractor parameters are the defaults, short trunks included: most real trunks span 1-3 beams.
 Use: trunkslam slam vp_full.npz --config victoria_park_ute"""
 
@@ -699,8 +701,10 @@ TABLES = (
             "profile (least squares). No GPS error of a run enters it."
         ),
     ),
-    dataclasses.replace(
-        vp_pass_offset.TABLE, records=lambda st: vp_pass_offset.pass_offset_records(st.pass_offset)
+    dataclasses.replace(  # its own name: victoria-park-pass-offset writes the shipped preset's
+        vp_pass_offset.TABLE,
+        stem="victoria_park_calibration_pass_offset",
+        records=lambda st: vp_pass_offset.pass_offset_records(st.pass_offset),
     ),
     TableSpec(
         "victoria_park_start",
