@@ -99,6 +99,15 @@ def _existence_scan(manager, book, state, meas):
     return d
 
 
+def _map_the_trunk(manager, book, state, max_scans: int = 50) -> tuple[int, int]:
+    """Scans of the trunk seen every scan until it joins the map: (its id, the scans run)."""
+    for k in range(max_scans):
+        _existence_scan(manager, book, state, _trunk_scan(k))
+        if state.n_landmarks:
+            return int(state.landmark_ids[0]), k + 1
+    raise AssertionError(f"the trunk did not join the map in {max_scans} scans")
+
+
 @pytest.mark.parametrize("method", ["ihgr", "ihgr-window"])
 def test_existence_joins_a_trunk_at_join_prob_not_at_a_count(method):
     """A trunk seen every scan joins the map in the first scan its existence reaches
@@ -148,11 +157,7 @@ def test_a_landmark_missed_in_view_leaves_when_its_existence_falls_below_remove_
     "existence", in the first scan its existence falls below remove_prob, not before."""
     manager, book = _existence_manager(method)
     state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
-    k = 0
-    while state.n_landmarks == 0:
-        _existence_scan(manager, book, state, _trunk_scan(k))
-        k += 1
-    lid = int(state.landmark_ids[0])
+    lid, k = _map_the_trunk(manager, book, state)
     odds = book.r[lid] / (1 - book.r[lid])
     misses = 0
     while odds / (1 + odds) >= book.cfg.remove_prob:
@@ -167,11 +172,7 @@ def test_a_landmark_missed_in_view_leaves_when_its_existence_falls_below_remove_
 def test_a_landmark_out_of_view_keeps_its_existence():
     manager, book = _existence_manager("ihgr")
     state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
-    k = 0
-    while state.n_landmarks == 0:
-        _existence_scan(manager, book, state, _trunk_scan(k))
-        k += 1
-    lid = int(state.landmark_ids[0])
+    lid, k = _map_the_trunk(manager, book, state)
     r = book.r[lid]
     state.x[2] = math.pi  # turned round: the landmark is behind the laser
     for i in range(5):
