@@ -32,6 +32,7 @@ from experiments.paper import products
 from experiments.paper.products import TableSpec
 from experiments.paper.victoria_park.map_policy import f1_score
 from experiments.paper.victoria_park.real_run import HALVES, reference_match, run_config
+from slam.config import MapPolicy
 
 __all__ = ["BASE_CONFIRM", "TABLE", "existence_rows", "existence_trial", "submit"]
 
@@ -104,6 +105,7 @@ def existence_rows(results: list[dict]) -> list[dict]:
     return [r for res in results for r in res["rows"]]
 
 
+_POLICY = MapPolicy()  # the thresholds the runs use: the defaults (module doc)
 LABELS = {
     "landmarks": "landmarks",
     "precision": "precision",
@@ -124,7 +126,8 @@ TABLE = TableSpec(
     title="Victoria Park: the existence map policy, derived on a half and judged on the other",
     notes=(
         "experiments/paper/victoria_park/existence_policy.py. map_policy.policy = existence "
-        "with join_prob 0.99 and remove_prob 0.01; pd_max, min_beams, the false circles per "
+        f"with join_prob {_POLICY.existence_join_prob:g} and remove_prob "
+        f"{_POLICY.existence_remove_prob:g}; pd_max, min_beams, the false circles per "
         "scan and birth_prob measured without the reference or the GPS "
         "(experiments/eval/existence_rates.py) on the scans of derived_on of a run with the "
         "paper's confirm_scans 3, then one run of scans 1-2000 with them, judged on the other "
