@@ -731,6 +731,10 @@ class MeasurementConfig:
         at most 1 / (r/n + s^2) per axis (`slam.measurement.pass_variance`). (0, 0): white
         errors, nothing is computed.
     pass_gap_s: a landmark's pass ends after this long without a sighting of it.
+    pass_offset_model: how the filter carries the pass offset when one is set: "inflation"
+        (each sighting's covariance grown by `slam.measurement.pass_inflation`) or "state" (the
+        offset as a state of the filter while its pass lasts, a variable per pass in the
+        smoother).
     """
 
     noise: str = default(
@@ -763,6 +767,9 @@ class MeasurementConfig:
     )
     pass_gap_s: float = default(
         2.0, "design: 2 s, the pass of experiments/eval/trunk_offsets.view_offset"
+    )
+    pass_offset_model: str = default(
+        "inflation", "design: the per-sighting inflation of slam.measurement.pass_inflation"
     )
 
     def __post_init__(self) -> None:
@@ -806,6 +813,7 @@ class MeasurementConfig:
         for i, x in enumerate(v):
             setting(f"measurement.pass_offset_sd_m[{i}]", x, limit=MAX_PASS_OFFSET_M)
         object.__setattr__(self, "pass_offset_sd_m", (float(v[0]), float(v[1])))
+        _choice("measurement", "pass_offset_model", self.pass_offset_model, ("inflation", "state"))
         g = self.pass_gap_s
         setting("measurement.pass_gap_s", g, limit=MAX_PASS_GAP_S)
         if not g > 0:
