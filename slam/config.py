@@ -380,6 +380,10 @@ class MapPolicy:
         that spread over the view's range and field of view).
     existence_birth_prob: the existence of a new tentative: of the circles seen where nothing
         was mapped, the share that are trunks.
+    existence_clutter: "uniform" (a re-sighting is weighed against the clutter density) or
+        "persistent" (against a non-tree object at the landmark's place, reported again with
+        probability `existence_repeat_prob` in a scan whose beams reach it, its fitted centre
+        spread by `existence_shape_sd_m` per axis; `slam.existence`, "Persistent clutter").
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -404,6 +408,15 @@ class MapPolicy:
     )
     existence_see_through_q: float = default(
         0.1, "design: 1 in 10 beams passes a real trunk's place (position error, grazing)"
+    )
+    existence_clutter: str = default(
+        "uniform", "design: 'uniform', every false circle a fresh draw over the view (as before)"
+    )
+    existence_repeat_prob: float = default(
+        0.5, "design: placeholder; derived as how often a circle never mapped is seen again"
+    )
+    existence_shape_sd_m: float = default(
+        0.0, "design: placeholder; derived from the spread of a never-mapped track's sightings"
     )
     existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
     existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
@@ -452,6 +465,17 @@ class MapPolicy:
                 "map_policy.existence_remove_prob: must be below existence_join_prob "
                 f"({self.existence_join_prob!r}), got {self.existence_remove_prob!r}"
             )
+        if self.existence_clutter not in ("uniform", "persistent"):
+            raise SlamError(
+                "map_policy.existence_clutter: must be 'uniform' or 'persistent', got "
+                f"{self.existence_clutter!r}"
+            )
+        v = self.existence_repeat_prob
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < 1.0:
+            raise SlamError(f"map_policy.existence_repeat_prob: must be in (0, 1), got {v!r}")
+        v = self.existence_shape_sd_m
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < math.inf:
+            raise SlamError(f"map_policy.existence_shape_sd_m: must be finite and >= 0, got {v!r}")
         v = self.existence_min_beams
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise SlamError(f"map_policy.existence_min_beams: must be an integer >= 1, got {v!r}")

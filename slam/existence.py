@@ -29,6 +29,21 @@ extractor can see. Each scan:
      place (the landmark's position error, a beam grazing its edge); under "not real" the
      beams pass freely (likelihood 1).
    A landmark with Pd = 0 and no see-through beam keeps its r: nothing was learnt.
+   **Persistent clutter** (`update_existence_persistent`, map policy `existence_clutter =
+   "persistent"`). The clutter density above treats every false circle as a fresh draw over
+   the whole measurement space, so a second sighting at the same place is a million times more
+   likely under "real" and anything the extractor reports twice joins: a person's legs, a
+   bush. They are real objects, not trees. Here "not a tree" is an object at the landmark's
+   place that the extractor reports again, in a scan whose beams reach it, with probability
+   `repeat_prob` (measured on a run: how often a circle that never became a landmark is seen
+   again in the next scan), its circle's centre spread by the object's shape with sd
+   `shape_sd_m` per axis (a bush's or a car corner's fitted centre moves with the view):
+     detected: r' = r Pd g / (r Pd g + (1 - r) repeat_prob g_o), g_o = N(nu; 0, S + H Sc H^T)
+     missed:   r' = r (1 - Pd) q^n / (r (1 - Pd) q^n + (1 - r) (1 - repeat_prob)),
+   with repeat_prob 0 where Pd is 0 (neither reports what the beams cannot reach). A trunk
+   gains about Pd / repeat_prob a scan and more when its sightings hold still; an object seen
+   in a few scans as the car passes, or whose centre wanders, does not reach join_prob. The
+   birth (a new tentative) is unchanged: b / (b + kappa) against the one-off clutter.
 4. **Decisions** (`decide`): a tentative joins the map when r >= `join_prob` ("at least this
    probable that it is a real trunk"); a landmark is removed when r < `remove_prob` ("less
    probable than this that it is real"). A new tentative starts at `initial_existence(birth,
@@ -73,6 +88,7 @@ __all__ = [
     "initial_existence",
     "predict_existence",
     "update_existence",
+    "update_existence_persistent",
 ]
 
 
@@ -233,6 +249,40 @@ def update_existence(
     yes_miss, no_miss = r * (1.0 - pd) * pass_through, 1.0 - r
     yes = np.where(det, yes_det, yes_miss)
     no = np.where(det, no_det, no_miss)
+    total = yes + no
+    return np.where(total > 0, yes / np.where(total > 0, total, 1.0), r)
+
+
+def update_existence_persistent(
+    r: np.ndarray,
+    pd: np.ndarray,
+    detected: np.ndarray,
+    likelihood: np.ndarray,
+    likelihood_object: np.ndarray,
+    through: np.ndarray,
+    repeat_prob: float,
+    cfg: ExistenceConfig,
+) -> np.ndarray:
+    """(L,) the existence after one scan against persistent clutter (module doc, "Persistent
+    clutter"): "not a tree" is an object at the landmark's place that the extractor reports
+    again with probability repeat_prob in a scan whose beams reach it (pd > 0), its circle's
+    centre spread by its shape (likelihood_object: N(nu; 0, S + the shape's covariance));
+    "tree" is as `update_existence`. likelihood: N(nu; 0, S) where detected."""
+    r = np.asarray(r, dtype=np.float64)
+    pd = np.asarray(pd, dtype=np.float64)
+    det = np.asarray(detected, bool)
+    if not 0.0 < repeat_prob < 1.0:
+        raise ValueError(
+            f"update_existence_persistent: repeat_prob must be in (0, 1), got {repeat_prob!r}"
+        )
+    g = np.where(det, np.asarray(likelihood, dtype=np.float64), 0.0)
+    g0 = np.where(det, np.asarray(likelihood_object, dtype=np.float64), 0.0)
+    pass_through = cfg.see_through_q ** np.asarray(through, dtype=np.float64)
+    # neither hypothesis reports what the beams cannot reach (a detection has pd > 0: the
+    # caller gives a paired landmark pd_max)
+    repeat = np.where((pd > 0) | det, repeat_prob, 0.0)
+    yes = np.where(det, r * pd * g, r * (1.0 - pd) * pass_through)
+    no = (1.0 - r) * np.where(det, repeat * g0, 1.0 - repeat)
     total = yes + no
     return np.where(total > 0, yes / np.where(total > 0, total, 1.0), r)
 

@@ -34,9 +34,20 @@ from slam.existence import (
     detection_probability,
     gaussian_likelihood,
     update_existence,
+    update_existence_persistent,
 )
 
 __all__ = ["DEFAULT_RADIUS_M", "LandmarkExistence", "radii"]
+
+
+def _mean_nis_likelihood(S: np.ndarray, S_obj: np.ndarray) -> float:
+    """N(nu; 0, S_obj) at an innovation of S's mean NIS 2 (nu^T S^-1 nu = 2), taken along S's
+    principal axes equally: the non-tree likelihood of a typical window track's sighting."""
+    w, V = np.linalg.eigh(S)
+    nu = V @ np.sqrt(w)  # nu^T S^-1 nu = 2
+    m = float(nu @ np.linalg.solve(S_obj, nu))
+    return math.exp(-0.5 * m) / (2.0 * math.pi * math.sqrt(max(np.linalg.det(S_obj), 1e-300)))
+
 
 # A landmark's radius before a circle with one was associated with it (published detections
 # give diameters; a source without them gets this): a Victoria Park trunk's, 0.15 m.
@@ -69,6 +80,14 @@ class LandmarkExistence:
             float(policy.existence_false_per_scan), float(view.max_range), max(fov, 1e-9)
         )
         self.birth = float(policy.existence_birth_prob)
+        # map_policy.existence_clutter "persistent": re-sightings weighed against a non-tree
+        # object at the place (`slam.existence`, "Persistent clutter"); None: uniform clutter
+        self.repeat = (
+            float(policy.existence_repeat_prob)
+            if policy.existence_clutter == "persistent"
+            else None
+        )
+        self.shape_var = float(policy.existence_shape_sd_m) ** 2
         self.r: dict[int, float] = {}
         self.radius: dict[int, float] = {}
 
@@ -89,12 +108,23 @@ class LandmarkExistence:
         """(n,) bool: existence below remove_prob."""
         return self.of(ids) < self.cfg.remove_prob
 
-    def track_existence(self, n_sightings: int, R: np.ndarray) -> float:
+    def track_existence(self, n_sightings: int, R: np.ndarray, range_m: float = math.inf) -> float:
         """The existence of a window track seen in n_sightings scans, each a detection with the
-        likelihood of an innovation of NIS 2 (its mean) under S = 2 R (two sightings' noise)."""
+        likelihood of an innovation of NIS 2 (its mean) under S = 2 R (two sightings' noise);
+        range_m: its range (persistent clutter's shape term). Against persistent clutter a
+        track gains about pd_max / repeat_prob a sighting, and a window holds at most
+        window_scans of them: it joins only when that is enough (the single-scan associator's
+        tentatives have no such limit)."""
         S = 2.0 * np.asarray(R, dtype=np.float64)
         g = math.exp(-1.0) / (2.0 * math.pi * math.sqrt(max(np.linalg.det(S), 1e-300)))
         ratio = self.cfg.pd_max * g / self.kappa
+        if self.repeat is not None:  # persistent clutter: against an object at the place
+            J = np.diag([1.0, 1.0 / max(float(range_m), 1e-3) ** 2])  # world xy -> range, bearing
+            ratio = (
+                self.cfg.pd_max
+                * g
+                / (self.repeat * _mean_nis_likelihood(S, S + self.shape_var * J))
+            )
         # in log-odds: ratio ** n overflows (an OverflowError, not inf) for tiny clutter rates
         lo = math.log(max(self.birth, 1e-300)) - math.log(max(1.0 - self.birth, 1e-300))
         lo += max(n_sightings - 1, 0) * math.log(max(ratio, 1e-300))
@@ -126,7 +156,7 @@ class LandmarkExistence:
         look = self.view.contains(z_hat, margins=False)
         if hidden is not None:
             look[:n_lm] &= ~np.asarray(hidden, bool)
-        detected, g = self._detections(state, meas, a, tentatives, z_hat=z_hat, H5=H5)
+        detected, g, g_obj = self._detections(state, meas, a, tentatives, z_hat=z_hat, H5=H5)
         look |= detected
         idx = np.flatnonzero(look)
         if not idx.size:
@@ -146,20 +176,33 @@ class LandmarkExistence:
         pd = np.where(detected[idx], self.cfg.pd_max, pd)
         r = self.of(ids[idx])
         r = np.where(np.isfinite(r), r, self.birth)
-        r = update_existence(
-            r, pd, detected[idx], g[idx], ev.through, kappa=self.kappa, cfg=self.cfg
-        )
+        if self.repeat is None:
+            r = update_existence(
+                r, pd, detected[idx], g[idx], ev.through, kappa=self.kappa, cfg=self.cfg
+            )
+        else:
+            r = update_existence_persistent(
+                r,
+                pd,
+                detected[idx],
+                g[idx],
+                g_obj[idx],
+                through=ev.through,
+                repeat_prob=self.repeat,
+                cfg=self.cfg,
+            )
         for lid, v in zip(ids[idx].tolist(), r.tolist()):
             self.r[lid] = v
 
     def _detections(self, state, meas, a, tentatives, *, z_hat, H5):
-        """(detected (L,) bool, likelihood (L,)) of [landmarks, tentatives] from the association;
-        the radii of the detecting circles are remembered."""
+        """(detected (L,) bool, likelihood (L,), likelihood under a non-tree object (L,)) of
+        [landmarks, tentatives] from the association; the radii of the detecting circles are
+        remembered."""
         L, n_lm = z_hat.shape[0], state.landmark_ids.size
-        detected, g = np.zeros(L, bool), np.zeros(L)
+        detected, g, g_obj = np.zeros(L, bool), np.zeros(L), np.zeros(L)
         rows = np.flatnonzero(a.assign >= 0)
         if not rows.size:
-            return detected, g
+            return detected, g, g_obj
         n_l = a.lm_idx.size
         j = a.assign[rows]
         cand = np.concatenate([a.lm_idx, n_lm + a.t_idx]).astype(np.int64)[j]  # into z_hat
@@ -176,9 +219,12 @@ class LandmarkExistence:
         nu[:, 1] = (nu[:, 1] + np.pi) % (2.0 * np.pi) - np.pi
         detected[cand] = True
         g[cand] = gaussian_likelihood(nu, S)
+        if self.repeat is not None:  # the object's shape spreads its centre: + H_l Sc H_l^T
+            Hl = H[:, :, 3:]
+            g_obj[cand] = gaussian_likelihood(nu, S + self.shape_var * Hl @ Hl.transpose(0, 2, 1))
         ids = np.concatenate(
             [state.landmark_ids, np.zeros(0, np.int64) if tentatives is None else tentatives.ids]
         )
         for c, rad in zip(cand.tolist(), radii(meas)[rows].tolist()):
             self._radius(int(ids[c]), rad)
-        return detected, g
+        return detected, g, g_obj

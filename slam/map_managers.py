@@ -447,7 +447,11 @@ class WindowMap:
                 status[i] = AMBIGUOUS
                 closed.append(use_pos[int(i)])
                 continue
-            r = None if book is None else book.track_existence(int(a.sightings[i]), meas.R[i])
+            r = (
+                None
+                if book is None
+                else book.track_existence(int(a.sightings[i]), meas.R[i], meas.z[i, 0])
+            )
             if (a.sightings[i] < need) if r is None else (r < book.cfg.join_prob):
                 n_open += 1
                 continue

@@ -16,6 +16,20 @@ of the sequence `seq` with the paper's map policy (confirm_scans), on the scans 
    extractor's false-detection rate on the data at hand, where the simulator's (Table 4) is
    that of simulated parks without this park's clutter.
 3. birth_prob: of the tracks started (a new tentative), the share that joined the map.
+
+Persistent clutter (`derive_persistent`, map policy `existence_clutter = "persistent"`), from
+the same run's tracks that never became a landmark (the run's own verdict, as the clutter
+rate's; no truth):
+4. repeat_prob: how often such a circle is seen again in the next scan. The paper's policy
+   drops a tentative at its first miss and maps it at its confirm_scans-th sighting, so a
+   never-mapped track's sightings are a run of k < confirm_scans scans; with a chance p of
+   being seen again each scan, P(k | k < C) is proportional to p^(k - 1) (a geometric run cut
+   at C - 1), and p is its maximum-likelihood value (`truncated_geometric_p`).
+5. shape_sd_m: the spread of such a track's fitted centre beyond the noise: over its pairs of
+   consecutive sightings, d = the world positions' difference (the run's pose after each
+   scan; the pose error of consecutive scans is shared, so d carries the two measurements'
+   noise G R G^T each, plus the odometry increment's), s^2 = max(0, mean(|d|^2 - trace of
+   their covariance)) / 4 (two sightings, two axes).
 """
 
 from __future__ import annotations
@@ -27,8 +41,17 @@ from slam import se2
 from slam.existence import ExistenceConfig, beam_evidence
 from slam.existence_map import DEFAULT_RADIUS_M
 from slam.log import AMBIGUOUS, NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED
+from slam.tentatives import sighting
 
-__all__ = ["ESTABLISHED", "MAX_BEAMS", "WELL_SEEN", "beam_detection_rates", "derive_existence"]
+__all__ = [
+    "ESTABLISHED",
+    "MAX_BEAMS",
+    "WELL_SEEN",
+    "beam_detection_rates",
+    "derive_existence",
+    "derive_persistent",
+    "truncated_geometric_p",
+]
 
 ESTABLISHED = 30  # associated in more than this many scans: a landmark the run keeps seeing
 WELL_SEEN = 10  # free beams: a trunk the extractor sees whole
@@ -114,4 +137,59 @@ def derive_existence(lg, seq, scans: tuple[int, int], established: int = ESTABLI
         "tracks_started": n_started,
         "tracks_joined": n_joined,
         "scans_used": n_scans,
+    }
+
+
+def truncated_geometric_p(k: np.ndarray, cut: int) -> float:
+    """The maximum-likelihood p of runs k (>= 1) drawn with P(k) proportional to p^(k - 1) for
+    k = 1 .. cut (module doc, 4), on a grid of 1e-4 in (0, 1); 0.5 / (runs + 1) when no run
+    went past one scan (none seen again: a rate the sample cannot tell from 0)."""
+    k = np.asarray(k, dtype=np.float64)
+    if k.size == 0 or np.any(k < 1) or np.any(k > cut):
+        raise DataError(f"truncated_geometric_p: needs runs in 1..{cut}, got {k.tolist()!r}")
+    extra = float((k - 1).sum())
+    if extra == 0 or cut == 1:
+        return 0.5 / (k.size + 1)
+    p = np.linspace(1e-4, 1 - 1e-4, 9999)
+    norm = np.log(np.sum(p[:, None] ** np.arange(cut)[None, :], axis=1))
+    return float(p[np.argmax(extra * np.log(p) - k.size * norm)])
+
+
+def derive_persistent(lg, scans: tuple[int, int]) -> dict:
+    """The persistent clutter's settings from the run `lg` (a confirm_scans run) on `scans`
+    (module doc, 4-5): {"settings": {"map_policy.existence_<name>": value}, and the counts}."""
+    in_half = (lg.meas_scan >= scans[0]) & (lg.meas_scan < scans[1]) & (lg.meas_track >= 0)
+    gone = [row[0] for row in (lg.departures or [])]
+    never = in_half & ~np.isin(lg.meas_track, lg.landmark_id) & ~np.isin(lg.meas_track, gone)
+    tracks, k = np.unique(lg.meas_track[never], return_counts=True)
+    cut = int(lg.config["map_policy"]["confirm_scans"]) - 1
+    if not tracks.size:
+        raise DataError(f"derive_persistent: no track in scans {scans} that never joined the map")
+    p = truncated_geometric_p(np.minimum(k, max(cut, 1)), max(cut, 1))
+    excess = []
+    for t in tracks[k >= 2].tolist():
+        rows = np.flatnonzero(never & (lg.meas_track == t))
+        rows = rows[np.argsort(lg.meas_scan[rows])]
+        at = []
+        for r in rows:
+            i = int(lg.meas_scan[r])
+            xy, C = sighting(
+                lg.pose[i], np.zeros((3, 3)), lg.meas_z[r], lg.meas_R[r], lg.laser_pose
+            )
+            at.append((i, xy, C, float(lg.meas_z[r, 0])))
+        for (i, x1, C1, _), (j, x2, C2, d) in zip(at, at[1:]):
+            if j != i + 1:
+                continue
+            # the increment's position noise, and its heading noise carried to the range
+            odo = float(np.trace(lg.odo_cov[j][:2, :2]) + lg.odo_cov[j][2, 2] * d**2)
+            excess.append(float(np.sum((x2 - x1) ** 2) - np.trace(C1 + C2) - odo))
+    shape_var = max(float(np.mean(excess)), 0.0) / 4.0 if excess else 0.0
+    return {
+        "settings": {
+            "map_policy.existence_repeat_prob": p,
+            "map_policy.existence_shape_sd_m": float(np.sqrt(shape_var)),
+        },
+        "never_mapped_tracks": int(tracks.size),
+        "never_mapped_runs": np.bincount(k, minlength=max(cut, 1) + 1)[1:].tolist(),
+        "consecutive_pairs": len(excess),
     }

@@ -55,7 +55,14 @@ VARIANTS = (
 # derived from the same drive's confirm_scans run without the truth
 # (`experiments.eval.existence_rates.derive_existence` over all its scans)
 EXISTENCE = tuple(m for m, _, short in VARIANTS if not short)
-LABELS_RUN = (*(v[0] for v in VARIANTS), *(f"{m}, existence" for m in EXISTENCE))
+# and with persistent clutter (`existence_clutter = "persistent"`), its repeat_prob and
+# shape_sd_m derived from the same confirm run (`existence_rates.derive_persistent`)
+PERSISTENT = "existence, persistent clutter"
+LABELS_RUN = (
+    *(v[0] for v in VARIANTS),
+    *(f"{m}, existence" for m in EXISTENCE),
+    *(f"{m}, {PERSISTENT}" for m in EXISTENCE),
+)
 
 
 def landmark_objects(lg, labels: np.ndarray, feats) -> dict[int, int]:
@@ -123,20 +130,27 @@ def clutter_trial(job: tuple, seed) -> list[dict]:
                 {"scene": name, "method": label, "run": index} | _map_figures(lg, scene, seq, feats)
             )
             if label in EXISTENCE:
-                rows.append(_existence_row(name, label, index, (scene, seq, scfg, feats), lg))
+                run = (scene, seq, scfg, feats)
+                rows.append(_existence_row(name, label, index, run, lg))
+                rows.append(_existence_row(name, label, index, run, lg, persistent=True))
     return rows
 
 
-def _existence_row(name: str, label: str, index: int, run: tuple, lg) -> dict:
+def _existence_row(name: str, label: str, index: int, run: tuple, lg, persistent=False) -> dict:
     """The drive again with map policy "existence", its settings derived from `lg` (the
-    confirm_scans run of the same drive) without the truth."""
-    from experiments.eval.existence_rates import derive_existence
+    confirm_scans run of the same drive) without the truth; persistent: with persistent
+    clutter, its settings derived from `lg` as well."""
+    from experiments.eval.existence_rates import derive_existence, derive_persistent
 
     scene, seq, scfg, feats = run
-    derived = derive_existence(lg, seq, (0, seq.n_scans))
-    cfg = scfg.with_(**{"map_policy.policy": "existence", **derived["settings"]})
+    settings = derive_existence(lg, seq, (0, seq.n_scans))["settings"]
+    if persistent:
+        settings |= {"map_policy.existence_clutter": "persistent"}
+        settings |= derive_persistent(lg, (0, seq.n_scans))["settings"]
+    cfg = scfg.with_(**{"map_policy.policy": "existence", **settings})
     ex = run_slam(seq, cfg, features=feats)
-    row = {"scene": name, "method": f"{label}, existence", "run": index}
+    tag = f"{label}, {PERSISTENT}" if persistent else f"{label}, existence"
+    row = {"scene": name, "method": tag, "run": index}
     return row | _map_figures(ex, scene, seq, feats)
 
 

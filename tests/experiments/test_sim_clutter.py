@@ -72,6 +72,9 @@ def test_a_drive_through_the_clutter_park_counts_each_class():
         "paper, existence",
         "geometric, existence",
         "bailey, existence",
+        "paper, existence, persistent clutter",
+        "geometric, existence, persistent clutter",
+        "bailey, existence, persistent clutter",
     }
     for r in clutter:
         assert r["objects_trunk"] == 8 and r["objects_post"] == 6 and r["objects_person"] == 6

@@ -123,3 +123,28 @@ def test_decisions_are_the_stated_probability_thresholds():
 def test_bad_settings_are_refused_by_name(field, value):
     with pytest.raises(ValueError, match=field):
         ExistenceConfig(**{field: value})
+
+
+def test_persistent_clutter_weighs_a_resighting_against_an_object_seen_again():
+    """Against persistent clutter a detection multiplies the odds by Pd g / (repeat g_o), a
+    miss where the beams reach by (1 - Pd) q^n / (1 - repeat); where Pd is 0 and no beam passes,
+    nothing is learnt (hand-derived from the module doc)."""
+    from slam.existence import update_existence_persistent
+
+    cfg = ExistenceConfig(pd_max=0.9, see_through_q=0.1)
+    r0 = np.full(4, 0.25)
+    pd = np.array([0.9, 0.9, 0.9, 0.0])
+    det = np.array([True, False, False, False])
+    g, g_o = np.array([40.0, 0, 0, 0]), np.array([10.0, 0, 0, 0])
+    through = np.array([0, 0, 2, 0])
+    r = update_existence_persistent(r0, pd, det, g, g_o, through, 0.3, cfg)
+    odds = r / (1 - r)
+    np.testing.assert_allclose(
+        odds / (1 / 3), [0.9 * 40 / (0.3 * 10), 0.1 / 0.7, 0.1 * 0.01 / 0.7, 1.0], rtol=1e-12
+    )
+    # a rigid circle (g_o = g) seen every scan gains only Pd / repeat a scan: far less than
+    # against the clutter density, where one sighting is worth Pd g / kappa
+    r = update_existence_persistent(r0[:1], pd[:1], det[:1], g[:1], g[:1], through[:1], 0.3, cfg)
+    assert r[0] / (1 - r[0]) == pytest.approx((1 / 3) * 3.0, rel=1e-12)
+    with pytest.raises(ValueError, match="repeat_prob"):
+        update_existence_persistent(r0, pd, det, g, g_o, through, 1.0, cfg)

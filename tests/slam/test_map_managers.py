@@ -178,3 +178,24 @@ def test_a_landmark_out_of_view_keeps_its_existence():
     for i in range(5):
         assert _existence_scan(manager, book, state, _trunk_scan(k + i, seen=False)).removed == []
     assert book.r[lid] == r and state.n_landmarks == 1
+
+
+@pytest.mark.parametrize("method", ["ihgr"])
+def test_against_persistent_clutter_a_trunk_joins_after_the_sightings_pd_over_repeat_needs(method):
+    """With persistent clutter (repeat_prob 0.3, no shape spread) a trunk seen every scan gains
+    odds pd_max / repeat_prob a scan after its birth, so it joins in the first scan where
+    birth odds times that ratio to the (scans - 1) reaches join_prob, where the uniform clutter
+    maps it after two sightings. (The window's tracks hold at most window_scans sightings: with
+    these settings they never reach join_prob, `LandmarkExistence.track_existence`.)"""
+    policy = {"existence_clutter": "persistent", "existence_repeat_prob": 0.3}
+    manager, book = _existence_manager(method, confirm_scans=30, **policy)
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    _, scans = _map_the_trunk(manager, book, state)
+    lo = math.log(book.birth / (1 - book.birth))
+    step = math.log(book.cfg.pd_max / 0.3)
+    want = 1 + math.ceil((math.log(book.cfg.join_prob / (1 - book.cfg.join_prob)) - lo) / step)
+    assert scans == want and scans > 2
+    manager, book = _existence_manager(method, confirm_scans=30)
+    assert (
+        _map_the_trunk(manager, book, Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6)))[1] == 2
+    )
