@@ -24,7 +24,8 @@ rate's; no truth):
    drops a tentative at its first miss and maps it at its confirm_scans-th sighting, so a
    never-mapped track's sightings are a run of k < confirm_scans scans; with a chance p of
    being seen again each scan, P(k | k < C) is proportional to p^(k - 1) (a geometric run cut
-   at C - 1), and p is its maximum-likelihood value (`truncated_geometric_p`).
+   at C - 1), and p is its maximum-likelihood value (`truncated_geometric_p`; a run with no
+   such track, a clean park, gives 0.5: nothing measured).
 5. shape_sd_m: the spread of such a track's fitted centre beyond the noise: over its pairs of
    consecutive sightings, d = the world positions' difference (the run's pose after each
    scan; the pose error of consecutive scans is shared, so d carries the two measurements'
@@ -143,9 +144,10 @@ def derive_existence(lg, seq, scans: tuple[int, int], established: int = ESTABLI
 def truncated_geometric_p(k: np.ndarray, cut: int) -> float:
     """The maximum-likelihood p of runs k (>= 1) drawn with P(k) proportional to p^(k - 1) for
     k = 1 .. cut (module doc, 4), on a grid of 1e-4 in (0, 1); 0.5 / (runs + 1) when no run
-    went past one scan (none seen again: a rate the sample cannot tell from 0)."""
+    went past one scan (none seen again, or no run at all: a rate the sample cannot tell from 0;
+    0.5 with no run)."""
     k = np.asarray(k, dtype=np.float64)
-    if k.size == 0 or np.any(k < 1) or np.any(k > cut):
+    if np.any(k < 1) or np.any(k > cut):
         raise DataError(f"truncated_geometric_p: needs runs in 1..{cut}, got {k.tolist()!r}")
     extra = float((k - 1).sum())
     if extra == 0 or cut == 1:
@@ -163,8 +165,6 @@ def derive_persistent(lg, scans: tuple[int, int]) -> dict:
     never = in_half & ~np.isin(lg.meas_track, lg.landmark_id) & ~np.isin(lg.meas_track, gone)
     tracks, k = np.unique(lg.meas_track[never], return_counts=True)
     cut = int(lg.config["map_policy"]["confirm_scans"]) - 1
-    if not tracks.size:
-        raise DataError(f"derive_persistent: no track in scans {scans} that never joined the map")
     p = truncated_geometric_p(np.minimum(k, max(cut, 1)), max(cut, 1))
     excess = []
     for t in tracks[k >= 2].tolist():

@@ -35,6 +35,7 @@ def test_the_truncated_geometric_estimate_refuses_runs_outside_its_range():
     with pytest.raises(DataError, match="truncated_geometric_p"):
         truncated_geometric_p(np.array([1, 3]), 2)
     assert truncated_geometric_p(np.ones(9), 2) == 0.05  # none seen again: 0.5 / (9 + 1)
+    assert truncated_geometric_p(np.zeros(0), 2) == 0.5  # a clean park: nothing measured
 
 
 @pytest.fixture(scope="module")
