@@ -13,8 +13,10 @@ import slam.ekf
 import slam.pass_state
 from slam import SlamError, run_slam
 from slam import rigid as rigid_ops
+from slam.config import ClosureConfig
 from slam.ekf import EkfState, Filter
 from slam.pass_state import PassOffsets, offset_cov
+from tests.slam.test_closure import _closer, _revisit, _stand
 from tests.slam.test_run import LANDMARKS, TIGHT, drive_sequence, paper_noise, point_features
 
 LASER = np.array([0.5, 0.2, 0.1])
@@ -297,13 +299,34 @@ def test_short_gaps_give_one_pass_per_sighting_with_the_state_model(monkeypatch)
 
 
 def test_a_closure_run_with_the_state_model_keeps_its_invariants():
-    """Loop closure on a drive round a circle that comes back to its trees: the run ends,
-    with no copy left, one landmark per tree, and the estimate near the truth."""
-    log = _run((0.03, 0.05), closure=True, n_scans=130)
-    white = _run((0.0, 0.0), closure=True, n_scans=130)
+    """A run with loop closure on (its per-scan calls: revisit detection, the duplicate sweep,
+    seen-together bookkeeping; the drive does not return, so no match is tried: the test
+    below has one) and the state model: the run ends with no copy left, one landmark per
+    tree, and the map near the truth."""
+    log = _run((0.03, 0.05), closure=True, n_scans=60)
+    white = _run((0.0, 0.0), closure=True, n_scans=60)
+    assert log.closures is not None
     assert log.final_x.shape == (3 + 2 * log.landmark_id.size,)
     assert np.all(np.isfinite(log.final_P))
     assert np.all(np.linalg.eigvalsh(log.final_P) > -1e-12)
     assert log.landmark_id.size == white.landmark_id.size
     err = np.linalg.norm(log.landmark_xy[:, None] - LANDMARKS[None], axis=2).min(axis=1)
     assert err.max() < 0.5
+
+
+def test_a_closure_with_passes_open_is_accepted_and_ends_them():
+    """The return of test_closure (the stand mapped again 2.5 m and 2 deg off) with the recent
+    landmarks in a pass (their anchors open): the closure is accepted with the same pairs,
+    its merge restores every anchor first, and the pose comes back to the truth."""
+    rng = np.random.default_rng(11)
+    pts = _stand(rng, 20)
+    f, old_ids, recent_ids = _revisit(pts, pts[:12], (2.0, -1.5, math.radians(2.0)))
+    xy = f.landmarks_xy[f.positions_of(recent_ids[:6])]
+    f.append_copies(recent_ids[:6], offset_cov(f.pose, xy, LASER, (0.0546, 0.0385)))
+    assert f.n_landmarks == 32 and f.dim == 3 + 2 * 38
+    closer = _closer(f, ClosureConfig(enabled=True))
+    ev = closer.match(f, 50, np.arange(20, 32), np.arange(20))
+    assert ev.outcome == "accepted" and ev.best == 12
+    assert sorted(ev.merged) == [(old_ids[j], recent_ids[j]) for j in range(12)]
+    assert f.copy_of.size == 0 and f.n_landmarks == 20 and f.dim == 43
+    np.testing.assert_allclose(f.pose, 0.0, atol=0.05)
