@@ -245,17 +245,20 @@ class Filter(_Estimate):
         d = 3 + 2 * self.n_landmarks
         return EkfState(self.x[:d], self.P[:d, :d], self.landmark_ids)
 
-    def append_copies(self, landmark_ids, extra) -> None:
+    def append_copies(self, landmark_ids, extra, on_copy=None) -> None:
         """Append a hidden copy of each of these landmarks, then add extra (k, 2, 2) to the
         landmark's own covariance block: the copy (a slot after the landmarks, which
         `landmarks_xy`, `landmark_ids`, `snapshot` and the steps' indices do not see) keeps
         the landmark's estimate and all its covariances, its cross-covariance with the
         landmark included (the landmark's block before the addition); the landmark becomes
         the copy plus an independent error of covariance extra, whose later updates reach the
-        copy through that correlation. `restore_copies` marginalises the error out again.
-        Cost O(d^2) (P grows: a copy), one copy for the whole batch."""
+        copy through that correlation. on_copy (k,) bool (default none): for these, extra
+        goes to the copy's block instead (the landmark is the copy less an independent error:
+        an estimate that already carries the error). `restore_copies` marginalises the error
+        out. Cost O(d^2) (P grows: a copy), one copy for the whole batch."""
         ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
         extra = np.asarray(extra, dtype=np.float64).reshape(ids.size, 2, 2)
+        on_copy = np.zeros(ids.size, bool) if on_copy is None else np.asarray(on_copy, bool)
         if not ids.size:
             return
         pos = self.positions_of(ids)
@@ -272,7 +275,8 @@ class Filter(_Estimate):
         out[d:, :d] = P[cols]
         out[:d, d:] = out[d:, :d].T
         out[d:, d:] = P[np.ix_(cols, cols)]
-        for c, e in zip(cols[::2].tolist(), extra):
+        for j, (c, e) in enumerate(zip(cols[::2].tolist(), extra)):
+            c = d + 2 * j if on_copy[j] else c
             out[c : c + 2, c : c + 2] += 0.5 * (e + e.T)
         self._P = out
         self._mirrored = True

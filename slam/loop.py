@@ -306,6 +306,8 @@ class Slam:
         joined the map, the earlier measurements re-tracked to a new landmark."""
         for lid, n_obs in decisions.joined:
             self.history.joined(lid, k, n_obs)
+        if self.passes is not None:  # their first pass began before they joined
+            self.passes.joined([lid for lid, _ in decisions.joined], float(self.scan_t[k]))
         for scan, feature, lid in decisions.retracks:
             self.log.retrack(scan, feature, lid)
         if decisions.removed:  # map policy "existence": marginalised out

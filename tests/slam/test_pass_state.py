@@ -14,7 +14,7 @@ import slam.pass_state
 from slam import SlamError, run_slam
 from slam import rigid as rigid_ops
 from slam.config import ClosureConfig
-from slam.ekf import EkfState, Filter
+from slam.ekf import EkfState, Filter, initial_state
 from slam.pass_state import PassOffsets, offset_cov
 from tests.slam.test_closure import _closer, _revisit, _stand
 from tests.slam.test_run import LANDMARKS, TIGHT, drive_sequence, paper_noise, point_features
@@ -70,10 +70,10 @@ def test_the_offset_is_along_and_across_the_line_of_sight():
 
 def _batch(m0, P0, passes):
     """The posterior of m under z_j = m + b_p + w_j (w_j ~ N(0, R_j), b_p ~ N(0, Sigma_p)
-    independent per pass p), prior N(m0, P0), fixed vehicle at POSE: each pass's stacked
-    sightings have covariance blockdiag(R_j) + 1 1^T (x) Sigma_p."""
-    info = np.linalg.inv(P0)
-    vec = info @ m0
+    independent per pass p), prior N(m0, P0) (None: none), fixed vehicle at POSE: each pass's
+    stacked sightings have covariance blockdiag(R_j) + 1 1^T (x) Sigma_p."""
+    info = np.zeros((2, 2)) if P0 is None else np.linalg.inv(P0)
+    vec = np.zeros(2) if P0 is None else info @ m0
     for zs, Rs, Sig in passes:
         n = len(zs)
         C = np.kron(np.ones((n, n)), Sig)
@@ -122,6 +122,48 @@ def test_the_state_model_is_the_batch_posterior_of_a_constant_offset_per_pass(
     po.end_passes(f, t)
     assert f.copy_of.size == 0 and f.dim == 5 and po.n_passes == n_passes
     want_m, want_P = _batch(m0, P0, passes)
+    np.testing.assert_allclose(f.landmarks_xy[0], want_m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(f.P[3:, 3:], want_P, rtol=0, atol=1e-9)
+
+
+def _linear_inverse(pose, z, laser):
+    """`slam.se2.inverse_observe` of `_linear_observe`: m = (x, y) + z."""
+    Gx = np.zeros((2, 3))
+    Gx[0, 0] = Gx[1, 1] = 1.0
+    return np.asarray(pose)[:2] + np.asarray(z), Gx, np.eye(2)
+
+
+def test_a_landmark_initialised_in_its_first_pass_carries_that_pass_offset(monkeypatch):
+    """A landmark initialised from a sighting (no prior), seen again in the same pass, then
+    in a second pass: the filter ends at the batch posterior of z_j = m + b_p + w_j in which
+    the initialising sighting shares the first pass's offset (to 1e-9)."""
+    monkeypatch.setattr(slam.ekf, "observe", _linear_observe)
+    monkeypatch.setattr(slam.ekf, "inverse_observe", _linear_inverse)
+    rng = np.random.default_rng(4)
+    sd = (0.07, 0.02)
+    f = Filter(initial_state(POSE, np.zeros((3, 3))))
+    po = PassOffsets(sd, 2.0, LASER)
+    z0, R0 = np.array([9.0, -4.0]) + rng.normal(0.0, 0.1, 2), _spd(rng, 0.02)
+    f.add_landmark(z0, R0, LASER, 6)
+    po.joined([6], 0.0)
+    passes, t, zs, Rs = [], 0.2, [z0], [R0]
+    for n in (7, 4):
+        for j in range(n):
+            po.end_passes(f, t)
+            if j == 0:
+                d = f.landmarks_xy[0] - (POSE[:2] + _rot2(POSE[2]) @ LASER[:2])
+                Sig = _rot_cov(math.atan2(d[1], d[0]), sd)
+            po.begin(f, np.array([6]), t)
+            z, R = np.array([9.0, -4.0]) + rng.normal(0.0, 0.1, 2), _spd(rng, 0.02)
+            f.update(np.array([0]), z[None], R[None], LASER)
+            zs.append(z)
+            Rs.append(R)
+            t += 0.2
+        passes.append((zs, Rs, Sig))
+        zs, Rs, t = [], [], t + 3.0
+    po.end_all(f)
+    assert f.copy_of.size == 0 and not po.fresh and not po.last
+    want_m, want_P = _batch(None, None, passes)
     np.testing.assert_allclose(f.landmarks_xy[0], want_m, rtol=0, atol=1e-9)
     np.testing.assert_allclose(f.P[3:, 3:], want_P, rtol=0, atol=1e-9)
 
