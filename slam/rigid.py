@@ -10,6 +10,9 @@ Each function reads or changes a `Filter` in place, as its own steps do:
 - `free_rigid_motion`: let the vehicle and some landmarks move together by an unknown rigid
   motion (their covariance grows);
 - `move_rigidly`: move the whole estimate by one rigid motion (a change of world frame).
+The three that change the estimate (merge, free, move) first restore the filter's hidden copies
+(`Filter.restore_copies`: the pass offsets' anchors, `slam.pass_state`), so they act on the
+landmarks alone.
 """
 
 from __future__ import annotations
