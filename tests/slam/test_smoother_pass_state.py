@@ -340,3 +340,52 @@ def test_bad_pass_fields_name_the_field(change, message):
     p = one_tree([pass_poses(15, (0.0, 0.0), 0.2)], [np.zeros(2)], np.random.default_rng(5))
     with pytest.raises(SlamError, match=message):
         dataclasses.replace(p, **change)
+
+
+def test_a_run_log_with_half_the_passes_is_refused(tmp_path):
+    from experiments.errors import DataError
+    from experiments.io.run_log import read_run_log, write_run_log
+    from tests.slam.test_pass_offset import _run
+
+    path = write_run_log(tmp_path / "run_log.npz", _state(_run((0.03, 0.05))))
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files if k != "pass_cov"}
+    np.savez(tmp_path / "half.npz", **arrays)
+    with pytest.raises(DataError, match="half.npz: Problem: pass_cov missing"):
+        read_run_log(tmp_path / "half.npz")
+
+
+@pytest.mark.slow
+def test_trunkslam_smooth_counts_the_pass_variables_and_export_graph_says_why_not(tmp_path):
+    """End to end: a run with the "state" model, `trunkslam smooth` (smoother.json counts
+    the pass landmarks) and `trunkslam export-graph` (exit 1, the reason, no file)."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from experiments.cli import app
+
+    runner = CliRunner()
+    run = tmp_path / "run.npz"
+    res = runner.invoke(app, ["simulate-drive", "--scans", "40", "--seed", "4", "--out", str(run)])
+    assert res.exit_code == 0, res.output
+    cfg = tmp_path / "state.toml"
+    cfg.write_text('[measurement]\nnoise = "constant"\npass_offset_sd_m = [0.03, 0.05]\n'
+                   'pass_offset_model = "state"\n')  # fmt: skip
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["slam", str(run), "--config", str(cfg), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["smooth", str(out)])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((out / "smoother.json").read_text())
+    problem = read_back(out)
+    assert summary["pass_variables"] == problem.pass_variables > 0
+    res = runner.invoke(app, ["export-graph", str(out), "--out", str(tmp_path / "g.g2o")])
+    assert res.exit_code == 1 and "pass offset as a state" in res.output
+    assert not (tmp_path / "g.g2o").exists()
+
+
+def read_back(run_dir):
+    from experiments.io.run_log import read_run_log
+
+    return read_run_log(run_dir)[0]
