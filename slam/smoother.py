@@ -134,6 +134,10 @@ def _pass_key(q: int) -> int:
     return gtsam.symbol("p", q)
 
 
+def _apparent_key(i: int) -> int:
+    return gtsam.symbol("a", i)
+
+
 @dataclass(frozen=True, eq=False)
 class Problem:
     """The smoother's inputs. N scans, M measurements, L landmarks; world frame; m, rad, s.
@@ -152,6 +156,9 @@ class Problem:
         of each pass (every measurement's landmark is its pass's); pass_cov (P, 2, 2): the
         covariance of each pass's offset in the world frame (m^2). A pass no measurement
         refers to is left out of the graph.
+    pass_corr_rad (with the pass fields; None or inf: the offset is constant over a pass): the
+        correlation length L in rad of the view angle of an offset that drifts over its pass
+        (first-order Gauss-Markov, `measurement.pass_offset_corr_rad`; the module doc).
     """
 
     scan_t: np.ndarray
@@ -171,6 +178,7 @@ class Problem:
     meas_pass: np.ndarray | None = None
     pass_landmark: np.ndarray | None = None
     pass_cov: np.ndarray | None = None
+    pass_corr_rad: float | None = None
 
     def __post_init__(self) -> None:
         n = _shape(self, "scan_t", (None,), np.float64)[0]
@@ -227,13 +235,22 @@ class Problem:
 
     @property
     def pass_variables(self) -> int:
-        """The pass landmarks the graph gets: the passes with a measurement (0: none)."""
-        return 0 if self.meas_pass is None else int(np.unique(self.meas_pass).size)
+        """The pass landmarks the graph gets: the passes with a measurement (0: none), or with
+        a drifting offset (a finite `pass_corr_rad`) one apparent point per measurement."""
+        if self.meas_pass is None:
+            return 0
+        return self.n_measurements if self.drifts else int(np.unique(self.meas_pass).size)
+
+    @property
+    def drifts(self) -> bool:
+        """Whether the pass offset drifts (pass fields and a finite `pass_corr_rad`)."""
+        c = self.pass_corr_rad
+        return self.meas_pass is not None and c is not None and math.isfinite(c)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The fields given, as a dict of arrays (what the run-log file stores)."""
         out = {name: getattr(self, name) for name in self.__dataclass_fields__}
-        return {name: a for name, a in out.items() if a is not None}
+        return {name: np.asarray(a) for name, a in out.items() if a is not None}
 
 
 def _shape(obj, name: str, shape: tuple, dtype) -> tuple[int, ...]:
@@ -308,6 +325,9 @@ def _check_passes(p: Problem, m: int) -> None:
 
     given = [name for name in PASS_FIELDS if getattr(p, name) is not None]
     if not given:
+        if p.pass_corr_rad is not None:
+            raise SlamError("Problem.pass_corr_rad: given without the pass fields (meas_pass, "
+                            "pass_landmark, pass_cov)")  # fmt: skip
         return
     if len(given) < len(PASS_FIELDS):
         missing = ", ".join(name for name in PASS_FIELDS if name not in given)
@@ -332,6 +352,14 @@ def _check_passes(p: Problem, m: int) -> None:
             f"+-{MAX_VARIANCE:g}"
         )
     _positive_definite("Problem.pass_cov", p.pass_cov)
+    c = p.pass_corr_rad
+    if c is not None:
+        a = np.asarray(c)
+        ok = a.shape == () and a.dtype.kind in "fiu" and not isinstance(c, bool)
+        if not ok or not float(a) > 0:
+            raise SlamError(f"Problem.pass_corr_rad: expected a length > 0 rad (inf: constant "
+                            f"over a pass), got {c!r}")  # fmt: skip
+        object.__setattr__(p, "pass_corr_rad", float(a))
 
 
 def _positive_definite(name: str, covs: np.ndarray, first: int = 0, semi: bool = False) -> None:
@@ -447,10 +475,12 @@ def pass_offsets(log: SlamLog, use: np.ndarray) -> dict[str, np.ndarray]:
     laser_xy = np.stack([x[:, 0] + c * lx - s * ly, x[:, 1] + s * lx + c * ly], axis=1)
     row_of = {int(v): j for j, v in enumerate(log.landmark_id.tolist())}
     d = log.landmark_xy[[row_of[int(v)] for v in lid]] - laser_xy
+    corr = log.config.get("measurement", {}).get("pass_offset_corr_rad", math.inf)
     return {
         "meas_pass": number,
         "pass_landmark": lid,
         "pass_cov": pass_offset_cov(np.arctan2(d[:, 1], d[:, 0]), sd),
+        **({"pass_corr_rad": float(corr)} if math.isfinite(float(corr)) else {}),
     }
 
 
@@ -638,6 +668,8 @@ class _Graph:
         of its pass's first measurement. Returns the passes in the graph (those measured)."""
         if p.meas_pass is None:
             return np.zeros(0, np.int64)
+        if p.drifts:
+            return self._drift_factors(p)
         first = np.full(p.pass_landmark.size, p.n_scans, np.int64)
         np.minimum.at(first, p.meas_pass, p.meas_scan)
         used = np.flatnonzero(first < p.n_scans)
@@ -647,10 +679,40 @@ class _Graph:
             self._add(int(first[q]), f, None)
         return used
 
+    def _drift_factors(self, p: Problem) -> np.ndarray:
+        """The apparent points A_j of a drifting pass offset (module doc), each pass's in scan
+        order: A_1 - L_i ~ N(0, Sigma_b) at the pass's first scan, then the Gauss-Markov step
+        A_{j+1} - phi A_j - (1 - phi) L_i ~ N(0, (1 - phi^2) Sigma_b), phi = exp(-|dtheta| / L)
+        at the scan of j + 1. Returns the measurements (one variable each)."""
+        theta = view_angles(p)
+        order = np.lexsort((np.arange(p.n_measurements), p.meas_scan, p.meas_pass))
+        q = p.meas_pass[order]
+        new = np.r_[True, q[1:] != q[:-1]]
+        for i in order[new].tolist():
+            keys = (_landmark_key(int(p.meas_landmark[i])), _apparent_key(i))
+            f = gtsam.BetweenFactorPoint2(*keys, np.zeros(2), _gauss(p.pass_cov[p.meas_pass[i]]))
+            self._add(int(p.meas_scan[i]), f, None)
+        for a, b in zip(order[:-1][~new[1:]].tolist(), order[1:][~new[1:]].tolist()):
+            phi = math.exp(-abs(_wrap(theta[b] - theta[a])) / p.pass_corr_rad)
+            cov = (1.0 - phi * phi) * p.pass_cov[p.meas_pass[b]] + PASS_FLOOR * np.eye(2)
+            keys = (_apparent_key(a), _apparent_key(b), _landmark_key(int(p.meas_landmark[b])))
+            self._add(int(p.meas_scan[b]), gm_step_factor(keys, phi, cov), None)
+        return np.arange(p.n_measurements)
+
+    def pass_points(self) -> list[tuple[int, int]]:
+        """(key, landmark id) of each pass landmark or apparent point in the graph."""
+        p = self.p
+        if p.drifts:
+            return [(_apparent_key(i), int(v)) for i, v in enumerate(p.meas_landmark.tolist())]
+        return [(_pass_key(q), int(p.pass_landmark[q])) for q in self.passes.tolist()]
+
     def point_key(self, i: int) -> int:
-        """The point measurement i observes: its pass landmark, else its landmark."""
+        """The point measurement i observes: its apparent point (a drifting pass offset), its
+        pass landmark (a constant one), else its landmark."""
         if self.p.meas_pass is None:
             return _landmark_key(int(self.p.meas_landmark[i]))
+        if self.p.drifts:
+            return _apparent_key(i)
         return _pass_key(int(self.p.meas_pass[i]))
 
     def _add(self, k: int, factor, gaussian) -> None:
@@ -669,6 +731,32 @@ class _Graph:
 
     def chi2(self, values: gtsam.Values) -> float:
         return 2.0 * self.gaussian.error(values)
+
+
+def view_angles(p: Problem) -> np.ndarray:
+    """(M,) the world bearing (rad) of each measurement's line of sight at the problem's
+    starting poses: the pose's heading, the laser's yaw and the measured bearing."""
+    return p.init_pose[p.meas_scan, 2] + p.laser_pose[2] + p.meas_z[:, 1]
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def gm_step_factor(keys, phi: float, cov: np.ndarray):
+    """The Gauss-Markov step of a drifting pass offset on keys (A_j, A_{j+1}, L_i), all Point2:
+    error A_{j+1} - phi A_j - (1 - phi) L_i with covariance `cov` (world frame, m^2). Linear, so
+    its Jacobians are constant: (-phi I, I, -(1 - phi) I)."""
+    jac = (-phi * np.eye(2), np.eye(2), -(1.0 - phi) * np.eye(2))
+
+    def error(this, values, H):
+        a, b, lm = (values.atPoint2(k) for k in this.keys())
+        if H is not None:
+            for n, J in enumerate(jac):
+                H[n] = J
+        return b - phi * a - (1.0 - phi) * lm
+
+    return gtsam.CustomFactor(_gauss(cov), list(keys), error)
 
 
 def _gauss(cov: np.ndarray):
@@ -715,8 +803,8 @@ def smooth(
         for lid, xy in zip(problem.landmark_id, problem.init_landmark):
             start[int(lid)] = np.asarray(xy, dtype=np.float64)
             values.insert(_landmark_key(int(lid)), start[int(lid)])
-        for q in g.passes.tolist():  # a pass landmark starts at its landmark
-            values.insert(_pass_key(q), start[int(problem.pass_landmark[q])])
+        for key, lid in g.pass_points():  # a pass landmark or apparent point: at its landmark
+            values.insert(key, start[lid])
         initial = g.chi2(values)
         report("optimise", 0, 1)
         opt = gtsam.LevenbergMarquardtOptimizer(g.all(), values, _lm_params(o))

@@ -19,6 +19,7 @@ Format (datasets/FORMAT.md, "Run log"): one compressed `.npz` with `format` =
     Optional, together (`measurement.pass_offset_model = "state"`, P passes): meas_pass (M,)
     int, the pass of each measurement; pass_landmark (P,) int, each pass's landmark;
     pass_cov (P, 2, 2), each pass's offset covariance in the world frame (m^2).
+    pass_corr_rad (optional, with them): the drift's correlation length (rad) when finite.
 """
 
 from __future__ import annotations
@@ -75,6 +76,7 @@ SCHEMA |= {
     "meas_pass": Var("int", ("M",)),
     "pass_landmark": Var("int", ("P",)),
     "pass_cov": Var("float", ("P", 2, 2)),
+    "pass_corr_rad": Var("float", ()),
 }
 # departed_reason codes: SlamLog.departures' reasons
 DEPARTURE_REASONS = ("existence", "pruned")
