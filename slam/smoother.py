@@ -19,6 +19,17 @@ The graph (`Problem` holds its inputs; `problem_from_log` takes them from a `Sla
   covariance. The sightings of a pass z_j = h(L_i + b_q) + w_j then share one offset, exactly:
   this is the model the per-pass inflation (r + n s^2, the "inflation" model) approximates.
   The results are the landmarks L_i; the pass landmarks are counted (`pass_variables`).
+- with an offset that drifts as the view turns (a finite `measurement.pass_offset_corr_rad` L,
+  `Problem.pass_corr_rad`): one apparent point A_j (Point2) per sighting instead of one per
+  pass, the sighting's bearing-range factor on A_j with the white covariance; in each pass, in
+  scan order, A_1 - L_i ~ N(0, Sigma_b) and A_{j+1} - phi_j A_j - (1 - phi_j) L_i ~
+  N(0, (1 - phi_j^2) Sigma_b + PASS_FLOOR I), phi_j = exp(-|theta_{j+1} - theta_j| / L)
+  (`gm_step_factor`), theta the world bearing of the line of sight at the starting poses
+  (`view_angles`): the offset b_j = A_j - L_i is first-order Gauss-Markov in the view angle,
+  stationary with covariance Sigma_b, the pass's (its first line of sight, so that the process
+  is stationary: a Sigma_b turned at each sighting would need steps (Sigma_b(theta_{j+1}) -
+  phi^2 Sigma_b(theta_j)) that are not always covariances). L -> inf is the per-pass graph,
+  L -> 0 white sightings of r + Sigma_b (tests/slam/test_smoother_pass_drift.py).
 
 **How the laser offset is modelled.** GTSAM's `BearingRangeFactor2D` observes from the pose it
 is attached to, and the laser sits ahead of the rear axle (3.78 m on the Victoria Park ute).
@@ -745,18 +756,22 @@ def _wrap(a: float) -> float:
 
 def gm_step_factor(keys, phi: float, cov: np.ndarray):
     """The Gauss-Markov step of a drifting pass offset on keys (A_j, A_{j+1}, L_i), all Point2:
-    error A_{j+1} - phi A_j - (1 - phi) L_i with covariance `cov` (world frame, m^2). Linear, so
-    its Jacobians are constant: (-phi I, I, -(1 - phi) I)."""
-    jac = (-phi * np.eye(2), np.eye(2), -(1.0 - phi) * np.eye(2))
-
-    def error(this, values, H):
-        a, b, lm = (values.atPoint2(k) for k in this.keys())
-        if H is not None:
-            for n, J in enumerate(jac):
-                H[n] = J
-        return b - phi * a - (1.0 - phi) * lm
-
-    return gtsam.CustomFactor(_gauss(cov), list(keys), error)
+    error A_{j+1} - phi A_j - (1 - phi) L_i with covariance `cov` (world frame, m^2). Linear in
+    vector-space variables, so a native linear factor states it exactly: GTSAM's
+    LinearContainerFactor of the whitened JacobianFactor (blocks W (-phi I, I, -(1 - phi) I),
+    W the square-root information of `cov`) about the origin, which relinearises at a point x
+    with the right-hand side moved by the blocks times x. (A gtsam.CustomFactor, a Python
+    callback per factor, made one Levenberg-Marquardt iteration of scans 1-2000 take minutes.)"""
+    W = _gauss(cov).R()
+    blocks = (-phi * W, W, -(1.0 - phi) * W)
+    unit = gtsam.noiseModel.Unit.Create(2)
+    lin = gtsam.JacobianFactor(
+        keys[0], blocks[0], keys[1], blocks[1], keys[2], blocks[2], np.zeros(2), unit
+    )
+    origin = gtsam.Values()
+    for k in keys:
+        origin.insert(k, np.zeros(2))
+    return gtsam.LinearContainerFactor(lin, origin)
 
 
 def _gauss(cov: np.ndarray):

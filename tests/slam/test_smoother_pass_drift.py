@@ -177,30 +177,44 @@ def test_two_passes_and_isam2_solve_the_same_graph():
 
 
 def test_the_step_factors_jacobians_against_numerical_derivatives():
-    """gm_step_factor's (-phi I, I, -(1 - phi) I), whitened, against central differences of
-    its whitened error (h = 1e-6 m; the error is linear: exact to rounding, 1e-8)."""
+    """gm_step_factor linearised at a point: its whitened residual is W (A_{j+1} - phi A_j -
+    (1 - phi) L) (W the square-root information) and its Jacobian (-phi W, W, -(1 - phi) W)
+    equals central differences of that residual over the linearisation point (h = 1e-6 m; the
+    error is linear: exact to rounding, 1e-6 of the entries' size ~30)."""
     phi = 0.37
     cov = np.array([[2e-3, 4e-4], [4e-4, 1e-3]])
     keys = [gtsam.symbol("a", 0), gtsam.symbol("a", 1), gtsam.symbol("l", 0)]
     f = gm_step_factor(keys, phi, cov)
     pts = [np.array([1.0, 2.0]), np.array([1.3, 1.7]), np.array([0.9, 2.2])]
+
+    def residual(points):
+        values = gtsam.Values()
+        for k, v in zip(keys, points):
+            values.insert(k, v)
+        A, b = f.linearize(values).jacobian()
+        return A, -b
+
+    A, r = residual(pts)
+    e = pts[1] - phi * pts[0] - (1 - phi) * pts[2]
+    assert r @ r == pytest.approx(e @ np.linalg.solve(cov, e), rel=1e-12)
+    want = np.hstack([-phi * np.eye(2), np.eye(2), -(1 - phi) * np.eye(2)])
+    np.testing.assert_allclose(A.T @ A, want.T @ np.linalg.solve(cov, want), rtol=1e-10)
+    num = np.zeros((2, 6))
+    for n in range(3):
+        for c in range(2):
+            for sign in (1, -1):
+                x = [v.copy() for v in pts]
+                x[n][c] += sign * 1e-6
+                num[:, 2 * n + c] += sign * residual(x)[1] / 2e-6
+    np.testing.assert_allclose(A, num, rtol=0, atol=1e-6 * np.abs(A).max())
+    assert f.error(_values(keys, pts)) == pytest.approx(0.5 * r @ r)
+
+
+def _values(keys, pts):
     values = gtsam.Values()
     for k, v in zip(keys, pts):
         values.insert(k, v)
-    want = pts[1] - phi * pts[0] - (1 - phi) * pts[2]
-    np.testing.assert_allclose(f.unwhitenedError(values), want, atol=1e-15)
-    lin = f.linearize(values)
-    A = lin.jacobian()[0]
-    num = np.zeros((2, 6))
-    for n, k in enumerate(keys):
-        for c in range(2):
-            for sign in (1, -1):
-                v = gtsam.Values(values)
-                x = pts[n].copy()
-                x[c] += sign * 1e-6
-                v.update(k, x)
-                num[:, 2 * n + c] += sign * f.whitenedError(v) / 2e-6
-    np.testing.assert_allclose(A, num, rtol=0, atol=1e-8)
+    return values
 
 
 def test_a_bad_correlation_is_refused_naming_it():
