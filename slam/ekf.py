@@ -307,6 +307,32 @@ class Filter(_Estimate):
         self._P = np.ascontiguousarray(P[np.ix_(keep, keep)])
         self.copy_of = np.delete(self.copy_of, slot)
 
+    def blend_copies(self, landmark_ids, phi, extra) -> None:
+        """A first-order Gauss-Markov step of the error `append_copies` added to each of these
+        landmarks (each has a hidden copy): landmark <- phi landmark + (1 - phi) copy, then
+        extra (k, 2, 2) added to the landmark's own block, i.e. the error e = landmark - copy
+        becomes phi e plus an independent error of covariance extra. phi (k,) in [0, 1].
+        x <- T x, P <- T P T^T + extra on the landmark's block. Cost O(d) per landmark."""
+        ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
+        if not ids.size:
+            return
+        phi = np.asarray(phi, dtype=np.float64).reshape(ids.size)
+        extra = np.asarray(extra, dtype=np.float64).reshape(ids.size, 2, 2)
+        where = {i: j for j, i in enumerate(self.copy_of.tolist())}
+        if np.unique(ids).size != ids.size or not all(i in where for i in ids.tolist()):
+            raise SlamError(f"blend_copies: landmark ids {ids.tolist()} must each have a copy")
+        if not np.all((phi >= 0.0) & (phi <= 1.0)):
+            raise SlamError(f"blend_copies: phi must be in [0, 1], got {phi.tolist()}")
+        cols = _pair_cols(self.positions_of(ids))
+        hid = _pair_cols(self.n_landmarks + np.array([where[i] for i in ids.tolist()]))
+        f = np.repeat(phi, 2)
+        P = self.P  # mirrored: rows, then columns (T P, then (T P) T^T)
+        P[cols, :] = f[:, None] * P[cols, :] + (1.0 - f)[:, None] * P[hid, :]
+        P[:, cols] = P[:, cols] * f[None, :] + P[:, hid] * (1.0 - f)[None, :]
+        for c, e in zip(cols[::2].tolist(), extra):
+            P[c : c + 2, c : c + 2] += 0.5 * (e + e.T)
+        self.x[cols] = f * self.x[cols] + (1.0 - f) * self.x[hid]
+
     def predict(self, pose1: np.ndarray, F: np.ndarray, Q: np.ndarray) -> None:
         """Prediction with the motion's result `pose1`, Jacobian F (3, 3) and noise Q (3, 3).
 

@@ -177,7 +177,9 @@ class Slam:
         self.rest = RestGate(self.motion, self.scan_t, p.min_travel_m)
         sd = p.pass_offset_sd_m
         by_state = p.pass_offset_model == "state" and (sd[0] != 0.0 or sd[1] != 0.0)
-        self.passes = PassOffsets(sd, p.pass_gap_s, self.laser) if by_state else None
+        self.passes = (
+            PassOffsets(sd, p.pass_gap_s, self.laser, p.pass_offset_corr_rad) if by_state else None
+        )
 
     def step(self, k: int) -> ScanResult:
         """Scan k's five steps, timed and logged; returns what they produced."""
@@ -307,7 +309,9 @@ class Slam:
         for lid, n_obs in decisions.joined:
             self.history.joined(lid, k, n_obs)
         if self.passes is not None:  # their first pass began before they joined
-            self.passes.joined([lid for lid, _ in decisions.joined], float(self.scan_t[k]))
+            self.passes.joined(
+                [lid for lid, _ in decisions.joined], float(self.scan_t[k]), self.state
+            )
         for scan, feature, lid in decisions.retracks:
             self.log.retrack(scan, feature, lid)
         if decisions.removed:  # map policy "existence": marginalised out

@@ -11,6 +11,7 @@ import pytest
 
 import slam.ekf
 import slam.pass_state
+import slam.se2
 from slam import SlamError, run_slam
 from slam import rigid as rigid_ops
 from slam.config import ClosureConfig
@@ -372,3 +373,85 @@ def test_a_closure_with_passes_open_is_accepted_and_ends_them():
     assert sorted(ev.merged) == [(old_ids[j], recent_ids[j]) for j in range(12)]
     assert f.copy_of.size == 0 and f.n_landmarks == 20 and f.dim == 43
     np.testing.assert_allclose(f.pose, 0.0, atol=0.05)
+
+
+def _batch_drift(m0, P0, passes, corr_rad):
+    """The posterior of m under z_j + (x_j, y_j) = m + b_j + w_j with b first-order
+    Gauss-Markov in the view angle within a pass (Cov(b_j, b_k) = Sigma_p exp(-|path from
+    theta_j to theta_k| / L)), independent between passes, prior N(m0, P0); passes hold
+    (z_j + pose_j, R_j, theta_j, Sigma_p)."""
+    info, vec = np.linalg.inv(P0), np.linalg.inv(P0) @ m0
+    for ys, Rs, thetas, Sig in passes:
+        n = len(ys)
+        steps = np.abs([float(slam.se2.wrap_angle(b - a)) for a, b in zip(thetas, thetas[1:])])
+        path = np.concatenate([[0.0], np.cumsum(steps)])
+        corr = np.exp(-np.abs(path[:, None] - path[None, :]) / corr_rad)
+        C = np.kron(corr, Sig)
+        for j, R in enumerate(Rs):
+            C[2 * j : 2 * j + 2, 2 * j : 2 * j + 2] += R
+        H = np.kron(np.ones((n, 1)), np.eye(2))
+        Ci = np.linalg.inv(C)
+        info += H.T @ Ci @ H
+        vec += H.T @ Ci @ np.concatenate(ys)
+    cov = np.linalg.inv(info)
+    return cov @ vec, cov
+
+
+@pytest.mark.parametrize("corr_rad", [0.05, 0.4, 3.0])
+def test_a_drifting_offset_is_the_batch_posterior_of_a_gauss_markov_offset(monkeypatch, corr_rad):
+    """One landmark, a known vehicle driving past it (the view angle turns by up to a few
+    degrees a sighting, back and forth in the second pass), two passes: with a finite
+    correlation length the filter's landmark and covariance after the passes are the
+    closed-form posterior of an offset first-order Gauss-Markov in the view angle (to 1e-9)."""
+    monkeypatch.setattr(slam.ekf, "observe", _linear_observe)
+    rng = np.random.default_rng(5)
+    sd = (0.06, 0.03)
+    m0, P0 = np.array([12.0, 5.0]), _spd(rng, 0.3)
+    f = _filter(m0, P0, [4])
+    po = PassOffsets(sd, 2.0, LASER, corr_rad)
+    passes, t = [], 0.0
+    for p in range(2):
+        ys, Rs, thetas = [], [], []
+        xs = np.linspace(0.0, 9.0, 8) if p == 0 else np.array([9.0, 7.0, 8.0, 3.0, 4.0, 1.0])
+        for j, x in enumerate(xs):
+            po.end_passes(f, t)
+            f.x[:3] = [x, -2.0 + 0.1 * j, 0.3 - 0.05 * j]
+            theta = float(slam.pass_state.view_angle(f.x[:3], f.landmarks_xy[:1], LASER)[0])
+            if j == 0:
+                Sig = _rot_cov(theta, sd)
+            z = m0 - f.x[:2] + rng.normal(0.0, 0.2, 2)
+            R = _spd(rng, 0.02)
+            po.begin(f, np.array([4]), t)
+            f.update(np.array([0]), z[None], R[None], LASER)
+            ys.append(z + f.x[:2])
+            Rs.append(R)
+            thetas.append(theta)
+            t += 0.2
+        passes.append((ys, Rs, thetas, Sig))
+        t += 2.5
+    po.end_passes(f, t)
+    assert f.copy_of.size == 0 and not po.view and not po.cov
+    want_m, want_P = _batch_drift(m0, P0, passes, corr_rad)
+    np.testing.assert_allclose(f.landmarks_xy[0], want_m, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(f.P[3:, 3:], want_P, rtol=0, atol=1e-9)
+
+
+def test_an_infinite_correlation_length_takes_no_drift_step(monkeypatch):
+    """corr_rad = inf is the constant offset: `blend_copies` is never called."""
+    calls = []
+    monkeypatch.setattr(Filter, "blend_copies", lambda *a, **k: calls.append(a))
+    f = _filter([12.0, 5.0], 0.1 * np.eye(2), [4])
+    po = PassOffsets((0.05, 0.03), 2.0, LASER, math.inf)
+    for j in range(4):
+        f.x[:3] = [float(j), -2.0, 0.3]
+        po.begin(f, np.array([4]), 0.2 * j)
+    assert calls == [] and not po.view
+
+
+def test_blend_copies_refuses_what_it_cannot_do():
+    f = _filter([12.0, 5.0], 0.1 * np.eye(2), [4])
+    with pytest.raises(SlamError, match="blend_copies: landmark ids \\[4\\] must each have"):
+        f.blend_copies([4], [0.5], np.zeros((1, 2, 2)))
+    f.append_copies([4], 0.01 * np.eye(2)[None])
+    with pytest.raises(SlamError, match="phi must be in \\[0, 1\\]"):
+        f.blend_copies([4], [1.5], np.zeros((1, 2, 2)))
