@@ -7,6 +7,7 @@ configuration."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +39,8 @@ class Components:
     the parts the loop makes for each pass (`slam.loop.Slam.start`): the association and map
     policy sections (map manager, pruning), the closure section, `vehicle.min_travel_m` and
     `filter.first_estimates_jacobians`; the pass offset of the update's measurements
-    (`measurement.pass_offset_sd_m`, `measurement.pass_gap_s`)."""
+    (`measurement.pass_offset_sd_m`, `measurement.pass_gap_s`, `measurement.pass_offset_model`,
+    `measurement.pass_offset_corr_rad`)."""
 
     seq: Sequence
     source: object  # slam.sources: (k, scan) -> (Features, z, R); method, model, count, needs_scan
@@ -54,6 +56,8 @@ class Components:
     first_estimates: bool
     pass_offset_sd_m: tuple[float, float] = (0.0, 0.0)
     pass_gap_s: float = 2.0
+    pass_offset_model: str = "inflation"
+    pass_offset_corr_rad: float = math.inf
 
 
 def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) -> Components:
@@ -79,6 +83,8 @@ def components(seq: Sequence, cfg: SlamConfig, features=None, association=None) 
         first_estimates=cfg.filter.first_estimates_jacobians,
         pass_offset_sd_m=cfg.measurement.pass_offset_sd_m,
         pass_gap_s=cfg.measurement.pass_gap_s,
+        pass_offset_model=cfg.measurement.pass_offset_model,
+        pass_offset_corr_rad=cfg.measurement.pass_offset_corr_rad,
         view=View(
             fov=(a0, a0 + da * (seq.n_beams - 1)),
             max_range=min(float(seq.scan_max_range), cfg.measurement.max_range_m),

@@ -93,6 +93,7 @@ OWN_COVARIANCE = ("geometric", "paper")
 
 MAX_PASS_OFFSET_M = 10.0  # a trunk's centre offset shared by a pass: above a trunk's size
 MAX_PASS_GAP_S = 1e6  # s, longer than any run: one pass per landmark
+MAX_PASS_CORR_RAD = 1e6  # rad: a finite correlation length beyond this is inf in all but name
 MAX_LATENCY_S = 1.0  # a laser stamped a second or more off its measurement is a clock fault
 
 
@@ -759,6 +760,9 @@ class MeasurementConfig:
         (each sighting's covariance grown by `slam.measurement.pass_inflation`) or "state" (the
         offset as a state of the filter while its pass lasts, a variable per pass in the
         smoother).
+    pass_offset_corr_rad: with the "state" model, the correlation length in rad of view angle
+        of an offset that drifts over its pass (first-order Gauss-Markov; the smoother's
+        apparent point per sighting, `slam.smoother`); inf: constant over a pass.
     """
 
     noise: str = default(
@@ -794,6 +798,11 @@ class MeasurementConfig:
     )
     pass_offset_model: str = default(
         "inflation", "design: the per-sighting inflation of slam.measurement.pass_inflation"
+    )
+    pass_offset_corr_rad: float = default(
+        math.inf,
+        "design: inf, an offset constant over a pass (today's model); the drift's L is derived "
+        "on scans 1-2000 by experiments.eval.pass_drift (victoria-park-pass-offset)",
     )
 
     def __post_init__(self) -> None:
@@ -842,6 +851,14 @@ class MeasurementConfig:
         setting("measurement.pass_gap_s", g, limit=MAX_PASS_GAP_S)
         if not g > 0:
             raise SlamError(f"measurement.pass_gap_s: must be > 0 s, got {g!r}")
+        c = self.pass_offset_corr_rad
+        if isinstance(c, bool) or not isinstance(c, (int, float)) or not c > 0:
+            raise SlamError(
+                "measurement.pass_offset_corr_rad: must be a number > 0 rad (inf: constant over "
+                f"a pass), got {c!r}"
+            )
+        if math.isfinite(c):
+            setting("measurement.pass_offset_corr_rad", c, limit=MAX_PASS_CORR_RAD)
 
     def model_for(self, method: str, has_cov: bool | None = None) -> MeasurementModel:
         """The measurement model of circles from `method`. has_cov: whether they carry their own

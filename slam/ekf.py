@@ -30,6 +30,13 @@ the d x d covariance:
   O(d^2) mirror, whose writes across the cold upper triangle cost more than the update.
 - `add_landmark`: initialisation from one measurement with its cross covariances:
   m = g(pose, z), P_mm = Gx P_vv Gx^T + Gz R Gz^T, P_m* = Gx P_v* (this one grows P: a copy).
+
+Hidden copies (`Filter.append_copies`, `Filter.restore_copies`): 2-D slots after the landmarks,
+x = [pose, landmarks..., copies...], each a copy of one landmark taken before an extra error
+was added to it (the pass offset's anchor, `slam.pass_state`). They take part in every step
+(`predict` carries all rows after the pose, `update` all rows of P) but not in what the filter
+shows: `landmarks_xy`, `landmark_ids`, `n_landmarks` and `snapshot` see the landmarks only, a
+new landmark is inserted before the copies, and removing a landmark removes its copy with it.
 The functions `predict`, `update` and `add_landmark` do the same on an immutable `EkfState`
 (copying it), for callers that want values rather than a working state.
 """
@@ -84,7 +91,7 @@ class _Estimate:
 
     @property
     def n_landmarks(self) -> int:
-        return (self.dim - 3) // 2
+        return int(self.landmark_ids.size)
 
     @property
     def pose(self) -> np.ndarray:
@@ -99,7 +106,7 @@ class _Estimate:
     @property
     def landmarks_xy(self) -> np.ndarray:
         """(n, 2) landmark positions, world frame, m."""
-        return self.x[3:].reshape(-1, 2)
+        return self.x[3 : 3 + 2 * self.n_landmarks].reshape(-1, 2)
 
     @property
     def landmark_covs(self) -> np.ndarray:
@@ -215,6 +222,7 @@ class Filter(_Estimate):
         self.first_estimates = bool(first_estimates)
         self.first_xy = self.landmarks_xy.copy()  # each landmark's first estimate
         self.prior_pose = self.x[:3].copy()  # the pose after the last prediction
+        self.copy_of = np.zeros(0, np.int64)  # the hidden slots: the landmark each one copies
 
     @property
     def P(self) -> np.ndarray:
@@ -233,7 +241,97 @@ class Filter(_Estimate):
         return self._P[idx] if self._mirrored else _sym_rows(self._P, idx)
 
     def snapshot(self) -> EkfState:
-        return EkfState(self.x, self.P, self.landmark_ids)
+        """The landmarks' estimate (the hidden copies marginalised out), immutable."""
+        d = 3 + 2 * self.n_landmarks
+        return EkfState(self.x[:d], self.P[:d, :d], self.landmark_ids)
+
+    def append_copies(self, landmark_ids, extra, on_copy=None) -> None:
+        """Append a hidden copy of each of these landmarks, then add extra (k, 2, 2) to the
+        landmark's own covariance block: the copy (a slot after the landmarks, which
+        `landmarks_xy`, `landmark_ids`, `snapshot` and the steps' indices do not see) keeps
+        the landmark's estimate and all its covariances, its cross-covariance with the
+        landmark included (the landmark's block before the addition); the landmark becomes
+        the copy plus an independent error of covariance extra, whose later updates reach the
+        copy through that correlation. on_copy (k,) bool (default none): for these, extra
+        goes to the copy's block instead (the landmark is the copy less an independent error:
+        an estimate that already carries the error). `restore_copies` marginalises the error
+        out. Cost O(d^2) (P grows: a copy), one copy for the whole batch."""
+        ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
+        extra = np.asarray(extra, dtype=np.float64).reshape(ids.size, 2, 2)
+        on_copy = np.zeros(ids.size, bool) if on_copy is None else np.asarray(on_copy, bool)
+        if not ids.size:
+            return
+        pos = self.positions_of(ids)
+        if np.any(pos < 0) or np.unique(ids).size != ids.size or np.isin(ids, self.copy_of).any():
+            raise SlamError(
+                f"append_copies: landmark ids {ids.tolist()} must be distinct landmarks of the "
+                "state without a copy"
+            )
+        cols = _pair_cols(pos)
+        P = self.P  # mirrored: the new rows are read whole
+        d, q = self.dim, cols.size
+        out = np.empty((d + q, d + q))
+        out[:d, :d] = P
+        out[d:, :d] = P[cols]
+        out[:d, d:] = out[d:, :d].T
+        out[d:, d:] = P[np.ix_(cols, cols)]
+        for j, (c, e) in enumerate(zip(cols[::2].tolist(), extra)):
+            c = d + 2 * j if on_copy[j] else c
+            out[c : c + 2, c : c + 2] += 0.5 * (e + e.T)
+        self._P = out
+        self._mirrored = True
+        self.x = np.concatenate([self.x, self.x[cols]])
+        self.copy_of = np.concatenate([self.copy_of, ids])
+
+    def restore_copies(self, landmark_ids=None) -> None:
+        """Give each of these landmarks (None: every landmark with a copy) its hidden copy's
+        estimate back (x, its row and column of P, its own block) and drop the copy: the error
+        `append_copies` added is marginalised out, exact for a Gaussian. Cost O(d^2)."""
+        ids = self.copy_of.copy() if landmark_ids is None else landmark_ids
+        ids = np.asarray(ids, dtype=np.int64).reshape(-1)
+        if not ids.size:
+            return
+        where = {i: j for j, i in enumerate(self.copy_of.tolist())}
+        if np.unique(ids).size != ids.size or not all(i in where for i in ids.tolist()):
+            raise SlamError(f"restore_copies: landmark ids {ids.tolist()} must each have a copy")
+        slot = np.array([where[i] for i in ids.tolist()], np.int64)
+        cols = _pair_cols(self.positions_of(ids))
+        hid = _pair_cols(self.n_landmarks + slot)
+        P = self.P
+        P[cols, :] = P[hid, :]
+        P[:, cols] = P[:, hid]  # the landmark's own block is now the copy's
+        self.x[cols] = self.x[hid]
+        keep = np.ones(self.dim, bool)
+        keep[hid] = False
+        self.x = self.x[keep]
+        self._P = np.ascontiguousarray(P[np.ix_(keep, keep)])
+        self.copy_of = np.delete(self.copy_of, slot)
+
+    def blend_copies(self, landmark_ids, phi, extra) -> None:
+        """A first-order Gauss-Markov step of the error `append_copies` added to each of these
+        landmarks (each has a hidden copy): landmark <- phi landmark + (1 - phi) copy, then
+        extra (k, 2, 2) added to the landmark's own block, i.e. the error e = landmark - copy
+        becomes phi e plus an independent error of covariance extra. phi (k,) in [0, 1].
+        x <- T x, P <- T P T^T + extra on the landmark's block. Cost O(d) per landmark."""
+        ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
+        if not ids.size:
+            return
+        phi = np.asarray(phi, dtype=np.float64).reshape(ids.size)
+        extra = np.asarray(extra, dtype=np.float64).reshape(ids.size, 2, 2)
+        where = {i: j for j, i in enumerate(self.copy_of.tolist())}
+        if np.unique(ids).size != ids.size or not all(i in where for i in ids.tolist()):
+            raise SlamError(f"blend_copies: landmark ids {ids.tolist()} must each have a copy")
+        if not np.all((phi >= 0.0) & (phi <= 1.0)):
+            raise SlamError(f"blend_copies: phi must be in [0, 1], got {phi.tolist()}")
+        cols = _pair_cols(self.positions_of(ids))
+        hid = _pair_cols(self.n_landmarks + np.array([where[i] for i in ids.tolist()]))
+        f = np.repeat(phi, 2)
+        P = self.P  # mirrored: rows, then columns (T P, then (T P) T^T)
+        P[cols, :] = f[:, None] * P[cols, :] + (1.0 - f)[:, None] * P[hid, :]
+        P[:, cols] = P[:, cols] * f[None, :] + P[:, hid] * (1.0 - f)[None, :]
+        for c, e in zip(cols[::2].tolist(), extra):
+            P[c : c + 2, c : c + 2] += 0.5 * (e + e.T)
+        self.x[cols] = f * self.x[cols] + (1.0 - f) * self.x[hid]
 
     def predict(self, pose1: np.ndarray, F: np.ndarray, Q: np.ndarray) -> None:
         """Prediction with the motion's result `pose1`, Jacobian F (3, 3) and noise Q (3, 3).
@@ -310,16 +408,22 @@ class Filter(_Estimate):
         if np.any(self.landmark_ids == landmark_id):
             raise SlamError(f"add_landmark.landmark_id: {landmark_id} is already in the state")
         m, Gx, Gz = inverse_observe(self.pose, z, laser_pose)
-        d = self.dim
+        d, e = self.dim, 3 + 2 * self.n_landmarks  # e: where it goes, before any hidden copy
         P = np.zeros((d + 2, d + 2))
-        P[:d, :d] = self._P  # its upper triangle lags as much as the old one did
-        cross = Gx @ _sym_rows(self._P, _POSE_COLS[0])  # (2, d)
-        P[d:, :d] = cross
-        P[:d, d:] = cross.T
+        old = self._P  # the order of the rows is kept: the triangles stay where they were
+        P[:e, :e] = old[:e, :e]  # its upper triangle lags as much as the old one did
+        P[e + 2 :, :e] = old[e:, :e]
+        P[:e, e + 2 :] = old[:e, e:]
+        P[e + 2 :, e + 2 :] = old[e:, e:]
+        cross = Gx @ _sym_rows(old, _POSE_COLS[0])  # (2, d)
+        P[e : e + 2, :e] = cross[:, :e]
+        P[:e, e : e + 2] = cross[:, :e].T
+        P[e : e + 2, e + 2 :] = cross[:, e:]
+        P[e + 2 :, e : e + 2] = cross[:, e:].T
         Pmm = Gx @ self.pose_cov @ Gx.T + Gz @ np.asarray(R) @ Gz.T
-        P[d:, d:] = 0.5 * (Pmm + Pmm.T)
+        P[e : e + 2, e : e + 2] = 0.5 * (Pmm + Pmm.T)
         self._P = P
-        self.x = np.concatenate([self.x, m])
+        self.x = np.concatenate([self.x[:e], m, self.x[e:]])
         self.landmark_ids = np.concatenate([self.landmark_ids, np.array([landmark_id], np.int64)])
         self.first_xy = np.concatenate([self.first_xy, m[None, :]])
 
@@ -336,9 +440,12 @@ class Filter(_Estimate):
         keep = np.ones(self.dim, bool)
         keep[3 + 2 * pos] = False
         keep[4 + 2 * pos] = False
+        copies = np.flatnonzero(np.isin(self.copy_of, ids))  # their hidden copies go too
+        keep[_pair_cols(self.n_landmarks + copies)] = False
         self.x = self.x[keep]
         self._P = np.ascontiguousarray(self._P[np.ix_(keep, keep)])  # keeps the triangles
         self.landmark_ids = np.delete(self.landmark_ids, pos)
+        self.copy_of = np.delete(self.copy_of, copies)
         self.first_xy = np.delete(self.first_xy, pos, axis=0)
 
 
@@ -397,6 +504,13 @@ def _mirror_lower(P: np.ndarray) -> None:
 
 
 _POSE_COLS = np.array([[0, 1, 2]], np.int64)
+
+
+def _pair_cols(pos: np.ndarray) -> np.ndarray:
+    """(2 k,) the state columns [3 + 2 i, 4 + 2 i, ...] of the 2-D slots at positions pos (k,)
+    (landmarks, then the hidden copies after them)."""
+    pos = np.asarray(pos, dtype=np.int64).reshape(-1)
+    return ((3 + 2 * pos)[:, None] + np.arange(2)).reshape(-1)
 
 
 @njit(cache=True)

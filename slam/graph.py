@@ -134,7 +134,15 @@ def graph_of_problem(p) -> tuple[PoseGraph2D, int]:
     standard deviations of its covariance's diagonal, landmark ids as run (closures merged).
     The prior on the start is not part of it (a g2o file has none; the solver's gauge fix
     takes its place). Returns (graph, measurements whose covariance has a correlation the
-    bearing-range factor leaves out)."""
+    bearing-range factor leaves out). A problem with pass variables (the pass offset as a
+    state) is refused: a g2o file has no factor between two landmarks."""
+    if getattr(p, "meas_pass", None) is not None:
+        raise SlamError(
+            "the run carries its pass offset as a state (measurement.pass_offset_model = "
+            '"state"): its graph has a variable per pass tied to its landmark, which a graph of '
+            "range-bearing factors cannot hold; solve it with `trunkslam smooth RUN_DIR`, or "
+            'export a run with pass_offset_model "inflation"'
+        )
     T = np.asarray(p.laser_pose, dtype=np.float64)
     T_inv = se2.inverse(T)
     ad_inv = _adjoint(T_inv)

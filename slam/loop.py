@@ -54,6 +54,7 @@ from slam.history import RunHistory
 from slam.log import NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED, LogBuilder, SlamLog
 from slam.map_managers import MapDecisions, Pruner, ScanAssociation, make_map_manager
 from slam.measurement import pass_inflation
+from slam.pass_state import PassOffsets
 from slam.sequence import Sequence
 from slam.sources import Measurements
 from slam.start import first_pass_wanted, initial_pose
@@ -174,11 +175,18 @@ class Slam:
             else None
         )
         self.rest = RestGate(self.motion, self.scan_t, p.min_travel_m)
+        sd = p.pass_offset_sd_m
+        by_state = p.pass_offset_model == "state" and (sd[0] != 0.0 or sd[1] != 0.0)
+        self.passes = (
+            PassOffsets(sd, p.pass_gap_s, self.laser, p.pass_offset_corr_rad) if by_state else None
+        )
 
     def step(self, k: int) -> ScanResult:
         """Scan k's five steps, timed and logged; returns what they produced."""
         clock = _Clock()
         Q = self.predict(k)
+        if self.passes is not None:  # the passes that ended before this scan
+            self.passes.end_passes(self.state, float(self.scan_t[k]))
         clock.lap()
         meas = self.measure(k)
         clock.lap()
@@ -274,6 +282,8 @@ class Slam:
             return math.nan, paired
         pos = a.lm_idx[a.assign[to_map]]
         ids = self.state.landmark_ids[pos]
+        if self.passes is not None:  # pass offset "state": anchors for the passes begun
+            self.passes.begin(self.state, ids, float(self.scan_t[meas.k]))
         res = self.state.update(pos, meas.z[to_map], self._update_R(meas, to_map, ids), self.laser)
         self.log.logdet[meas.k] = res.logdet
         paired[to_map] = ids
@@ -285,9 +295,10 @@ class Slam:
     def _update_R(self, meas: Measurements, rows: np.ndarray, ids: np.ndarray) -> np.ndarray:
         """The covariances the update uses for measurements `rows` of landmarks `ids`: as
         measured, plus the pass offset (`slam.measurement.pass_inflation`) when one is set
-        (gating and new landmarks keep the white model)."""
+        as "inflation" (gating and new landmarks keep the white model; "state" carries it in
+        the filter, `slam.pass_state`)."""
         sd = self.parts.pass_offset_sd_m
-        if sd[0] == 0.0 and sd[1] == 0.0:
+        if (sd[0] == 0.0 and sd[1] == 0.0) or self.passes is not None:
             return meas.R[rows]
         k = self.history.pass_index(ids, float(self.scan_t[meas.k]), self.parts.pass_gap_s)
         return pass_inflation(meas.z[rows], meas.R[rows], k, sd)
@@ -297,6 +308,10 @@ class Slam:
         joined the map, the earlier measurements re-tracked to a new landmark."""
         for lid, n_obs in decisions.joined:
             self.history.joined(lid, k, n_obs)
+        if self.passes is not None:  # their first pass began before they joined
+            self.passes.joined(
+                [lid for lid, _ in decisions.joined], float(self.scan_t[k]), self.state
+            )
         for scan, feature, lid in decisions.retracks:
             self.log.retrack(scan, feature, lid)
         if decisions.removed:  # map policy "existence": marginalised out
@@ -381,6 +396,8 @@ def run_slam(
             show_scan(vis, sequence, loop.laser, loop.state, result)
         if progress is not None:
             progress(k + 1, sequence.n_scans)
+    if loop.passes is not None:  # the passes still open end with the run
+        loop.passes.end_all(loop.state)
     closer = loop.closer
     return loop.log.build(
         loop.state,

@@ -10,6 +10,9 @@ Each function reads or changes a `Filter` in place, as its own steps do:
 - `free_rigid_motion`: let the vehicle and some landmarks move together by an unknown rigid
   motion (their covariance grows);
 - `move_rigidly`: move the whole estimate by one rigid motion (a change of world frame).
+The three that change the estimate (merge, free, move) first restore the filter's hidden copies
+(`Filter.restore_copies`: the pass offsets' anchors, `slam.pass_state`), so they act on the
+landmarks alone.
 """
 
 from __future__ import annotations
@@ -56,6 +59,7 @@ def merge_landmarks(state: Filter, keep_ids, drop_ids, sigma_m: float = 1e-3) ->
     "their positions differ by 0" (noise sigma_m each axis, a hard constraint that keeps S
     invertible), then each drop_ids[j] is marginalised out (`remove_landmarks`). Returns
     the constraint's NIS (`same_landmarks_nis`, with the noise)."""
+    state.restore_copies()  # the pass offsets' anchors first (`slam.pass_state`)
     d, HP, S, _, _ = _pair_constraint(state, keep_ids, drop_ids, sigma_m)
     L = np.linalg.cholesky(S)
     W = np.linalg.solve(L, HP).T  # (dim, q): P H^T L^-T
@@ -118,6 +122,7 @@ def free_rigid_motion(state: Filter, landmark_ids, center, cov: np.ndarray, shar
     vehicle: all of it). Two rows with shares f, g then share min(f, g) cov:
     P += sum_k (f_k - f_(k-1)) B_k cov B_k^T over the distinct shares f_1 < ... < f_K,
     with B_k on the rows whose share is at least f_k."""
+    state.restore_copies()  # the pass offsets' anchors first (`slam.pass_state`)
     ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
     pos = np.array([state.index_of(int(i)) for i in ids], dtype=np.int64)
     f = np.ones(ids.size) if shares is None else np.asarray(shares, dtype=np.float64)
@@ -150,6 +155,7 @@ def move_rigidly(state: Filter, theta: float, t: np.ndarray) -> None:
     and every landmark's position, theta added to the heading): a change of the world
     frame, which nothing observes. P -> J P J^T (J: R(theta) on each position's rows), and
     the first estimates move with it, so the filter is the same filter in the new frame."""
+    state.restore_copies()  # the pass offsets' anchors first (`slam.pass_state`)
     c, s = math.cos(theta), math.sin(theta)
     R = np.array([[c, -s], [s, c]])
     t = np.asarray(t, dtype=np.float64).reshape(2)

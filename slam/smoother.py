@@ -11,7 +11,25 @@ The graph (`Problem` holds its inputs; `problem_from_log` takes them from a `Sla
   integration, `slam.vehicle.integrate`: mean and covariance, floor noise included);
 - one bearing-range factor per associated measurement with the EKF's covariance: by default the
   measurements the EKF used (its updates and the measurement that initialised each landmark),
-  optionally also the tentative sightings of landmarks that later joined the map.
+  optionally also the tentative sightings of landmarks that later joined the map;
+- with the pass offset carried as a state (`measurement.pass_offset_model = "state"`, a
+  non-zero `pass_offset_sd_m`): one "pass landmark" P_q (Point2) per pass of a landmark, tied
+  to its landmark L_i by a BetweenFactorPoint2 (P_q - L_i = b_q, b_q ~ N(0, Sigma_b) in the
+  world frame, `Problem.pass_cov`), the pass's bearing-range factors on P_q with the white
+  covariance. The sightings of a pass z_j = h(L_i + b_q) + w_j then share one offset, exactly:
+  this is the model the per-pass inflation (r + n s^2, the "inflation" model) approximates.
+  The results are the landmarks L_i; the pass landmarks are counted (`pass_variables`).
+- with an offset that drifts as the view turns (a finite `measurement.pass_offset_corr_rad` L,
+  `Problem.pass_corr_rad`): one apparent point A_j (Point2) per sighting instead of one per
+  pass, the sighting's bearing-range factor on A_j with the white covariance; in each pass, in
+  scan order, A_1 - L_i ~ N(0, Sigma_b) and A_{j+1} - phi_j A_j - (1 - phi_j) L_i ~
+  N(0, (1 - phi_j^2) Sigma_b + PASS_FLOOR I), phi_j = exp(-|theta_{j+1} - theta_j| / L)
+  (`gm_step_factor`), theta the world bearing of the line of sight at the starting poses
+  (`view_angles`): the offset b_j = A_j - L_i is first-order Gauss-Markov in the view angle,
+  stationary with covariance Sigma_b, the pass's (its first line of sight, so that the process
+  is stationary: a Sigma_b turned at each sighting would need steps (Sigma_b(theta_{j+1}) -
+  phi^2 Sigma_b(theta_j)) that are not always covariances). L -> inf is the per-pass graph,
+  L -> 0 white sightings of r + Sigma_b (tests/slam/test_smoother_pass_drift.py).
 
 **How the laser offset is modelled.** GTSAM's `BearingRangeFactor2D` observes from the pose it
 is attached to, and the laser sits ahead of the rear axle (3.78 m on the Victoria Park ute).
@@ -36,7 +54,7 @@ off by default. `solve_graph_file` solves GTSAM's own Victoria Park graph.
 chi2 is twice GTSAM's graph error (the sum of squared whitened residuals, of the Gaussian
 factors even when robust kernels were used to solve) and dof the number of residuals minus the
 number of unknowns: 2 M - 2 L for M measurements and L landmarks (the prior and odometry supply
-exactly the poses' 3 N).
+exactly the poses' 3 N; each pass landmark brings 2 unknowns and its 2 offset residuals).
 """
 
 from __future__ import annotations
@@ -80,6 +98,11 @@ MEAS_TENTATIVE = 2  # a sighting while the landmark was still tentative (the EKF
 # Added to the prior's covariance (m^2, rad^2): a run that starts from the truth with zero
 # covariance gets a prior of 1e-6 m and 1e-6 rad, which GTSAM's Gaussian can invert.
 PRIOR_FLOOR = 1e-12
+# Added to a pass offset's covariance (m^2): an offset with one axis at 0 (e.g. across the
+# line of sight only) gets 0.1 mm on it (1e-5 of the variance of a 3 cm sighting). Stiffer
+# ties make GTSAM's elimination call the landmark indeterminate (1e-10 m^2 did, on a tree seen
+# in one pass along one line of sight: tests/slam/test_smoother_pass_state.py).
+PASS_FLOOR = 1e-8
 ROBUST_DEFAULT_K = {"huber": 1.345, "cauchy": 2.3849}  # 95% efficiency under Gaussian noise
 
 
@@ -118,6 +141,14 @@ def _landmark_key(lid: int) -> int:
     return gtsam.symbol("l", lid)
 
 
+def _pass_key(q: int) -> int:
+    return gtsam.symbol("p", q)
+
+
+def _apparent_key(i: int) -> int:
+    return gtsam.symbol("a", i)
+
+
 @dataclass(frozen=True, eq=False)
 class Problem:
     """The smoother's inputs. N scans, M measurements, L landmarks; world frame; m, rad, s.
@@ -131,6 +162,14 @@ class Problem:
         meas_kind (M,): MEAS_UPDATE, MEAS_INIT or MEAS_TENTATIVE.
     init_pose (N, 3): starting values of the poses (the EKF's path).
     landmark_id (L,), init_landmark (L, 2): the landmarks and their starting values.
+    Optional, together (the pass offset as a state, P passes; None: no pass variables):
+    meas_pass (M,): the pass (0..P-1) of each measurement; pass_landmark (P,): the landmark
+        of each pass (every measurement's landmark is its pass's); pass_cov (P, 2, 2): the
+        covariance of each pass's offset in the world frame (m^2). A pass no measurement
+        refers to is left out of the graph.
+    pass_corr_rad (with the pass fields; None or inf: the offset is constant over a pass): the
+        correlation length L in rad of the view angle of an offset that drifts over its pass
+        (first-order Gauss-Markov, `measurement.pass_offset_corr_rad`; the module doc).
     """
 
     scan_t: np.ndarray
@@ -147,6 +186,10 @@ class Problem:
     init_pose: np.ndarray
     landmark_id: np.ndarray
     init_landmark: np.ndarray
+    meas_pass: np.ndarray | None = None
+    pass_landmark: np.ndarray | None = None
+    pass_cov: np.ndarray | None = None
+    pass_corr_rad: float | None = None
 
     def __post_init__(self) -> None:
         n = _shape(self, "scan_t", (None,), np.float64)[0]
@@ -191,6 +234,7 @@ class Problem:
         _positive_definite("Problem.meas_R", self.meas_R)
         if m and not (self.meas_z[:, 0] > 0).all():
             raise SlamError("Problem.meas_z: ranges must be > 0")
+        _check_passes(self, m)
 
     @property
     def n_scans(self) -> int:
@@ -200,9 +244,24 @@ class Problem:
     def n_measurements(self) -> int:
         return int(self.meas_scan.shape[0])
 
+    @property
+    def pass_variables(self) -> int:
+        """The pass landmarks the graph gets: the passes with a measurement (0: none), or with
+        a drifting offset (a finite `pass_corr_rad`) one apparent point per measurement."""
+        if self.meas_pass is None:
+            return 0
+        return self.n_measurements if self.drifts else int(np.unique(self.meas_pass).size)
+
+    @property
+    def drifts(self) -> bool:
+        """Whether the pass offset drifts (pass fields and a finite `pass_corr_rad`)."""
+        c = self.pass_corr_rad
+        return self.meas_pass is not None and c is not None and math.isfinite(c)
+
     def arrays(self) -> dict[str, np.ndarray]:
-        """The fields as a dict of arrays (what the run-log file stores)."""
-        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+        """The fields given, as a dict of arrays (what the run-log file stores)."""
+        out = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        return {name: np.asarray(a) for name, a in out.items() if a is not None}
 
 
 def _shape(obj, name: str, shape: tuple, dtype) -> tuple[int, ...]:
@@ -267,6 +326,53 @@ def _check_values(p: Problem) -> None:
         raise SlamError("Problem.landmark_id: ids must be >= 0")
 
 
+PASS_FIELDS = ("meas_pass", "pass_landmark", "pass_cov")
+
+
+def _check_passes(p: Problem, m: int) -> None:
+    """The optional pass fields: all or none, shapes, each measurement's pass of its landmark,
+    each offset covariance positive definite and within the sequence file's limit."""
+    from slam.sequence import MAX_VARIANCE
+
+    given = [name for name in PASS_FIELDS if getattr(p, name) is not None]
+    if not given:
+        if p.pass_corr_rad is not None:
+            raise SlamError("Problem.pass_corr_rad: given without the pass fields (meas_pass, "
+                            "pass_landmark, pass_cov)")  # fmt: skip
+        return
+    if len(given) < len(PASS_FIELDS):
+        missing = ", ".join(name for name in PASS_FIELDS if name not in given)
+        raise SlamError(f"Problem: {missing} missing (meas_pass, pass_landmark and pass_cov "
+                        "come together)")  # fmt: skip
+    n_pass = _shape(p, "pass_landmark", (None,), np.int64)[0]
+    _shape(p, "meas_pass", (m,), np.int64)
+    _shape(p, "pass_cov", (n_pass, 2, 2), np.float64)
+    if m and not (0 <= p.meas_pass.min() and p.meas_pass.max() < n_pass):
+        raise SlamError(f"Problem.meas_pass: pass indices must lie in [0, {n_pass})")
+    wrong = np.flatnonzero(p.pass_landmark[p.meas_pass] != p.meas_landmark)
+    if wrong.size:
+        i = int(wrong[0])
+        raise SlamError(
+            f"Problem.meas_pass[{i}]: pass {int(p.meas_pass[i])} is of landmark "
+            f"{int(p.pass_landmark[p.meas_pass[i]])}, the measurement of landmark "
+            f"{int(p.meas_landmark[i])}"
+        )
+    if n_pass and np.abs(p.pass_cov).max() > MAX_VARIANCE:
+        raise SlamError(
+            f"Problem.pass_cov: {float(np.abs(p.pass_cov).max()):.6g} is beyond the limit of "
+            f"+-{MAX_VARIANCE:g}"
+        )
+    _positive_definite("Problem.pass_cov", p.pass_cov)
+    c = p.pass_corr_rad
+    if c is not None:
+        a = np.asarray(c)
+        ok = a.shape == () and a.dtype.kind in "fiu" and not isinstance(c, bool)
+        if not ok or not float(a) > 0:
+            raise SlamError(f"Problem.pass_corr_rad: expected a length > 0 rad (inf: constant "
+                            f"over a pass), got {c!r}")  # fmt: skip
+        object.__setattr__(p, "pass_corr_rad", float(a))
+
+
 def _positive_definite(name: str, covs: np.ndarray, first: int = 0, semi: bool = False) -> None:
     if not covs.shape[0]:
         return
@@ -293,7 +399,8 @@ def problem_from_log(log: SlamLog, measurements: str = "ekf") -> Problem:
     of a pass of n sightings of its landmark (all its sightings in the log, tentative ones
     included, with the filter's gap rule) gets the batch pass variance r + n s^2 per axis
     (`slam.measurement.pass_inflation`): the covariance the smoother and an exported graph
-    use.
+    use. With `measurement.pass_offset_model = "state"` instead, the measurements keep their
+    white covariance and the problem gets the passes (`pass_offsets`): a variable per pass.
     """
     if measurements not in ("ekf", "all"):
         raise SlamError(f"measurements: expected 'ekf' or 'all', got {measurements!r}")
@@ -308,6 +415,7 @@ def problem_from_log(log: SlamLog, measurements: str = "ekf") -> Problem:
         kind[tentative] = MEAS_TENTATIVE
     # a landmark the map policy pruned is not in the final map: its measurements stay out
     use = (kind >= 0) & np.isin(log.meas_track, log.landmark_id)
+    passes = pass_offsets(log, use)
     return Problem(
         scan_t=log.scan_t,
         prior_pose=log.start_pose,
@@ -318,18 +426,26 @@ def problem_from_log(log: SlamLog, measurements: str = "ekf") -> Problem:
         meas_scan=log.meas_scan[use],
         meas_landmark=log.meas_track[use],
         meas_z=log.meas_z[use],
-        meas_R=_pass_R(log, use),
+        meas_R=log.meas_R[use] if passes else _pass_R(log, use),
         meas_kind=kind[use],
         init_pose=log.pose,
         landmark_id=log.landmark_id,
         init_landmark=log.landmark_xy,
+        **passes,
     )
+
+
+def _pass_settings(log: SlamLog) -> tuple[tuple[float, float], float, str]:
+    """The run's pass offset: (range, across) sd in m, the gap in s, the model."""
+    cfg = log.config.get("measurement", {}) if isinstance(log.config, dict) else {}
+    sd = tuple(float(v) for v in cfg.get("pass_offset_sd_m", (0.0, 0.0)))
+    gap = float(cfg.get("pass_gap_s", 2.0))
+    return (sd[0], sd[1]), gap, str(cfg.get("pass_offset_model", "inflation"))
 
 
 def _pass_R(log: SlamLog, use: np.ndarray) -> np.ndarray:
     """The covariances of measurements `use` of `log`, with the run's pass offset (batch)."""
-    cfg = log.config.get("measurement", {}) if isinstance(log.config, dict) else {}
-    sd = tuple(float(v) for v in cfg.get("pass_offset_sd_m", (0.0, 0.0)))
+    sd, gap, _ = _pass_settings(log)
     if sd == (0.0, 0.0):
         return log.meas_R[use]
     st = log.meas_status
@@ -337,10 +453,91 @@ def _pass_R(log: SlamLog, use: np.ndarray) -> np.ndarray:
     sighting &= np.isin(log.meas_track, log.landmark_id)
     rows = np.flatnonzero(sighting)
     t = log.scan_t[log.meas_scan[rows]]
-    _, size = pass_sizes(t, log.meas_track[rows], float(cfg.get("pass_gap_s", 2.0)))
+    _, size = pass_sizes(t, log.meas_track[rows], gap)
     n = np.zeros(st.shape, np.int64)
     n[rows] = size
     return pass_inflation(log.meas_z[use], log.meas_R[use], n[use], sd, batch=True)
+
+
+def pass_offsets(log: SlamLog, use: np.ndarray) -> dict[str, np.ndarray]:
+    """`Problem`'s pass fields for measurements `use` (K,) bool of `log` when the run carries
+    the pass offset as a state (`measurement.pass_offset_model = "state"`, a non-zero
+    `pass_offset_sd_m`); {} otherwise.
+
+    The passes are the filter's (`pass_numbers`: the gap rule over each landmark's updates,
+    under the id it had then). Each pass's offset covariance in the world frame is
+    Sigma_b = Rot(beta) diag(s_r^2, s_a^2) Rot(beta)^T (+ `PASS_FLOOR`), beta the bearing in
+    the world of the line of sight from the laser at the pass's first sighting (the EKF's
+    pose) to the landmark's estimate (the EKF's map)."""
+    sd, gap, model = _pass_settings(log)
+    if model != "state" or sd == (0.0, 0.0):
+        return {}
+    rows = np.flatnonzero(use)
+    scan = log.meas_scan[rows]
+    t = log.scan_t[scan]
+    track = log.meas_track if log.meas_track_unmerged is None else log.meas_track_unmerged
+    number = pass_numbers(t, track[rows], log.meas_status[rows] >= 0, gap)
+    order = np.lexsort((t, number))
+    first = order[np.r_[True, number[order][1:] != number[order][:-1]]]  # by pass number
+    lid = log.meas_track[rows][first]
+    x = log.pose[scan[first]]
+    c, s = np.cos(x[:, 2]), np.sin(x[:, 2])
+    lx, ly = log.laser_pose[0], log.laser_pose[1]
+    laser_xy = np.stack([x[:, 0] + c * lx - s * ly, x[:, 1] + s * lx + c * ly], axis=1)
+    row_of = {int(v): j for j, v in enumerate(log.landmark_id.tolist())}
+    d = log.landmark_xy[[row_of[int(v)] for v in lid]] - laser_xy
+    corr = log.config.get("measurement", {}).get("pass_offset_corr_rad", math.inf)
+    return {
+        "meas_pass": number,
+        "pass_landmark": lid,
+        "pass_cov": pass_offset_cov(np.arctan2(d[:, 1], d[:, 0]), sd),
+        **({"pass_corr_rad": float(corr)} if math.isfinite(float(corr)) else {}),
+    }
+
+
+def pass_numbers(t_s, landmark, update, gap_s: float) -> np.ndarray:
+    """The pass (0..P-1) of each sighting at times t_s (m,) of landmarks `landmark` (m,):
+    the sightings with `update` (m,) True are the filter's updates, grouped as the filter
+    counts its passes (the gap rule over a landmark's updates, `slam.measurement.pass_sizes`,
+    `slam.history.RunHistory.pass_index`); another sighting (the one that initialised its
+    landmark, a tentative one) joins the pass of its landmark's nearest update in time when
+    that is at most `gap_s` away, else the gap rule groups such sightings among themselves."""
+    t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+    lm = np.asarray(landmark, dtype=np.int64).reshape(-1)
+    update = np.asarray(update, dtype=bool).reshape(-1)
+    out = np.full(t.size, -1, np.int64)
+    if not t.size:
+        return out
+    up, other = np.flatnonzero(update), np.flatnonzero(~update)
+    out[up] = pass_sizes(t[up], lm[up], gap_s)[0]
+    # one sorted key per sighting: landmarks apart by more than the time span and the gap
+    _, rank = np.unique(lm, return_inverse=True)
+    span = float(t.max() - t.min()) + 2.0 * gap_s + 1.0
+    key = rank * span + (t - t.min())
+    o = np.argsort(key[up], kind="stable")
+    ukey = key[up][o]
+    if up.size and other.size:
+        i = np.searchsorted(ukey, key[other])
+        lo, hi = np.clip(i - 1, 0, up.size - 1), np.clip(i, 0, up.size - 1)
+        d_lo, d_hi = np.abs(ukey[lo] - key[other]), np.abs(ukey[hi] - key[other])
+        near = np.where(d_lo <= d_hi, lo, hi)
+        joined = np.minimum(d_lo, d_hi) <= gap_s
+        out[other[joined]] = out[up[o[near[joined]]]]
+    orphan = np.flatnonzero(out < 0)
+    if orphan.size:
+        out[orphan] = out.max() + 1 + pass_sizes(t[orphan], lm[orphan], gap_s)[0]
+    return out
+
+
+def pass_offset_cov(beta_rad, sd) -> np.ndarray:
+    """(P, 2, 2) world-frame covariances of pass offsets with standard deviations sd = (range,
+    across) in m along and across lines of sight at world bearings beta_rad (P,):
+    Rot(beta) diag(s_r^2, s_a^2) Rot(beta)^T + `PASS_FLOOR` I."""
+    b = np.asarray(beta_rad, dtype=np.float64).reshape(-1)
+    c, s = np.cos(b), np.sin(b)
+    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+    cov = rot @ np.diag([float(sd[0]) ** 2, float(sd[1]) ** 2]) @ np.swapaxes(rot, -1, -2)
+    return 0.5 * (cov + np.swapaxes(cov, -1, -2)) + PASS_FLOOR * np.eye(2)
 
 
 @dataclass(frozen=True)
@@ -409,6 +606,7 @@ class SmootherResult:
         starting values (batch) or of the iSAM2 estimate before a polish.
     iterations: Levenberg-Marquardt iterations (batch or polish) or iSAM2 updates.
     seconds: building the graph and solving; seconds_marginals: the covariances.
+    pass_variables: the pass landmarks in the graph (the pass offset as a state; 0: none).
     """
 
     pose: np.ndarray
@@ -424,6 +622,7 @@ class SmootherResult:
     seconds_marginals: float
     solver: str
     robust: str | None
+    pass_variables: int = 0
 
     @property
     def chi2_per_dof(self) -> float:
@@ -457,9 +656,10 @@ class _Graph:
             meas = self.T_inv.compose(gtsam.Pose2(*d)).compose(self.T)
             f = gtsam.BetweenFactorPose2(_pose_key(k - 1), _pose_key(k), meas, _gauss(cov))
             self._add(k, f, None)
+        self.passes = self._pass_factors(p)
         swap = np.array([[0.0, 1.0], [1.0, 0.0]])  # (range, bearing) -> (bearing, range)
-        for k, lid, z, R in zip(p.meas_scan, p.meas_landmark, p.meas_z, p.meas_R):
-            keys = (_pose_key(int(k)), _landmark_key(int(lid)))
+        for i, (k, z, R) in enumerate(zip(p.meas_scan, p.meas_z, p.meas_R)):
+            keys = (_pose_key(int(k)), self.point_key(i))
             noise = _gauss(swap @ R @ swap)
             model = noise
             if robust is not None:
@@ -473,6 +673,58 @@ class _Graph:
             f = gtsam.BearingRangeFactor2D(*keys, bearing, float(z[0]), model)
             g = gtsam.BearingRangeFactor2D(*keys, bearing, float(z[0]), noise)
             self._add(int(k), f, g)
+
+    def _pass_factors(self, p: Problem) -> np.ndarray:
+        """The pass landmarks' factors P_q - L_i = b_q ~ N(0, pass_cov[q]), each with the scan
+        of its pass's first measurement. Returns the passes in the graph (those measured)."""
+        if p.meas_pass is None:
+            return np.zeros(0, np.int64)
+        if p.drifts:
+            return self._drift_factors(p)
+        first = np.full(p.pass_landmark.size, p.n_scans, np.int64)
+        np.minimum.at(first, p.meas_pass, p.meas_scan)
+        used = np.flatnonzero(first < p.n_scans)
+        for q in used.tolist():
+            keys = (_landmark_key(int(p.pass_landmark[q])), _pass_key(q))
+            f = gtsam.BetweenFactorPoint2(*keys, np.zeros(2), _gauss(p.pass_cov[q]))
+            self._add(int(first[q]), f, None)
+        return used
+
+    def _drift_factors(self, p: Problem) -> np.ndarray:
+        """The apparent points A_j of a drifting pass offset (module doc), each pass's in scan
+        order: A_1 - L_i ~ N(0, Sigma_b) at the pass's first scan, then the Gauss-Markov step
+        A_{j+1} - phi A_j - (1 - phi) L_i ~ N(0, (1 - phi^2) Sigma_b), phi = exp(-|dtheta| / L)
+        at the scan of j + 1. Returns the measurements (one variable each)."""
+        theta = view_angles(p)
+        order = np.lexsort((np.arange(p.n_measurements), p.meas_scan, p.meas_pass))
+        q = p.meas_pass[order]
+        new = np.r_[True, q[1:] != q[:-1]]
+        for i in order[new].tolist():
+            keys = (_landmark_key(int(p.meas_landmark[i])), _apparent_key(i))
+            f = gtsam.BetweenFactorPoint2(*keys, np.zeros(2), _gauss(p.pass_cov[p.meas_pass[i]]))
+            self._add(int(p.meas_scan[i]), f, None)
+        for a, b in zip(order[:-1][~new[1:]].tolist(), order[1:][~new[1:]].tolist()):
+            phi = math.exp(-abs(_wrap(theta[b] - theta[a])) / p.pass_corr_rad)
+            cov = (1.0 - phi * phi) * p.pass_cov[p.meas_pass[b]] + PASS_FLOOR * np.eye(2)
+            keys = (_apparent_key(a), _apparent_key(b), _landmark_key(int(p.meas_landmark[b])))
+            self._add(int(p.meas_scan[b]), gm_step_factor(keys, phi, cov), None)
+        return np.arange(p.n_measurements)
+
+    def pass_points(self) -> list[tuple[int, int]]:
+        """(key, landmark id) of each pass landmark or apparent point in the graph."""
+        p = self.p
+        if p.drifts:
+            return [(_apparent_key(i), int(v)) for i, v in enumerate(p.meas_landmark.tolist())]
+        return [(_pass_key(q), int(p.pass_landmark[q])) for q in self.passes.tolist()]
+
+    def point_key(self, i: int) -> int:
+        """The point measurement i observes: its apparent point (a drifting pass offset), its
+        pass landmark (a constant one), else its landmark."""
+        if self.p.meas_pass is None:
+            return _landmark_key(int(self.p.meas_landmark[i]))
+        if self.p.drifts:
+            return _apparent_key(i)
+        return _pass_key(int(self.p.meas_pass[i]))
 
     def _add(self, k: int, factor, gaussian) -> None:
         self.by_scan[k].append(factor)
@@ -490,6 +742,36 @@ class _Graph:
 
     def chi2(self, values: gtsam.Values) -> float:
         return 2.0 * self.gaussian.error(values)
+
+
+def view_angles(p: Problem) -> np.ndarray:
+    """(M,) the world bearing (rad) of each measurement's line of sight at the problem's
+    starting poses: the pose's heading, the laser's yaw and the measured bearing."""
+    return p.init_pose[p.meas_scan, 2] + p.laser_pose[2] + p.meas_z[:, 1]
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def gm_step_factor(keys, phi: float, cov: np.ndarray):
+    """The Gauss-Markov step of a drifting pass offset on keys (A_j, A_{j+1}, L_i), all Point2:
+    error A_{j+1} - phi A_j - (1 - phi) L_i with covariance `cov` (world frame, m^2). Linear in
+    vector-space variables, so a native linear factor states it exactly: GTSAM's
+    LinearContainerFactor of the whitened JacobianFactor (blocks W (-phi I, I, -(1 - phi) I),
+    W the square-root information of `cov`) about the origin, which relinearises at a point x
+    with the right-hand side moved by the blocks times x. (A gtsam.CustomFactor, a Python
+    callback per factor, made one Levenberg-Marquardt iteration of scans 1-2000 take minutes.)"""
+    W = _gauss(cov).R()
+    blocks = (-phi * W, W, -(1.0 - phi) * W)
+    unit = gtsam.noiseModel.Unit.Create(2)
+    lin = gtsam.JacobianFactor(
+        keys[0], blocks[0], keys[1], blocks[1], keys[2], blocks[2], np.zeros(2), unit
+    )
+    origin = gtsam.Values()
+    for k in keys:
+        origin.insert(k, np.zeros(2))
+    return gtsam.LinearContainerFactor(lin, origin)
 
 
 def _gauss(cov: np.ndarray):
@@ -532,8 +814,12 @@ def smooth(
         values = gtsam.Values()
         for k in range(problem.n_scans):
             values.insert(_pose_key(k), g.laser_of(problem.init_pose[k]))
+        start = {}
         for lid, xy in zip(problem.landmark_id, problem.init_landmark):
-            values.insert(_landmark_key(int(lid)), np.asarray(xy, dtype=np.float64))
+            start[int(lid)] = np.asarray(xy, dtype=np.float64)
+            values.insert(_landmark_key(int(lid)), start[int(lid)])
+        for key, lid in g.pass_points():  # a pass landmark or apparent point: at its landmark
+            values.insert(key, start[lid])
         initial = g.chi2(values)
         report("optimise", 0, 1)
         opt = gtsam.LevenbergMarquardtOptimizer(g.all(), values, _lm_params(o))
@@ -570,6 +856,7 @@ def smooth(
         seconds_marginals=time.perf_counter() - t1,
         solver=o.solver + ("+polish" if o.solver == "isam2" and o.polish else ""),
         robust=o.robust,
+        pass_variables=int(g.passes.size),
     )
 
 
@@ -594,15 +881,14 @@ def _isam2(g: _Graph, o: SmootherOptions, report) -> tuple[gtsam.Values, int]:
         values.insert(_pose_key(k), prev)
         for f in g.by_scan[k]:
             graph.add(f)
-        for i in meas_at[k]:
-            lid = int(p.meas_landmark[i])
-            if lid not in known:
-                known.add(lid)
-                r, b = p.meas_z[i]
-                values.insert(
-                    _landmark_key(lid),
-                    prev.transformFrom(np.array([r * math.cos(b), r * math.sin(b)])),
-                )
+        for i in meas_at[k]:  # a new landmark or pass landmark starts at the measured point
+            r, b = p.meas_z[i]
+            for key in {_landmark_key(int(p.meas_landmark[i])), g.point_key(i)}:
+                if key not in known:
+                    known.add(key)
+                    values.insert(
+                        key, prev.transformFrom(np.array([r * math.cos(b), r * math.sin(b)]))
+                    )
         if (k + 1) % o.isam2_every == 0 or k == p.n_scans - 1:
             isam.update(graph, values)
             updates += 1

@@ -94,7 +94,9 @@ class Passes:
 class PassOffset:
     """The derived offset: sd_m (range, across) m; passes and landmarks used; median_white
     and median_derived (range, across): the median normalised squared residual of the
-    held-out passes under the white model (s = 0) and at sd_m; rounds of the alternation."""
+    held-out passes under the white model (s = 0) and at sd_m; rounds of the alternation.
+    drift: the within-pass drift of the same run (`experiments.eval.pass_drift.DriftFit`),
+    when it was fitted."""
 
     sd_m: tuple[float, float]
     passes: int
@@ -102,6 +104,7 @@ class PassOffset:
     median_white: tuple[float, float]
     median_derived: tuple[float, float]
     rounds: int
+    drift: object = None
 
 
 def passes_of(log, n_scans: int | None = None, gap_s: float = 2.0) -> Passes:

@@ -16,6 +16,10 @@ Format (datasets/FORMAT.md, "Run log"): one compressed `.npz` with `format` =
     departed_landmark, departed_scan, departed_reason (D,) int, departed_existence (D,) float
     (map policy "existence", or a run that prunes): the landmarks that left the map, after
     which scan, why (`DEPARTURE_REASONS`) and their existence then (NaN for "pruned").
+    Optional, together (`measurement.pass_offset_model = "state"`, P passes): meas_pass (M,)
+    int, the pass of each measurement; pass_landmark (P,) int, each pass's landmark;
+    pass_cov (P, 2, 2), each pass's offset covariance in the world frame (m^2).
+    pass_corr_rad (optional, with them): the drift's correlation length (rad) when finite.
 """
 
 from __future__ import annotations
@@ -69,6 +73,10 @@ SCHEMA |= {
     "departed_scan": Var("int", ("D",)),
     "departed_reason": Var("int", ("D",)),
     "departed_existence": Var("float", ("D",)),
+    "meas_pass": Var("int", ("M",)),
+    "pass_landmark": Var("int", ("P",)),
+    "pass_cov": Var("float", ("P", 2, 2)),
+    "pass_corr_rad": Var("float", ()),
 }
 # departed_reason codes: SlamLog.departures' reasons
 DEPARTURE_REASONS = ("existence", "pruned")
@@ -121,13 +129,14 @@ def read_run_log(path: Path | str, measurements: str = "ekf") -> tuple[Problem, 
     for k in _NAMES:
         if k in data:
             names[k] = check_method_name(path, k, str(data[k]))
-    arrays = {k: data[k] for k in Problem.__dataclass_fields__}
+    arrays = {k: data[k] for k in Problem.__dataclass_fields__ if k in data}
     if np.any(np.diff(arrays["meas_scan"]) < 0):
         raise DataError(f"{path}: meas_scan: must be sorted by scan, as trunkslam slam writes it")
     if measurements == "ekf":
         keep = arrays["meas_kind"] != MEAS_TENTATIVE
-        for k in ("meas_scan", "meas_landmark", "meas_z", "meas_R", "meas_kind"):
-            arrays[k] = arrays[k][keep]
+        for k in ("meas_scan", "meas_landmark", "meas_z", "meas_R", "meas_kind", "meas_pass"):
+            if k in arrays:
+                arrays[k] = arrays[k][keep]
     try:
         return Problem(**arrays), names
     except SlamError as exc:

@@ -18,11 +18,13 @@ per-pass offset), the same drives for every shape, and reports per shape and met
   the mean absolute pose error;
 
 each with the white measurement model and with the pass-offset model
-(`measurement.pass_offset_sd_m`, `slam.measurement.pass_variance`) given s = (range, across)
-two ways, both on calibration drives of their own (`CALIBRATION_RUNS`, seeds apart from the
-reported runs'), per shape and method: the truth's per-pass offset sd (`pass_statistics`),
-and the leave-one-pass-out criterion (`experiments.eval.pass_offsets.pass_offset`) on the
-white filter's logs of those drives, their passes pooled (no truth enters it).
+(`measurement.pass_offset_sd_m`) as an inflation (`slam.measurement.pass_variance`) and as a
+state of the filter (`measurement.pass_offset_model = "state"`, `slam.pass_state`), given
+s = (range, across) two ways, both on calibration drives of their own (`CALIBRATION_RUNS`,
+seeds apart from the reported runs'), per shape and method: the truth's per-pass offset sd
+(`pass_statistics`), and the leave-one-pass-out criterion
+(`experiments.eval.pass_offsets.pass_offset`) on the white filter's logs of those drives,
+their passes pooled (no truth enters it).
 """
 
 from __future__ import annotations
@@ -56,7 +58,14 @@ METHODS = ("paper", "geometric")
 RUNS = 50  # experiment 2's count (docs/method.md section 5)
 QUICK_RUNS = 4
 CALIBRATION_RUNS = 10  # drives that give the truth's per-pass offset sd (2 with --quick)
-MODELS = ("white", "pass offset, truth's s", "pass offset, criterion's s")
+MODELS = (
+    "white",
+    "pass offset, truth's s",
+    "pass offset, criterion's s",
+    "pass offset as a state, truth's s",
+    "pass offset as a state, criterion's s",
+)
+STATE_MODELS = MODELS[3:]  # measurement.pass_offset_model "state" (slam.pass_state)
 # The shapes compared. The oval's per-pass offset (0.03-0.07 m per axis, the table) is of the
 # order of Victoria Park's 0.05 m (`closure.tree_sd_m`); chosen from that, not from any NEES.
 SHAPES = {
@@ -152,12 +161,12 @@ def shape_trial(job: tuple, seed) -> dict:
 
 def _model_config(cfg: Exp2Config, method: str, model: str, sd: tuple | None) -> Exp2Config:
     """`cfg` with the measurement model `model` (white, or the pass offset of sd (range,
-    across) m), for `method` alone."""
+    across) m, as an inflation or as a state), for `method` alone."""
     if model == MODELS[0]:
         sd = (0.0, 0.0)
-    return replace(
-        cfg, methods=(method,), slam=cfg.slam.with_(**{"measurement.pass_offset_sd_m": sd})
-    )
+    kind = "state" if model in STATE_MODELS else "inflation"
+    changes = {"measurement.pass_offset_sd_m": sd, "measurement.pass_offset_model": kind}
+    return replace(cfg, methods=(method,), slam=cfg.slam.with_(**changes))
 
 
 def _pooled(records: list[dict], method: str) -> dict[str, np.ndarray]:
@@ -272,7 +281,8 @@ TABLE = TableSpec(
         "with no gap over 2 s (passes of at least 5 sightings); per-pass offset sd: the spread "
         "of the passes' mean offsets less white noise's share (experiments/eval/"
         "centre_offsets.py); the offsets are those of the white model's runs. Models: white "
-        "(experiment 2's filter) and the pass-offset model (measurement.pass_offset_sd_m) with "
+        "(experiment 2's filter) and the pass-offset model (measurement.pass_offset_sd_m; "
+        "as an inflation of each sighting, or as a state: pass_offset_model = state) with "
         "s the truth's per-pass offset sd of the same shape and method, or s from the "
         "leave-one-pass-out criterion (experiments/eval/pass_offsets.py) on the white filter's "
         f"runs, both on {CALIBRATION_RUNS} calibration drives of their own. NEES: the vehicle "
@@ -298,7 +308,9 @@ def run(ctx) -> None:
     cal_jobs = [(name, cfg) for name, cfg in cfgs.items() for _ in range(n_cal)]
     cal = ctx.map(calibration_trial, cal_jobs, cal_seeds * len(cfgs), desc="trunk-shape s")
     given = {
-        name: {MODELS[1]: truth_pass_sd(cal, name), MODELS[2]: criterion_sd(cal, name)}
+        name: dict(
+            zip(MODELS[1:], 2 * (truth_pass_sd(cal, name), criterion_sd(cal, name)), strict=True)
+        )
         for name in cfgs
     }
     seeds = spawn_seeds(ctx.rng("trunk-shape"), n)  # the same drives for every shape

@@ -39,8 +39,10 @@ def smooth_run(
                               first_scan: the scan of its initialising measurement, n_obs: its
                               measurements in the graph)
     smoother.json             solver, chi-square, degrees of freedom, chi-square per degree of
-                              freedom, iterations, seconds; errors against GPS and the truth
-                              (as summary.json's) when the run's input file is still there
+                              freedom, iterations, seconds, pass_variables (the pass landmarks
+                              of a run with measurement.pass_offset_model "state", 0 without);
+                              errors against GPS and the truth (as summary.json's) when the
+                              run's input file is still there
 
     Returns the smoother.json summary. measurements: "ekf" or "all" (`slam.smoother`).
     progress: callback(stage, done, total), as `slam.smoother.smooth`'s.
@@ -120,6 +122,7 @@ def smoother_summary(problem: Problem, r: SmootherResult) -> dict:
         "n_scans": problem.n_scans,
         "n_measurements": problem.n_measurements,
         "landmarks": int(problem.landmark_id.size),
+        "pass_variables": r.pass_variables,
         "chi2": r.chi2,
         "dof": r.dof,
         "chi2_per_dof": r.chi2_per_dof,

@@ -40,3 +40,20 @@ def test_oval_trunks_give_correlated_offsets_and_a_white_filter_out_of_its_bound
         model = rows[("oval", m, ts.MODELS[1])]
         assert model["model_range_sd_m"] == truth["oval"][m][0]
         assert model["nees_mean"] < oval["nees_mean"]
+
+
+def test_each_model_sets_the_offset_and_how_the_filter_carries_it():
+    cfg = ts.shape_config(ts.SHAPES["oval"], 1, quick=True)
+    want = {
+        "white": ((0.0, 0.0), "inflation"),
+        "pass offset, truth's s": ((0.08, 0.04), "inflation"),
+        "pass offset, criterion's s": ((0.08, 0.04), "inflation"),
+        "pass offset as a state, truth's s": ((0.08, 0.04), "state"),
+        "pass offset as a state, criterion's s": ((0.08, 0.04), "state"),
+    }
+    assert set(want) == set(ts.MODELS)
+    for model, (sd, kind) in want.items():
+        got = ts._model_config(cfg, "paper", model, (0.08, 0.04))
+        assert got.methods == ("paper",)
+        assert got.slam.measurement.pass_offset_sd_m == sd
+        assert got.slam.measurement.pass_offset_model == kind

@@ -451,6 +451,11 @@ def test_the_pass_offset_criterion_sees_correlated_error_on_scans_1_2000(vp_dir)
     np.testing.assert_allclose(po.median_derived, CHI2_1_MEDIAN, atol=1e-3)
     assert min(po.median_white) > 4 * CHI2_1_MEDIAN and po.landmarks > 50
     assert 0.02 < min(po.sd_m) and max(po.sd_m) < 0.1
+    # the drift (experiments.eval.pass_drift) from the same run: its between-pass sill, a
+    # second criterion on other pairs of sightings, gives the same s within 25% per axis
+    d = po.drift
+    assert d.bins >= 10 and 0 < d.corr_rad < math.inf
+    np.testing.assert_allclose(d.sd_between_m, po.sd_m, rtol=0.25)
 
 
 # ---- the laser latency (experiments/paper/victoria_park/calibration.py) ----------------------

@@ -74,7 +74,10 @@ either).
 Last, with every setting above (the preset, white measurement errors), the trunk's centre
 offset shared by a pass (`measurement.pass_offset_sd_m`) by leave-one-pass-out prediction of
 the landmarks' passes on the same scans (`pass_offset.derive`,
-`experiments.eval.pass_offsets`): J cannot see it, it assumes white errors. No GPS either.
+`experiments.eval.pass_offsets`): J cannot see it, it assumes white errors; and from the same
+run, how that offset drifts within a pass as the view turns (`experiments.eval.pass_drift`,
+the correlation length of `measurement.pass_offset_corr_rad`, reported in the manifest as
+`pass_offset_corr_rad`). No GPS either.
 It is derived and reported (manifest, page), not put in the preset: the filter model it
 feeds, each sighting's covariance inflated so that a pass carries at most 1 / (r/n + s^2),
 is not a consistent model of a view-dependent offset (simulated oval trunks: the trunk-shape
@@ -508,6 +511,8 @@ def _manifest_entry(st: VpCalibration) -> dict:
         "confirm_sweep": st.confirm_rows,
         "pass_offset_sd_m": list(st.pass_offset.sd_m),
         "pass_offset_median_white": list(st.pass_offset.median_white),
+        "pass_offset_corr_rad": st.pass_offset.drift.corr_rad,
+        "pass_offset_drift_sd_m": list(st.pass_offset.drift.sd_m),
         "consistency_evaluations": st.consistency["evaluations"],
         "seconds": round(st.seconds, 1),
     }

@@ -4,16 +4,22 @@ derived on scans 1-2000 by leave-one-pass-out prediction (`experiments.eval.pass
 The filter runs over scans 1-2000 with the given settings and the white model (the offset
 set to 0), and the passes of the landmarks it saw in two passes or more each predict one
 another; (s_r, s_a) are the offsets at which each axis's median normalised squared residual is
-the chi-square(1) median. No GPS enters it, and scans 2001-7249 never do. The calibration
+the chi-square(1) median. The same run's residuals give the drift of the offset within a pass
+(`experiments.eval.pass_drift`: the within-pass semivariogram against the view's turn, fitted
+by a first-order Gauss-Markov offset of sd s and correlation length L), reported beside it
+(`measurement.pass_offset_corr_rad` is not set by it: the preset keeps white errors). No GPS
+enters it, and scans 2001-7249 never do. The calibration
 (`calibration.py`) runs it last, with the preset it derived; `trunkslam reproduce
 victoria-park-pass-offset` runs it alone, with the shipped preset (about a minute).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 
 from experiments.errors import MissingDataError
+from experiments.eval.pass_drift import pass_drift
 from experiments.eval.pass_offsets import CHI2_1_MEDIAN, PassOffset, pass_offset, passes_of
 from experiments.io.victoria_park import load_victoria_park
 from experiments.paper import products
@@ -31,16 +37,19 @@ FIT_SCANS = 2000
 
 def derive(seq, cfg: SlamConfig) -> PassOffset:
     """The pass offset of `cfg`'s run over `seq` with the white model (the offset set to 0),
-    its passes by `measurement.pass_gap_s`."""
+    its passes by `measurement.pass_gap_s`, with the drift within a pass of the same run."""
     white = cfg.with_(**{"measurement.pass_offset_sd_m": [0.0, 0.0]})
     run = run_slam(seq, white)
-    return pass_offset(passes_of(run, gap_s=white.measurement.pass_gap_s))
+    gap = white.measurement.pass_gap_s
+    po = pass_offset(passes_of(run, gap_s=gap))
+    return dataclasses.replace(po, drift=pass_drift(run, gap_s=gap))
 
 
 def pass_offset_records(po: PassOffset) -> list[dict]:
     """One row per axis: passes used, the median statistic under the white model and at the
-    derived offset, the derived offset."""
-    return [
+    derived offset, the derived offset; with the drift fitted, its s within a pass, its s from
+    the between-pass sill, its correlation length (shared by the axes) and each axis's own."""
+    rows = [
         {
             "axis": axis,
             "passes": po.passes,
@@ -51,6 +60,16 @@ def pass_offset_records(po: PassOffset) -> list[dict]:
         }
         for i, axis in enumerate(("range", "across the line of sight"))
     ]
+    d = po.drift
+    if d is not None:
+        for i, row in enumerate(rows):
+            row |= {
+                "drift_sd_m": d.sd_m[i],
+                "between_sd_m": d.sd_between_m[i],
+                "drift_corr_rad": d.corr_rad,
+                "axis_corr_rad": d.corr_axis_rad[i],
+            }
+    return rows
 
 
 TABLE = TableSpec(
@@ -64,6 +83,10 @@ TABLE = TableSpec(
         "median_white": "median statistic, white model",
         "median_derived": "median statistic, derived s",
         "sd_m": "derived s (m)",
+        "drift_sd_m": "drift s within a pass (m)",
+        "between_sd_m": "s from the between-pass sill (m)",
+        "drift_corr_rad": "drift L, shared (rad)",
+        "axis_corr_rad": "drift L, this axis alone (rad)",
     },
     title="Victoria Park: the trunk's offset shared by a pass, leave-one-pass-out (scans 1-2000)",
     notes=lambda po: (
@@ -73,8 +96,12 @@ TABLE = TableSpec(
         "whose median is "
         f"{CHI2_1_MEDIAN:.4f} (chi-square, 1 dof) when the model holds. Derived s: the offset "
         "at which it is (0 when the white model is already there); the median, so that wrong "
-        "associations move it little. The filter's poses, published detections, scans 1-2000; "
-        "no GPS (experiments/eval/pass_offsets.py)."
+        "associations move it little. The drift: the same run's sightings about their "
+        "landmark, in their pass's first line of sight; the within-pass semivariogram against "
+        "the view's turn d, fitted by r + s^2 (1 - exp(-d / L)), one L for both axes (weighted "
+        "least squares, experiments/eval/pass_drift.py); the between-pass sill gives s "
+        "independently. The filter's poses, published detections, scans 1-2000; no GPS "
+        "(experiments/eval/pass_offsets.py)."
     ),
 )
 
@@ -106,5 +133,8 @@ def run(ctx) -> None:
         "pass_gap_s": cfg.measurement.pass_gap_s,
         "derived_sd_m": list(po.sd_m),
         "rounds": po.rounds,
+        "drift_corr_rad": po.drift.corr_rad,
+        "drift_sd_m": list(po.drift.sd_m),
+        "drift_between_sd_m": list(po.drift.sd_between_m),
     }
     products.tables(ctx, [TABLE], po)
