@@ -102,7 +102,8 @@ class Variogram:
 class DriftFit:
     """The fitted Gauss-Markov offset: corr_rad (L, shared by the axes), sd_m (s_r, s_a),
     r_eff_m2 (the white variance per axis), corr_axis_rad (each axis fitted alone; inf when
-    that axis alone shows no drift within a pass), bins (the
+    that axis alone shows no drift within a pass, an end of `L_GRID` when its variogram rises
+    without a sill (1000) or at once (0.001)), bins (the
     bins fitted), sd_between_m (sqrt(sill - r_eff) per axis, NaN when the sill is below
     r_eff), wsse (the fit's weighted squared error)."""
 
