@@ -765,9 +765,9 @@ def gm_step_factor(keys, phi: float, cov: np.ndarray):
     W = _gauss(cov).R()
     blocks = (-phi * W, W, -(1.0 - phi) * W)
     unit = gtsam.noiseModel.Unit.Create(2)
-    lin = gtsam.JacobianFactor(
-        keys[0], blocks[0], keys[1], blocks[1], keys[2], blocks[2], np.zeros(2), unit
-    )
+    # GTSAM's ternary constructor (key, block) x 3, b, model: positional only in the binding
+    terms = [x for kb in zip(keys, blocks) for x in kb]
+    lin = gtsam.JacobianFactor(*terms, np.zeros(2), unit)
     origin = gtsam.Values()
     for k in keys:
         origin.insert(k, np.zeros(2))

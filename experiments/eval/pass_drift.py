@@ -101,7 +101,9 @@ class Variogram:
 @dataclass(frozen=True)
 class DriftFit:
     """The fitted Gauss-Markov offset: corr_rad (L, shared by the axes), sd_m (s_r, s_a),
-    r_eff_m2 (the white variance per axis), corr_axis_rad (each axis fitted alone), bins (the
+    r_eff_m2 (the white variance per axis), corr_axis_rad (each axis fitted alone; inf when
+    that axis alone shows no drift within a pass, an end of `L_GRID` when its variogram rises
+    without a sill (1000) or at once (0.001)), bins (the
     bins fitted), sd_between_m (sqrt(sill - r_eff) per axis, NaN when the sill is below
     r_eff), wsse (the fit's weighted squared error)."""
 
@@ -257,7 +259,10 @@ def fit_drift(v: Variogram, min_pairs: int = MIN_PAIRS) -> DriftFit:
     L = _best_L(c, g, w, (0, 1))
     (ra, sa), (rb, sb) = _fit_axes(c, g, w, L, (0, 1))[0]
     _, wsse = _fit_axes(c, g, w, L, (0, 1))
-    per_axis = tuple(_best_L(c, g, w, (a,)) for a in (0, 1))
+    per_axis = []
+    for a in (0, 1):  # an axis with no drift of its own (s = 0 at its best L): inf
+        La = _best_L(c, g, w, (a,))
+        per_axis.append(La if _fit_axes(c, g, w, La, (a,))[0][0][1] > 0 else math.inf)
     sill = v.between - np.array([ra, rb])
     with np.errstate(invalid="ignore"):
         between = tuple(float(x) for x in np.where(sill >= 0, np.sqrt(np.abs(sill)), np.nan))

@@ -104,3 +104,14 @@ def test_too_few_pairs_is_refused_naming_the_reason():
     with pytest.raises(DataError, match="Sightings.e: expected shape"):
         Sightings(np.zeros(3, np.int64), np.zeros(3, np.int64), np.zeros(3), np.zeros((2, 2)),
                   np.ones((3, 2)))  # fmt: skip
+
+
+def test_an_axis_without_drift_gets_none():
+    """Drift along only (s = (0.06, 0)): the fit puts under 1 cm of drift across (seeds 11-13:
+    0-2.3 mm; that axis's own L is then arbitrary, inf when its s is exactly 0), s along within
+    10%, and the shared L is the along axis's (within 30%)."""
+    rng = np.random.default_rng(11)
+    fit = fit_drift(semivariogram(synthetic(rng, np.array([0.06, 0.0]), 0.15, n_pass=800)))
+    assert fit.sd_m[1] < 0.01
+    assert fit.sd_m[0] == pytest.approx(0.06, rel=0.1)
+    assert fit.corr_rad == pytest.approx(0.15, rel=0.3)
