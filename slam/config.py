@@ -753,6 +753,7 @@ class MeasurementConfig:
             for name, v in m._asdict().items():  # each sigma finite, >= 0, in range
                 setting(f"measurement.constant_noise.{method}.{name}", v)
             models[method] = m
+        models["other"] = models.pop("other")  # last, after the methods it does not name
         object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
         biases = dict(DEFAULT_RANGE_BIAS)
         for method, v in dict(self.range_bias).items():
