@@ -56,7 +56,7 @@ def built_in_note(seq: Sequence, cfg: SlamConfig) -> dict | None:
     parts = []
     if neutral:
         parts.append(
-            "neutral built-in settings, no site's calibration: "
+            "Neutral built-in settings, no site's calibration: "
             + "; ".join(f"{p} ({NEUTRAL[p]})" for p in neutral)
         )
     if cycab_values:
@@ -71,7 +71,7 @@ def built_in_note(seq: Sequence, cfg: SlamConfig) -> dict | None:
     )
     if is_cycab:
         parts.append(
-            "this sequence's vehicle is the simulated Cycab's: `--config cycab` runs with its "
+            "This sequence's vehicle is the simulated Cycab's: `--config cycab` runs with its "
             "calibration (the settings of experiment 2)"
         )
     if not parts:
