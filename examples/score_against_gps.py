@@ -4,6 +4,7 @@ time), as is and after the best rigid 2D alignment, with the fixes flagged as ju
 the clean figures.
 
     python examples/score_against_gps.py [OUT_DIR]             # simulate a drive, run SLAM
+                                                               # (the cycab preset)
     python examples/score_against_gps.py SEQUENCE.npz RUN_DIR  # a `trunkslam slam` output
 
 e.g. RUN_DIR from `trunkslam slam vp.npz --features detections --config victoria_park_ute
@@ -18,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.eval.gps import score_sequence
+from experiments.io.config_file import load_slam_config
 from experiments.io.sequence_file import load_sequence
 from experiments.sim import CycabParams, simulate_cycab_run
 from slam import run_slam
@@ -31,7 +33,7 @@ if len(sys.argv) == 3:  # an existing run: its trajectory.csv (t, x, y, theta, c
     antenna = json.loads((out / "summary.json").read_text())["gps"]["antenna_pose"]
 else:  # a simulated tree-park drive with 2 cm DGPS at 10 Hz
     seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=240))
-    log = run_slam(seq)  # the built-in configuration: paper's extractor, IHGR
+    log = run_slam(seq, load_slam_config("cycab"))  # the simulated Cycab's: paper's, IHGR
     scan_t, pose, antenna = log.scan_t, log.pose, log.antenna_pose
     out = Path(sys.argv[1]) if len(sys.argv) == 2 else Path(tempfile.mkdtemp(prefix="trunkslam_"))
     out.mkdir(parents=True, exist_ok=True)

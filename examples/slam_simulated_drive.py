@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.eval.poses import pose_errors
+from experiments.io.config_file import load_slam_config
 from experiments.io.results import trajectory_tum
 from experiments.io.sequence_file import save_sequence
 from experiments.sim import CycabParams, simulate_cycab_run
@@ -28,7 +29,8 @@ seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_sc
 save_sequence(seq, out / "run.npz")
 print(f"{seq.n_scans} scans over {seq.scan_t[-1]:.1f} s, {len(seq.truth_landmarks)} trees")
 
-log = run_slam(seq, features="paper")  # the paper's extractor, IHGR association
+cfg = load_slam_config("cycab")  # the simulated Cycab's calibration (experiment 2's filter)
+log = run_slam(seq, cfg, features="paper")  # the paper's extractor, IHGR association
 (out / "trajectory.tum").write_text(trajectory_tum(log.scan_t, log.pose))
 
 truth = interpolate_poses(log.scan_t, seq.truth_t, seq.truth_pose)

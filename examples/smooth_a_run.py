@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from experiments.eval.poses import pose_errors
+from experiments.io.config_file import load_slam_config
 from experiments.io.results import trajectory_tum
 from experiments.sim import CycabParams, simulate_cycab_run
 from slam import interpolate_poses, run_slam
@@ -24,7 +25,8 @@ out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp(prefix="
 out.mkdir(parents=True, exist_ok=True)
 
 seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=240))
-log = run_slam(seq, features="paper")  # the paper's extractor, IHGR association
+cfg = load_slam_config("cycab")  # the simulated Cycab's calibration (experiment 2's filter)
+log = run_slam(seq, cfg, features="paper")  # the paper's extractor, IHGR association
 result = smooth(problem_from_log(log), SmootherOptions(solver="batch"))
 
 truth = interpolate_poses(log.scan_t, seq.truth_t, seq.truth_pose)

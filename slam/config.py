@@ -136,57 +136,35 @@ def _choice(owner: str, name: str, v, choices) -> None:
 
 # ---- the defaults' tables and the sections' parts (odometry, steering, map policy, closure) ----
 
+# The built-in measurement model is neutral: it assumes no site's calibration. The simulated
+# tree park's calibrated values (`trunkslam reproduce noise-calibration`: the constant models of
+# the paper, geometric and Bailey circles, their range biases and the geometric fit's floors) are
+# the `cycab` preset's (experiments/presets/cycab.toml; docs/experiments/consistency.md).
+#
 # The "constant" measurement noise model of each extractor: configured constants, not a fit:
 #   sigma_range = range_sigma_m + range_sigma_per_m * range,
 #   sigma_bearing^2 = bearing_sigma_rad^2 + (cross_range_sigma_m / range)^2.
-# Values: maximum-likelihood fits of this model to the range and bearing errors of the centres
-# of the circles found on trunks in the simulated tree park (LMS200, 1 cm range noise, 1 cm
-# quantisation; `trunkslam reproduce noise-calibration`, seeds 1000-1003, apart from the
-# experiment's, each run's path varied as in experiment 2), rounded up to two digits. Fitted
-# (a, b, c, t): paper (0.0120, 0.00085, 0, 0.0081), geometric (0.0081, 0.0013, 0, 0.0078),
-# bailey (0.0098, 0.0014, 0.0019, 0.0022). The fitted extractors' centres are off by under 1 cm
-# across the beam (the bearing error falls as 1/range: c fits to 0); the Bailey detector's
-# bearing is quantised by the beams (about 0.1 deg whatever the range). The paper's fit also has
-# a mean range error of -4.6 mm (Kasa's bias toward the sensor), which a zero-mean model cannot
-# represent (`DEFAULT_RANGE_BIAS`).
-# "other" (any other source of circles): the Zaragoza SLAM-school model of the Victoria Park
-# detections, 0.05 m + 1% of the range and 0.5 deg (BAILEY_DETECTOR.md section 4).
+# Built in: one model for every extractor ("other"), the published model of a tree detector on
+# a SICK laser, the Zaragoza SLAM school's for the Victoria Park detections: 0.05 m + 1% of the
+# range and 0.5 deg (BAILEY_DETECTOR.md section 4; the Bailey detector's own, `BaileyConfig`).
 DEFAULT_CONSTANT_NOISE: dict[str, NoiseModel] = {
-    "paper": NoiseModel(0.013, 0.00085, 0.0, 0.0081),
-    "geometric": NoiseModel(0.0082, 0.0014, 0.0, 0.0078),
-    "bailey": NoiseModel(0.0098, 0.0014, 0.0019, 0.0022),
-    "other": NoiseModel(0.05, 0.01, math.radians(0.5), 0.0),
+    "other": NoiseModel(0.05, 0.01, math.radians(0.5), 0.0)
 }
 
 # Mean range error of each extractor's centres as a function of range, bias(r) = a + b r
-# (a in m, b in m per m of range), subtracted from its ranges: the line through the range errors
-# of the circles found on trunks in the calibration runs (noise-calibration, seeds 1000-1003,
-# never the experiment's) by maximum likelihood under the filter's own sigmas (least squares
-# weighted by 1 / sigma^2; `experiments.paper.calibration.range_bias_line`), rounded to 0.1 mm
-# and 0.01 mm per m. paper (-0.0076, 0.00010): its Gauss-Newton fit pulls the centre toward the
-# sensor (mean -4.6 mm, -0.42 of the sigma of its own covariance, which the filter uses for it);
-# bailey (-0.0097, 0.00062): its radius from the angular width is too small (mean -2.7 mm, -0.16
-# sigma); geometric (-0.0008, -0.00021): +0.9 mm on average, but -0.10 of the sigma the filter
-# gives each fit, so biased where the fit is precise (an unweighted line made its NEES worse).
-# A bias that every tree shares is not noise: a filter that treats scans as independent averages
-# it into the pose with ever-growing confidence (NEES above its bounds). Applied to every circle
-# of that method (extracted, or a sequence's detections); the Victoria Park preset sets them to 0
-# (the simulated sensor's biases say nothing of the real one).
-DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {
-    "paper": (-0.0076, 0.0001),
-    "geometric": (-0.0008, -0.00021),
-    "bailey": (-0.0097, 0.00062),
-}
+# (a in m, b in m per m of range), subtracted from its ranges. Built in: none (no correction; a
+# bias is a property of one sensor and extractor, measured by a calibration such as the
+# simulated tree park's in the `cycab` preset). A bias that every tree shares is not noise: a
+# filter that treats scans as independent averages it into the pose with ever-growing
+# confidence (NEES above its bounds), so a calibrated sensor should give its own.
+DEFAULT_RANGE_BIAS: dict[str, tuple[float, float]] = {}
 
-# Floors (range m, bearing rad) added in quadrature to a fit's own covariance ("fit" noise):
-# maximum-likelihood fit of R_fit + diag(f_r^2, f_b^2) to the `geometric` centres' errors in the
-# calibration runs (seeds 1000-1003): 6.29 mm and 0.092 mrad (rounded up to 2 digits). The fit's
-# covariance assumes independent Gaussian range noise; the 1 cm quantisation and the mixed
-# returns at the trunk's edges are neither, and the most precise fits (many beams, close
-# trees: the ones that steer the filter) were the most over-confident (range sigma under 10 mm:
-# errors 1.37-1.54 times their stated variance). NIS per dof of the calibration circles: 1.17
-# under the fit's covariance, 0.93 with the floors.
-DEFAULT_FIT_FLOOR: tuple[float, float] = (0.0063, 0.000093)
+# Floors (range m, bearing rad) added in quadrature to a fit's own covariance ("fit" noise).
+# Built in: none, the circle fit's own first-order covariance (`features.fitting.
+# circle_covariance`) as the sensor model gives it. The simulated tree park's maximum-likelihood
+# floors of the geometric fit (6.3 mm, 0.093 mrad: range quantisation and mixed returns, which
+# the fit's independent-Gaussian model cannot see) are the `cycab` preset's.
+DEFAULT_FIT_FLOOR: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -195,7 +173,9 @@ class OdometryNoise:
 
     speed_sigma_mps: standard deviation of the encoder speed reading, m/s.
     steer_sigma_rad: standard deviation of the steering angle reading, rad.
-    The defaults are those of the simulated Cycab (`experiments.sim.trajectory.CycabParams`).
+    The defaults are those of the simulated Cycab (`experiments.sim.trajectory.CycabParams`):
+    a car's odometry noise has no neutral value, so a run on these built-in values says so
+    (`experiments.pipeline.slam`); a car's own calibration (a preset) replaces them.
     floor_xy_m_per_sqrt_s, floor_theta_rad_per_sqrt_s: a small white process noise on the pose
         itself (variance per second). It keeps the covariance from being singular when the car
         is at or near rest: the linearised model then puts no noise on y and theta, while the
@@ -208,15 +188,15 @@ class OdometryNoise:
     steer_sigma_per_lateral_mps2: the steering sigma grows by this much (rad) per m/s^2 of the
         sample's lateral acceleration a = v_c^2 |tan(alpha)| / L (the tyres' slip angles grow
         with the cornering force): sigma_alpha = steer_sigma_rad + this * a.
-    Both 0 by default (the simulated Cycab's readings carry constant noise); the Victoria Park
+    Both 0 by default (constant noise, as the simulated Cycab's readings); the Victoria Park
     preset's values are fitted (experiments/paper/victoria_park/calibration.py).
     """
 
     speed_sigma_mps: float = default(
-        0.1, "simulator: the simulated Cycab's speed noise (CycabParams)"
+        0.1, "simulator: the simulated Cycab's, no neutral value exists (a run says so)"
     )
     steer_sigma_rad: float = default(
-        math.radians(2.0), "simulator: the simulated Cycab's steering noise, 2 deg (CycabParams)"
+        math.radians(2.0), "simulator: the simulated Cycab's 2 deg, no neutral value exists"
     )
     floor_xy_m_per_sqrt_s: float = default(
         0.001, "design: keeps the covariance regular at rest (tree park NEES, see doc)"
@@ -224,12 +204,8 @@ class OdometryNoise:
     floor_theta_rad_per_sqrt_s: float = default(
         0.0001, "design: keeps the covariance regular at rest (tree park NEES, see doc)"
     )
-    speed_sigma_per_speed: float = default(
-        0.0, "simulator: 0, the simulated Cycab's readings carry constant noise"
-    )
-    steer_sigma_per_lateral_mps2: float = default(
-        0.0, "simulator: 0, the simulated Cycab's readings carry constant noise"
-    )
+    speed_sigma_per_speed: float = default(0.0, "design: 0, no scale error modelled")
+    steer_sigma_per_lateral_mps2: float = default(0.0, "design: 0, no tyre slip modelled")
 
     def __post_init__(self) -> None:
         nonnegative_fields("vehicle.odometry_noise", self)
@@ -262,13 +238,9 @@ class SteeringCalibration:
     applies to the calibrated angle.
     """
 
-    offset_rad: float = default(
-        0.0, "simulator: identity, the simulated Cycab reads the model's angle"
-    )
-    gain: float = default(1.0, "simulator: identity, the simulated Cycab reads the model's angle")
-    cubic_per_rad2: float = default(
-        0.0, "simulator: identity, the simulated Cycab reads the model's angle"
-    )
+    offset_rad: float = default(0.0, "design: identity, no correction of the reading")
+    gain: float = default(1.0, "design: identity, no correction of the reading")
+    cubic_per_rad2: float = default(0.0, "design: identity, no correction of the reading")
 
     def __post_init__(self) -> None:
         for name in ("offset_rad", "gain", "cubic_per_rad2"):
@@ -312,12 +284,8 @@ class UnicycleNoise:
     yaw_rate_sigma_rad_s: float = default(
         math.radians(2.0), "simulator: the Cycab's 2 deg steering noise at 1.2 m/s on 1.2 m"
     )
-    speed_sigma_per_speed: float = default(
-        0.0, "simulator: 0, constant noise as the simulated Cycab's"
-    )
-    yaw_rate_sigma_per_yaw_rate: float = default(
-        0.0, "simulator: 0, constant noise as the simulated Cycab's"
-    )
+    speed_sigma_per_speed: float = default(0.0, "design: 0, no scale error modelled")
+    yaw_rate_sigma_per_yaw_rate: float = default(0.0, "design: 0, no scale error modelled")
     floor_xy_m_per_sqrt_s: float = default(0.001, "design: as OdometryNoise's floor")
     floor_theta_rad_per_sqrt_s: float = default(0.0001, "design: as OdometryNoise's floor")
 
@@ -741,14 +709,13 @@ class MeasurementConfig:
         or "constant".
     constant_noise: the constant model of each extractor (`slam.measurement.NoiseModel`), by
         method name; methods not given keep their `DEFAULT_CONSTANT_NOISE` entry, methods
-        unknown to both use its "other" entry.
+        unknown to both use its "other" entry (built in: "other" only, for every method).
     fit_floor_range_m, fit_floor_bearing_rad: added in quadrature to a fit's covariance (model
-        error the fit cannot see: range quantisation, mixed returns); the defaults are the
-        maximum-likelihood floors of the `geometric` fit in the simulated tree park
-        (`DEFAULT_FIT_FLOOR`, calibration seeds 1000-1003).
+        error the fit cannot see: range quantisation, mixed returns); 0 by default (the fit's own
+        covariance); the `cycab` preset holds the simulated tree park's.
     range_bias: known mean range error a + b r of each extractor's centres, by method name, as
         (a_m, b_per_m), subtracted from its ranges; methods not given keep their
-        `DEFAULT_RANGE_BIAS` entry ((0, 0) when it has none).
+        `DEFAULT_RANGE_BIAS` entry ((0, 0) when it has none; none is built in).
     max_range_m: circles farther away are not used (the laser's own maximum applies too).
     pass_offset_sd_m: (range, across) standard deviations in metres of an offset of a trunk's
         centre shared by the sightings of one pass (along and across the line of sight), on top
@@ -771,21 +738,17 @@ class MeasurementConfig:
     )
     constant_noise: Mapping[str, NoiseModel] = default(
         dict,
-        "calibration: noise-calibration, tree park seeds 1000-1003 (DEFAULT_CONSTANT_NOISE)",
+        "sensor model: one model for all, the Zaragoza school's 0.05 m + 1%, 0.5 deg",
         factory=True,
     )
     fit_floor_range_m: float = default(
-        DEFAULT_FIT_FLOOR[0],
-        "calibration: noise-calibration, simulated tree park seeds 1000-1003 (DEFAULT_FIT_FLOOR)",
+        DEFAULT_FIT_FLOOR[0], "sensor model: 0, the circle fit's own covariance, no floor"
     )
     fit_floor_bearing_rad: float = default(
-        DEFAULT_FIT_FLOOR[1],
-        "calibration: noise-calibration, simulated tree park seeds 1000-1003 (DEFAULT_FIT_FLOOR)",
+        DEFAULT_FIT_FLOOR[1], "sensor model: 0, the circle fit's own covariance, no floor"
     )
     range_bias: Mapping[str, tuple[float, float]] = default(
-        dict,
-        "calibration: noise-calibration, simulated tree park seeds 1000-1003 (DEFAULT_RANGE_BIAS)",
-        factory=True,
+        dict, "design: none, no range correction (a calibration's to give)", factory=True
     )
     max_range_m: float = default(
         math.inf, "sensor model: inf, the laser's own maximum range applies"
@@ -823,6 +786,7 @@ class MeasurementConfig:
             for name, v in m._asdict().items():  # each sigma finite, >= 0, in range
                 setting(f"measurement.constant_noise.{method}.{name}", v)
             models[method] = m
+        models["other"] = models.pop("other")  # last, after the methods it does not name
         object.__setattr__(self, "constant_noise", types.MappingProxyType(models))
         biases = dict(DEFAULT_RANGE_BIAS)
         for method, v in dict(self.range_bias).items():
@@ -927,8 +891,8 @@ class VehicleConfig:
         (status SKIPPED). 0 (default): every scan. A small value (the ute's 1 mm) skips the scans
         of a vehicle standing still: a scan from the same place repeats the last one's errors.
     calibrated_for: (wheelbase_m, encoder_offset_m) of the car whose odometry these settings
-        describe (the simulated Cycab's by default); a run on a sequence whose vehicle differs
-        is warned (`slam.checks.check_fit`). None: no claim.
+        describe; a run on a sequence whose vehicle differs is warned
+        (`slam.checks.check_fit`). None (the default): no claim.
     """
 
     odometry_noise: OdometryNoise = default(
@@ -945,9 +909,7 @@ class VehicleConfig:
         factory=True,
     )
     steering: SteeringCalibration = default(
-        SteeringCalibration,
-        "simulator: identity, the simulated Cycab's (SteeringCalibration)",
-        factory=True,
+        SteeringCalibration, "design: identity, no correction (SteeringCalibration)", factory=True
     )
     laser_pose: tuple[float, float, float] | None = default(
         None, "sensor model: none, the sequence's own laser pose"
@@ -959,7 +921,7 @@ class VehicleConfig:
     max_odometry_gap_s: float = default(1.0, "design: a second without odometry is a data fault")
     min_travel_m: float = default(0.0, "design: 0, every scan is used")
     calibrated_for: tuple[float, float] | None = default(
-        (1.2, 0.0), "simulator: the simulated Cycab's wheelbase 1.2 m, encoder offset 0 m"
+        None, "design: none, the built-in settings claim no car (the cycab preset: 1.2, 0)"
     )
 
     def __post_init__(self) -> None:

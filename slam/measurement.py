@@ -5,9 +5,11 @@ Two noise models (`SlamConfig.measurement_noise`):
   carried from the laser's x-y frame to range and bearing to first order (`polar_cov_from_xy`),
   plus an optional floor for model error the fit cannot see;
 - "constant": sigma_range = a + b range, sigma_bearing^2 = c^2 + (t / range)^2, with per-method
-  values (`slam.config.DEFAULT_CONSTANT_NOISE`) for extractors that give no covariance.
-A known mean range error of an extractor (`slam.config.DEFAULT_RANGE_BIAS`,
-`SlamConfig.measurement.range_bias`) is subtracted from its ranges before either model is applied.
+  values (`SlamConfig.measurement.constant_noise`; built in, one model for every extractor,
+  `slam.config.DEFAULT_CONSTANT_NOISE`) for extractors that give no covariance.
+A known mean range error of an extractor (`SlamConfig.measurement.range_bias`; none built in,
+the `cycab` preset's are the simulated tree park's) is subtracted from its ranges before either
+model is applied.
 
 A trunk's centre offset shared by the sightings of one pass (`measurement.pass_offset_sd_m`):
 `pass_variance` (the filter's k-th sighting of a pass, and a batch's n sightings) and

@@ -99,12 +99,13 @@ def test_smooth_a_run(tmp_path, monkeypatch, capsys):
 @pytest.mark.slow
 def test_score_against_gps(tmp_path, monkeypatch, capsys):
     """The example scores a `trunkslam slam` run exactly as its summary.json does, and its own
-    simulated run is the CLI's `simulate-drive tree_park --scans 240 --seed 0`."""
+    simulated run is the CLI's `simulate-drive tree_park --scans 240 --seed 0` run with the
+    cycab preset."""
     monkeypatch.chdir(tmp_path)
     runner = CliRunner()
     for args in (
         "simulate-drive tree_park --scans 240 --seed 0 --out run.npz",
-        "slam run.npz --out slam_out",
+        "slam run.npz --config cycab --out slam_out",
     ):
         res = runner.invoke(app, args.split())
         assert res.exit_code == 0, res.output

@@ -19,10 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
+from experiments.io.config_file import load_slam_config
 from experiments.io.provenance import machine
 from experiments.io.writers import markdown_table
 from experiments.sim.landmarks import avenue
-from slam import TIMING_KEYS, SlamConfig, run_slam
+from slam import TIMING_KEYS, run_slam
 
 __all__ = ["bench", "bench_victoria_park", "format_table", "recorded_row", "records_table"]
 
@@ -56,7 +57,7 @@ def bench(
     t0 = time.perf_counter()
     log = run_slam(
         seq,
-        SlamConfig(),
+        load_slam_config("cycab"),  # the avenue's car and circles are the simulated Cycab's
         features=feats,
         association=association,
         progress=_scans(progress, "slam, avenue"),

@@ -37,10 +37,10 @@ from experiments.eval.detections import dominant_label, run_labels
 from experiments.eval.gospa import gospa_columns
 from experiments.eval.mapping import duplicates_and_missed, false_pairings
 from experiments.eval.poses import pose_errors
-from experiments.paper.slam import extractor_params
+from experiments.paper.slam import CYCAB_SLAM, extractor_params
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
-from slam import SlamConfig, interpolate_poses, run_slam, se2
+from slam import OdometryNoise, SlamConfig, interpolate_poses, run_slam, se2
 
 __all__ = [
     "LOOP_LABELS",
@@ -159,12 +159,12 @@ def tree_park_trial(job: tuple, seed: int) -> dict:
         speed_sigma_mps=base_cyc.speed_sigma_mps * scale,
         steer_sigma_rad=base_cyc.steer_sigma_rad * scale,
     )
-    # the filter's odometry noise as simulated (with the built-in pose floor); paper's circles
+    # the simulated Cycab's filter (`CYCAB_SLAM`) with its odometry noise as simulated, with the
+    # built-in pose floor (`OdometryNoise`'s); paper's circles
     params = extractor_params("paper", cyc)
-    base = SlamConfig().with_(
+    base = CYCAB_SLAM.with_(
         **{
-            "vehicle.odometry_noise.speed_sigma_mps": cyc.speed_sigma_mps,
-            "vehicle.odometry_noise.steer_sigma_rad": cyc.steer_sigma_rad,
+            "vehicle.odometry_noise": OdometryNoise(cyc.speed_sigma_mps, cyc.steer_sigma_rad),
             "features.method": "paper",
             **{f"features.extractor.{k}": v for k, v in params.items()},
         }

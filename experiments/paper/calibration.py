@@ -1,4 +1,4 @@
-"""Calibration of the constant measurement-noise model (`slam.DEFAULT_CONSTANT_NOISE`).
+"""Calibration of the `cycab` preset's measurement model (experiments/presets/cycab.toml).
 
 `trunkslam reproduce noise-calibration` simulates four
 Cycab runs in the tree park on seeds 1000-1003, apart from experiment 2's, each on a path varied
@@ -6,9 +6,9 @@ as in experiment 2 (`experiments.sim.trajectory.MONTE_CARLO_PATH`: runs along on
 four copies of one geometry, and the extractors' errors are fixed by it), extracts circles with
 each method, and fits sigma_range = a + b r and sigma_bearing^2 = c^2 + (t / r)^2 to the centre
 errors of the circles found on trunks by maximum likelihood. Writes noise_calibration.md/.csv.
-The values in `slam.config.DEFAULT_CONSTANT_NOISE` are these fits rounded up to two digits.
+The `cycab` preset's constant noise models are these fits rounded up to two digits.
 It also fits each extractor's mean range error a + b r by maximum likelihood under the sigmas
-the filter gives its circles (`range_bias_line`; `slam.config.DEFAULT_RANGE_BIAS`), and
+the filter gives its circles (`range_bias_line`; the preset's `measurement.range_bias`), and
 the floors of the geometric fit's covariance (`calibrate_fit_floor`, noise_calibration_floor).
 """
 
@@ -26,11 +26,10 @@ from experiments.exec import SerialExecutor
 from experiments.paper import products
 from experiments.paper.products import TableSpec
 from experiments.paper.registry import experiment
-from experiments.paper.slam import METHODS, extractor_params
+from experiments.paper.slam import CYCAB_SLAM, METHODS, extractor_params
 from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
 from features import extract_features
-from slam import DEFAULT_CONSTANT_NOISE, SlamConfig, interpolate_poses, se2, wrap_angle
-from slam.config import DEFAULT_FIT_FLOOR
+from slam import interpolate_poses, se2, wrap_angle
 from slam.measurement import measurements_from_features
 
 __all__ = [
@@ -54,14 +53,15 @@ SEEDS = (1000, 1001, 1002, 1003)
 def calibration_trial(job: tuple, seed) -> dict:
     """One simulated run (`job` = (cycab, scene)) of the calibration: method -> list of (true
     range, range error, bearing error, range variance the filter gives the circle) of the
-    circles found on trunks. The variance is the default configuration's (`SlamConfig()`: the
-    constant model in use, or the fit's covariance with its floors), before any range bias."""
+    circles found on trunks. The variance is the simulated Cycab's configuration's (`CYCAB_SLAM`:
+    the constant model in use, or the fit's covariance with its floors), before any range
+    bias."""
     cycab, scene = job
     errs: dict[str, list] = {m: [] for m in METHODS}
     seq = simulate_cycab_run(np.random.default_rng(seed), scene, cycab)
     truth = interpolate_poses(seq.scan_t, seq.truth_t, seq.truth_pose)
     lm = seq.truth_landmarks
-    cfg = SlamConfig().measurement
+    cfg = CYCAB_SLAM.measurement
     for k in range(seq.n_scans):
         lw = se2.compose(truth[k], seq.laser_pose)
         d = lm[:, :2] - lw[:2]
@@ -99,7 +99,7 @@ def range_bias_line(r: np.ndarray, err: np.ndarray, var: np.ndarray) -> tuple[fl
 def calibrate_measurement_noise(
     seeds=SEEDS, cycab: CycabParams | None = None, scene: str = "tree_park", executor=None
 ) -> dict:
-    """Fit the constant noise model of `slam.DEFAULT_CONSTANT_NOISE` to the extractors' centre
+    """Fit the constant noise model (`slam.measurement.NoiseModel`) to the extractors' centre
     errors on circles found on trunks (majority of beams on one trunk), by maximum likelihood of
     zero-mean Gaussian errors: range error ~ N(0, (a + b r)^2), bearing error ~ N(0, c^2 +
     (t / r)^2) (a bias is absorbed into the spread). Returns method -> dict of the fitted
@@ -224,11 +224,11 @@ def _fitted(key: str) -> Callable[[str, dict], float]:
 
 
 def _noise_in_use(i: int) -> Callable[[str, dict], float]:
-    return lambda method, fit: DEFAULT_CONSTANT_NOISE[method][i]
+    return lambda method, fit: CYCAB_SLAM.measurement.constant_noise[method][i]
 
 
 def _bias_in_use(i: int) -> Callable[[str, dict], float]:
-    return lambda method, fit: SlamConfig().measurement.model_for(method).range_bias[i]
+    return lambda method, fit: CYCAB_SLAM.measurement.model_for(method).range_bias[i]
 
 
 # the constant-noise model's fields: (fits key, quantity, unit), in `NoiseModel`'s order
@@ -269,15 +269,14 @@ NOISE_QUANTITIES = (
     Quantity("in_use", "range_bias_a", "m", "in use range bias a (m)", _bias_in_use(0)),
     Quantity("in_use", "range_bias_b", "m/m", "in use range bias b (m/m)", _bias_in_use(1)),
 )
+_FLOOR = (CYCAB_SLAM.measurement.fit_floor_range_m, CYCAB_SLAM.measurement.fit_floor_bearing_rad)
 # noise_calibration_floor's columns, from `calibrate_fit_floor`'s fit
 FLOOR_QUANTITIES = (
     Quantity("measured", "circles", "count", "circles", _fitted("n")),
     Quantity("fitted", "floor_range", "m", "floor range (m)", _fitted("floor_range_m")),
     Quantity("fitted", "floor_bearing", "rad", "floor bearing (rad)", _fitted("floor_bearing_rad")),
-    Quantity("in_use", "floor_range", "m", "in use range (m)", lambda m, f: DEFAULT_FIT_FLOOR[0]),
-    Quantity(
-        "in_use", "floor_bearing", "rad", "in use bearing (rad)", lambda m, f: DEFAULT_FIT_FLOOR[1]
-    ),
+    Quantity("in_use", "floor_range", "m", "in use range (m)", lambda m, f: _FLOOR[0]),
+    Quantity("in_use", "floor_bearing", "rad", "in use bearing (rad)", lambda m, f: _FLOOR[1]),
     Quantity(
         "fitted",
         "nis_per_dof_fit_covariance",
@@ -341,14 +340,14 @@ TABLES = (
         f"Seeds {list(SEEDS)}, 240 scans each on paths varied as in experiment 2, circles "
         "whose beams with a return mostly hit one trunk. sigma_range = a + b r, "
         "sigma_bearing^2 = c^2 + (t / r)^2. 'in use' is "
-        "slam.DEFAULT_CONSTANT_NOISE (the fits rounded up to two digits). A normalised "
+        "the cycab preset's constant models (the fits rounded up to two digits). A normalised "
         "variance of 1 means the fitted model matches the errors. 'range mean / filter "
         "sigma': the mean range error in units of the sigma the filter gives each circle "
-        "(the default configuration: the constant model in use, the geometric fit's "
+        "(the cycab preset: the constant model in use, the geometric fit's "
         "covariance with its floors). 'fitted range bias': the line a + b r through the "
         "range errors by maximum likelihood under those sigmas (least squares weighted by "
         "1 / sigma^2, experiments/paper/calibration.py range_bias_line); 'in use': "
-        "slam.measurement.DEFAULT_RANGE_BIAS (the fits rounded to 0.1 mm and 0.01 mm per m), "
+        "the cycab preset's range biases (the fits rounded to 0.1 mm and 0.01 mm per m), "
         "subtracted from the ranges in slam.run_slam.",
     ),
     _table(
@@ -358,8 +357,8 @@ TABLES = (
         "Floors of the geometric fit's covariance: maximum-likelihood fit (tree park)",
         f"Seeds {list(SEEDS)}, the circles of noise_calibration.md. R = R_fit + diag(f_r^2, "
         "f_b^2) fitted by maximum likelihood of the centre errors; 'in use' is "
-        "slam.measurement.DEFAULT_FIT_FLOOR (SlamConfig.fit_floor_range_m, "
-        "fit_floor_bearing_rad; the fits rounded up to two digits).",
+        "the cycab preset's measurement.fit_floor_range_m and "
+        "fit_floor_bearing_rad (the fits rounded up to two digits).",
     ),
 )
 

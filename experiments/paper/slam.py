@@ -59,7 +59,7 @@ from experiments.eval.poses import consistency as consistency_figures
 from experiments.eval.poses import nees, nees_bounds, pose_errors
 from experiments.eval.series import slam_panels, slam_series
 from experiments.exec import SerialExecutor, spawn_seeds
-from experiments.io.config_file import config_toml
+from experiments.io.config_file import config_toml, load_slam_config
 from experiments.io.writers import dumps_json, json_types, write_atomic
 from experiments.paper import products
 from experiments.paper.products import FigureSpec, TableSpec
@@ -103,23 +103,18 @@ QUANTITIES3 = (("dx", "m"), ("dy", "m"), ("dtheta", "rad"))  # Table 3's rows, w
 SCAN_SETS = ((10, 40), (50, 80), (90, 120), (130, 160))  # inclusive, as the paper's Table 4
 STYLE = {"paper": "-.", "geometric": "--", "bailey": "-"}
 
-# The filter's model of the simulated Cycab (`CycabParams`; `experiments/presets/cycab.toml`): the
-# odometry noise exactly as simulated (0.1 m/s and 2 deg per 20 Hz sample) and no pose floor.
-# `OdometryNoise`'s default floor (1 mm and 0.1 mrad per sqrt(s)) stands for slip and keeps the
-# covariance non-singular at rest on real data; the simulated car does not slip and stands still
-# only before its first scan, so there the floor would only make the filter cautious where the
-# true errors are smallest. Measured on calibration seeds (docs/notebook.md): the floor held
-# the pose NEES of dead reckoning at 2.66 over scans 1-20 (2.98 without), and of the filter with
-# ideal Gaussian centres at 2.69 over the run (2.94 without).
-# The extractor is the paper's (`features.PAPER_FAITHFUL`: no short trunks), as the paper's
-# tables were made with it.
-CYCAB_SLAM = SlamConfig().with_(
-    **{
-        "features.extractor.short_trunks": False,
-        "vehicle.odometry_noise.floor_xy_m_per_sqrt_s": 0.0,
-        "vehicle.odometry_noise.floor_theta_rad_per_sqrt_s": 0.0,
-    }
-)
+# The filter's model of the simulated Cycab (`CycabParams`): the `cycab` preset
+# (experiments/presets/cycab.toml, which says what it holds and why). Its odometry noise is
+# exactly as simulated (0.1 m/s and 2 deg per 20 Hz sample) with no pose floor: `OdometryNoise`'s
+# default floor (1 mm and 0.1 mrad per sqrt(s)) stands for slip and keeps the covariance
+# non-singular at rest on real data; the simulated car does not slip and stands still only
+# before its first scan, so there the floor would only make the filter cautious where the true
+# errors are smallest. Measured on calibration seeds (docs/notebook.md): the floor held the pose
+# NEES of dead reckoning at 2.66 over scans 1-20 (2.98 without), and of the filter with ideal
+# Gaussian centres at 2.69 over the run (2.94 without). The extractor is the paper's
+# (`features.PAPER_FAITHFUL`: no short trunks), as the paper's tables were made with it; the
+# measurement model is the simulated tree park's calibration (`noise-calibration`).
+CYCAB_SLAM = load_slam_config("cycab")
 
 
 @dataclass(frozen=True)
@@ -131,7 +126,7 @@ class Exp2Config:
         (`experiments.sim.trajectory.MONTE_CARLO_PATH`), so that the runs are independent.
         association: "ihgr" (the paper's), "jcbb", "nn".
     slam: the filter's configuration (measurement noise per method, map policy, ...); by
-        default `CYCAB_SLAM`, the defaults with the odometry model exactly as simulated.
+        default `CYCAB_SLAM`, the `cycab` preset.
     false_match_m: a circle on a trunk's beams farther than this from its centre is false.
     sensitivity: also run the consistency variants listed in `SENSITIVITY`, on the first
         `sensitivity_runs` runs (fewer than n_runs to keep the default under 3 minutes).
@@ -158,7 +153,7 @@ class Exp2Config:
 
 
 # Consistency variants: (name, method, SlamConfig overrides, kind). They explain the NEES figures:
-# each switches off one part of the measurement model (`slam.config.DEFAULT_RANGE_BIAS`,
+# each switches off one part of the measurement model (the `cycab` preset's range biases and
 # `DEFAULT_FIT_FLOOR`) or changes the detections. kind "synthetic": the method's circles on
 # trunks only, each centre replaced by the truth plus Gaussian noise drawn from the method's
 # constant noise model (same detections, ideal errors, no bias to correct); "": as extracted.

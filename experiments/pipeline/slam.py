@@ -22,6 +22,7 @@ from experiments.io.results import map_csv, trajectory_csv, trajectory_tum
 from experiments.io.run_log import RUN_LOG_NAME, write_run_log
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import atomic_folder, dumps_json, json_types, write_atomic
+from experiments.pipeline.built_in import built_in_note
 from experiments.render.compiling import compile_seconds, watch_compiles
 from experiments.render.rerun_sink import recording_file
 from experiments.render.viz import open_recording
@@ -104,6 +105,7 @@ def _run_into(out: Path, inputs, cfg: SlamConfig, rerun, view) -> dict:
     input_path, features_file, reference = inputs
     rerun_path, rerun_in_out = rerun
     seq = load_sequence(input_path)
+    note = built_in_note(seq, cfg)  # logged before the run: which settings are neutral
     given = None
     if features_file is not None:
         given = load_features_json(features_file, seq.n_scans, seq.n_beams)
@@ -117,6 +119,8 @@ def _run_into(out: Path, inputs, cfg: SlamConfig, rerun, view) -> dict:
         _write_run(stage, seq, cfg, lg, f"trunkslam slam {input_path}")
         summary = summarise(lg, seq, seconds)
         summary = {"input": str(input_path), "features_file": _str(features_file), **summary}
+        if note is not None:
+            summary["built_in_settings"] = note
         if reference is not None:
             summary["reference_map"] = reference_map_scores(lg.landmark_xy, *reference)
         summary["compile_s"] = compiling  # 0 once the kernels are in numba's cache

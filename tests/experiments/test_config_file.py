@@ -48,7 +48,8 @@ def test_a_configuration_round_trips_through_toml(tmp_path):
     assert back == CUSTOM
     noise = back.measurement.constant_noise
     assert noise["bailey"] == NoiseModel(0.03, 0.002, 0.004, 0.0)
-    assert noise["paper"] == DEFAULT_CONSTANT_NOISE["paper"]  # defaults kept
+    assert noise["other"] == DEFAULT_CONSTANT_NOISE["other"]  # defaults kept
+    assert "paper" not in noise  # the built-in model is one for every extractor
     model = back.measurement.model_for("bailey")
     assert (model.kind, model.constant) == ("constant", NoiseModel(0.03, 0.002, 0.004, 0.0))
     assert path.read_text().startswith("# a header\n# over two lines\n")
@@ -123,8 +124,15 @@ def test_presets():
     from experiments.paper.slam import CYCAB_SLAM, Exp2Config
 
     assert load_slam_config("cycab") == CYCAB_SLAM == Exp2Config().slam
-    # the defaults but the odometry model's pose floor, which the simulated car does not have
-    back = {"vehicle.odometry_noise": OdometryNoise(), "features.extractor.short_trunks": True}
+    # the defaults but the odometry model's pose floor, which the simulated car does not have,
+    # the paper-faithful extractor, the tree park's measurement calibration and the car claimed
+    back = {
+        "vehicle.odometry_noise": OdometryNoise(),
+        "features.extractor.short_trunks": True,
+        "measurement": SlamConfig().measurement,
+        "vehicle.calibrated_for": None,
+    }
+    assert CYCAB_SLAM.measurement != SlamConfig().measurement
     assert CYCAB_SLAM.with_(**back) == SlamConfig()
     vp = load_slam_config("victoria_park_ute")
     assert vp.filter.first_estimates_jacobians and vp.vehicle.laser_pose[:2] == (3.78, 0.5)

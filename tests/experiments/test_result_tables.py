@@ -148,18 +148,21 @@ def test_table1_has_the_papers_numbers_as_rows(quick_tables):
 
 @pytest.mark.slow
 def test_noise_calibration_in_use_values_are_slams(quick_tables):
-    from slam import DEFAULT_CONSTANT_NOISE
+    """'in use' is the cycab preset's model (the simulated tables' filter)."""
+    from experiments.paper.slam import CYCAB_SLAM
 
     rows = read_tidy_csv(quick_tables / "noise_calibration.csv")
     in_use = [r["value"] for r in rows if r["method"] == "paper" and r["source"] == "in_use"]
-    assert in_use[:4] == list(DEFAULT_CONSTANT_NOISE["paper"])
+    assert in_use[:4] == list(CYCAB_SLAM.measurement.constant_noise["paper"])
 
 
 @pytest.mark.slow
 def test_range_biases_in_use_are_the_calibrations_lines(quick_tables):
-    """slam.config.DEFAULT_RANGE_BIAS holds the calibration's maximum-likelihood lines,
+    """The cycab preset's range biases are the calibration's maximum-likelihood lines,
     rounded to 0.1 mm and 0.01 mm per m, for every extractor."""
-    from slam.config import DEFAULT_RANGE_BIAS
+    from experiments.paper.slam import CYCAB_SLAM
+
+    biases = CYCAB_SLAM.measurement.range_bias
 
     rows = read_tidy_csv(quick_tables / "noise_calibration.csv")
 
@@ -171,8 +174,8 @@ def test_range_biases_in_use_are_the_calibrations_lines(quick_tables):
         ]
         return v
 
-    assert set(DEFAULT_RANGE_BIAS) == {"paper", "geometric", "bailey"}
-    for m, (a, b) in DEFAULT_RANGE_BIAS.items():
+    assert set(biases) == {"paper", "geometric", "bailey"}
+    for m, (a, b) in biases.items():
         assert value(m, "fitted", "range_bias_a") == pytest.approx(a, abs=0.5e-4)
         assert value(m, "fitted", "range_bias_b") == pytest.approx(b, abs=0.5e-5)
         assert (value(m, "in_use", "range_bias_a"), value(m, "in_use", "range_bias_b")) == (a, b)

@@ -22,7 +22,7 @@ from experiments.io.config_file import (
 from experiments.paper.slam import CYCAB_SLAM
 from features import ExtractorParams
 from slam import SlamConfig, SlamError
-from slam.config import MOVED, AssociationConfig, FeaturesConfig, setting_sources
+from slam.config import MOVED, AssociationConfig, FeaturesConfig, VehicleConfig, setting_sources
 
 
 def _toml(cfg: SlamConfig) -> str:
@@ -163,8 +163,9 @@ def test_config_pickles_for_the_workers():
 
 
 def test_a_configuration_made_for_another_car_is_warned(caplog):
-    """The built-in settings are the simulated Cycab's; on the ute (the Victoria Park preset's
-    car) they are warned about, naming both cars, and the ute's preset on the Cycab too."""
+    """The cycab preset claims the simulated Cycab; on the ute (the Victoria Park preset's car)
+    it is warned about, naming both cars, and the ute's preset on the Cycab too. The built-in
+    settings claim no car: no warning."""
     import dataclasses as dc
 
     import numpy as np
@@ -173,15 +174,16 @@ def test_a_configuration_made_for_another_car_is_warned(caplog):
     from slam import run_slam
 
     seq = simulate_cycab_run(np.random.default_rng(2), "tree_park", CycabParams(n_scans=15))
-    with caplog.at_level("WARNING", logger="slam.checks"):
-        run_slam(seq)
-    assert not [r for r in caplog.records if "made for a car" in r.message]
     ute = dc.replace(
         seq, vehicle={"model": "ackermann", "wheelbase_m": 2.83, "encoder_offset_m": 0.76}
     )
+    with caplog.at_level("WARNING", logger="slam.checks"):
+        run_slam(seq, CYCAB_SLAM)
+        run_slam(ute, SlamConfig(), warm_up=False)
+    assert not [r for r in caplog.records if "made for a car" in r.message]
     caplog.clear()
     with caplog.at_level("WARNING", logger="slam.checks"):
-        run_slam(ute, warm_up=False)
+        run_slam(ute, CYCAB_SLAM, warm_up=False)
     (msg,) = [r.message for r in caplog.records if "made for a car" in r.message]
     assert "wheelbase 1.2 m" in msg and "has 2.83 m (0.76 m)" in msg
     caplog.clear()
@@ -217,9 +219,9 @@ def test_a_preset_holds_only_what_differs_from_the_defaults(name, tmp_path):
 
 
 def test_a_preset_diff_reads_back_and_keeps_a_noise_model_whole():
-    cfg = SlamConfig().with_(**{"measurement.constant_noise.paper.range_sigma_m": 0.5})
+    cfg = SlamConfig().with_(**{"measurement.constant_noise.other.range_sigma_m": 0.5})
     diff = config_diff(cfg.to_dict(), SlamConfig().to_dict())
-    assert set(diff["measurement"]["constant_noise"]["paper"]) == {
+    assert set(diff["measurement"]["constant_noise"]["other"]) == {
         "range_sigma_m",
         "range_sigma_per_m",
         "bearing_sigma_rad",
@@ -227,9 +229,26 @@ def test_a_preset_diff_reads_back_and_keeps_a_noise_model_whole():
     }
     assert SlamConfig.from_dict(tomllib.loads(preset_toml(cfg))) == cfg
     assert tomllib.loads(preset_toml(SlamConfig())) == {}
-    no_claim = SlamConfig().with_(**{"vehicle.calibrated_for": None})  # None is no TOML value
+
+
+@dataclasses.dataclass(frozen=True)
+class _Claimed(SlamConfig):
+    """Built-in settings that claim a car (the neutral ones claim none)."""
+
+    vehicle: VehicleConfig = dataclasses.field(
+        default_factory=lambda: VehicleConfig(calibrated_for=(1.2, 0.0))
+    )
+
+
+def test_a_setting_the_diff_cannot_carry_is_refused(monkeypatch):
+    """None over a built-in value is no TOML value: preset_toml refuses it rather than write a
+    preset that reads back otherwise."""
+    import slam
+
+    monkeypatch.setattr(slam, "SlamConfig", _Claimed)
+    assert tomllib.loads(preset_toml(_Claimed())) == {}
     with pytest.raises(ConfigError, match="diff"):
-        preset_toml(no_claim)
+        preset_toml(_Claimed(vehicle=VehicleConfig(calibrated_for=None)))
 
 
 def test_every_default_names_its_source():

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from experiments.paper.slam import CYCAB_SLAM
 from features.types import Features
 from slam import (
     MapPolicy,
@@ -22,8 +23,6 @@ from slam import (
     se2,
 )
 from slam.config import (
-    DEFAULT_CONSTANT_NOISE,
-    DEFAULT_FIT_FLOOR,
     AssociationConfig,
     MeasurementConfig,
     OdometryNoise,
@@ -42,7 +41,7 @@ EXACT = SlamConfig(measurement=MeasurementConfig(noise="constant"))
 # The constant noise of the "paper" circles the tests make: 1 cm in range, 1 mrad in bearing;
 # TIGHT_RB gives range and bearing only and keeps the paper model's cross-range term.
 TIGHT = NoiseModel(0.01, 0.0, 0.001, 0.0)
-TIGHT_RB = DEFAULT_CONSTANT_NOISE["paper"]._replace(
+TIGHT_RB = CYCAB_SLAM.measurement.constant_noise["paper"]._replace(
     range_sigma_m=0.01, range_sigma_per_m=0.0, bearing_sigma_rad=0.001
 )
 
@@ -351,7 +350,7 @@ def test_config_validation():
     with pytest.raises(ValueError, match="association.gate_prob"):
         AssociationConfig(gate_prob=1.0)
     assert SlamConfig().measurement.model_for("geometric").kind == "fit"
-    wide = DEFAULT_CONSTANT_NOISE["bailey"]._replace(range_sigma_m=0.5)
+    wide = SlamConfig().measurement.constant_noise["other"]._replace(range_sigma_m=0.5)
     model = MeasurementConfig(constant_noise={"bailey": wide}).model_for("bailey")
     assert model.kind == "constant" and model.constant[0] == 0.5
 
@@ -470,8 +469,13 @@ def test_detections_noise_model_and_errors():
     det = as_detections(seq, feats, "bailey")
     cov = np.array([np.diag([0.04**2, 0.002**2])] * det.det_scan.size)
     with_cov = dataclasses.replace(det, det_cov=cov)
-    lg = run_slam(with_cov, features="detections")  # auto: the detections' own covariance + floors
-    f_r, f_b = DEFAULT_FIT_FLOOR
+    # auto: the detections' own covariance + floors (the cycab preset's; none built in)
+    lg = run_slam(with_cov, CYCAB_SLAM, features="detections")
+    f_r, f_b = (
+        CYCAB_SLAM.measurement.fit_floor_range_m,
+        CYCAB_SLAM.measurement.fit_floor_bearing_rad,
+    )
+    assert f_r > 0 and f_b > 0
     np.testing.assert_allclose(lg.meas_R, cov + np.diag([f_r**2, f_b**2]))
     no_floor = SlamConfig(
         measurement=MeasurementConfig(fit_floor_range_m=0.0, fit_floor_bearing_rad=0.0)
@@ -485,7 +489,7 @@ def test_detections_noise_model_and_errors():
         config=SlamConfig().with_(**{"measurement.noise": "constant"}),
     )
     z = lg.meas_z
-    s_r, s_rm = DEFAULT_CONSTANT_NOISE["bailey"][:2]  # the bailey constant model
+    s_r, s_rm = SlamConfig().measurement.model_for("bailey").constant[:2]  # the built-in one
     expected = s_r + s_rm * z[:, 0]
     np.testing.assert_allclose(np.sqrt(lg.meas_R[:, 0, 0]), expected)
     with pytest.raises(SlamError, match="'fit' needs det_cov"):

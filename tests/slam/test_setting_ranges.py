@@ -21,14 +21,9 @@ from hypothesis import strategies as st
 from kernel_runs import EXTREMES, Bounded, slam_summary
 from subprocesses import error_line, trunkslam
 
+from experiments.paper.slam import CYCAB_SLAM
 from slam import SlamConfig, SlamError
-from slam.config import (
-    DEFAULT_CONSTANT_NOISE,
-    IncrementNoise,
-    OdometryNoise,
-    SteeringCalibration,
-    UnicycleNoise,
-)
+from slam.config import IncrementNoise, OdometryNoise, SteeringCalibration, UnicycleNoise
 from slam.sequence import MAX_VARIANCE
 from slam.smoother import MEAS_TENTATIVE
 from slam.validators import SETTING_TINY, SIGMA_LIMIT
@@ -37,7 +32,7 @@ TIMEOUT_S = 60.0  # a case's bound: the 6-scan drive runs in well under a second
 
 # (path, base document): the setting at `path` (keys, or a list index last) in a document that
 # is valid before the value is put in
-_NOISE = DEFAULT_CONSTANT_NOISE["paper"]._asdict()
+_NOISE = CYCAB_SLAM.measurement.constant_noise["paper"]._asdict()  # a model with a 0 sigma
 SETTINGS = [
     (("measurement", name), {})
     for name in ("fit_floor_range_m", "fit_floor_bearing_rad", "max_range_m")
