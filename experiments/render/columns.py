@@ -36,6 +36,7 @@ __all__ = [
     "Floats",
     "Formatted",
     "IdLabels",
+    "ScanPoints",
     "Spec",
     "Strips",
     "Table",
@@ -149,13 +150,73 @@ class Floats(Kind):
 
 
 class IdLabels(Kind):
-    """(m,) integer ids labelled `prefix` + id ("L12"); the texts are made at the flush."""
+    """(m,) integer ids labelled `prefix` + id ("L12"); the texts are taken at the flush from
+    a table of every id's label up to the largest seen (made once, grown as ids grow; the
+    texts of `rows.id_labels`)."""
 
     def __init__(self, prefix: str) -> None:
         self.prefix = prefix
+        self._labels = pa.array([], pa.string())
+
+    def _arrow(self, ids: np.ndarray) -> pa.Array:
+        if len(ids) == 0 or ids.min() < 0 or ids.max() >= 1 << 20:  # (no table for those)
+            return rows._id_labels(self.prefix).arrow(ids)
+        top = int(ids.max())
+        if top >= len(self._labels):
+            every = np.arange(max(top + 1, 2 * len(self._labels)), dtype=np.int64)
+            self._labels = rows._id_labels(self.prefix).arrow(every)
+        return self._labels.take(pa.array(ids))
 
     def column(self) -> _Column:
-        return _Column((), np.int64, rows._id_labels(self.prefix).arrow)
+        return _Column((), np.int64, self._arrow)
+
+
+class ScanPoints(Kind):
+    """A scan's points in its own frame, the returns only: a row's value is (ranges (B,) m,
+    NaN for no return, angle_min rad, angle_increment rad), and the points are made at the
+    flush as `features.Scan` makes them (`points_xy[valid]`: the same products of each range
+    with the cosine and sine of its beam's angle, the angles computed as `Scan.angles_rad`
+    does, once for each laser geometry)."""
+
+    def __init__(self) -> None:
+        self._trig: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+    def trig(self, n: int, angle_min: float, increment: float) -> tuple[np.ndarray, np.ndarray]:
+        key = (n, angle_min, increment)
+        if key not in self._trig:
+            a = angle_min + increment * np.arange(n)  # (Scan.angles_rad)
+            self._trig[key] = (np.cos(a), np.sin(a))
+        return self._trig[key]
+
+    def column(self) -> _ScanColumn:
+        return _ScanColumn(self)
+
+
+class _ScanColumn:
+    __slots__ = ("beams", "geometry", "kind", "ranges")
+
+    def __init__(self, kind: ScanPoints) -> None:
+        self.kind = kind
+        self.ranges = _Grow((), np.float64)
+        self.geometry = _Grow((3,), np.float64)  # [B, angle_min, angle_increment] a row
+
+    def put(self, value) -> None:
+        ranges, angle_min, increment = value
+        self.geometry.put1((self.ranges.put(ranges), angle_min, increment))
+
+    def take(self) -> tuple[pa.Array, np.ndarray]:
+        ranges, geometry = self.ranges.take(), self.geometry.take()
+        ends = np.cumsum(geometry[:, 0].astype(np.int64))
+        points, lengths = [], np.empty(len(geometry), np.int32)
+        for i, (n, a0, da) in enumerate(geometry.tolist()):
+            r = ranges[ends[i] - int(n) : ends[i]]
+            cos, sin = self.kind.trig(int(n), a0, da)
+            valid = np.isfinite(r)
+            xy = np.stack([r * cos, r * sin], axis=1)[valid]
+            points.append(xy)
+            lengths[i] = len(xy)
+        flat = np.concatenate(points) if points else np.zeros((0, 2))
+        return rows._VECTORS.arrow(flat.astype(np.float32)), _offsets(lengths)
 
 
 class Formatted(Kind):

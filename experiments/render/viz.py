@@ -89,8 +89,9 @@ FLUSH_TIMEOUT_S = 120.0
 # The scene's rows are sent in batches (`_Batch`) of this many scans, or, streamed to a live
 # viewer, of what this many seconds brought (the viewer is behind the run by at most that; a
 # file has no such limit: on a loaded machine it made batches of a few scans, and the cost of a
-# send is mostly per call); 1: each row as it comes.
-BATCH_SCANS = 64
+# send is mostly per call: some 0.5 ms of CPU a `send_columns` in rerun 0.41, whatever its
+# rows, 15 a batch); 1: each row as it comes.
+BATCH_SCANS = 256
 BATCH_S = 0.25
 # The map's ellipses (`world/landmarks/ellipses`) are logged again when a landmark joined or left
 # the map, else once this many seconds of the sequence's time have passed since they last were,
@@ -182,7 +183,12 @@ def _lines(strips: columns.Kind, radius_ui: float, rgb: tuple[int, int, int]) ->
     )
 
 
-_SCAN = _points(SCAN_POINT_PX, (200, 200, 200))
+_SCAN = _C.Spec(  # a row: the scan's ranges and angles (`columns.ScanPoints`)
+    rr.Points2D,
+    positions=_C.ScanPoints(),
+    radii=_C.Const(rows.radii_ui(SCAN_POINT_PX)),
+    colors=_C.Const(rows.color(200, 200, 200)),
+)
 _EDGES = _points(4.0, (255, 40, 40))
 _TENTATIVES = _points(3.0, (255, 200, 0))
 _SEGMENTS = _C.Spec(
@@ -687,7 +693,7 @@ class Recorder(NullRecorder):
         if self._skip():
             return
         self._log_pose(_parent(path), pose)
-        self._put(path, _SCAN, scan.points_xy[scan.valid])
+        self._put(path, _SCAN, (scan.ranges_m, scan.angle_min_rad, scan.angle_increment_rad))
 
     def log_features(self, scan: Scan, features: Features, pose=None, path="world/laser/features"):
         """Segments, circles, lines and edges in the laser frame under `path`; with `pose`, as
@@ -695,8 +701,8 @@ class Recorder(NullRecorder):
         if self._skip():
             return
         self._log_pose(_parent(path), pose)
-        pts = scan.points_xy
-        strips = [pts[features.beams(a, b)] for a, b in features.segment_beams]
+        beams = features.segment_beams
+        strips = [scan.points_xy[features.beams(a, b)] for a, b in beams] if len(beams) else []
         kinds = np.asarray(features.segment_kind, np.int64).reshape(-1)
         self._put(f"{path}/segments", _SEGMENTS, columns.strips(strips), KIND_COLORS[kinds])
         self.log_circles(f"{path}/circles", features.circle_params, None, features.method)

@@ -219,3 +219,32 @@ def test_a_table_gives_each_rows_values_with_their_offsets():
     scan, time_s, cols = table.take()
     assert scan.tolist() == [0] and np.isnan(time_s).all() and cols[0][2].tolist() == [0, 3]
     assert cols[2][1].equals(pa.array(["a", "b", "c"]))
+
+
+def test_scan_points_and_id_labels_made_at_the_flush_are_the_scans_and_labels():
+    """`columns.ScanPoints`: scans of two laser geometries in one batch give each scan's
+    `points_xy[valid]` (float32) in turn; `columns.IdLabels`: the labels of `rows.id_labels`,
+    for ids past the table's size and for negative ids."""
+    from features.types import Scan
+
+    rng = np.random.default_rng(4)
+    scans = []
+    for n, a0, da in [
+        (361, -np.pi / 2, np.pi / 360),
+        (181, -1.0, 0.01),
+        (361, -np.pi / 2, np.pi / 360),
+    ]:
+        ranges = rng.uniform(0.5, 30.0, n)
+        ranges[rng.random(n) < 0.2] = np.nan
+        scans.append(Scan(ranges, a0, da, max_range_m=25.0))
+    spec = columns.Spec(rr.Points2D, positions=columns.ScanPoints(), labels=columns.IdLabels("L"))
+    table = spec.table()
+    ids = [np.array([0, 5, 3]), np.array([], np.int64), np.array([1000, 2])]
+    for k, (scan, i) in enumerate(zip(scans, ids)):
+        table.add(k, None, ((scan.ranges_m, scan.angle_min_rad, scan.angle_increment_rad), i))
+    _, _, ((_, points, o), (_, labels, lo)) = table.take()
+    for k, scan in enumerate(scans):
+        want = rr.Points2D(scan.points_xy[scan.valid]).as_component_batches()[0].as_arrow_array()
+        assert points.slice(o[k], o[k + 1] - o[k]).equals(want)
+    assert labels.to_pylist() == ["L0", "L5", "L3", "L1000", "L2"] and lo.tolist() == [0, 3, 3, 5]
+    assert columns.IdLabels("L")._arrow(np.array([-3, 4])).to_pylist() == ["L-3", "L4"]
