@@ -81,8 +81,9 @@ __all__ = [
 KINDS = ("slam", "features", "circles")
 # A recording is not started on a file system with less free space than this (a tree-park
 # drive's recording is 10-20 kB a scan, a decimated Victoria Park run's a few MB; the margin is
-# for the rest of the command's outputs), and is stopped at the next scan once less than
-# RECORDING_STOP_FREE_BYTES is left. The flush at the end waits at most FLUSH_TIMEOUT_S.
+# for the rest of the command's outputs), and is stopped when its next batch is due (the file
+# grows only then) once less than RECORDING_STOP_FREE_BYTES is left. The flush at the end
+# waits at most FLUSH_TIMEOUT_S.
 RECORDING_MIN_FREE_BYTES = 16 * 1024 * 1024
 RECORDING_STOP_FREE_BYTES = 1024 * 1024
 FLUSH_TIMEOUT_S = 120.0
@@ -483,9 +484,10 @@ class Recorder(NullRecorder):
     `abort()` (or leaving a `with` block by an exception) deletes the temporary file.
 
     A full disk: a recording is not started on a file system with less than
-    `RECORDING_MIN_FREE_BYTES` free, and is stopped at the next scan once less than
-    `RECORDING_STOP_FREE_BYTES` is left; rerun's file writer (a thread of its own) stops at a
-    write error, which shows when the recording is flushed. Each is a `WriteError` naming
+    `RECORDING_MIN_FREE_BYTES` free, and is stopped when its next batch is due (`_Batch`; the
+    file grows only then) once less than `RECORDING_STOP_FREE_BYTES` is left; rerun's file
+    writer (a thread of its own) stops at a write error, which shows when the recording is
+    flushed. Each is a `WriteError` naming
     `path` and the reason (no space left, the process's file-size limit), with the temporary
     file deleted."""
 

@@ -248,3 +248,11 @@ def test_scan_points_and_id_labels_made_at_the_flush_are_the_scans_and_labels():
         assert points.slice(o[k], o[k + 1] - o[k]).equals(want)
     assert labels.to_pylist() == ["L0", "L5", "L3", "L1000", "L2"] and lo.tolist() == [0, 3, 3, 5]
     assert columns.IdLabels("L")._arrow(np.array([-3, 4])).to_pylist() == ["L-3", "L4"]
+
+
+def test_the_docs_state_the_batch():
+    from pathlib import Path
+
+    page = " ".join((Path(__file__).parents[2] / "docs" / "rerun.md").read_text().split())
+    assert f"the rows of {viz.BATCH_SCANS} scans, or, streamed to a live viewer" in page
+    assert viz.BATCH_S == 0.25 and "at most a quarter of a second" in page
