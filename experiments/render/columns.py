@@ -86,7 +86,8 @@ class _Grow:
         return out
 
 
-def _offsets(lengths: np.ndarray) -> np.ndarray:
+def _offsets(lengths) -> np.ndarray:
+    """int32 offsets (n + 1,) of n rows of `lengths` (an array or a list)."""
     out = np.zeros(len(lengths) + 1, np.int32)
     np.cumsum(lengths, out=out[1:])
     return out
@@ -102,20 +103,22 @@ class Kind:
 
 
 class _Column:
-    """A column's values in one buffer (`tail`, `dtype`), made arrow by `to_arrow`."""
+    """A column's values in one buffer (`tail`, `dtype`), made arrow by `to_arrow`; how many
+    each row holds in a list (an append costs less than a numpy store)."""
 
     __slots__ = ("lengths", "to_arrow", "values")
 
     def __init__(self, tail: tuple, dtype, to_arrow: Callable) -> None:
         self.values = _Grow(tail, dtype)
-        self.lengths = _Grow((), np.int32)
+        self.lengths: list[int] = []
         self.to_arrow = to_arrow
 
     def put(self, value) -> None:
-        self.lengths.put1(self.values.put(value))
+        self.lengths.append(self.values.put(value))
 
     def take(self) -> tuple[pa.Array, np.ndarray]:
-        return self.to_arrow(self.values.take()), _offsets(self.lengths.take())
+        lengths, self.lengths = self.lengths, []
+        return self.to_arrow(self.values.take()), _offsets(lengths)
 
 
 class Vectors(Kind):
@@ -285,16 +288,17 @@ class _StripsColumn:
     def __init__(self) -> None:
         self.points = _Grow((2,), np.float32)
         self.strip_lengths = _Grow((), np.int32)
-        self.lengths = _Grow((), np.int32)
+        self.lengths: list[int] = []
 
     def put(self, value) -> None:
         points, lengths = value
         self.points.put(points)
-        self.lengths.put1(self.strip_lengths.put(lengths))
+        self.lengths.append(self.strip_lengths.put(lengths))
 
     def take(self) -> tuple[pa.Array, np.ndarray]:
         data = (self.points.take(), self.strip_lengths.take())
-        return rows._STRIPS.arrow(data), _offsets(self.lengths.take())
+        lengths, self.lengths = self.lengths, []
+        return rows._STRIPS.arrow(data), _offsets(lengths)
 
 
 def strips(pieces) -> tuple[np.ndarray, np.ndarray]:
@@ -321,15 +325,16 @@ class _TextsColumn:
 
     def __init__(self) -> None:
         self.texts: list[str] = []
-        self.lengths = _Grow((), np.int32)
+        self.lengths: list[int] = []
 
     def put(self, value) -> None:
         self.texts.extend(value)
-        self.lengths.put1(len(value))
+        self.lengths.append(len(value))
 
     def take(self) -> tuple[pa.Array, np.ndarray]:
         texts, self.texts = self.texts, []
-        return pa.array(texts, pa.string()), _offsets(self.lengths.take())
+        lengths, self.lengths = self.lengths, []
+        return pa.array(texts, pa.string()), _offsets(lengths)
 
 
 class Const:
@@ -361,31 +366,36 @@ class Spec:
 class Table:
     """An entity's rows of a batch (`Spec`), as columns: `add` a row, `take` them all."""
 
-    __slots__ = ("columns", "n", "scan", "spec", "time")
+    __slots__ = ("columns", "scan", "spec", "time")
 
     def __init__(self, spec: Spec) -> None:
         self.spec = spec
         self.columns = [k.column() for _, k in spec.fields if not isinstance(k, Const)]
-        self.scan = _Grow((), np.int64)
-        self.time = _Grow((), np.float64)  # NaN: a row without time
-        self.n = 0
+        self.scan: list[int] = []  # the rows' scans and times (lists: cheaper to append to)
+        self.time: list[float] = []  # NaN: a row without time
+
+    @property
+    def n(self) -> int:
+        """Rows added since the last take."""
+        return len(self.scan)
 
     def add(self, k: int, stamp_s: float | None, values: tuple) -> None:
         """A row at scan `k` and time `stamp_s` (s, or None), with the values of the Kind
         fields in order."""
-        self.scan.put1(k)
-        self.time.put1(np.nan if stamp_s is None else stamp_s)
+        self.scan.append(k)
+        self.time.append(np.nan if stamp_s is None else stamp_s)
         for column, value in zip(self.columns, values):
             column.put(value)
-        self.n += 1
 
     def take(self) -> tuple[np.ndarray, np.ndarray, list]:
         """(scan (n,) int64, time (n,) s with NaN for none, [(descriptor, arrow array of every
         row's values, int32 offsets (n + 1,))]) of the rows added since the last take."""
-        n, self.n = self.n, 0
+        n = len(self.scan)
         kept = iter(self.columns)
         out = []
         for descriptor, kind in self.spec.fields:
             array, offsets = kind.take(n) if isinstance(kind, Const) else next(kept).take()
             out.append((descriptor, array, offsets))
-        return self.scan.take(), self.time.take(), out
+        scan, self.scan = np.array(self.scan, np.int64), []
+        stamps, self.time = np.array(self.time, np.float64), []
+        return scan, stamps, out
