@@ -111,14 +111,13 @@ class _Estimate:
     @property
     def landmark_covs(self) -> np.ndarray:
         """(n, 2, 2) marginal covariances of the landmarks."""
-        n = self.n_landmarks
-        i = 3 + 2 * np.arange(n)
         P = self._lower
-        out = np.empty((n, 2, 2))
-        out[:, 0, 0] = P[i, i]
-        out[:, 0, 1] = P[i + 1, i]
-        out[:, 1, 0] = P[i + 1, i]
-        out[:, 1, 1] = P[i + 1, i + 1]
+        diag, below = np.diagonal(P), np.diagonal(P, -1)  # views: P[j, j], P[j + 1, j]
+        out = np.empty((self.n_landmarks, 2, 2))
+        out[:, 0, 0] = diag[3::2]
+        out[:, 0, 1] = below[3::2]
+        out[:, 1, 0] = below[3::2]
+        out[:, 1, 1] = diag[4::2]
         return out
 
     def cov(self, idx) -> np.ndarray:

@@ -51,14 +51,14 @@ def show_scan(vis, seq, laser: np.ndarray, state, result) -> None:
             vis.log_departures([(lid, why, v) for (lid, why), v in zip(removed, r)])
     vis.log_tentatives(result.tentative_xy)
     # (a landmark a loop closure merged away in this scan is no longer in the state)
-    status = result.status
-    in_map = set(state.landmark_ids.tolist())  # (a set: np.isin sorts, at every scan)
-    used = np.array([i for i, s in enumerate(status.tolist()) if s >= 0 and s in in_map], int)
+    status = np.asarray(result.status)
+    used = np.flatnonzero(status >= 0)
+    at = state.positions_of(status[used])  # (one sort a scan, not a search a measurement)
+    used, at = used[at >= 0], at[at >= 0]
     if used.size:
         ang = T_world_laser[2] + meas.z[used, 1]
         frm = T_world_laser[:2] + meas.z[used, 0:1] * np.stack([np.cos(ang), np.sin(ang)], 1)
-        to = np.array([state.landmarks_xy[state.index_of(int(i))] for i in status[used]])
-        vis.log_associations(frm, to)
+        vis.log_associations(frm, state.landmarks_xy[at])
     else:
         vis.log_associations(np.zeros((0, 2)), np.zeros((0, 2)))
     if seq.truth_t is not None:

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import functools
 import logging
 import os
 import shutil
@@ -59,9 +60,9 @@ import rerun.blueprint as rrb
 from experiments.errors import ConfigError, DataError, WriteError
 from experiments.io.outputs import check_output_file
 from experiments.io.writers import interruption_point
-from experiments.render import rows
+from experiments.render import columns, rows
 from experiments.render.rerun_sink import Viewer, viewer_program
-from experiments.render.shapes import circle_polylines, ellipse_polyline, ellipse_polylines
+from experiments.render.shapes import circle_polylines
 from features.types import Features, Scan
 from slam import se2
 
@@ -80,16 +81,18 @@ __all__ = [
 KINDS = ("slam", "features", "circles")
 # A recording is not started on a file system with less free space than this (a tree-park
 # drive's recording is 10-20 kB a scan, a decimated Victoria Park run's a few MB; the margin is
-# for the rest of the command's outputs), and is stopped at the next scan once less than
-# RECORDING_STOP_FREE_BYTES is left. The flush at the end waits at most FLUSH_TIMEOUT_S.
+# for the rest of the command's outputs), and is stopped when its next batch is due (the file
+# grows only then) once less than RECORDING_STOP_FREE_BYTES is left. The flush at the end
+# waits at most FLUSH_TIMEOUT_S.
 RECORDING_MIN_FREE_BYTES = 16 * 1024 * 1024
 RECORDING_STOP_FREE_BYTES = 1024 * 1024
 FLUSH_TIMEOUT_S = 120.0
 # The scene's rows are sent in batches (`_Batch`) of this many scans, or, streamed to a live
 # viewer, of what this many seconds brought (the viewer is behind the run by at most that; a
 # file has no such limit: on a loaded machine it made batches of a few scans, and the cost of a
-# send is mostly per call); 1: each row as it comes.
-BATCH_SCANS = 64
+# send is mostly per call: some 0.5 ms of CPU a `send_columns` in rerun 0.41, whatever its
+# rows, 15 a batch); 1: each row as it comes.
+BATCH_SCANS = 256
 BATCH_S = 0.25
 # The map's ellipses (`world/landmarks/ellipses`) are logged again when a landmark joined or left
 # the map, else once this many seconds of the sequence's time have passed since they last were,
@@ -142,26 +145,6 @@ def _transform(xy: np.ndarray, pose: np.ndarray | None) -> np.ndarray:
     return se2.transform_points(pose, xy)
 
 
-def _pose_transform(pose) -> rows.Row:
-    """A 2D pose [x, y, theta] as a rerun transform (rotation about z)."""
-    x, y, th = (float(v) for v in pose)
-    return rows.row(
-        rr.Transform3D,
-        translation=rows.vectors([[x, y, 0.0]]),
-        rotation_axis_angle=rows.axis_angles_z([th]),
-    )
-
-
-def _strips(pieces, rgb: tuple[int, int, int], radius_ui: float) -> rows.Row:
-    """Line strips (`rows.strips`) of one colour and one on-screen width (UI points)."""
-    return rows.row(
-        rr.LineStrips2D,
-        strips=rows.strips(pieces),
-        radii=rows.radii_ui(radius_ui),
-        colors=rows.color(*rgb),
-    )
-
-
 def _parent(path: str) -> str:
     return path.rsplit("/", 1)[0]
 
@@ -170,6 +153,98 @@ def _y_up(frame: str) -> str:
     """A child of `frame` that mirrors y: rerun draws 2D views with y down (rerun issue 1387),
     so each view's origin is such a child, and the map reads as on paper, y up."""
     return f"{frame}/y_up"
+
+
+# The rows logged at every scan, as columns (`columns.Spec`: each field a value a row, or
+# `Const`, the same in every row); `_circles_spec` for circles by method.
+_C = columns
+_POSE = _C.Spec(rr.Transform3D, translation=_C.Vectors(3), rotation_axis_angle=_C.AxisZ())
+_FOLLOW = _C.Spec(
+    rr.Transform3D, translation=_C.Vectors(3), scale=_C.Const(rows.vectors([[1.0, -1.0, 1.0]]))
+)
+
+
+def _points(radius_ui: float, rgb: tuple[int, int, int]) -> columns.Spec:
+    """Points2D: positions a row, one radius (UI points) and one colour."""
+    return _C.Spec(
+        rr.Points2D,
+        positions=_C.Vectors(2),
+        radii=_C.Const(rows.radii_ui(radius_ui)),
+        colors=_C.Const(rows.color(*rgb)),
+    )
+
+
+def _lines(strips: columns.Kind, radius_ui: float, rgb: tuple[int, int, int]) -> columns.Spec:
+    """LineStrips2D: strips a row (`strips`), one radius (UI points) and one colour."""
+    return _C.Spec(
+        rr.LineStrips2D,
+        strips=strips,
+        radii=_C.Const(rows.radii_ui(radius_ui)),
+        colors=_C.Const(rows.color(*rgb)),
+    )
+
+
+_SCAN = _C.Spec(  # a row: the scan's ranges and angles (`columns.ScanPoints`)
+    rr.Points2D,
+    positions=_C.ScanPoints(),
+    radii=_C.Const(rows.radii_ui(SCAN_POINT_PX)),
+    colors=_C.Const(rows.color(200, 200, 200)),
+)
+_EDGES = _points(4.0, (255, 40, 40))
+_TENTATIVES = _points(3.0, (255, 200, 0))
+_SEGMENTS = _C.Spec(
+    rr.LineStrips2D, strips=_C.Strips(), radii=_C.Const(rows.radii_ui(1.5)), colors=_C.Colors()
+)
+_LINES = _lines(_C.Strips(), 2.0, (60, 120, 255))
+_ASSOCIATIONS = _lines(_C.Strips(), 1.0, (0, 200, 255))
+_PATH = _lines(_C.Strips(), 1.5, (255, 80, 80))
+_TRUE_PATH = _lines(_C.Strips(), 1.0, (255, 255, 255))
+_VEHICLE_ELLIPSE = _lines(_C.Ellipses(40), 1.0, (255, 80, 80))  # (shapes.ellipse_polyline's)
+_MAP_ELLIPSES = _lines(_C.Ellipses(ELLIPSE_POINTS - 1), 1.0, (40, 200, 90))
+_VEHICLE_ARROW = _C.Spec(  # a row: the heading's sigma, rad
+    rr.Arrows2D,
+    vectors=_C.Const(rows.vectors([[2.0, 0.0]])),
+    origins=_C.Const(rows.vectors([[0.0, 0.0]])),
+    radii=_C.Const(rows.radii_ui(2.0)),
+    colors=_C.Const(rows.color(255, 80, 80)),
+    labels=_C.Formatted("heading +-{:.2f} deg (3 sigma)", lambda sig: np.degrees(3 * sig)),
+)
+_TRUE_ARROW = _C.Spec(
+    rr.Arrows2D,
+    vectors=_C.Vectors(2),
+    origins=_C.Vectors(2),
+    radii=_C.Const(rows.radii_ui(1.5)),
+    colors=_C.Const(rows.color(255, 255, 255)),
+)
+_LANDMARKS = _C.Spec(
+    rr.Points2D,
+    positions=_C.Vectors(2),
+    radii=_C.Const(rows.radii_ui(3.0)),
+    colors=_C.Const(rows.color(40, 200, 90)),
+    labels=_C.IdLabels("L"),
+)
+_LANDMARKS_EXISTENCE = _C.Spec(
+    rr.Points2D,
+    positions=_C.Vectors(2),
+    radii=_C.Const(rows.radii_ui(3.0)),
+    colors=_C.Colors(),
+    labels=_C.Texts(),
+)
+_SCALARS = _C.Spec(rr.Scalars, scalars=_C.Floats())
+
+
+@functools.cache
+def _circles_spec(rgb: tuple[int, int, int], labelled: bool) -> columns.Spec:
+    """Circles of one colour a row ([x, y, r], drawn at the flush), labelled with their
+    radius (a row: the radii) or, for a row with no circle, not labelled."""
+    labels = {"labels": _C.Formatted("r={:.2f} m")} if labelled else {}
+    return _C.Spec(
+        rr.LineStrips2D,
+        strips=_C.Circles(),
+        radii=_C.Const(rows.radii_ui(1.5)),
+        colors=_C.Const(rows.color(*rgb)),
+        **labels,
+    )
 
 
 # the frames that get a y_up child, by kind
@@ -297,55 +372,73 @@ class _Track:
 
 
 class _Batch:
-    """The scene's rows of the last scans, kept until BATCH_SCANS scans (or, with `max_s`, that
-    many seconds) have passed and then sent with one `send_columns` an entity, each component's
-    values of every row joined in one arrow array (`rows.columns`): rerun's cost of a logged row is
+    """The scene's rows of the last scans as columns (`columns.Table`, one an entity and
+    `columns.Spec`), kept until BATCH_SCANS scans (or, with `max_s`, that many seconds) have
+    passed and then sent with one `send_columns` an entity: rerun's cost of a logged row is
     mostly that of the call (a chunk each), and a Victoria Park run logs some 15 entities at
-    each of 7,249 scans. The rows are those `rec.log` would have logged, at the same times
-    (`tests/experiments/test_live_viewer.py` compares the two row for row)."""
+    each of 7,249 scans. At each scan a row only copies its values into the table's numpy
+    buffers; the arrow arrays are built once a batch. With `one_by_one` the rows are logged
+    each with `rec.log` at its own time instead (`batch_scans=1`: each scan's rows are sent at
+    the next scan; `tests/experiments/test_live_viewer.py` compares the two row for row)."""
 
-    def __init__(self, rec: rr.RecordingStream, scans: int, max_s: float | None = None) -> None:
+    def __init__(
+        self,
+        rec: rr.RecordingStream,
+        scans: int,
+        max_s: float | None = None,
+        one_by_one: bool = False,
+    ) -> None:
         self.rec = rec
         self.scans = scans
         self.max_s = max_s
-        self.rows: dict[str, list] = {}
+        self.one_by_one = one_by_one
+        self.tables: dict[tuple[str, columns.Spec], columns.Table] = {}
         self._n = 0
         self._since = time.monotonic()
 
-    def add(self, path: str, k: int, stamp_s: float | None, archetype) -> None:
-        self.rows.setdefault(path, []).append((k, stamp_s, rows.Row.of(archetype)))
+    def add(self, path: str, spec: columns.Spec, k: int, stamp_s: float | None, values) -> None:
+        table = self.tables.get((path, spec))
+        if table is None:
+            table = self.tables[(path, spec)] = spec.table()
+        table.add(k, stamp_s, values)
 
-    def next_scan(self) -> None:
-        """A scan is complete: send the batch when it is full or old."""
+    def due(self) -> bool:
+        """A scan is complete: True when the batch is full or old (then `send` it)."""
         self._n += 1
         old = self.max_s is not None and time.monotonic() - self._since > self.max_s
-        if self._n >= self.scans or old:
-            self.send()
+        return self._n >= self.scans or old
 
     def send(self) -> None:
-        batch, self.rows = self.rows, {}
         self._n, self._since = 0, time.monotonic()
-        for path, entity_rows in batch.items():
-            self._send(path, entity_rows)
+        for (path, _), table in self.tables.items():
+            if table.n:
+                self._send(path, *table.take())
 
-    def _send(self, path: str, entity_rows: list) -> None:
-        stamps = [s for _, s, _ in entity_rows]
-        columns = rows.columns([r for _, _, r in entity_rows])
-        if columns is None or (None in stamps and any(s is not None for s in stamps)):
-            for k, stamp_s, row in entity_rows:  # rows unlike each other: one at a time
-                self.rec.set_time("scan", sequence=k)
-                if stamp_s is not None:
-                    self.rec.set_time("time", duration=stamp_s)
-                self.rec.log(path, row.as_component_batches())
+    def _send(self, path: str, scan: np.ndarray, stamp_s: np.ndarray, cols: list) -> None:
+        timed = ~np.isnan(stamp_s)
+        if self.one_by_one or timed.any() != timed.all():  # (rows with and without time)
+            self._log_rows(path, scan, stamp_s, cols)
             return
-        indexes = [rr.TimeColumn("scan", sequence=[k for k, _, _ in entity_rows])]
-        if None not in stamps:
-            indexes.append(rr.TimeColumn("time", duration=stamps))
+        indexes = [rr.TimeColumn("scan", sequence=scan)]
+        if timed.all():
+            ns = np.rint(1e9 * stamp_s).astype(np.int64)  # as rerun's set_time: round(1e9 s)
+            indexes.append(rr.TimeColumn("time", duration=ns.astype("timedelta64[ns]")))
         cols = [
-            rr.ComponentColumn(d, rows.Described(d, array), lengths=lengths)
-            for d, array, lengths in columns
+            rr.ComponentColumn(d, rows.Described(d, array), offsets=offsets)
+            for d, array, offsets in cols
         ]
         self.rec.send_columns(path, indexes=indexes, columns=cols)
+
+    def _log_rows(self, path: str, scan: np.ndarray, stamp_s: np.ndarray, cols: list) -> None:
+        """The rows logged one at a time (`rec.log`), each at its scan and time."""
+        for i, k in enumerate(scan.tolist()):
+            self.rec.set_time("scan", sequence=k)
+            if not np.isnan(stamp_s[i]):
+                self.rec.set_time("time", duration=float(stamp_s[i]))
+            batches = [
+                rows.Described(d, array.slice(o[i], o[i + 1] - o[i])) for d, array, o in cols
+            ]
+            self.rec.log(path, batches)
 
 
 class NullRecorder:
@@ -391,9 +484,10 @@ class Recorder(NullRecorder):
     `abort()` (or leaving a `with` block by an exception) deletes the temporary file.
 
     A full disk: a recording is not started on a file system with less than
-    `RECORDING_MIN_FREE_BYTES` free, and is stopped at the next scan once less than
-    `RECORDING_STOP_FREE_BYTES` is left; rerun's file writer (a thread of its own) stops at a
-    write error, which shows when the recording is flushed. Each is a `WriteError` naming
+    `RECORDING_MIN_FREE_BYTES` free, and is stopped when its next batch is due (`_Batch`; the
+    file grows only then) once less than `RECORDING_STOP_FREE_BYTES` is left; rerun's file
+    writer (a thread of its own) stops at a write error, which shows when the recording is
+    flushed. Each is a `WriteError` naming
     `path` and the reason (no space left, the process's file-size limit), with the temporary
     file deleted."""
 
@@ -463,6 +557,7 @@ class Recorder(NullRecorder):
         self._stamp = _NO_SCAN  # the current scan's time, s (None: none); _NO_SCAN: no scan yet
         self._batch = None
         self._batch_scans = BATCH_SCANS if batch_scans == 0 else int(batch_scans)
+        self._timed = False  # rerun's own time is this scan's (`_at_scan`)
         self._est_path = _Track()
         self._truth_path = _Track()
         self._map = None  # the map's (ids, centres, scaled covariances) at its last scan
@@ -472,8 +567,8 @@ class Recorder(NullRecorder):
         """The static y mirrors under the views' frames (`_y_up`); the batch starts."""
         for frame in _VIEW_FRAMES[self.kind]:
             self.rec.log(_y_up(frame), rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
-        if self._batch_scans > 1:
-            self._batch = _Batch(self.rec, self._batch_scans, self.batch_s)
+        one_by_one = self._batch_scans == 1
+        self._batch = _Batch(self.rec, self._batch_scans, self.batch_s, one_by_one)
 
     def _send_batch(self) -> None:
         """The map's ellipses at the last scan, when not yet logged; then the batch goes."""
@@ -539,32 +634,51 @@ class Recorder(NullRecorder):
         return self._k % self.decimate != 0
 
     def set_scan(self, k: int, stamp_s: float | None = None) -> None:
-        """Timeline `scan` = k; with the scan's time, also timeline `time` (seconds)."""
+        """Timeline `scan` = k; with the scan's time, also timeline `time` (seconds). The rows
+        of the scans before go when their batch is due, after a look at the free space (the
+        file grows only when a batch goes: a disk filling up stops the run there, not at its
+        end)."""
         self._k = int(k)
-        if self._tmp is not None:  # a disk filling up stops the run now, not at its end
-            try:
-                self._check_space(RECORDING_STOP_FREE_BYTES, "the recording was stopped")
-                why = self._failed()
-                if why is not None:
-                    raise WriteError(self.path, why)
-            except WriteError:
-                self.abort()
-                raise
         interruption_point("recording-scan")  # the interruption tests' Ctrl-C, mid-recording
-        if self._batch is not None and self._stamp is not _NO_SCAN:
-            self._batch.next_scan()
+        if self._stamp is not _NO_SCAN and self._batch.due():
+            self._check_writer()
+            self._batch.send()
         self._stamp = None if stamp_s is None else float(stamp_s)
-        self.rec.set_time("scan", sequence=int(k))
-        if stamp_s is not None:
-            self.rec.set_time("time", duration=float(stamp_s))
+        self._timed = False
 
-    def _log(self, path: str, archetype, static: bool = False) -> None:
-        """Log `archetype` at `path` at this scan (into the batch, `_Batch`), or for all
-        times (static), or now when no scan is set or batching is off."""
-        if static or self._batch is None or self._stamp is _NO_SCAN:
-            self.rec.log(path, archetype, static=static)
-        else:
-            self._batch.add(path, self._k, self._stamp, archetype)
+    def _check_writer(self) -> None:
+        """Stop the recording (`WriteError`, nothing left) when its disk is nearly full or its
+        file writer has stopped."""
+        if self._tmp is None:
+            return
+        try:
+            self._check_space(RECORDING_STOP_FREE_BYTES, "the recording was stopped")
+            why = self._failed()
+            if why is not None:
+                raise WriteError(self.path, why)
+        except WriteError:
+            self.abort()
+            raise
+
+    def _at_scan(self) -> None:
+        """rerun's own time set to this scan, for a row logged at once (`rec.log`)."""
+        if self._timed or self._stamp is _NO_SCAN:
+            return
+        self._timed = True
+        self.rec.set_time("scan", sequence=self._k)
+        if self._stamp is not None:
+            self.rec.set_time("time", duration=self._stamp)
+
+    def _put(self, path: str, spec: columns.Spec, *values) -> None:
+        """A row of `spec` at `path` at this scan, the values of its `columns.Kind` fields in
+        order, into the batch (before any scan: logged at once, without a time)."""
+        if self._stamp is not _NO_SCAN:
+            self._batch.add(path, spec, self._k, self._stamp, values)
+            return
+        table = spec.table()
+        table.add(0, None, values)
+        _, _, cols = table.take()
+        self.rec.log(path, [rows.Described(d, array) for d, array, _ in cols])
 
     def _log_pose(self, frame: str, pose) -> None:
         """The frame entity's pose at this scan, once (a scan and its features share it)."""
@@ -573,7 +687,7 @@ class Recorder(NullRecorder):
         key = (self._k, frame, tuple(float(v) for v in pose))
         if key != self._posed:
             self._posed = key
-            self._log(frame, _pose_transform(pose))
+            self._put(frame, _POSE, [[key[2][0], key[2][1], 0.0]], key[2][2:])
 
     def log_scan(self, scan: Scan, pose=None, path: str = "world/laser/scan") -> None:
         """Scan points in the laser frame at `path`. With `pose` (the laser's world pose), the
@@ -581,16 +695,7 @@ class Recorder(NullRecorder):
         if self._skip():
             return
         self._log_pose(_parent(path), pose)
-        pts = scan.points_xy[scan.valid]
-        self._log(
-            path,
-            rows.row(
-                rr.Points2D,
-                positions=rows.vectors(pts),
-                radii=rows.radii_ui(SCAN_POINT_PX),
-                colors=rows.color(200, 200, 200),
-            ),
-        )
+        self._put(path, _SCAN, (scan.ranges_m, scan.angle_min_rad, scan.angle_increment_rad))
 
     def log_features(self, scan: Scan, features: Features, pose=None, path="world/laser/features"):
         """Segments, circles, lines and edges in the laser frame under `path`; with `pose`, as
@@ -598,37 +703,14 @@ class Recorder(NullRecorder):
         if self._skip():
             return
         self._log_pose(_parent(path), pose)
-        pts = scan.points_xy
-        strips = [pts[features.beams(a, b)] for a, b in features.segment_beams]
+        beams = features.segment_beams
+        strips = [scan.points_xy[features.beams(a, b)] for a, b in beams] if len(beams) else []
         kinds = np.asarray(features.segment_kind, np.int64).reshape(-1)
-        self._log(
-            f"{path}/segments",
-            rows.row(
-                rr.LineStrips2D,
-                strips=rows.strips(strips),
-                radii=rows.radii_ui(1.5),
-                colors=rows.colors(KIND_COLORS[kinds]),
-            ),
-        )
+        self._put(f"{path}/segments", _SEGMENTS, columns.strips(strips), KIND_COLORS[kinds])
         self.log_circles(f"{path}/circles", features.circle_params, None, features.method)
-        self._log(
-            f"{path}/lines",
-            rows.row(
-                rr.LineStrips2D,
-                strips=rows.strips(np.asarray(features.line_endpoints, float).reshape(-1, 2, 2)),
-                radii=rows.radii_ui(2.0),
-                colors=rows.color(60, 120, 255),
-            ),
-        )
-        self._log(
-            f"{path}/edges",
-            rows.row(
-                rr.Points2D,
-                positions=rows.vectors(np.asarray(features.edge_xy, float).reshape(-1, 2)),
-                radii=rows.radii_ui(4.0),
-                colors=rows.color(255, 40, 40),
-            ),
-        )
+        ends = np.asarray(features.line_endpoints, float).reshape(-1, 2, 2)
+        self._put(f"{path}/lines", _LINES, columns.strips(ends))
+        self._put(f"{path}/edges", _EDGES, np.asarray(features.edge_xy, float).reshape(-1, 2))
 
     def log_circles(
         self, path, circles_xyr, pose=None, method="truth", labels=None, static=False
@@ -636,6 +718,13 @@ class Recorder(NullRecorder):
         """Circles (C, 3) [x, y, r] as outlines labelled with their radius (or `labels`; [] for
         none); `pose` transforms them into the world; static: for all times (truth)."""
         circles_xyr = np.asarray(circles_xyr, float).reshape(-1, 3)
+        rgb = tuple(METHOD_COLORS.get(method, [255, 255, 255]))
+        if pose is None and labels is None and not static:  # drawn and labelled at the flush
+            if len(circles_xyr):
+                self._put(path, _circles_spec(rgb, True), circles_xyr, circles_xyr[:, 2])
+            else:
+                self._put(path, _circles_spec(rgb, False), circles_xyr)
+            return
         strips = circle_polylines(circles_xyr)
         if pose is not None and len(strips):
             strips = _transform(strips.reshape(-1, 2), pose).reshape(strips.shape)
@@ -644,11 +733,17 @@ class Recorder(NullRecorder):
         fields = {
             "strips": rows.strips(strips),
             "radii": rows.radii_ui(1.5),
-            "colors": rows.color(*METHOD_COLORS.get(method, [255, 255, 255])),
+            "colors": rows.color(*rgb),
         }
         if len(labels):
             fields["labels"] = rows.labels(labels)
         self._log(path, rows.row(rr.LineStrips2D, **fields), static=static)
+
+    def _log(self, path: str, row: rows.Row, static: bool = False) -> None:
+        """Log `row` at `path` now: at this scan, or for all times (static)."""
+        if not static:
+            self._at_scan()
+        self.rec.log(path, row, static=static)
 
     # ---- SLAM (the visualiser interface of slam.run_slam; world frame) -----------------------
 
@@ -672,30 +767,14 @@ class Recorder(NullRecorder):
         self._est_path.append(pose[:2])
         if self._skip():
             return
-        sig_th = float(np.sqrt(max(cov[2, 2], 0.0)))
-        self._log("world/vehicle", _pose_transform(pose))
-        self._log(  # y mirrored: see _y_up
-            "world/follow",
-            rows.row(
-                rr.Transform3D,
-                translation=rows.vectors([[pose[0], pose[1], 0.0]]),
-                scale=rows.vectors([[1.0, -1.0, 1.0]]),
-            ),
-        )
-        self._log(
-            "world/vehicle/arrow",
-            rows.row(
-                rr.Arrows2D,
-                vectors=rows.vectors([[2.0, 0.0]]),
-                origins=rows.vectors([[0.0, 0.0]]),
-                radii=rows.radii_ui(2.0),
-                colors=rows.color(255, 80, 80),
-                labels=rows.labels([f"heading +-{np.degrees(3 * sig_th):.2f} deg (3 sigma)"]),
-            ),
-        )
-        ellipse = ellipse_polyline(pose[:2], cov[:2, :2] * self.ellipse_scale**2)
-        self._log("world/vehicle_ellipse", _strips(ellipse[None], (255, 80, 80), 1.0))
-        self._log("world/path", _strips([self._est_path.piece()], (255, 80, 80), 1.5))
+        x, y, th = pose.tolist()
+        self._put("world/vehicle", _POSE, [[x, y, 0.0]], [th])
+        self._put("world/follow", _FOLLOW, [[x, y, 0.0]])  # y mirrored: see _y_up
+        self._put("world/vehicle/arrow", _VEHICLE_ARROW, [np.sqrt(max(cov[2, 2], 0.0))])
+        scaled = cov[:2, :2] * self.ellipse_scale**2
+        self._put("world/vehicle_ellipse", _VEHICLE_ELLIPSE, [[x, y, *scaled.reshape(-1)]])
+        piece = self._est_path.piece()
+        self._put("world/path", _PATH, (piece, np.array([len(piece)], np.int32)))
 
     def log_landmarks(self, xy, cov, ids, existence=None) -> None:
         """The map; existence (n,): map policy "existence", each landmark's, in its label and
@@ -704,24 +783,16 @@ class Recorder(NullRecorder):
             return
         xy = np.asarray(xy, float).reshape(-1, 2)
         cov = np.asarray(cov, float).reshape(-1, 2, 2) * self.ellipse_scale**2
-        labels = colors = None  # without existence: one colour, the ids' labels
-        if existence is not None:
+        ids = np.array(ids, np.int64).reshape(-1)
+        if existence is None:  # one colour, the ids' labels
+            self._put("world/landmarks", _LANDMARKS, xy, ids)
+        else:
             r = np.clip(np.nan_to_num(np.asarray(existence, float), nan=0.0), 0.0, 1.0)
             labels = [f"L{int(i)} r={v:.3f}" for i, v in zip(ids, r)]
             colors = np.column_stack(
                 [255 * np.minimum(1.0, 2 * (1 - r)), 200 * np.minimum(1.0, 2 * r), 60 + 0 * r]
             ).astype(np.uint8)
-        self._log(
-            "world/landmarks",
-            rows.row(
-                rr.Points2D,
-                positions=rows.vectors(xy),
-                radii=rows.radii_ui(3.0),
-                colors=rows.color(40, 200, 90) if colors is None else rows.colors(colors),
-                labels=rows.id_labels("L", ids) if labels is None else rows.labels(labels),
-            ),
-        )
-        ids = np.array(ids, np.int64)
+            self._put("world/landmarks", _LANDMARKS_EXISTENCE, xy, colors, labels)
         last_ids, last_s = self._map_logged
         self._map = (ids, xy.copy(), cov)
         if (
@@ -736,31 +807,19 @@ class Recorder(NullRecorder):
     def _log_ellipses(self, ids, xy, cov) -> None:
         """The map's ellipses (scaled covariances `cov`) at this scan (see ELLIPSES_EVERY_S)."""
         self._map_logged = (ids, self._stamp)
-        self._log(
-            "world/landmarks/ellipses",
-            _strips(ellipse_polylines(xy, cov, n=ELLIPSE_POINTS - 1), (40, 200, 90), 1.0),
-        )
+        self._put("world/landmarks/ellipses", _MAP_ELLIPSES, np.hstack([xy, cov.reshape(-1, 4)]))
 
     def log_tentatives(self, xy) -> None:
         if self._skip():
             return
-        xy = np.asarray(xy, float).reshape(-1, 2)
-        self._log(
-            "world/tentative",
-            rows.row(
-                rr.Points2D,
-                positions=rows.vectors(xy),
-                radii=rows.radii_ui(3.0),
-                colors=rows.color(255, 200, 0),
-            ),
-        )
+        self._put("world/tentative", _TENTATIVES, np.asarray(xy, float).reshape(-1, 2))
 
     def log_associations(self, from_xy, to_xy) -> None:
         if self._skip():
             return
         a = np.asarray(from_xy, float).reshape(-1, 2)
         b = np.asarray(to_xy, float).reshape(-1, 2)
-        self._log("world/associations", _strips(np.stack([a, b], axis=1), (0, 200, 255), 1.0))
+        self._put("world/associations", _ASSOCIATIONS, columns.strips(np.stack([a, b], axis=1)))
 
     def log_closure(self, event: dict) -> None:
         """A loop-closure match (`slam.closure.ClosureEvent.to_dict()`) as a line of the text
@@ -782,12 +841,14 @@ class Recorder(NullRecorder):
         if e["merged"]:
             text += f"; {len(e['merged'])} landmarks merged"
         level = rr.TextLogLevel.INFO if e["outcome"] == "accepted" else rr.TextLogLevel.DEBUG
+        self._at_scan()
         self.rec.log("events/closures", rr.TextLog(text, level=level))
 
     def log_departures(self, departures: list) -> None:
         """The landmarks that left the map at this scan, (id, reason, existence) each (map
         policy "existence", `slam.log.SlamLog.departures`), as lines of the text log
         `events/map`, whatever the decimation."""
+        self._at_scan()
         for lid, why, r in departures:
             text = f"L{int(lid)} left the map: {why} (existence {float(r):.4f})"
             self.rec.log("events/map", rr.TextLog(text, level=rr.TextLogLevel.INFO))
@@ -798,6 +859,7 @@ class Recorder(NullRecorder):
         decimation."""
         merged = ", ".join(f"{b} into {a}" for a, b in pairs)
         text = f"duplicate sweep: {len(pairs)} landmarks marginalised out ({merged})"
+        self._at_scan()
         self.rec.log("events/closures", rr.TextLog(text, level=rr.TextLogLevel.INFO))
 
     def log_truth(self, pose) -> None:
@@ -806,23 +868,16 @@ class Recorder(NullRecorder):
         self._truth_path.append(pose[:2])
         if self._skip():
             return
-        self._log(
-            "world/truth/vehicle",
-            rows.row(
-                rr.Arrows2D,
-                vectors=rows.vectors([[2 * np.cos(pose[2]), 2 * np.sin(pose[2])]]),
-                origins=rows.vectors([pose[:2]]),
-                radii=rows.radii_ui(1.5),
-                colors=rows.color(255, 255, 255),
-            ),
-        )
-        self._log("world/truth/path", _strips([self._truth_path.piece()], (255, 255, 255), 1.0))
+        arrow = [[2 * np.cos(pose[2]), 2 * np.sin(pose[2])]]
+        self._put("world/truth/vehicle", _TRUE_ARROW, arrow, [pose[:2]])
+        piece = self._truth_path.piece()
+        self._put("world/truth/path", _TRUE_PATH, (piece, np.array([len(piece)], np.int32)))
 
     # ---- time series -----------------------------------------------------------------------------
 
     def log_scalars(self, name: str, values: dict[str, float]) -> None:
         """One row of the series `series/<name>` at the current scan, one curve per key."""
-        self._log(f"series/{name}", rr.Scalars([float(v) for v in values.values()]))
+        self._put(f"series/{name}", _SCALARS, np.fromiter(values.values(), float, len(values)))
         if name not in self.__dict__.setdefault("_styled", set()):
             self._styled.add(name)
             self._style(name, tuple(values), points=False)

@@ -354,7 +354,7 @@ def test_batched_rows_are_the_rows_logged_one_by_one(batch, tmp_path):
     seq = simulate_cycab_run(np.random.default_rng(5), "tree_park", CycabParams(n_scans=30))
     one = viz.Recorder(tmp_path / "one.rrd", series=slam_panels(True), batch_scans=1)
     many = viz.Recorder(tmp_path / "many.rrd", series=slam_panels(True), batch_scans=batch)
-    assert one._batch is None and many._batch is not None
+    assert one._batch.one_by_one and not many._batch.one_by_one
     rec = _Tee(one, many)
     rec.log_truth_trees(seq.truth_landmarks)
     lg = run_slam(seq, CFG, visualiser=rec)
