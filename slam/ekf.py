@@ -113,11 +113,12 @@ class _Estimate:
         """(n, 2, 2) marginal covariances of the landmarks."""
         P = self._lower
         diag, below = np.diagonal(P), np.diagonal(P, -1)  # views: P[j, j], P[j + 1, j]
+        end = 3 + 2 * self.n_landmarks  # the landmarks' slots (a Filter's hidden copies after)
         out = np.empty((self.n_landmarks, 2, 2))
-        out[:, 0, 0] = diag[3::2]
-        out[:, 0, 1] = below[3::2]
-        out[:, 1, 0] = below[3::2]
-        out[:, 1, 1] = diag[4::2]
+        out[:, 0, 0] = diag[3:end:2]
+        out[:, 0, 1] = below[3:end:2]
+        out[:, 1, 0] = below[3:end:2]
+        out[:, 1, 1] = diag[4:end:2]
         return out
 
     def cov(self, idx) -> np.ndarray:
