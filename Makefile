@@ -31,19 +31,20 @@ reproduce: $(STAMP)
 # The whole suite on every core (pytest-xdist; --dist loadscope keeps each module's tests, and
 # so its module fixtures, on one worker), property tests derandomized (tests/conftest.py); then
 # the documentation site with --strict (a broken link, or a number that does not resolve
-# against docs/results/, fails).
+# against docs/results/, fails). --durations=25: the slowest tests, so CI's log shows where the
+# time goes.
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci
+	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci --durations=25
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 # The fast tier, for every change: lint, format, and the tests not marked slow (each under
-# about 1 s; pyproject.toml's `slow` marker).
+# about 1 s; pyproject.toml's `slow` marker), and the 25 slowest of them.
 check: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci -m "not slow"
+	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci --durations=25 -m "not slow"
 
 # each benchmark prints its table and writes it to bench_results/ for the performance page; one
 # BLAS/OpenMP thread, as the figures say (a multi-threaded BLAS on a busy machine is slower)
