@@ -28,22 +28,24 @@ strip-notebooks: $(STAMP)
 reproduce: $(STAMP)
 	$(BIN)/trunkslam reproduce --out results
 
-# The whole suite on every core (pytest-xdist; --dist loadscope keeps each module's tests, and
-# so its module fixtures, on one worker), property tests derandomized (tests/conftest.py); then
-# the documentation site with --strict (a broken link, or a number that does not resolve
-# against docs/results/, fails).
+# The documentation site with --strict (a broken link, or a number that does not resolve
+# against docs/results/, fails), into build/site; then the whole suite on every core
+# (pytest-xdist; --dist loadscope keeps each module's tests, and so its module fixtures, on one
+# worker), property tests derandomized (tests/conftest.py). The site's tests
+# (tests/test_docs_offline.py) read the site just built instead of building it again (about a
+# minute of one core). --durations=25: the slowest tests, so CI's log shows where the time goes.
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+	TRUNKSLAM_BUILT_SITE=build/site $(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci --durations=25
 
 # The fast tier, for every change: lint, format, and the tests not marked slow (each under
-# about 1 s; pyproject.toml's `slow` marker).
+# about 1 s; pyproject.toml's `slow` marker), and the 25 slowest of them.
 check: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci -m "not slow"
+	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci --durations=25 -m "not slow"
 
 # each benchmark prints its table and writes it to bench_results/ for the performance page; one
 # BLAS/OpenMP thread, as the figures say (a multi-threaded BLAS on a busy machine is slower)

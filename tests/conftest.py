@@ -185,13 +185,17 @@ def vp_dir() -> Path:
 def noise_calibration_set(tmp_path_factory) -> Path:
     """A complete result set of `trunkslam reproduce noise-calibration --quick --seed 0` (the
     quickest experiment), made once a session: the earlier results that the interruption,
-    full-disk and failed-experiment tests copy and then try to replace. Read-only: copy it."""
+    full-disk and failed-experiment tests copy and then try to replace. Read-only: copy it.
+    One worker (`--workers 1`): its trials in this process, as on any executor (the results do
+    not depend on it, tests/experiments/test_exec.py), without starting a pool of processes
+    that each import the project and load the kernels (about 15 s of CPU)."""
     from typer.testing import CliRunner
 
     from experiments.cli import app
 
     out = tmp_path_factory.mktemp("noise_calibration") / "results"
-    args = ["reproduce", "noise-calibration", "--quick", "--seed", "0", "--out", str(out)]
+    args = ["reproduce", "noise-calibration", "--quick", "--seed", "0", "--workers", "1"]
+    args += ["--out", str(out)]
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     assert (out / "noise_calibration.csv").is_file() and (out / "manifest.json").is_file()

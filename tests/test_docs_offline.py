@@ -1,6 +1,7 @@
 """The documentation site opens from disk (issue 44): `make docs`, then `build/site/index.html`.
 
-The site is built (mkdocs, as `make docs` does, into a temporary folder) and every page read
+The site is built (mkdocs, as `make docs` does, into a temporary folder; under `make test`, which
+builds it with --strict first, that build is read) and every page read
 as a browser on file:// would: each link and resource of our own must name a file that is
 there (no folder, which a browser shows as a listing from disk), and the only resources from
 the network are none (fonts are the system's, the search worker's shim is vendored). Search
@@ -39,8 +40,18 @@ class _Links(HTMLParser):
                 self.links.append((f"{tag}.{name}", value))
 
 
+BUILT_SITE_ENV = "TRUNKSLAM_BUILT_SITE"  # `make test`: the site it built, --strict, just before
+
+
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Path:
+    """The site as `make docs` builds it: the one `make test` built just before the suite (its
+    folder in TRUNKSLAM_BUILT_SITE), else built here into a temporary folder."""
+    built = os.environ.get(BUILT_SITE_ENV)
+    if built:
+        path = REPO / built
+        assert (path / "index.html").is_file(), f"{BUILT_SITE_ENV}={built}: no site built there"
+        return path
     out = tmp_path_factory.mktemp("site")
     env = dict(os.environ, NO_MKDOCS_2_WARNING="1")
     mkdocs = Path(sys.executable).parent / "mkdocs"

@@ -27,7 +27,7 @@ from experiments.errors import DataError
 from experiments.io.provenance import machine
 from experiments.io.writers import markdown_table
 
-__all__ = ["COMMANDS", "bench_cold", "clear_caches", "format_cold", "project_root"]
+__all__ = ["COMMANDS", "bench_cold", "clear_caches", "cold_seconds", "format_cold", "project_root"]
 
 COMMANDS: dict[str, list[str]] = {
     "check": ["make", "check"],
@@ -154,3 +154,21 @@ def format_cold(rows: list[dict]) -> str:
         "command again at once. CPU: every process the command started. The install row is "
         "`make install` of the fresh clone (pip from its local cache).\n"
     )
+
+
+def cold_seconds(text: str, command: str, run: str) -> float:
+    """The wall seconds of `command` (its start, e.g. "make check" or "trunkslam reproduce
+    --quick") run `run` (cold, warm) in a table of `format_cold`: what the README and
+    getting-started quote, checked against the table the benchmark wrote."""
+    found = [
+        float(cells[2])
+        for line in text.splitlines()
+        if line.startswith("| ")
+        for cells in [[c.strip() for c in line.strip("|").split("|")]]
+        if len(cells) == 5 and cells[0].startswith(command) and cells[1] == run
+    ]
+    if len(found) != 1:
+        raise DataError(
+            f"bench cold table: {len(found)} rows of {command!r} run {run!r} (one is needed)"
+        )
+    return found[0]

@@ -26,7 +26,10 @@ from experiments.io.writers import atomic_folder, write_atomic
 from tests.support import leftovers, read_recording, snapshot
 
 runner = CliRunner()
-FAST = ["noise-calibration"]  # the quickest experiment: two tables in about 3 s
+FAST = ["noise-calibration"]  # a quick experiment: two tables
+# in this process: a pool of worker processes (each importing the project and loading the
+# kernels, about 15 s of CPU a run) is not what these tests are about
+ONE_WORKER = ["--workers", "1"]
 
 
 def assert_complete_reproduce_set(folder: Path, seed: int) -> None:
@@ -176,13 +179,17 @@ def test_reproduce_under_a_full_disk_keeps_the_old_set(old_set, tmp_path, monkey
     n_writes = len(old)  # one flushed write per file of the set (the manifest included)
     for n in (1, n_writes // 2, n_writes):
         _fail_fsync_at(monkeypatch, n)
-        res = runner.invoke(app, ["reproduce", *FAST, "--quick", "--seed", "1", "--out", str(out)])
+        res = runner.invoke(
+            app, ["reproduce", *FAST, *ONE_WORKER, "--quick", "--seed", "1", "--out", str(out)]
+        )
         monkeypatch.undo()
         assert res.exit_code == 1, (n, res.output)
         assert "No space left on device" in res.output
         assert snapshot(out) == old, n
         assert not leftovers(out), leftovers(out)
-    res = runner.invoke(app, ["reproduce", *FAST, "--quick", "--seed", "1", "--out", str(out)])
+    res = runner.invoke(
+        app, ["reproduce", *FAST, *ONE_WORKER, "--quick", "--seed", "1", "--out", str(out)]
+    )
     assert res.exit_code == 0, res.output
     assert_complete_reproduce_set(out, 1)
     assert snapshot(out) != old

@@ -399,6 +399,8 @@ def test_a_failed_experiment_fails_reproduce_after_the_others(
             "--quick",
             "--seed",
             "4",
+            "--workers",  # one worker: no pool of processes to start
+            "1",
             "--out",
             str(out),
         ],

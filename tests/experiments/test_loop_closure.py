@@ -143,7 +143,8 @@ def test_the_experiment_writes_its_table(tmp_path):
     from experiments.cli import app
 
     out = tmp_path / "r"
-    res = CliRunner().invoke(app, ["reproduce", "loop-closure", "--quick", "--out", str(out)])
+    args = ["reproduce", "loop-closure", "--quick", "--workers", "1", "--out", str(out)]
+    res = CliRunner().invoke(app, args)  # one worker: no pool of processes to start
     assert res.exit_code == 0, res.output
     rows = list(csv.DictReader((out / "loop_closure.csv").open()))
     assert [(r["scene"], r["jacobians"], r["closure"]) for r in rows] == [

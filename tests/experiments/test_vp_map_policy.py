@@ -99,7 +99,8 @@ def test_map_policy_experiment_on_the_first_scans(vp_dir, tmp_path):
 
     out = tmp_path / "r"
     res = CliRunner().invoke(
-        app, ["reproduce", "victoria-park-map-policy", "--quick", "--out", str(out)]
+        app,  # one worker: no pool of processes to start
+        ["reproduce", "victoria-park-map-policy", "--quick", "--workers", "1", "--out", str(out)],
     )
     assert res.exit_code == 0, res.output
     cfg = json.loads((out / "manifest.json").read_text())["config"]["victoria-park-map-policy"]
