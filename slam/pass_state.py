@@ -26,10 +26,14 @@ q ~ N(0, (1 - phi^2) Sigma_b) (`Filter.blend_copies`: landmark <- phi landmark +
 anchor), Sigma_b kept from the pass's first sighting so that the process is stationary (the
 smoother's model, `slam.smoother`). L = inf: constant over the pass, nothing computed.
 
-Loop closure's merges and rigid moves act on the landmarks' slots, so `slam.rigid` restores
-every copy before it acts; a landmark seen again in the same pass afterwards begins a new pass
-(a new, independent offset: on the cautious side). A landmark removed from the map takes its
-copy with it (`Filter.remove_landmarks`).
+Loop closure's change of frame (`slam.rigid.move_rigidly`, which holds the map's frame after a
+re-registration, possibly at every scan) moves the copies with the landmarks, and the passes go
+on (with a drift, the kept Sigma_b and view angles stay in the old frame: the frame's turn is a
+few millidegrees). Its merges and re-registrations (`merge_landmarks`, `free_rigid_motion`, a
+few events in a run) restore every copy first: a landmark seen again in the same pass
+afterwards begins a new pass with a new, independent offset, which counts that pass's offset
+twice (over-confident by at most one pass's offset, once per such event). A landmark removed
+from the map takes its copy with it (`Filter.remove_landmarks`).
 """
 
 from __future__ import annotations

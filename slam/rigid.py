@@ -10,9 +10,9 @@ Each function reads or changes a `Filter` in place, as its own steps do:
 - `free_rigid_motion`: let the vehicle and some landmarks move together by an unknown rigid
   motion (their covariance grows);
 - `move_rigidly`: move the whole estimate by one rigid motion (a change of world frame).
-The three that change the estimate (merge, free, move) first restore the filter's hidden copies
-(`Filter.restore_copies`: the pass offsets' anchors, `slam.pass_state`), so they act on the
-landmarks alone.
+`move_rigidly` moves the filter's hidden copies (the pass offsets' anchors, `slam.pass_state`)
+with the landmarks. The two that change what the filter knows (merge, free) first restore them
+(`Filter.restore_copies`), so they act on the landmarks alone: the passes open then end there.
 """
 
 from __future__ import annotations
@@ -154,12 +154,13 @@ def move_rigidly(state: Filter, theta: float, t: np.ndarray) -> None:
     """Move the whole estimate by one rigid motion (p -> R(theta) p + t for the vehicle's
     and every landmark's position, theta added to the heading): a change of the world
     frame, which nothing observes. P -> J P J^T (J: R(theta) on each position's rows), and
-    the first estimates move with it, so the filter is the same filter in the new frame."""
-    state.restore_copies()  # the pass offsets' anchors first (`slam.pass_state`)
+    the first estimates move with it, so the filter is the same filter in the new frame. The
+    hidden copies (the pass offsets' anchors, `slam.pass_state`) are positions too and move
+    with the landmarks: a pass goes on through a change of frame."""
     c, s = math.cos(theta), math.sin(theta)
     R = np.array([[c, -s], [s, c]])
     t = np.asarray(t, dtype=np.float64).reshape(2)
-    xy = np.concatenate([[0], 3 + 2 * np.arange(state.n_landmarks)])
+    xy = np.concatenate([[0], 3 + 2 * np.arange((state.dim - 3) // 2)])
     pts = np.stack([state.x[xy], state.x[xy + 1]], axis=1) @ R.T + t
     state.x[xy], state.x[xy + 1] = pts[:, 0], pts[:, 1]
     state.x[2] = float(wrap_angle(state.x[2] + theta))

@@ -465,7 +465,8 @@ def pass_offsets(log: SlamLog, use: np.ndarray) -> dict[str, np.ndarray]:
     `pass_offset_sd_m`); {} otherwise.
 
     The passes are the filter's (`pass_numbers`: the gap rule over each landmark's updates,
-    under the id it had then). Each pass's offset covariance in the world frame is
+    under the id it had then), except that the filter also ends a pass at a loop closure's
+    merge or re-registration (`slam.pass_state`), which the graph does not. Each pass's offset covariance in the world frame is
     Sigma_b = Rot(beta) diag(s_r^2, s_a^2) Rot(beta)^T (+ `PASS_FLOOR`), beta the bearing in
     the world of the line of sight from the laser at the pass's first sighting (the EKF's
     pose) to the landmark's estimate (the EKF's map)."""

@@ -249,12 +249,42 @@ def test_copies_are_invisible_to_the_map_and_follow_its_changes():
     np.testing.assert_allclose(f.x, h.x, rtol=0, atol=0)
 
 
-def test_loop_closure_restores_the_copies_before_it_acts():
-    """A merge, a rigid move and freeing a rigid motion act on the landmarks' slots: each
-    first restores every copy, so it acts on the filter without them."""
+def _busy_with_copies():
+    f = _busy_filter(np.random.default_rng(3))
+    f.append_copies([3, 8], np.tile(np.eye(2) * 1e-3, (2, 1, 1)))
+    f.update(
+        np.array([0, 1]),
+        np.array([[9.0, 0.2], [8.0, -0.9]]),
+        np.tile(np.eye(2) * 1e-3, (2, 1, 1)),
+        LASER,
+    )
+    return f
+
+
+def test_a_change_of_frame_moves_the_copies_and_the_passes_go_on():
+    """Loop closure's change of frame (`move_rigidly`, possibly at every scan after a
+    re-registration) keeps the copies, moved with the landmarks: moving then restoring is
+    restoring then moving (to 1e-12), and an identity move changes nothing."""
+    f, g = _busy_with_copies(), _busy_with_copies()
+    rigid_ops.move_rigidly(f, 0.01, np.array([0.2, -0.1]))
+    assert f.copy_of.tolist() == [3, 8]
+    f.restore_copies()
+    g.restore_copies()
+    rigid_ops.move_rigidly(g, 0.01, np.array([0.2, -0.1]))
+    np.testing.assert_allclose(f.x, g.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f.P, g.P, rtol=0, atol=1e-12)
+    f, g = _busy_with_copies(), _busy_with_copies()
+    rigid_ops.move_rigidly(f, 0.0, np.zeros(2))
+    np.testing.assert_array_equal(f.x, g.x)
+    np.testing.assert_array_equal(f.P, g.P)
+    assert f.copy_of.tolist() == [3, 8]
+
+
+def test_loop_closure_restores_the_copies_before_a_merge_or_a_re_registration():
+    """A merge and freeing a rigid motion change what the filter knows of the landmarks'
+    slots: each first restores every copy, so it acts on the filter without them."""
     for act in (
         lambda s: rigid_ops.merge_landmarks(s, [3], [5]),
-        lambda s: rigid_ops.move_rigidly(s, 0.01, np.array([0.2, -0.1])),
         lambda s: rigid_ops.free_rigid_motion(s, [8, 5], s.pose[:2].copy(), np.eye(3) * 1e-4),
     ):
         f, g = _busy_filter(np.random.default_rng(3)), _busy_filter(np.random.default_rng(3))
