@@ -823,6 +823,12 @@ class MeasurementConfig:
             )
         if math.isfinite(c):
             setting("measurement.pass_offset_corr_rad", c, limit=MAX_PASS_CORR_RAD)
+            if self.pass_offset_model != "state":
+                raise SlamError(
+                    "measurement.pass_offset_corr_rad: a drift length is used only with "
+                    f"measurement.pass_offset_model = 'state', got {self.pass_offset_model!r} "
+                    "(inf: no drift)"
+                )
 
     def model_for(self, method: str, has_cov: bool | None = None) -> MeasurementModel:
         """The measurement model of circles from `method`. has_cov: whether they carry their own

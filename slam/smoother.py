@@ -74,6 +74,7 @@ from slam.errors import SlamError
 from slam.graph import PoseGraph2D
 from slam.log import CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT, SlamLog
 from slam.measurement import pass_inflation, pass_sizes
+from slam.se2 import wrap_angle
 
 __all__ = [
     "MEAS_INIT",
@@ -466,10 +467,10 @@ def pass_offsets(log: SlamLog, use: np.ndarray) -> dict[str, np.ndarray]:
 
     The passes are the filter's (`pass_numbers`: the gap rule over each landmark's updates,
     under the id it had then), except that the filter also ends a pass at a loop closure's
-    merge or re-registration (`slam.pass_state`), which the graph does not. Each pass's offset covariance in the world frame is
-    Sigma_b = Rot(beta) diag(s_r^2, s_a^2) Rot(beta)^T (+ `PASS_FLOOR`), beta the bearing in
-    the world of the line of sight from the laser at the pass's first sighting (the EKF's
-    pose) to the landmark's estimate (the EKF's map)."""
+    merge or re-registration (`slam.pass_state`), which the graph does not. Each pass's offset
+    covariance in the world frame is Sigma_b = Rot(beta) diag(s_r^2, s_a^2) Rot(beta)^T
+    (+ `PASS_FLOOR`), beta the bearing in the world of the line of sight from the laser at the
+    pass's first sighting (the EKF's pose) to the landmark's estimate (the EKF's map)."""
     sd, gap, model = _pass_settings(log)
     if model != "state" or sd == (0.0, 0.0):
         return {}
@@ -705,7 +706,7 @@ class _Graph:
             f = gtsam.BetweenFactorPoint2(*keys, np.zeros(2), _gauss(p.pass_cov[p.meas_pass[i]]))
             self._add(int(p.meas_scan[i]), f, None)
         for a, b in zip(order[:-1][~new[1:]].tolist(), order[1:][~new[1:]].tolist()):
-            phi = math.exp(-abs(_wrap(theta[b] - theta[a])) / p.pass_corr_rad)
+            phi = math.exp(-abs(float(wrap_angle(theta[b] - theta[a]))) / p.pass_corr_rad)
             cov = (1.0 - phi * phi) * p.pass_cov[p.meas_pass[b]] + PASS_FLOOR * np.eye(2)
             keys = (_apparent_key(a), _apparent_key(b), _landmark_key(int(p.meas_landmark[b])))
             self._add(int(p.meas_scan[b]), gm_step_factor(keys, phi, cov), None)
@@ -749,10 +750,6 @@ def view_angles(p: Problem) -> np.ndarray:
     """(M,) the world bearing (rad) of each measurement's line of sight at the problem's
     starting poses: the pose's heading, the laser's yaw and the measured bearing."""
     return p.init_pose[p.meas_scan, 2] + p.laser_pose[2] + p.meas_z[:, 1]
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def gm_step_factor(keys, phi: float, cov: np.ndarray):

@@ -159,7 +159,10 @@ def truncated_geometric_p(k: np.ndarray, cut: int) -> float:
 
 def derive_persistent(lg, scans: tuple[int, int]) -> dict:
     """The persistent clutter's settings from the run `lg` (a confirm_scans run) on `scans`
-    (module doc, 4-5): {"settings": {"map_policy.existence_<name>": value}, and the counts}."""
+    (module doc, 4-5): {"settings": {"map_policy.existence_<name>": value}, and the counts}.
+    A never-mapped track seen in more scans than confirm_scans - 1 (a window associator's, or
+    one with gaps) does not fit the truncated geometric model: it counts as confirm_scans - 1
+    sightings, and how many were so clipped is reported ("clipped_tracks")."""
     in_half = (lg.meas_scan >= scans[0]) & (lg.meas_scan < scans[1]) & (lg.meas_track >= 0)
     gone = [row[0] for row in (lg.departures or [])]
     never = in_half & ~np.isin(lg.meas_track, lg.landmark_id) & ~np.isin(lg.meas_track, gone)
@@ -192,4 +195,5 @@ def derive_persistent(lg, scans: tuple[int, int]) -> dict:
         "never_mapped_tracks": int(tracks.size),
         "never_mapped_runs": np.bincount(k, minlength=max(cut, 1) + 1)[1:].tolist(),
         "consecutive_pairs": len(excess),
+        "clipped_tracks": int(np.count_nonzero(k > max(cut, 1))),
     }

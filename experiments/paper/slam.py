@@ -154,7 +154,7 @@ class Exp2Config:
 
 # Consistency variants: (name, method, SlamConfig overrides, kind). They explain the NEES figures:
 # each switches off one part of the measurement model (the `cycab` preset's range biases and
-# `DEFAULT_FIT_FLOOR`) or changes the detections. kind "synthetic": the method's circles on
+# fit floors) or changes the detections. kind "synthetic": the method's circles on
 # trunks only, each centre replaced by the truth plus Gaussian noise drawn from the method's
 # constant noise model (same detections, ideal errors, no bias to correct); "": as extracted.
 NO_PAPER_BIAS = {"measurement.range_bias": {"paper": [0.0, 0.0]}}

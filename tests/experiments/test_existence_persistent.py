@@ -55,6 +55,7 @@ def test_the_persistent_settings_come_from_the_tracks_that_never_joined(drive):
     d = derive_persistent(lg, (0, seq.n_scans))
     runs = d["never_mapped_runs"]
     assert len(runs) == cfg.map_policy.confirm_scans - 1 and sum(runs) == d["never_mapped_tracks"]
+    assert d["clipped_tracks"] == 0  # a single-scan confirm run: no track past confirm_scans - 1
     k = np.repeat(np.arange(1, len(runs) + 1), runs)
     s = d["settings"]
     assert s["map_policy.existence_repeat_prob"] == truncated_geometric_p(k, len(runs))

@@ -231,6 +231,12 @@ def test_a_bad_correlation_is_refused_naming_it():
         with pytest.raises(SlamError, match="measurement.pass_offset_corr_rad"):
             MeasurementConfig(pass_offset_corr_rad=bad)
     assert MeasurementConfig().pass_offset_corr_rad == math.inf
+    with pytest.raises(SlamError, match="used only with measurement.pass_offset_model = 'state'"):
+        MeasurementConfig(pass_offset_corr_rad=0.3)  # the inflation model has no drift
+    assert (
+        MeasurementConfig(pass_offset_corr_rad=0.3, pass_offset_model="state").pass_offset_corr_rad
+        == 0.3
+    )
 
 
 def test_a_run_with_a_finite_correlation_gives_the_problem_its_length():
