@@ -206,8 +206,11 @@ def test_sigterm_while_the_kernels_run_ends_the_command_within_5_s(dense_drive, 
     it ends within 5 s, as Ctrl-C does (exit 143, one error line, no output written)."""
     out = tmp_path / ("f.json" if command == "extract" else "out")
     env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # the drive is the simulated Cycab's: its preset (no built-in-settings warning before the
+    # first progress line)
+    config = ["--config", "cycab"] if command == "slam" else []
     for delay in (0.0, 0.4, 1.1):
-        p = start([command, dense_drive, "--out", out], tmp_path, env)
+        p = start([command, dense_drive, "--out", out, *config], tmp_path, env)
         line = p.stderr.readline()  # the first progress line: the kernels are compiled and run
         assert f"{command}" in line or "scan" in line, line
         time.sleep(delay)
