@@ -287,16 +287,7 @@ def test_loop_closure_restores_the_copies_before_a_merge_or_a_re_registration():
         lambda s: rigid_ops.merge_landmarks(s, [3], [5]),
         lambda s: rigid_ops.free_rigid_motion(s, [8, 5], s.pose[:2].copy(), np.eye(3) * 1e-4),
     ):
-        f, g = _busy_filter(np.random.default_rng(3)), _busy_filter(np.random.default_rng(3))
-        f.append_copies([3, 8], np.tile(np.eye(2) * 1e-3, (2, 1, 1)))
-        f.update(
-            np.array([0, 1]),
-            np.array([[9.0, 0.2], [8.0, -0.9]]),
-            np.tile(np.eye(2) * 1e-3, (2, 1, 1)),
-            LASER,
-        )
-        g.x, g._P = f.x.copy(), f.P.copy()
-        g.copy_of = f.copy_of.copy()
+        f, g = _busy_with_copies(), _busy_with_copies()
         g.restore_copies()
         act(f)
         act(g)
