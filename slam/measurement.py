@@ -27,6 +27,7 @@ __all__ = [
     "MeasurementModel",
     "NoiseModel",
     "constant_noise",
+    "line_of_sight_cov",
     "measurements_from_features",
     "pass_inflation",
     "pass_sizes",
@@ -148,6 +149,18 @@ def _pass_extra(r, k, s, batch: bool):
     if batch:
         return k * s2
     return (2.0 * k - 1.0) * s2 + k * (k - 1.0) * s2 * s2 / r
+
+
+def line_of_sight_cov(bearing_rad, sd) -> np.ndarray:
+    """(k, 2, 2) world-frame covariances of offsets with standard deviations sd = (along,
+    across) in m along and across lines of sight at world bearings bearing_rad (k,):
+    Rot(b) diag(sd_along^2, sd_across^2) Rot(b)^T, as u u^T sd_along^2 + v v^T sd_across^2
+    (u along the line, v across it; exactly symmetric). The pass offset's covariance in the
+    filter (`slam.pass_state`) and the smoother (`slam.smoother.pass_offset_cov`)."""
+    b = np.asarray(bearing_rad, dtype=np.float64).reshape(-1)
+    u = np.stack([np.cos(b), np.sin(b)], axis=1)  # along the line of sight
+    v = np.stack([-u[:, 1], u[:, 0]], axis=1)  # across it
+    return sd[0] ** 2 * np.einsum("ki,kj->kij", u, u) + sd[1] ** 2 * np.einsum("ki,kj->kij", v, v)
 
 
 def pass_inflation(z, R, k, sd, batch: bool = False) -> np.ndarray:

@@ -43,6 +43,7 @@ import math
 import numpy as np
 
 from slam.ekf import Filter
+from slam.measurement import line_of_sight_cov
 from slam.se2 import wrap_angle
 
 __all__ = ["PassOffsets", "offset_cov", "view_angle"]
@@ -61,10 +62,7 @@ def offset_cov(pose: np.ndarray, landmarks_xy: np.ndarray, laser: np.ndarray, sd
     """(k, 2, 2) world-frame covariances Rot(phi) diag(sd_range^2, sd_across^2) Rot(phi)^T of
     the offsets of landmarks at landmarks_xy (k, 2), phi the direction from the laser (mounted
     at `laser` [lx, ly, lth] on the vehicle at `pose`) to each landmark."""
-    phi = view_angle(pose, landmarks_xy, laser)
-    u = np.stack([np.cos(phi), np.sin(phi)], axis=1)  # along the line of sight
-    v = np.stack([-u[:, 1], u[:, 0]], axis=1)  # across it
-    return sd[0] ** 2 * np.einsum("ki,kj->kij", u, u) + sd[1] ** 2 * np.einsum("ki,kj->kij", v, v)
+    return line_of_sight_cov(view_angle(pose, landmarks_xy, laser), sd)
 
 
 class PassOffsets:

@@ -73,7 +73,7 @@ import numpy as np
 from slam.errors import SlamError
 from slam.graph import PoseGraph2D
 from slam.log import CONFIRMED, NEW_TENTATIVE, TENTATIVE_HIT, SlamLog
-from slam.measurement import pass_inflation, pass_sizes
+from slam.measurement import line_of_sight_cov, pass_inflation, pass_sizes
 from slam.se2 import wrap_angle
 
 __all__ = [
@@ -535,11 +535,7 @@ def pass_offset_cov(beta_rad, sd) -> np.ndarray:
     """(P, 2, 2) world-frame covariances of pass offsets with standard deviations sd = (range,
     across) in m along and across lines of sight at world bearings beta_rad (P,):
     Rot(beta) diag(s_r^2, s_a^2) Rot(beta)^T + `PASS_FLOOR` I."""
-    b = np.asarray(beta_rad, dtype=np.float64).reshape(-1)
-    c, s = np.cos(b), np.sin(b)
-    rot = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-    cov = rot @ np.diag([float(sd[0]) ** 2, float(sd[1]) ** 2]) @ np.swapaxes(rot, -1, -2)
-    return 0.5 * (cov + np.swapaxes(cov, -1, -2)) + PASS_FLOOR * np.eye(2)
+    return line_of_sight_cov(beta_rad, (float(sd[0]), float(sd[1]))) + PASS_FLOOR * np.eye(2)
 
 
 @dataclass(frozen=True)
