@@ -13,11 +13,8 @@ from experiments.eval.existence_rates import (
     truncated_geometric_p,
 )
 from experiments.paper.sim_clutter import _map_figures
-from experiments.paper.slam import Exp2Config, run_config
-from experiments.sim.clutter import clutter_park
-from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
-from features import extract_features
 from slam import run_slam
+from tests.experiments.test_existence_policy_run import clutter_drive
 
 
 @pytest.mark.parametrize(("p", "cut"), [(0.3, 2), (0.6, 5)])
@@ -40,11 +37,7 @@ def test_the_truncated_geometric_estimate_refuses_runs_outside_its_range():
 
 @pytest.fixture(scope="module")
 def drive():
-    scene = clutter_park()
-    seq = simulate_cycab_run(np.random.default_rng(3), scene, CycabParams(**MONTE_CARLO_PATH))
-    cfg = run_config(Exp2Config(), "geometric")
-    kw = cfg.features.extractor_kwargs()
-    feats = [extract_features(seq.scan(k), "geometric", **kw) for k in range(seq.n_scans)]
+    scene, seq, cfg, feats = clutter_drive()
     return scene, seq, cfg, feats, run_slam(seq, cfg, features=feats)
 
 

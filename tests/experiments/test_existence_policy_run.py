@@ -13,14 +13,20 @@ from features import extract_features
 from slam import run_slam
 
 
-@pytest.fixture(scope="module")
-def drive():
+def clutter_drive():
+    """(scene, sequence, experiment 2's geometric config, its features) of one Cycab drive
+    through the clutter park (seed 3)."""
     scene = clutter_park()
     seq = simulate_cycab_run(np.random.default_rng(3), scene, CycabParams(**MONTE_CARLO_PATH))
     cfg = run_config(Exp2Config(), "geometric")
     kw = cfg.features.extractor_kwargs()
     feats = [extract_features(seq.scan(k), "geometric", **kw) for k in range(seq.n_scans)]
     return scene, seq, cfg, feats
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return clutter_drive()
 
 
 @pytest.mark.parametrize("method", ["ihgr", "ihgr-window"])
