@@ -15,7 +15,14 @@ import pytest
 from slam import SlamError, se2
 from slam.config import MeasurementConfig
 from slam.smoother import PASS_FLOOR, SmootherOptions, gm_step_factor, problem_from_log, smooth
-from tests.slam.test_smoother_pass_state import R_WHITE, TREE, S, one_tree, pass_poses
+from tests.slam.test_smoother_pass_state import (
+    R_WHITE,
+    TREE,
+    S,
+    one_tree,
+    pass_poses,
+    range_bearing,
+)
 
 
 def arc(n: int, turn_rad: float, dist_m: float = 8.0) -> np.ndarray:
@@ -71,11 +78,7 @@ def batch_posterior(p, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for _ in range(40):
         rows, jac, Hs = [], [], []
         for j in range(n):
-            d = x[:2] + x[2 + 2 * j : 4 + 2 * j] - sensor[j, :2]
-            r2 = d @ d
-            e = np.array([math.sqrt(r2), math.atan2(d[1], d[0]) - sensor[j, 2]]) - p.meas_z[j]
-            e[1] = se2.wrap_angle(e[1])
-            H = np.array([d / math.sqrt(r2), [-d[1] / r2, d[0] / r2]])
+            e, H = range_bearing(x[:2] + x[2 + 2 * j : 4 + 2 * j], sensor[j], p.meas_z[j])
             J = np.zeros((2, x.size))
             J[:, :2] = J[:, 2 + 2 * j : 4 + 2 * j] = H
             rows.append(wr @ e)

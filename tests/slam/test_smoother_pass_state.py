@@ -76,6 +76,16 @@ def one_tree(passes, offsets, rng, noise: float = 1.0, sd=S, white: bool = False
     )
 
 
+def range_bearing(point, sensor, z) -> tuple[np.ndarray, np.ndarray]:
+    """The residual h(point) - z of a range-bearing sighting from the laser at sensor
+    [x, y, theta] (world) and its Jacobian (2, 2) with respect to the point."""
+    d = point - sensor[:2]
+    r2 = d @ d
+    e = np.array([math.sqrt(r2), math.atan2(d[1], d[0]) - sensor[2]]) - z
+    e[1] = se2.wrap_angle(e[1])
+    return e, np.array([d / math.sqrt(r2), [-d[1] / r2, d[0] / r2]])
+
+
 def oracle(p: Problem, cov_b: np.ndarray) -> tuple[np.ndarray, np.ndarray, list]:
     """The exact model solved by Gauss-Newton in numpy, poses fixed: unknowns m and b_q,
     residuals R^-1/2 (h_j(m + b_q) - z_j) and Sigma_b^-1/2 b_q. Returns (m, its marginal
@@ -89,13 +99,7 @@ def oracle(p: Problem, cov_b: np.ndarray) -> tuple[np.ndarray, np.ndarray, list]
         rows, jac = [], []
         info = [np.zeros((2, 2)) for _ in range(n_pass)]
         for j, q in enumerate(p.meas_pass):
-            pt = theta[:2] + theta[2 + 2 * q : 4 + 2 * q]
-            d = pt - sensor[j, :2]
-            r2 = d @ d
-            h = np.array([math.sqrt(r2), math.atan2(d[1], d[0]) - sensor[j, 2]])
-            e = h - p.meas_z[j]
-            e[1] = se2.wrap_angle(e[1])
-            H = np.array([d / math.sqrt(r2), [-d[1] / r2, d[0] / r2]])
+            e, H = range_bearing(theta[:2] + theta[2 + 2 * q : 4 + 2 * q], sensor[j], p.meas_z[j])
             J = np.zeros((2, theta.size))
             J[:, :2] = J[:, 2 + 2 * q : 4 + 2 * q] = H
             rows.append(wr @ e)
