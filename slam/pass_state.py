@@ -44,7 +44,7 @@ import numpy as np
 
 from slam.ekf import Filter
 from slam.measurement import line_of_sight_cov
-from slam.se2 import wrap_angle
+from slam.se2 import compose, wrap_angle
 
 __all__ = ["PassOffsets", "offset_cov", "view_angle"]
 
@@ -52,9 +52,7 @@ __all__ = ["PassOffsets", "offset_cov", "view_angle"]
 def view_angle(pose: np.ndarray, landmarks_xy: np.ndarray, laser: np.ndarray) -> np.ndarray:
     """(k,) the world bearing of the line of sight from the laser (mounted at `laser` on the
     vehicle at `pose`) to each landmark at landmarks_xy (k, 2)."""
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    at = pose[:2] + np.array([c * laser[0] - s * laser[1], s * laser[0] + c * laser[1]])
-    d = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2) - at
+    d = np.asarray(landmarks_xy, dtype=np.float64).reshape(-1, 2) - compose(pose, laser)[:2]
     return np.arctan2(d[:, 1], d[:, 0])
 
 
