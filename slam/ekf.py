@@ -283,6 +283,15 @@ class Filter(_Estimate):
         self.x = np.concatenate([self.x, self.x[cols]])
         self.copy_of = np.concatenate([self.copy_of, ids])
 
+    def _copy_columns(self, ids: np.ndarray, who: str):
+        """(slots of the copies (k,), the landmarks' columns (2 k,), the copies' columns (2 k,))
+        of the distinct landmark ids (k,), each with a copy; `who` names the caller's error."""
+        where = {i: j for j, i in enumerate(self.copy_of.tolist())}
+        if np.unique(ids).size != ids.size or not all(i in where for i in ids.tolist()):
+            raise SlamError(f"{who}: landmark ids {ids.tolist()} must each have a copy")
+        slot = np.array([where[i] for i in ids.tolist()], np.int64)
+        return slot, _pair_cols(self.positions_of(ids)), _pair_cols(self.n_landmarks + slot)
+
     def restore_copies(self, landmark_ids=None) -> None:
         """Give each of these landmarks (None: every landmark with a copy) its hidden copy's
         estimate back (x, its row and column of P, its own block) and drop the copy: the error
@@ -291,12 +300,7 @@ class Filter(_Estimate):
         ids = np.asarray(ids, dtype=np.int64).reshape(-1)
         if not ids.size:
             return
-        where = {i: j for j, i in enumerate(self.copy_of.tolist())}
-        if np.unique(ids).size != ids.size or not all(i in where for i in ids.tolist()):
-            raise SlamError(f"restore_copies: landmark ids {ids.tolist()} must each have a copy")
-        slot = np.array([where[i] for i in ids.tolist()], np.int64)
-        cols = _pair_cols(self.positions_of(ids))
-        hid = _pair_cols(self.n_landmarks + slot)
+        slot, cols, hid = self._copy_columns(ids, "restore_copies")
         P = self.P
         P[cols, :] = P[hid, :]
         P[:, cols] = P[:, hid]  # the landmark's own block is now the copy's
@@ -318,13 +322,9 @@ class Filter(_Estimate):
             return
         phi = np.asarray(phi, dtype=np.float64).reshape(ids.size)
         extra = np.asarray(extra, dtype=np.float64).reshape(ids.size, 2, 2)
-        where = {i: j for j, i in enumerate(self.copy_of.tolist())}
-        if np.unique(ids).size != ids.size or not all(i in where for i in ids.tolist()):
-            raise SlamError(f"blend_copies: landmark ids {ids.tolist()} must each have a copy")
+        _, cols, hid = self._copy_columns(ids, "blend_copies")
         if not np.all((phi >= 0.0) & (phi <= 1.0)):
             raise SlamError(f"blend_copies: phi must be in [0, 1], got {phi.tolist()}")
-        cols = _pair_cols(self.positions_of(ids))
-        hid = _pair_cols(self.n_landmarks + np.array([where[i] for i in ids.tolist()]))
         f = np.repeat(phi, 2)
         P = self.P  # mirrored: rows, then columns (T P, then (T P) T^T)
         P[cols, :] = f[:, None] * P[cols, :] + (1.0 - f)[:, None] * P[hid, :]
