@@ -30,7 +30,7 @@ def test_q_is_the_share_of_beams_passing_beyond_a_trunk_in_the_scans_it_was_miss
     assert q == d["missed_beams_through"] / d["missed_beams_reaching"]
     assert 0 < q < 0.3
     through = reach = 0
-    for ev, free, hit in _views(lg, seq, (0, seq.n_scans), ESTABLISHED):
+    for ev, free, _ in _views(lg, seq, (0, seq.n_scans), ESTABLISHED):
         use = free >= MIN_BEAMS
         through, reach = through + ev.through[use].sum(), reach + ev.reach[use].sum()
     assert reach > d["missed_beams_reaching"] and not np.isclose(through / reach, q)
