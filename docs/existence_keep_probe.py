@@ -8,6 +8,14 @@ existence: tentatives kept through their misses" were measured with it once.
     (the same with paper, geometric; --variants to run a subset)
     .venv/bin/python -P docs/existence_keep_probe.py sim --out /tmp/keep_sim.json
 
+    TRUNKSLAM_DATA=/work/shared/datasets .venv/bin/python -P docs/existence_keep_probe.py \
+        full --variants "persistent, kept, q derived" --out /tmp/keep_full.json
+
+full: the whole Victoria Park run (7249 scans, published detections, IHGR, closure off: the
+preset as `reproduce victoria-park` runs it) with the existence policy and the settings derived
+on scans 1-2000 of the detections' confirm run, the first variant named: `real_run._one`'s row
+(GPS RMSE over the vouched fixes, landmarks, map precision and recall over scans 1-2000).
+
 (-P: docs/experiments/, the site's pages, would shadow the package.)
 
 sim: `reproduce sim-clutter`'s 20 drives (its seeds: root seed 0), both scenes, `paper` and
@@ -279,14 +287,38 @@ def sim(variants: list[str], runs: int = 20) -> dict:
     return {"pooled": pooled, "rows": rows}
 
 
+def full(variant: str) -> dict:
+    from experiments.paper.victoria_park.real_run import _one
+
+    seq2000 = load_victoria_park(n_scans=2000)
+    base = run_config("detections", "ihgr")
+    confirm = base.with_(**{"map_policy.confirm_scans": 3, "map_policy.prune_after_expected": 0})
+    lg = run_slam(seq2000, confirm)
+    h = (0, 2000)
+    settings = derive_existence(lg, seq2000, h)["settings"] | derive_persistent(lg, h)["settings"]
+    mb = settings["map_policy.existence_min_beams"]
+    q = derive_see_through(lg, seq2000, h, mb)["settings"]
+    settings["see_through_q"] = q["map_policy.existence_see_through_q"]
+    cfg = base.with_(**{"map_policy.policy": "existence", **_settings(settings, variant)})
+    row, run, _ = _one(variant, load_victoria_park(full=True), cfg, load_ss2002_reference())
+    keep = ("rmse_vouched_m", "fixes_vouched", "rmse_m", "fixes", "rmse_2001_7249_m")
+    keep += ("landmarks", "precision_1m", "reference_trees_seen_1m", "nis_inside", "seconds")
+    out = {k: row[k] for k in keep} | {"variant": variant, "settings": settings}
+    out["removed"] = len(run.departures or [])
+    print(json.dumps(out), flush=True)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("extractor", choices=("detections", "paper", "geometric", "sim"))
+    ap.add_argument("extractor", choices=("detections", "paper", "geometric", "sim", "full"))
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS)[:4], choices=list(VARIANTS))
     ap.add_argument("--out", required=True)
     args = ap.parse_args()
     if args.extractor == "sim":
         res = sim(args.variants)
+    elif args.extractor == "full":
+        res = full(args.variants[0])
     else:
         res = probe(args.extractor, args.variants)
     with open(args.out, "w") as fh:
