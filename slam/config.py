@@ -359,6 +359,7 @@ class MapPolicy:
         0), and leaves only when its existence falls below `existence_remove_prob`, so a trunk
         the extractor reports in, say, 60% of the scans that reach it accumulates its sightings
         (`slam.existence`, "Intermittent detection"). False: the paper's drop at a miss.
+        The window associator ("ihgr-window") keeps no tentatives: it has no effect there.
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
