@@ -17,14 +17,6 @@ of the sequence `seq` with the paper's map policy (confirm_scans), on the scans 
    that of simulated parks without this park's clutter.
 3. birth_prob: of the tracks started (a new tentative), the share that joined the map.
 
-6. see_through_q (`derive_see_through`, used only when asked for): the chance that a beam
-   passes a real trunk's place in a scan where the trunk was not reported: of the beams that
-   reach the established landmarks of 1. in the scans they were missed with at least min_beams
-   free beams, the share that passed beyond them (no return, or one farther than the trunk's
-   far side plus `ExistenceConfig.gap_m`). It is the rate of the "real" hypothesis's
-   see-through factor q^n at a miss (`slam.existence`, step 3), measured where that factor
-   applies.
-
 Persistent clutter (`derive_persistent`, map policy `existence_clutter = "persistent"`), from
 the same run's tracks that never became a landmark (the run's own verdict, as the clutter
 rate's; no truth):
@@ -39,6 +31,15 @@ rate's; no truth):
    scan; the pose error of consecutive scans is shared, so d carries the two measurements'
    noise G R G^T each, plus the odometry increment's), s^2 = max(0, mean(|d|^2 - trace of
    their covariance)) / 4 (two sightings, two axes).
+
+See-through (`derive_see_through`, used only when asked for; `docs/existence_keep_probe.py`):
+6. see_through_q: the chance that a beam
+   passes a real trunk's place in a scan where the trunk was not reported: of the beams that
+   reach the established landmarks of 1. in the scans they were missed with at least min_beams
+   free beams, the share that passed beyond them (no return, or one farther than the trunk's
+   far side plus `ExistenceConfig.gap_m`). It is the rate of the "real" hypothesis's
+   see-through factor q^n at a miss (`slam.existence`, step 3), measured where that factor
+   applies.
 """
 
 from __future__ import annotations
