@@ -353,6 +353,13 @@ class MapPolicy:
         "persistent" (against a non-tree object at the landmark's place, reported again with
         probability `existence_repeat_prob` in a scan whose beams reach it, its fitted centre
         spread by `existence_shape_sd_m` per axis; `slam.existence`, "Persistent clutter").
+    existence_keep_tentatives: with the existence policy, a tentative is no longer dropped
+        after drop_after_missed scans unseen: it stays through its misses, each costing its
+        existence (1 - Pd) where the sensor model says it was detectable (nothing where Pd is
+        0), and leaves only when its existence falls below `existence_remove_prob`, so a trunk
+        the extractor reports in, say, 60% of the scans that reach it accumulates its sightings
+        (`slam.existence`, "Intermittent detection"). False: the paper's drop at a miss.
+        The window associator ("ihgr-window") keeps no tentatives: it has no effect there.
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -386,6 +393,9 @@ class MapPolicy:
     )
     existence_shape_sd_m: float = default(
         0.0, "design: placeholder; derived from the spread of a never-mapped track's sightings"
+    )
+    existence_keep_tentatives: bool = default(
+        False, "paper: False, a tentative not seen again is dropped (drop_after_missed)"
     )
     existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
     existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
@@ -445,6 +455,11 @@ class MapPolicy:
         v = self.existence_shape_sd_m
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < math.inf:
             raise SlamError(f"map_policy.existence_shape_sd_m: must be finite and >= 0, got {v!r}")
+        if not isinstance(self.existence_keep_tentatives, bool):
+            raise SlamError(
+                "map_policy.existence_keep_tentatives: must be true or false, got "
+                f"{self.existence_keep_tentatives!r}"
+            )
         v = self.existence_min_beams
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise SlamError(f"map_policy.existence_min_beams: must be an integer >= 1, got {v!r}")

@@ -44,6 +44,17 @@ extractor can see. Each scan:
    gains about Pd / repeat_prob a scan and more when its sightings hold still; an object seen
    in a few scans as the car passes, or whose centre wanders, does not reach join_prob. The
    birth (a new tentative) is unchanged: b / (b + kappa) against the one-off clutter.
+   **Intermittent detection** (map policy `existence_keep_tentatives`). The paper's policy
+   drops a tentative at its first miss; on Victoria Park the extractor reports a tree in about
+   60% of the scans whose beams reach it, so a tree must string together an unbroken run of
+   sightings. Kept through its misses, a tentative's log-odds change each scan by
+   log(Pd g / c) when seen (c: kappa, or repeat_prob g_o against persistent clutter) and by
+   log((1 - Pd) q^n / (1 - c')) when missed (c' = 0, or repeat_prob), where Pd is the sensor
+   model's (0 where the beams cannot reach it: an unreachable miss costs nothing). A tree seen
+   at rate p of its reachable scans gains on average p log(Pd g / c) + (1 - p) log((1 - Pd) /
+   (1 - c')) a scan and joins once the sum passes logit(join_prob) - logit(birth); a one-off
+   false circle is missed in every following scan that reaches it and falls below remove_prob
+   after logit(birth) - logit(remove_prob) over -log((1 - Pd) / (1 - c')) such scans.
 4. **Decisions** (`decide`): a tentative joins the map when r >= `join_prob` ("at least this
    probable that it is a real trunk"); a landmark is removed when r < `remove_prob` ("less
    probable than this that it is real"). A new tentative starts at `initial_existence(birth,

@@ -81,6 +81,8 @@ class Tentatives:
         new: [(xy, cov, id)] first sightings to add.
         join, gone: (t,) bool, the tentatives that join the map and those dropped, decided
         by the caller (map policy "existence"); None: by `policy.confirm_scans`, nothing more.
+        A tentative unseen for `policy.drop_after_missed` scans is dropped too, unless the
+        existence policy keeps tentatives through misses (`existence_keep_tentatives`).
         Returns the new set and the positions (in `self`) of the tentatives that reached
         `policy.confirm_scans` (or `join`) and must join the map (they are removed from the
         set).
@@ -101,7 +103,8 @@ class Tentatives:
             confirm = np.flatnonzero(join).tolist()
         keep = np.ones(t, bool)
         keep[confirm] = False
-        keep &= missed < policy.drop_after_missed
+        if not (policy.by_existence and policy.existence_keep_tentatives):
+            keep &= missed < policy.drop_after_missed  # else: only its existence drops it
         if gone is not None:
             keep &= ~np.asarray(gone, bool)
         n_new = len(new)

@@ -31,6 +31,15 @@ rate's; no truth):
    scan; the pose error of consecutive scans is shared, so d carries the two measurements'
    noise G R G^T each, plus the odometry increment's), s^2 = max(0, mean(|d|^2 - trace of
    their covariance)) / 4 (two sightings, two axes).
+
+See-through (`derive_see_through`, used only when asked for; `docs/existence_keep_probe.py`):
+6. see_through_q: the chance that a beam
+   passes a real trunk's place in a scan where the trunk was not reported: of the beams that
+   reach the established landmarks of 1. in the scans they were missed with at least min_beams
+   free beams, the share that passed beyond them (no return, or one farther than the trunk's
+   far side plus `ExistenceConfig.gap_m`). It is the rate of the "real" hypothesis's
+   see-through factor q^n at a miss (`slam.existence`, step 3), measured where that factor
+   applies.
 """
 
 from __future__ import annotations
@@ -51,6 +60,7 @@ __all__ = [
     "beam_detection_rates",
     "derive_existence",
     "derive_persistent",
+    "derive_see_through",
     "truncated_geometric_p",
 ]
 
@@ -64,18 +74,15 @@ def _radius(lg, lid: int) -> float:
     return float(np.median(r)) if r.size else DEFAULT_RADIUS_M
 
 
-def beam_detection_rates(
-    lg, seq, scans: tuple[int, int], established: int = ESTABLISHED
-) -> tuple[np.ndarray, np.ndarray]:
-    """(expected (MAX_BEAMS + 1,), detected (MAX_BEAMS + 1,)) by free beams (module doc, 1):
-    the landmarks of the final map associated in more than `established` scans."""
+def _views(lg, seq, scans: tuple[int, int], established: int):
+    """Per scan of `scans` in which some landmark of the final map associated in more than
+    `established` scans is in view after it joined: (its beam evidence, free beams (clipped at
+    MAX_BEAMS), whether a measurement updated it), arrays over those landmarks."""
     est = lg.landmark_n_obs > established
     ids, xy, first = lg.landmark_id[est], lg.landmark_xy[est], lg.landmark_first_scan[est]
     radius = np.array([_radius(lg, int(i)) for i in ids])
     seen = set(zip(lg.obs_scan.tolist(), lg.obs_landmark.tolist()))
     cfg = ExistenceConfig(max_range_m=float(seq.scan_max_range))
-    expected = np.zeros(MAX_BEAMS + 1, np.int64)
-    detected = np.zeros(MAX_BEAMS + 1, np.int64)
     max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
     for k in range(scans[0], min(scans[1], lg.n_scans)):
         if lg.scan_skipped[k] or not ids.size:
@@ -90,9 +97,46 @@ def beam_detection_rates(
         ev = beam_evidence(scan.ranges_m, bearings, z[j, 0], z[j, 1], radius[j], cfg=cfg)
         free = np.minimum(ev.reach - ev.occluded, MAX_BEAMS)
         hit = np.array([(k, int(i)) in seen for i in ids[j]])
+        yield ev, free, hit
+
+
+def beam_detection_rates(
+    lg, seq, scans: tuple[int, int], established: int = ESTABLISHED
+) -> tuple[np.ndarray, np.ndarray]:
+    """(expected (MAX_BEAMS + 1,), detected (MAX_BEAMS + 1,)) by free beams (module doc, 1):
+    the landmarks of the final map associated in more than `established` scans."""
+    expected = np.zeros(MAX_BEAMS + 1, np.int64)
+    detected = np.zeros(MAX_BEAMS + 1, np.int64)
+    for _, free, hit in _views(lg, seq, scans, established):
         np.add.at(expected, free, 1)
         np.add.at(detected, free, hit.astype(np.int64))
     return expected, detected
+
+
+def derive_see_through(
+    lg, seq, scans: tuple[int, int], min_beams: int, established: int = ESTABLISHED
+) -> dict:
+    """see_through_q measured on the run (module doc, 6): of the beams reaching the established
+    landmarks (as `beam_detection_rates` places them) in the scans of `scans` where at least
+    min_beams of them were free and no measurement updated the landmark, the share that passed
+    beyond it (none passed: half a beam over those counted, a rate the run cannot tell from 0;
+    the model needs q > 0)."""
+    through = reach = 0
+    for ev, free, hit in _views(lg, seq, scans, established):
+        missed = (free >= min_beams) & ~hit
+        through += int(ev.through[missed].sum())
+        reach += int(ev.reach[missed].sum())
+    if not reach:
+        raise DataError(
+            f"derive_see_through: no established landmark was missed with {min_beams} free "
+            f"beams or more in scans {scans}: no see-through rate to derive"
+        )
+    q = max(through, 0.5) / reach
+    return {
+        "settings": {"map_policy.existence_see_through_q": float(min(q, 1.0))},
+        "missed_beams_reaching": reach,
+        "missed_beams_through": through,
+    }
 
 
 def derive_existence(lg, seq, scans: tuple[int, int], established: int = ESTABLISHED) -> dict:

@@ -1,0 +1,329 @@
+"""Victoria Park, scans 1-2000: why the existence map policy misses reference trees, and the map
+with tentatives kept through their misses (`map_policy.existence_keep_tentatives`, issue 41).
+A script, not part of the package; the figures of the lab notebook's entry "Landmark
+existence: tentatives kept through their misses" were measured with it once.
+
+    TRUNKSLAM_DATA=/work/shared/datasets .venv/bin/python -P docs/existence_keep_probe.py \
+        detections --out /tmp/keep_detections.json
+    (the same with paper, geometric; --variants to run a subset)
+    .venv/bin/python -P docs/existence_keep_probe.py sim --out /tmp/keep_sim.json
+
+    TRUNKSLAM_DATA=/work/shared/datasets .venv/bin/python -P docs/existence_keep_probe.py \
+        full --variants "persistent, kept, q derived" --out /tmp/keep_full.json
+
+full: the whole Victoria Park run (7249 scans, published detections, IHGR, closure off: the
+preset as `reproduce victoria-park` runs it) with the existence policy and the settings derived
+on scans 1-2000 of the detections' confirm run, the first variant named: `real_run._one`'s row
+(GPS RMSE over the vouched fixes, landmarks, map precision and recall over scans 1-2000).
+
+(-P: docs/experiments/, the site's pages, would shadow the package.)
+
+sim: `reproduce sim-clutter`'s 20 drives (its seeds: root seed 0), both scenes, `paper` and
+`geometric`: the confirm run, then the existence policy with the settings derived from it
+(as `sim_clutter._existence_row`, persistent clutter included) for each variant; precision and
+recall pooled over the drives as the sim-clutter table pools them.
+
+Per extractor (the published detections, or `paper` / `geometric` on the raw scans), as
+`victoria_park.existence_policy` does: one run of scans 1-2000 with the preset and the paper's
+confirm_scans 3; from it, without the reference or the GPS, the existence settings of each half
+and of the whole (`existence_rates.derive_existence`, and `derive_persistent` for the
+persistent clutter); then one run of scans 1-2000 per variant (uniform / persistent clutter,
+tentatives dropped at a miss / kept) and per derivation (derived on 1-1000 judged on
+1001-2000, the other way round, and 1-2000 as a whole), judged by `reference_match`.
+
+The reference trees serve the diagnosis only (no setting reads them): of the reference trees a
+circle the filter considered came within 1 m of in the judged scans and no landmark of the map
+is within 1 m of, what became of the tracks of those circles, the furthest any got:
+"left the map by existence", "mapped > 1 m away" (a landmark of the map, not within 1 m of the
+tree), "tentative: existence below remove_prob", "tentative dropped at a miss", "tentative
+pending at the end", "circles never a track of their own" (paired with another landmark, or
+ambiguous). Tentatives' fates are recorded by wrapping `Tentatives.step` (which ids left the
+set, and whether their existence or a miss dropped them).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+
+import numpy as np
+
+from experiments.eval.existence_rates import derive_existence, derive_persistent, derive_see_through
+from experiments.eval.map_quality import reference_in_our_frame
+from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
+from experiments.paper.victoria_park.existence_policy import _features, _judge, _tag
+from experiments.paper.victoria_park.real_run import HALVES, run_config
+from slam import run_slam, se2
+from slam import tentatives as tentatives_module
+from slam.log import OUT_OF_RANGE, SKIPPED
+
+VARIANTS = {
+    "uniform": {},
+    "uniform, kept": {"map_policy.existence_keep_tentatives": True},
+    "persistent": {"map_policy.existence_clutter": "persistent"},
+    "persistent, kept": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+    },
+    # diagnosis only (not a derived setting): how much of the loss the see-through factor is
+    "persistent, kept, q 1": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_see_through_q": 1.0,
+    },
+    "uniform, kept, q 1": {
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_see_through_q": 1.0,
+    },
+    # see_through_q derived on the derivation half (`existence_rates.derive_see_through`)
+    "persistent, kept, q derived": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "q": "derived",
+    },
+    "uniform, kept, q derived": {"map_policy.existence_keep_tentatives": True, "q": "derived"},
+}
+
+
+def _settings(derived: dict, variant: str) -> dict:
+    """The variant's settings: the derived ones, its own, and the derived see_through_q where
+    it asks for it."""
+    own = dict(VARIANTS[variant])
+    if own.pop("q", None) == "derived":
+        own["map_policy.existence_see_through_q"] = derived["see_through_q"]
+    return {k: v for k, v in derived.items() if k != "see_through_q"} | own
+
+
+FATES = (
+    "left the map by existence",
+    "mapped > 1 m away",
+    "tentative: existence below remove_prob",
+    "tentative dropped at a miss",
+    "tentative pending at the end",
+    "circles never a track of their own",
+)
+
+
+class _Fates:
+    """Wraps `Tentatives.step`: id -> "existence" / "miss" for every tentative that left the
+    set other than by joining the map."""
+
+    def __init__(self) -> None:
+        self.dropped: dict[int, str] = {}
+        self._step = tentatives_module.Tentatives.step
+
+    def __enter__(self):
+        fates, step = self, self._step
+
+        def wrapped(tent, matched, new, scan_index, policy, join=None, gone=None):
+            out, confirm = step(tent, matched, new, scan_index, policy, join=join, gone=gone)
+            left = set(tent.ids.tolist()) - set(out.ids.tolist())
+            left -= {int(tent.ids[i]) for i in confirm}
+            for i in np.flatnonzero(np.isin(tent.ids, list(left))):
+                by_existence = gone is not None and bool(np.asarray(gone)[i])
+                fates.dropped[int(tent.ids[i])] = "existence" if by_existence else "miss"
+            return out, confirm
+
+        tentatives_module.Tentatives.step = wrapped
+        return self
+
+    def __exit__(self, *exc) -> None:
+        tentatives_module.Tentatives.step = self._step
+
+
+def _trees(lg, ref) -> np.ndarray:
+    n = min(ref[0].shape[0], lg.n_scans)
+    ours = np.array([se2.compose(p, lg.laser_pose)[:2] for p in lg.pose[:n]])
+    return reference_in_our_frame(ours, *ref)
+
+
+def _fate(tracks: set, lg, dropped: dict) -> str:
+    gone = {int(row[0]) for row in (lg.departures or [])}
+    mapped = set(lg.landmark_id.tolist())
+    if tracks & gone:
+        return FATES[0]
+    if tracks & mapped:
+        return FATES[1]
+    reasons = {dropped.get(t) for t in tracks}
+    if "existence" in reasons:
+        return FATES[2]
+    if "miss" in reasons:
+        return FATES[3]
+    return FATES[4] if tracks else FATES[5]
+
+
+def diagnose(lg, ref, dropped: dict, scans: tuple[int, int]) -> dict:
+    """The missed reference trees of `scans` by the fate of their circles' tracks (module doc),
+    with the scans their circles were seen in (median, by fate)."""
+    tw = _trees(lg, ref)
+    used = (lg.meas_status != OUT_OF_RANGE) & (lg.meas_status != SKIPPED)
+    used &= (lg.meas_scan >= scans[0]) & (lg.meas_scan < scans[1])
+    rows = np.flatnonzero(used)
+    xy = se2.observed_points(lg.pose[lg.meas_scan[rows]], lg.meas_z[rows], lg.laser_pose)
+    d_circle = np.linalg.norm(xy[:, None, :] - tw[None, :, :], axis=2)  # (circles, trees)
+    if lg.landmark_xy.size:
+        d_map = np.linalg.norm(lg.landmark_xy[:, None, :] - tw[None, :, :], axis=2).min(axis=0)
+    else:
+        d_map = np.full(tw.shape[0], math.inf)
+    seen = (d_circle <= 1.0).any(axis=0)
+    out: dict = {f: [] for f in FATES}
+    for t in np.flatnonzero(seen & (d_map > 1.0)):
+        near = rows[d_circle[:, t] <= 1.0]
+        tracks = {int(x) for x in lg.meas_track[near] if x >= 0}
+        out[_fate(tracks, lg, dropped)].append(int(np.unique(lg.meas_scan[near]).size))
+    return {
+        "seen_trees": int(seen.sum()),
+        "missed": {f: len(v) for f, v in out.items()},
+        "scans_seen_median": {f: float(np.median(v)) for f, v in out.items() if v},
+        "tentatives_dropped": {
+            r: sum(1 for v in dropped.values() if v == r) for r in ("miss", "existence")
+        },
+    }
+
+
+def probe(extractor: str, variants: list[str]) -> dict:
+    seq = load_victoria_park(n_scans=2000)
+    ref = load_ss2002_reference()
+    base = run_config(extractor, "ihgr").with_(
+        **{"map_policy.confirm_scans": 3, "map_policy.prune_after_expected": 0}
+    )
+    feats = _features(seq, extractor, base)
+    t0 = time.time()
+    lg = run_slam(seq, base, features=feats)
+    whole = (0, 2000)
+    derived = {}
+    for h in (*HALVES, whole):
+        settings = derive_existence(lg, seq, h)["settings"]
+        settings |= derive_persistent(lg, h)["settings"]
+        min_beams = settings["map_policy.existence_min_beams"]
+        q = derive_see_through(lg, seq, h, min_beams)["settings"]
+        derived[_tag(h)] = settings | {"see_through_q": q["map_policy.existence_see_through_q"]}
+    out = {"extractor": extractor, "derived": derived, "base_s": time.time() - t0, "rows": []}
+    a, b = (_tag(h) for h in HALVES)
+    for variant in variants:
+        for fit, judged in ((a, b), (b, a), ("1_2000", "1_2000")):
+            cfg = base.with_(
+                **{"map_policy.policy": "existence", **_settings(derived[fit], variant)}
+            )
+            t0 = time.time()
+            with _Fates() as fates:
+                run = run_slam(seq, cfg, features=feats)
+            lo, hi = (int(x) for x in judged.split("_"))
+            row = {
+                "variant": variant,
+                "derived_on": fit,
+                "judged_on": judged,
+                **_judge(run, ref, judged),
+                "removed": len(run.departures or []),
+                "seconds": round(time.time() - t0, 1),
+                "diagnosis": diagnose(run, ref, fates.dropped, (lo - 1, hi)),
+            }
+            print(json.dumps(row), flush=True)
+            out["rows"].append(row)
+    return out
+
+
+def _sim_drive(seed: int, variants: list[str]) -> list[dict]:
+    from experiments.paper.sim_clutter import SCENES, _map_figures
+    from experiments.paper.slam import Exp2Config
+    from experiments.paper.slam import run_config as exp2_config
+    from experiments.sim.clutter import clutter_park
+    from experiments.sim.scene import load_scene
+    from experiments.sim.trajectory import MONTE_CARLO_PATH, CycabParams, simulate_cycab_run
+    from features import extract_features
+
+    rows = []
+    for name in SCENES:
+        scene = clutter_park() if name.endswith("_clutter") else load_scene(name)
+        seq = simulate_cycab_run(
+            np.random.default_rng(seed), scene, CycabParams(**MONTE_CARLO_PATH)
+        )
+        for m in ("paper", "geometric"):
+            scfg = exp2_config(Exp2Config(), m).with_(**{"features.extractor.short_trunks": False})
+            kw = scfg.features.extractor_kwargs()
+            feats = [extract_features(seq.scan(k), m, **kw) for k in range(seq.n_scans)]
+            lg = run_slam(seq, scfg, features=feats)
+            settings = derive_existence(lg, seq, (0, seq.n_scans))["settings"]
+            settings |= derive_persistent(lg, (0, seq.n_scans))["settings"]
+            mb = settings["map_policy.existence_min_beams"]
+            q = derive_see_through(lg, seq, (0, seq.n_scans), mb)["settings"]
+            settings["see_through_q"] = q["map_policy.existence_see_through_q"]
+            for variant in variants:
+                cfg = scfg.with_(
+                    **{"map_policy.policy": "existence", **_settings(settings, variant)}
+                )
+                ex = run_slam(seq, cfg, features=feats)
+                row = {"scene": name, "method": m, "variant": variant, "seed": seed}
+                rows.append(row | _map_figures(ex, scene, seq, feats))
+    return rows
+
+
+def sim(variants: list[str], runs: int = 20) -> dict:
+    from experiments.paper.runner import experiment_seed
+
+    seeds = np.random.default_rng(experiment_seed(0, "sim-clutter")).integers(0, 2**31, size=runs)
+    rows = []
+    for seed in seeds.tolist():
+        rows += _sim_drive(int(seed), variants)
+        print(f"drive {len(rows)} rows", flush=True)
+    pooled = []
+    for key in sorted({(r["scene"], r["method"], r["variant"]) for r in rows}):
+        rs = [r for r in rows if (r["scene"], r["method"], r["variant"]) == key]
+        total = sum(r["landmarks"] for r in rs)
+        pooled.append(
+            {
+                "scene": key[0],
+                "method": key[1],
+                "variant": key[2],
+                "precision": sum(r["right"] for r in rs) / total if total else math.nan,
+                "recall": sum(r["trunks_found"] for r in rs) / sum(r["trunks"] for r in rs),
+                "landmarks_mean": total / len(rs),
+                "on_bushes_mean": sum(r["landmarks_bush"] for r in rs) / len(rs),
+                "on_people_mean": sum(r["landmarks_person"] for r in rs) / len(rs),
+            }
+        )
+    return {"pooled": pooled, "rows": rows}
+
+
+def full(variant: str) -> dict:
+    from experiments.paper.victoria_park.real_run import _one
+
+    seq2000 = load_victoria_park(n_scans=2000)
+    base = run_config("detections", "ihgr")
+    confirm = base.with_(**{"map_policy.confirm_scans": 3, "map_policy.prune_after_expected": 0})
+    lg = run_slam(seq2000, confirm)
+    h = (0, 2000)
+    settings = derive_existence(lg, seq2000, h)["settings"] | derive_persistent(lg, h)["settings"]
+    mb = settings["map_policy.existence_min_beams"]
+    q = derive_see_through(lg, seq2000, h, mb)["settings"]
+    settings["see_through_q"] = q["map_policy.existence_see_through_q"]
+    cfg = base.with_(**{"map_policy.policy": "existence", **_settings(settings, variant)})
+    row, run, _ = _one(variant, load_victoria_park(full=True), cfg, load_ss2002_reference())
+    keep = ("rmse_vouched_m", "fixes_vouched", "rmse_m", "fixes", "rmse_2001_7249_m")
+    keep += ("landmarks", "precision_1m", "reference_trees_seen_1m", "nis_inside", "seconds")
+    out = {k: row[k] for k in keep} | {"variant": variant, "settings": settings}
+    out["removed"] = len(run.departures or [])
+    print(json.dumps(out), flush=True)
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("extractor", choices=("detections", "paper", "geometric", "sim", "full"))
+    ap.add_argument("--variants", nargs="*", default=list(VARIANTS)[:4], choices=list(VARIANTS))
+    ap.add_argument("--out", required=True)
+    args = ap.parse_args()
+    if args.extractor == "sim":
+        res = sim(args.variants)
+    elif args.extractor == "full":
+        res = full(args.variants[0])
+    else:
+        res = probe(args.extractor, args.variants)
+    with open(args.out, "w") as fh:
+        json.dump(res, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,42 @@
+"""`existence_rates.derive_see_through`: the see-through rate q of the existence model measured
+on a run, without the truth, where the model applies it (a trunk in view and not reported)."""
+
+import numpy as np
+import pytest
+
+from experiments.errors import DataError
+from experiments.eval.existence_rates import ESTABLISHED, _views, derive_see_through
+from slam import run_slam
+from tests.experiments.test_existence_policy_run import clutter_drive
+
+MIN_BEAMS = 4  # the drive's derived min_beams: geometric's min_circle_points
+
+
+@pytest.fixture(scope="module")
+def run():
+    _, seq, cfg, feats = clutter_drive()
+    return seq, run_slam(seq, cfg, features=feats)
+
+
+def test_q_is_the_share_of_beams_passing_beyond_a_trunk_in_the_scans_it_was_missed(run):
+    """In the simulated park the landmarks the run keeps are trunks placed within centimetres:
+    of the beams reaching them in the scans they were missed, most return from the trunk, so
+    q is small but above 0; it is the stated ratio of the counts it reports, and counting the
+    detected scans too (where the model ignores the beams) would give a different figure."""
+    seq, lg = run
+    d = derive_see_through(lg, seq, (0, seq.n_scans), MIN_BEAMS)
+    q = d["settings"]["map_policy.existence_see_through_q"]
+    assert d["missed_beams_reaching"] > 20
+    assert q == d["missed_beams_through"] / d["missed_beams_reaching"]
+    assert 0 < q < 0.3
+    through = reach = 0
+    for ev, free, _ in _views(lg, seq, (0, seq.n_scans), ESTABLISHED):
+        use = free >= MIN_BEAMS
+        through, reach = through + ev.through[use].sum(), reach + ev.reach[use].sum()
+    assert reach > d["missed_beams_reaching"] and not np.isclose(through / reach, q)
+
+
+def test_no_missed_established_landmark_derives_nothing_and_says_why(run):
+    seq, lg = run
+    with pytest.raises(DataError, match="no established landmark was missed"):
+        derive_see_through(lg, seq, (0, seq.n_scans), MIN_BEAMS, established=10000)
