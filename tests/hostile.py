@@ -448,7 +448,20 @@ def file_cases(fmt: str, good: Callable[[Path], Path]) -> list[Case]:
         return Case(fmt, f"file: {label}", "", build)
 
     def truncate(p):
-        p.write_bytes(p.read_bytes()[: len(p.read_bytes()) // 2])
+        b = p.read_bytes()
+        n = len(b) // 2
+        if b"\n" in (b[n - 1 : n], b[n : n + 1]):
+            # a cut at a line's end can leave a shorter valid text file (a TOML prefix that
+            # simply sets fewer keys): cut inside the next line of at least 4 bytes instead
+            i = n
+            while i < len(b):
+                j = b.find(b"\n", i)
+                j = len(b) if j < 0 else j
+                if j - i >= 4:
+                    n = i + (j - i) // 2
+                    break
+                i = j + 1
+        p.write_bytes(b[:n])
         return p
 
     def empty(p):
