@@ -26,6 +26,7 @@ as before.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import shutil
 import subprocess
@@ -181,11 +182,32 @@ def vp_dir() -> Path:
     return d
 
 
+def made_once(tmp_path_factory, name: str, make) -> Path:
+    """A folder `make(folder)` filled once for the whole test run: under pytest-xdist each
+    worker has its own session, so a session fixture was made once per worker (25 s of CPU for
+    the quick Victoria Park set, twice when its two modules went to two workers). The first
+    worker to ask makes it, holding a lock, in the folder all workers' temporary folders share;
+    the others wait for it, then read it (read-only, as the session fixtures say). A make that
+    fails leaves the next one to try again."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    folder, made = root / f"once-{name}", root / f"once-{name}.made"
+    with open(root / f"once-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        if not made.exists():
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir()
+            make(folder)
+            made.touch()
+    return folder
+
+
 @pytest.fixture(scope="session")
 def noise_calibration_set(tmp_path_factory) -> Path:
     """A complete result set of `trunkslam reproduce noise-calibration --quick --seed 0` (the
-    quickest experiment), made once a session: the earlier results that the interruption,
-    full-disk and failed-experiment tests copy and then try to replace. Read-only: copy it.
+    quickest experiment), made once a test run (`made_once`): the earlier results that the
+    interruption, full-disk and failed-experiment tests copy and then try to replace. Read-only:
+    copy it.
     One worker (`--workers 1`): its trials in this process, as on any executor (the results do
     not depend on it, tests/experiments/test_exec.py), without starting a pool of processes
     that each import the project and load the kernels (about 15 s of CPU)."""
@@ -193,11 +215,13 @@ def noise_calibration_set(tmp_path_factory) -> Path:
 
     from experiments.cli import app
 
-    out = tmp_path_factory.mktemp("noise_calibration") / "results"
-    args = ["reproduce", "noise-calibration", "--quick", "--seed", "0", "--workers", "1"]
-    args += ["--out", str(out)]
-    res = CliRunner().invoke(app, args)
-    assert res.exit_code == 0, res.output
+    def make(folder: Path) -> None:
+        out = folder / "results"
+        args = ["reproduce", "noise-calibration", "--quick", "--seed", "0", "--workers", "1"]
+        res = CliRunner().invoke(app, [*args, "--out", str(out)])
+        assert res.exit_code == 0, res.output
+
+    out = made_once(tmp_path_factory, "noise_calibration", make) / "results"
     assert (out / "noise_calibration.csv").is_file() and (out / "manifest.json").is_file()
     return out
 
@@ -206,14 +230,16 @@ def noise_calibration_set(tmp_path_factory) -> Path:
 def quick_victoria_park_set(tmp_path_factory, vp_dir) -> Path:
     """`trunkslam reproduce victoria-park --quick` on shorter data (the first 150 scans of the
     full run and 100 raw scans, instead of 1500 and 400, so that it takes seconds), made once a
-    session: its tables (test_result_tables.py) and the configuration files it writes beside
-    them, which do not depend on the number of scans (test_run_is_its_config.py). Read-only."""
+    test run (`made_once`): its tables (test_result_tables.py) and the configuration files it
+    writes beside them, which do not depend on the number of scans (test_run_is_its_config.py).
+    Read-only."""
     from experiments.paper.reproduce import run_experiments
     from experiments.paper.victoria_park import real_run as vp
 
-    full, raw, ref = vp._data(True)
-    out = tmp_path_factory.mktemp("vp_tables")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(vp, "_data", lambda quick: (vp.head(full, 150), vp.head(raw, 100), ref))
-        run_experiments(["victoria-park"], out, quick=True, seed=0)
-    return out
+    def make(out: Path) -> None:
+        full, raw, ref = vp._data(True)
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(vp, "_data", lambda quick: (vp.head(full, 150), vp.head(raw, 100), ref))
+            run_experiments(["victoria-park"], out, quick=True, seed=0)
+
+    return made_once(tmp_path_factory, "vp_tables", make)
