@@ -96,7 +96,7 @@ class Tentatives:
             xy[i] = m
             cov[i] = C
         if join is None:
-            confirm = [i for i in range(t) if hits[i] >= policy.confirm_scans]
+            confirm = np.flatnonzero(hits >= policy.confirm_scans).tolist()
         else:
             confirm = np.flatnonzero(join).tolist()
         keep = np.ones(t, bool)
