@@ -380,8 +380,8 @@ def prepare(z, R, z_hat, H, P, gate_prob: float, *, validate: bool = True) -> Pr
     m, n = z.shape[0], z_hat.shape[0]
     gate = gate_threshold(gate_prob)
     # Canonical ranks: lexicographic on the data, so results do not depend on input order.
-    rank_meas = _ranks(np.column_stack([z, R.reshape(m, 4)]))
-    rank_feat = _ranks(np.column_stack([z_hat, S_feat.reshape(n, 4)]))
+    rank_meas = _ranks_of(z, R.reshape(m, 4))
+    rank_feat = _ranks_of(z_hat, S_feat.reshape(n, 4))
 
     if m and n:
         ii, jj, nu, S, d2, l11, l22, bad = _gated_pairs(
@@ -553,6 +553,56 @@ def _check_joint_psd(H: np.ndarray, P: np.ndarray, feats: np.ndarray) -> None:
             f"{feats.tolist()} (smallest eigenvalue {low:.3g}; the cross-covariances between "
             "them are inconsistent)"
         )
+
+
+# Rows ranked by `_rank_kernel` (an insertion sort) up to this many, by np.lexsort beyond
+_KERNEL_RANKS = 64
+
+
+def _ranks_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """`_ranks` of the rows [a | b] (a (k, 2), b (k, 4)): for the few rows of one scan a
+    kernel, the same ranks without building the keys and the lexsort's arrays."""
+    if a.shape[0] > _KERNEL_RANKS:
+        return _ranks(np.column_stack([a, b]))
+    f = np.ascontiguousarray
+    return _rank_kernel(f(a, np.float64), f(b, np.float64))
+
+
+@njit(cache=True)
+def _row_before(a, b, i, j) -> bool:
+    """Row i of [a | b] before row j in np.lexsort's order of the columns (first column
+    most significant; NaN after every number, NaNs equal; equal rows by index: stable)."""
+    for c in range(a.shape[1] + b.shape[1]):
+        x = a[i, c] if c < a.shape[1] else b[i, c - a.shape[1]]
+        y = a[j, c] if c < a.shape[1] else b[j, c - a.shape[1]]
+        if x < y:
+            return True
+        if x > y:
+            return False
+        if (x != x) != (y != y):  # one NaN: the number first
+            return y != y
+    return i < j
+
+
+@njit(cache=True)
+def _rank_kernel(a, b):
+    """`_ranks_of` by a stable insertion sort (k rows, k - 1 insertions of at most k - 1
+    steps each)."""
+    k = a.shape[0]
+    order = np.arange(k)
+    for t in range(1, k):
+        row = order[t]
+        p = t
+        for _ in range(t):
+            if not _row_before(a, b, row, order[p - 1]):
+                break
+            order[p] = order[p - 1]
+            p -= 1
+        order[p] = row
+    r = np.empty(k, np.int64)
+    for t in range(k):
+        r[order[t]] = t
+    return r
 
 
 def _ranks(keys: np.ndarray) -> np.ndarray:

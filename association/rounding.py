@@ -379,10 +379,11 @@ def ihgr_round_csc(
 
     if presolve:  # single-choice components settled without an LP (`_presolve`)
         bound += _presolve(tuple(problem), tuple(components), chosen, active)
-    covered = np.zeros(n_rows, bool)
-    covered[indices[np.repeat(chosen, counts)]] = True
     solves = 0
     fractional = False
+    if active.any():  # else presolve settled every component (most scans): no LP
+        covered = np.zeros(n_rows, bool)
+        covered[indices[np.repeat(chosen, counts)]] = True
     while active.any():
         cols = np.flatnonzero(active)
         in_play = np.bincount(indices[np.repeat(active, counts)], minlength=n_rows) > 0

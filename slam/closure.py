@@ -290,12 +290,19 @@ class LoopCloser:
         again."""
         xy, ids = state.landmarks_xy, state.landmark_ids
         d, j = _k_nearest(np.ascontiguousarray(xy), xy[pos], min(NEIGHBOURS, ids.size))
+        # d ascends along each row: the answer is its first entry that is another tree
         other = d > self.cfg.match_m
         close = other & (d <= SAME_TREE_M)
+        far = other & ~close
+        first = np.argmax(far, axis=1)
+        out = np.where(far[np.arange(d.shape[0]), first], d[np.arange(d.shape[0]), first], np.inf)
         for r in np.flatnonzero(close.any(axis=1)).tolist():
             together = self._together.get(int(ids[pos[r]]), ())
-            other[r, close[r]] = [int(ids[q]) in together for q in j[r, close[r]]]
-        return np.where(other, d, np.inf).min(axis=1)
+            for q, dq in zip(j[r, close[r]].tolist(), d[r, close[r]].tolist()):
+                if int(ids[q]) in together:  # seen in one scan with it: another tree
+                    out[r] = dq
+                    break
+        return out
 
     def seen_together(self, state, updated: np.ndarray) -> None:
         """Record the pairs of landmarks within SAME_TREE_M of each other that this scan
@@ -451,7 +458,8 @@ class LoopCloser:
 
     def _joined_at(self, ids) -> np.ndarray:
         """The time each landmark joined the map (-inf if unknown)."""
-        joined = np.array([self.history.first_scan.get(int(i), -1) for i in ids], dtype=np.int64)
+        get, ids = self.history.first_scan.get, np.asarray(ids, np.int64).reshape(-1)
+        joined = np.fromiter((get(i, -1) for i in ids.tolist()), np.int64, ids.size)
         return np.where(joined >= 0, self.scan_t[np.maximum(joined, 0)], -np.inf)
 
     def _free_local_map(self, state, k: int, t_from: float, cov: np.ndarray) -> None:

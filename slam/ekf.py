@@ -100,8 +100,11 @@ class _Estimate:
 
     @property
     def pose_cov(self) -> np.ndarray:
-        """(3, 3) covariance of the pose (a copy)."""
-        return _sym_blocks(self._lower, _POSE_COLS)[0]
+        """(3, 3) covariance of the pose (a copy), read from the lower triangle (the values of
+        `cov([0, 1, 2])`, without a kernel call: it is read several times a scan)."""
+        out = self._lower[:3, :3].copy()
+        out[0, 1], out[0, 2], out[1, 2] = out[1, 0], out[2, 0], out[2, 1]
+        return out
 
     @property
     def landmarks_xy(self) -> np.ndarray:
@@ -579,7 +582,7 @@ def landmark_columns(idx: np.ndarray) -> np.ndarray:
     """(k, 5) state columns [0, 1, 2, 3 + 2 i, 4 + 2 i] of landmarks at positions idx."""
     idx = np.asarray(idx, dtype=np.int64).reshape(-1)
     cols = np.empty((idx.size, 5), np.int64)
-    cols[:, :3] = [0, 1, 2]
+    cols[:, :3] = _POSE_COLS  # broadcast from an array: a list would be converted every call
     cols[:, 3] = 3 + 2 * idx
     cols[:, 4] = 4 + 2 * idx
     return cols

@@ -76,9 +76,12 @@ class RunHistory:
     def seen_at(self, ids, default: float) -> np.ndarray:
         """The time each landmark of `ids` was last seen (`default` if never)."""
         ids = np.asarray(ids, dtype=np.int64).reshape(-1)
-        out = np.full(ids.size, default)
-        known = ids < self._seen.size
-        out[known] = self._seen[ids[known]]
+        if ids.size and ids.max() < self._seen.size:  # every id known (the loop's case)
+            out = self._seen[ids]
+        else:
+            out = np.full(ids.size, default)
+            known = ids < self._seen.size
+            out[known] = self._seen[ids[known]]
         return np.where(np.isnan(out), default, out)
 
     def merged(self, drop: int, keep: int) -> None:

@@ -275,9 +275,10 @@ class TentativeMap:
         status, track, policy = out.status, out.track, ctx.policy
         n_l = a.lm_idx.size
         matched, matched_meas, new, new_meas = {}, {}, [], []
+        pose, pose_cov = state.pose, state.pose_cov  # the state changes only after the loops
         for i in np.flatnonzero(a.assign >= n_l):
             ti = int(a.t_idx[a.assign[i] - n_l])
-            matched[ti] = sighting(state.pose, state.pose_cov, z[i], R[i], ctx.laser)
+            matched[ti] = sighting(pose, pose_cov, z[i], R[i], ctx.laser)
             matched_meas[ti] = int(i)
             status[i] = TENTATIVE_HIT
             track[i] = int(tent.ids[ti])
@@ -285,7 +286,7 @@ class TentativeMap:
             if a.ambiguous[i]:
                 status[i] = AMBIGUOUS
                 continue
-            mxy, C = sighting(state.pose, state.pose_cov, z[i], R[i], ctx.laser)
+            mxy, C = sighting(pose, pose_cov, z[i], R[i], ctx.laser)
             lid = ctx.new_id()
             if book is not None:
                 book.born(lid, float(radii(meas)[i]))

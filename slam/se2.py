@@ -105,10 +105,15 @@ def to_frame(T_ab, p_a) -> np.ndarray:
 def sensor_position(pose, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
     """World position p_S (2,) of a sensor mounted at `sensor_pose` (vehicle frame) when the
     vehicle is at `pose`, and d p_S / d theta (2,)."""
+    px, py, dpx, dpy = _sensor_position(pose, sensor_pose)
+    return np.array([px, py]), np.array([dpx, dpy])
+
+
+def _sensor_position(pose, sensor_pose) -> tuple[float, float, float, float]:
+    """`sensor_position` as four numbers (p_S x, y; d p_S / d theta x, y), without arrays."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     lx, ly = float(sensor_pose[0]), float(sensor_pose[1])
-    p = np.array([pose[0] + c * lx - s * ly, pose[1] + s * lx + c * ly])
-    return p, np.array([-s * lx - c * ly, c * lx - s * ly])
+    return pose[0] + c * lx - s * ly, pose[1] + s * lx + c * ly, -s * lx - c * ly, c * lx - s * ly
 
 
 def observe(pose, landmarks_xy, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
@@ -122,8 +127,8 @@ def observe(pose, landmarks_xy, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
     with respect to [x, y, theta, m_x, m_y].
     """
     m = np.ascontiguousarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
-    pL, dpL = sensor_position(pose, sensor_pose)
-    return _observe_kernel(m, pL[0], pL[1], dpL[0], dpL[1], float(pose[2]), float(sensor_pose[2]))
+    px, py, dpx, dpy = _sensor_position(pose, sensor_pose)
+    return _observe_kernel(m, px, py, dpx, dpy, float(pose[2]), float(sensor_pose[2]))
 
 
 @njit(cache=True)

@@ -77,7 +77,11 @@ class ExtractorSource:
 class DetectionsSource:
     """The sequence's precomputed detections: z as stored (less the known range bias of their
     method), R their covariance plus the fit floor or the constant model of their method; the
-    Features (circles at the detections) are for the log and the visualiser."""
+    Features (circles at the detections) are for the log and the visualiser.
+
+    The measurement model is elementwise, so it is applied once to every detection of the
+    sequence (the same numbers as scan by scan) and a scan takes its rows: a scan then costs a
+    few slices, not the dozen small array operations of building them."""
 
     def __init__(self, seq: Sequence, measurement: MeasurementConfig) -> None:
         if not seq.has_detections:
@@ -95,21 +99,29 @@ class DetectionsSource:
         # the arrays of no lines, edges or segments, shared by every scan's Features (read-only)
         self._empty = Features.empty(0.0, seq.det_method, seq.n_beams)
         self.count = None
+        self._bounds = np.searchsorted(seq.det_scan, np.arange(seq.n_scans + 1))
+        stored = np.stack([seq.det_range, seq.det_bearing], axis=1)
+        self._z, self._R = self.model.measure(stored, seq.det_cov)
+        c, s = np.cos(self._z[:, 1]), np.sin(self._z[:, 1])
+        n = stored.shape[0]
+        self._circles = _readonly(
+            np.column_stack([stored[:, 0] * c, stored[:, 0] * s, seq.det_radius])
+        )
+        self._no_cov = _readonly(np.zeros((n, 3, 3)))
+        self._no_beams = _readonly(np.zeros((n, 2), np.int64))
+        self._no_rms = _readonly(np.full(n, np.nan))
 
     needs_scan = False  # the detections are read from the sequence: the loop builds no Scan
 
     def __call__(self, k: int, scan) -> tuple[Features, np.ndarray, np.ndarray]:
-        stored, radius, cov = self.seq.detections(k)
-        z, R = self.model.measure(stored, cov)
-        n = z.shape[0]
-        c, s = np.cos(z[:, 1]), np.sin(z[:, 1])
+        a, b = int(self._bounds[k]), int(self._bounds[k + 1])
         e = self._empty  # written out, not `dataclasses.replace` (its field loop, every scan)
         f = Features(
             stamp_s=float(self.seq.scan_t[k]),
-            circle_params=np.column_stack([stored[:, 0] * c, stored[:, 0] * s, radius]),
-            circle_cov=np.zeros((n, 3, 3)),
-            circle_beams=np.zeros((n, 2), np.int64),
-            circle_rms_m=np.full(n, np.nan),
+            circle_params=self._circles[a:b],
+            circle_cov=self._no_cov[a:b],
+            circle_beams=self._no_beams[a:b],
+            circle_rms_m=self._no_rms[a:b],
             line_params=e.line_params,
             line_cov=e.line_cov,
             line_endpoints=e.line_endpoints,
@@ -124,7 +136,13 @@ class DetectionsSource:
             method=e.method,
             n_beams=e.n_beams,
         )
-        return f, z, R
+        return f, self._z[a:b].copy(), self._R[a:b].copy()
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    """`a`, made read-only: its rows are shared by the scans' Features."""
+    a.setflags(write=False)
+    return a
 
 
 class GivenSource:

@@ -89,16 +89,15 @@ class Tentatives:
         """
         t = len(self)
         hits = self.hits.copy()
-        missed = self.missed.copy() + 1
-        xy = self.xy.copy()
-        cov = self.cov.copy()
+        missed = self.missed + 1
+        xy, cov = (self.xy.copy(), self.cov.copy()) if matched else (self.xy, self.cov)
         for i, (m, C) in matched.items():
             hits[i] += 1
             missed[i] = 0
             xy[i] = m
             cov[i] = C
         if join is None:
-            confirm = [i for i in range(t) if hits[i] >= policy.confirm_scans]
+            confirm = np.flatnonzero(hits >= policy.confirm_scans).tolist()
         else:
             confirm = np.flatnonzero(join).tolist()
         keep = np.ones(t, bool)
@@ -107,13 +106,16 @@ class Tentatives:
             keep &= missed < policy.drop_after_missed  # else: only its existence drops it
         if gone is not None:
             keep &= ~np.asarray(gone, bool)
-        n_new = len(new)
-        out = Tentatives(
-            xy=np.concatenate([xy[keep], np.array([m for m, _, _ in new]).reshape(n_new, 2)]),
-            cov=np.concatenate([cov[keep], np.array([C for _, C, _ in new]).reshape(n_new, 2, 2)]),
-            hits=np.concatenate([hits[keep], np.ones(n_new, np.int64)]),
-            missed=np.concatenate([missed[keep], np.zeros(n_new, np.int64)]),
-            first_scan=np.concatenate([self.first_scan[keep], np.full(n_new, scan_index)]),
-            ids=np.concatenate([self.ids[keep], np.array([i for _, _, i in new], np.int64)]),
-        )
-        return out, confirm
+        kept = xy[keep], cov[keep], hits[keep], missed[keep], self.first_scan[keep], self.ids[keep]
+        if new:  # the first sightings after the tentatives kept
+            n_new = len(new)
+            added = (
+                np.array([m for m, _, _ in new]).reshape(n_new, 2),
+                np.array([C for _, C, _ in new]).reshape(n_new, 2, 2),
+                np.ones(n_new, np.int64),
+                np.zeros(n_new, np.int64),
+                np.full(n_new, scan_index),
+                np.array([i for _, _, i in new], np.int64),
+            )
+            kept = tuple(np.concatenate([a, b]) for a, b in zip(kept, added))
+        return Tentatives(*kept), confirm

@@ -1,0 +1,140 @@
+"""Probes behind issue 40's speed target (the full Victoria Park run, one core): the run's
+outputs hashed, to show that a speed change leaves them identical to the bit, and an in-process
+profile of the run.
+
+    TRUNKSLAM_DATA=../shared/datasets PYTHONPATH=. .venv/bin/python docs/full_run_speed_probe.py \
+        hash SEQUENCE.npz [--expect HASHES.json] [--save HASHES.json]
+    TRUNKSLAM_DATA=../shared/datasets PYTHONPATH=. .venv/bin/python docs/full_run_speed_probe.py \
+        profile SEQUENCE.npz [--top 40]
+
+SEQUENCE.npz: `trunkslam convert victoria-park --full --out SEQUENCE.npz`. Both run the preset
+`victoria_park_ute` with closure off and with `[closure] enabled = true`, at one BLAS/OpenMP
+thread. "hash" writes each run's files as `trunkslam slam` does (`run_slam_file`) and prints
+the SHA-256 of map.csv, trajectory.csv and of run_log.npz's arrays (names, dtypes, shapes and
+bytes; the zip's own bytes carry the write time), and of every array of the `SlamLog` but its
+timings; with --expect it exits 1 when one differs. "profile" runs both once untimed (numba
+compiles or loads its kernels), then each under cProfile, and prints its CPU seconds and the
+top functions by cumulative and by own time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import hashlib
+import io
+import json
+import pstats
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from experiments.io.config_file import load_slam_config
+from experiments.io.sequence_file import load_sequence
+from experiments.pipeline.slam import run_slam_file
+from slam import run_slam
+
+RUNS = {"closure off": False, "closure on": True}
+
+
+def config(closure: bool):
+    """The preset, with loop closure on or off."""
+    return load_slam_config("victoria_park_ute").with_(**{"closure.enabled": closure})
+
+
+def npz_digest(path: Path) -> str:
+    """SHA-256 over an npz's arrays in name order: name, dtype, shape and bytes."""
+    h = hashlib.sha256()
+    with np.load(path, allow_pickle=False) as z:
+        for name in sorted(z.files):
+            a = np.ascontiguousarray(z[name])
+            h.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
+            h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def log_digest(log) -> str:
+    """SHA-256 over the `SlamLog`'s arrays (its timings and config aside), field order."""
+    h = hashlib.sha256()
+    for name, value in vars(log).items():
+        if name in ("timing_s", "config"):
+            continue
+        h.update(f"{name}|".encode())
+        h.update(repr(value).encode() if not isinstance(value, np.ndarray) else value.tobytes())
+    return h.hexdigest()
+
+
+def run_hashes(seq_path: Path, closure: bool) -> dict:
+    """The hashes of one run's files (`run_slam_file` into a temporary folder)."""
+    with tempfile.TemporaryDirectory(prefix="trunkslam-speed-") as tmp:
+        out = Path(tmp) / "run"
+        run_slam_file(seq_path, config(closure), out)
+        return {
+            "map.csv": hashlib.sha256((out / "map.csv").read_bytes()).hexdigest(),
+            "trajectory.csv": hashlib.sha256((out / "trajectory.csv").read_bytes()).hexdigest(),
+            "run_log.npz arrays": npz_digest(out / "run_log.npz"),
+        }
+
+
+def hash_runs(seq_path: Path, expect: Path | None, save: Path | None) -> int:
+    """Print the hashes of both runs; 1 when --expect's differ."""
+    seq = load_sequence(seq_path)
+    found = {}
+    for name, closure in RUNS.items():
+        found[name] = run_hashes(seq_path, closure)
+        found[name]["SlamLog"] = log_digest(run_slam(seq, config(closure)))
+        for k, v in found[name].items():
+            print(f"{name:12s} {k:20s} {v}")
+    if save is not None:
+        save.write_text(json.dumps(found, indent=1) + "\n")
+    if expect is None:
+        return 0
+    want = json.loads(expect.read_text())
+    bad = [(n, k) for n in want for k in want[n] if found.get(n, {}).get(k) != want[n][k]]
+    for n, k in bad:
+        print(f"DIFFERS: {n} {k}")
+    print("identical" if not bad else f"{len(bad)} differ")
+    return 1 if bad else 0
+
+
+def profile_runs(seq_path: Path, top: int) -> int:
+    """Profile both runs after an untimed one; print CPU seconds and the top functions."""
+    seq = load_sequence(seq_path)
+    run_slam(seq, config(True))  # numba compiles or loads every kernel both runs use
+    for name, closure in RUNS.items():
+        cfg = config(closure)
+        c0, t0 = time.process_time(), time.perf_counter()
+        run_slam(seq, cfg)
+        cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+        prof = cProfile.Profile()
+        prof.enable()
+        run_slam(seq, cfg)
+        prof.disable()
+        print(f"== {name}: {cpu:.2f} s CPU, {wall:.2f} s wall (unprofiled run)")
+        for key in ("cumulative", "tottime"):
+            text = io.StringIO()
+            pstats.Stats(prof, stream=text).sort_stats(key).print_stats(top)
+            print(text.getvalue())
+    return 0
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("what", choices=("hash", "profile"))
+    p.add_argument("sequence", type=Path)
+    p.add_argument("--expect", type=Path, default=None)
+    p.add_argument("--save", type=Path, default=None)
+    p.add_argument("--top", type=int, default=40)
+    a = p.parse_args(argv)
+    with threadpool_limits(limits=1):
+        if a.what == "hash":
+            return hash_runs(a.sequence, a.expect, a.save)
+        return profile_runs(a.sequence, a.top)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
