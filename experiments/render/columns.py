@@ -248,8 +248,8 @@ class Ellipses(Kind):
         self.n = n
 
     def _arrow(self, values: np.ndarray) -> pa.Array:
-        drawn = ellipse_polylines(values[:, :2], values[:, 2:].reshape(-1, 2, 2), n=self.n)
-        return _fixed_strips(drawn)
+        covs = values[:, 2:].reshape(-1, 2, 2)
+        return _fixed_strips(ellipse_polylines(values[:, :2], covs, n=self.n, dtype=np.float32))
 
     def column(self) -> _Column:
         return _Column((6,), np.float64, self._arrow)
@@ -272,7 +272,8 @@ class Circles(Kind):
 def _fixed_strips(drawn: np.ndarray) -> pa.Array:
     """(m, n, 2) m strips of n points as rerun's LineStrip2D components."""
     m, n = drawn.shape[:2]
-    return rows._STRIPS.arrow((drawn.reshape(-1, 2).astype(np.float32), np.full(m, n, np.int32)))
+    points = drawn.reshape(-1, 2).astype(np.float32, copy=False)
+    return rows._STRIPS.arrow((points, np.full(m, n, np.int32)))
 
 
 class Strips(Kind):
