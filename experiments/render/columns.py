@@ -36,6 +36,7 @@ __all__ = [
     "Floats",
     "Formatted",
     "IdLabels",
+    "Pairs",
     "ScanPoints",
     "Spec",
     "Strips",
@@ -114,7 +115,17 @@ class _Column:
         self.to_arrow = to_arrow
 
     def put(self, value) -> None:
-        self.lengths.append(self.values.put(value))
+        g = self.values  # (`_Grow.put`, inline: a recording makes some 100,000 of these)
+        m = len(value)
+        if g.n + m > len(g.a):
+            g._room(m)
+        g.a[g.n : g.n + m] = value
+        g.n += m
+        self.lengths.append(m)
+
+    def put_rows(self, values) -> None:
+        """The values of len(values) rows of one instance each."""
+        self.lengths.extend([1] * self.values.put(values))
 
     def take(self) -> tuple[pa.Array, np.ndarray]:
         lengths, self.lengths = self.lengths, []
@@ -276,6 +287,18 @@ def _fixed_strips(drawn: np.ndarray) -> pa.Array:
     return rows._STRIPS.arrow((points, np.full(m, n, np.int32)))
 
 
+class Pairs(Kind):
+    """(m, 4) [ax, ay, bx, by]: m two-point line strips (segments from a to b), as float32:
+    the rows' values are the strips' points one after the other (associations, lines)."""
+
+    def column(self) -> _Column:
+        return _Column((4,), np.float32, _pairs_arrow)
+
+
+def _pairs_arrow(values: np.ndarray) -> pa.Array:
+    return rows._STRIPS.arrow((values.reshape(-1, 2), np.full(len(values), 2, np.int32)))
+
+
 class Strips(Kind):
     """(points (P, 2), lengths (m,)): m line strips one after the other (`strips`)."""
 
@@ -296,14 +319,25 @@ class _StripsColumn:
         self.points.put(points)
         self.lengths.append(self.strip_lengths.put(lengths))
 
+    def put_rows(self, value) -> None:
+        """Rows of one strip each: (points, lengths (n,)), strip i of row i."""
+        points, lengths = value
+        self.points.put(points)
+        self.lengths.extend([1] * self.strip_lengths.put(lengths))
+
     def take(self) -> tuple[pa.Array, np.ndarray]:
         data = (self.points.take(), self.strip_lengths.take())
         lengths, self.lengths = self.lengths, []
         return rows._STRIPS.arrow(data), _offsets(lengths)
 
 
+_NO_STRIPS = (np.zeros((0, 2)), np.zeros(0, np.int32))  # (read, never written: `put` copies)
+
+
 def strips(pieces) -> tuple[np.ndarray, np.ndarray]:
     """A `Strips` value: a list of (n_i, 2) arrays, or one (m, n, 2) array of m strips."""
+    if not len(pieces):
+        return _NO_STRIPS
     if isinstance(pieces, np.ndarray) and pieces.ndim == 3:
         m, n = pieces.shape[:2]
         return pieces.reshape(-1, 2), np.full(m, n, np.int32)
@@ -387,6 +421,17 @@ class Table:
         self.time.append(np.nan if stamp_s is None else stamp_s)
         for column, value in zip(self.columns, values):
             column.put(value)
+
+    def add_rows(self, scan: list[int], stamps_s: list[float], values: tuple) -> None:
+        """Rows at the scans `scan` and times `stamps_s` (s, NaN for none), each with one
+        instance a field: the values of the Kind fields in order, each those of every row
+        (n rows' values, as `put` takes one row's; a `Strips` field: one strip a row). Only
+        the kinds of fixed shape (`Vectors`, `AxisZ`, `Floats`, `Formatted`, `Ellipses`,
+        `Pairs`, ...) and `Strips` take rows so."""
+        self.scan.extend(scan)
+        self.time.extend(stamps_s)
+        for column, value in zip(self.columns, values):
+            column.put_rows(value)
 
     def take(self) -> tuple[np.ndarray, np.ndarray, list]:
         """(scan (n,) int64, time (n,) s with NaN for none, [(descriptor, arrow array of every
