@@ -19,6 +19,7 @@ This module does not import rerun (`viz` does, and passes its archetype classes)
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import numpy as np
@@ -220,15 +221,18 @@ class _ScanColumn:
 
     def take(self) -> tuple[pa.Array, np.ndarray]:
         ranges, geometry = self.ranges.take(), self.geometry.take()
-        ends = np.cumsum(geometry[:, 0].astype(np.int64))
+        starts = np.cumsum(geometry[:, 0].astype(np.int64)) - geometry[:, 0].astype(np.int64)
         points, lengths = [], np.empty(len(geometry), np.int32)
-        for i, (n, a0, da) in enumerate(geometry.tolist()):
-            r = ranges[ends[i] - int(n) : ends[i]]
+        # the rows in runs of one laser geometry, each run at once: (rows, beams) ranges
+        change = np.flatnonzero((geometry[1:] != geometry[:-1]).any(axis=1)) + 1
+        bounds = [0, *change.tolist(), len(geometry)]
+        for i, j in itertools.pairwise(bounds):
+            n, a0, da = geometry[i].tolist()
+            r = ranges[starts[i] : starts[i] + (j - i) * int(n)].reshape(j - i, int(n))
             cos, sin = self.kind.trig(int(n), a0, da)
             valid = np.isfinite(r)
-            xy = np.stack([r * cos, r * sin], axis=1)[valid]
-            points.append(xy)
-            lengths[i] = len(xy)
+            points.append(np.stack([r * cos, r * sin], axis=2)[valid])
+            lengths[i:j] = valid.sum(axis=1)
         flat = np.concatenate(points) if points else np.zeros((0, 2))
         return rows._VECTORS.arrow(flat.astype(np.float32)), _offsets(lengths)
 

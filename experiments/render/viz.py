@@ -92,7 +92,7 @@ FLUSH_TIMEOUT_S = 120.0
 # file has no such limit: on a loaded machine it made batches of a few scans, and the cost of a
 # send is mostly per call: some 0.5 ms of CPU a `send_columns` in rerun 0.41, whatever its
 # rows, 15 a batch); 1: each row as it comes.
-BATCH_SCANS = 256
+BATCH_SCANS = 1024
 BATCH_S = 0.25
 # The map's ellipses (`world/landmarks/ellipses`) are logged again when a landmark joined or left
 # the map, else once this many seconds of the sequence's time have passed since they last were,
