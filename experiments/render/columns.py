@@ -19,6 +19,7 @@ This module does not import rerun (`viz` does, and passes its archetype classes)
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import numpy as np
@@ -36,6 +37,7 @@ __all__ = [
     "Floats",
     "Formatted",
     "IdLabels",
+    "Pairs",
     "ScanPoints",
     "Spec",
     "Strips",
@@ -114,7 +116,17 @@ class _Column:
         self.to_arrow = to_arrow
 
     def put(self, value) -> None:
-        self.lengths.append(self.values.put(value))
+        g = self.values  # (`_Grow.put`, inline: a recording makes some 100,000 of these)
+        m = len(value)
+        if g.n + m > len(g.a):
+            g._room(m)
+        g.a[g.n : g.n + m] = value
+        g.n += m
+        self.lengths.append(m)
+
+    def put_rows(self, values) -> None:
+        """The values of len(values) rows of one instance each."""
+        self.lengths.extend([1] * self.values.put(values))
 
     def take(self) -> tuple[pa.Array, np.ndarray]:
         lengths, self.lengths = self.lengths, []
@@ -209,15 +221,18 @@ class _ScanColumn:
 
     def take(self) -> tuple[pa.Array, np.ndarray]:
         ranges, geometry = self.ranges.take(), self.geometry.take()
-        ends = np.cumsum(geometry[:, 0].astype(np.int64))
+        starts = np.cumsum(geometry[:, 0].astype(np.int64)) - geometry[:, 0].astype(np.int64)
         points, lengths = [], np.empty(len(geometry), np.int32)
-        for i, (n, a0, da) in enumerate(geometry.tolist()):
-            r = ranges[ends[i] - int(n) : ends[i]]
+        # the rows in runs of one laser geometry, each run at once: (rows, beams) ranges
+        change = np.flatnonzero((geometry[1:] != geometry[:-1]).any(axis=1)) + 1
+        bounds = [0, *change.tolist(), len(geometry)]
+        for i, j in itertools.pairwise(bounds):
+            n, a0, da = geometry[i].tolist()
+            r = ranges[starts[i] : starts[i] + (j - i) * int(n)].reshape(j - i, int(n))
             cos, sin = self.kind.trig(int(n), a0, da)
             valid = np.isfinite(r)
-            xy = np.stack([r * cos, r * sin], axis=1)[valid]
-            points.append(xy)
-            lengths[i] = len(xy)
+            points.append(np.stack([r * cos, r * sin], axis=2)[valid])
+            lengths[i:j] = valid.sum(axis=1)
         flat = np.concatenate(points) if points else np.zeros((0, 2))
         return rows._VECTORS.arrow(flat.astype(np.float32)), _offsets(lengths)
 
@@ -248,8 +263,8 @@ class Ellipses(Kind):
         self.n = n
 
     def _arrow(self, values: np.ndarray) -> pa.Array:
-        drawn = ellipse_polylines(values[:, :2], values[:, 2:].reshape(-1, 2, 2), n=self.n)
-        return _fixed_strips(drawn)
+        covs = values[:, 2:].reshape(-1, 2, 2)
+        return _fixed_strips(ellipse_polylines(values[:, :2], covs, n=self.n, dtype=np.float32))
 
     def column(self) -> _Column:
         return _Column((6,), np.float64, self._arrow)
@@ -272,7 +287,20 @@ class Circles(Kind):
 def _fixed_strips(drawn: np.ndarray) -> pa.Array:
     """(m, n, 2) m strips of n points as rerun's LineStrip2D components."""
     m, n = drawn.shape[:2]
-    return rows._STRIPS.arrow((drawn.reshape(-1, 2).astype(np.float32), np.full(m, n, np.int32)))
+    points = drawn.reshape(-1, 2).astype(np.float32, copy=False)
+    return rows._STRIPS.arrow((points, np.full(m, n, np.int32)))
+
+
+class Pairs(Kind):
+    """(m, 4) [ax, ay, bx, by]: m two-point line strips (segments from a to b), as float32:
+    the rows' values are the strips' points one after the other (associations, lines)."""
+
+    def column(self) -> _Column:
+        return _Column((4,), np.float32, _pairs_arrow)
+
+
+def _pairs_arrow(values: np.ndarray) -> pa.Array:
+    return rows._STRIPS.arrow((values.reshape(-1, 2), np.full(len(values), 2, np.int32)))
 
 
 class Strips(Kind):
@@ -295,14 +323,25 @@ class _StripsColumn:
         self.points.put(points)
         self.lengths.append(self.strip_lengths.put(lengths))
 
+    def put_rows(self, value) -> None:
+        """Rows of one strip each: (points, lengths (n,)), strip i of row i."""
+        points, lengths = value
+        self.points.put(points)
+        self.lengths.extend([1] * self.strip_lengths.put(lengths))
+
     def take(self) -> tuple[pa.Array, np.ndarray]:
         data = (self.points.take(), self.strip_lengths.take())
         lengths, self.lengths = self.lengths, []
         return rows._STRIPS.arrow(data), _offsets(lengths)
 
 
+_NO_STRIPS = (np.zeros((0, 2)), np.zeros(0, np.int32))  # (read, never written: `put` copies)
+
+
 def strips(pieces) -> tuple[np.ndarray, np.ndarray]:
     """A `Strips` value: a list of (n_i, 2) arrays, or one (m, n, 2) array of m strips."""
+    if not len(pieces):
+        return _NO_STRIPS
     if isinstance(pieces, np.ndarray) and pieces.ndim == 3:
         m, n = pieces.shape[:2]
         return pieces.reshape(-1, 2), np.full(m, n, np.int32)
@@ -386,6 +425,17 @@ class Table:
         self.time.append(np.nan if stamp_s is None else stamp_s)
         for column, value in zip(self.columns, values):
             column.put(value)
+
+    def add_rows(self, scan: list[int], stamps_s: list[float], values: tuple) -> None:
+        """Rows at the scans `scan` and times `stamps_s` (s, NaN for none), each with one
+        instance a field: the values of the Kind fields in order, each those of every row
+        (n rows' values, as `put` takes one row's; a `Strips` field: one strip a row). Only
+        the kinds of fixed shape (`Vectors`, `AxisZ`, `Floats`, `Formatted`, `Ellipses`,
+        `Pairs`, ...) and `Strips` take rows so."""
+        self.scan.extend(scan)
+        self.time.extend(stamps_s)
+        for column, value in zip(self.columns, values):
+            column.put_rows(value)
 
     def take(self) -> tuple[np.ndarray, np.ndarray, list]:
         """(scan (n,) int64, time (n,) s with NaN for none, [(descriptor, arrow array of every

@@ -92,7 +92,7 @@ FLUSH_TIMEOUT_S = 120.0
 # file has no such limit: on a loaded machine it made batches of a few scans, and the cost of a
 # send is mostly per call: some 0.5 ms of CPU a `send_columns` in rerun 0.41, whatever its
 # rows, 15 a batch); 1: each row as it comes.
-BATCH_SCANS = 256
+BATCH_SCANS = 1024
 BATCH_S = 0.25
 # The map's ellipses (`world/landmarks/ellipses`) are logged again when a landmark joined or left
 # the map, else once this many seconds of the sequence's time have passed since they last were,
@@ -195,8 +195,8 @@ _TENTATIVES = _points(3.0, (255, 200, 0))
 _SEGMENTS = _C.Spec(
     rr.LineStrips2D, strips=_C.Strips(), radii=_C.Const(rows.radii_ui(1.5)), colors=_C.Colors()
 )
-_LINES = _lines(_C.Strips(), 2.0, (60, 120, 255))
-_ASSOCIATIONS = _lines(_C.Strips(), 1.0, (0, 200, 255))
+_LINES = _lines(_C.Pairs(), 2.0, (60, 120, 255))
+_ASSOCIATIONS = _lines(_C.Pairs(), 1.0, (0, 200, 255))
 _PATH = _lines(_C.Strips(), 1.5, (255, 80, 80))
 _TRUE_PATH = _lines(_C.Strips(), 1.0, (255, 255, 255))
 _VEHICLE_ELLIPSE = _lines(_C.Ellipses(40), 1.0, (255, 80, 80))  # (shapes.ellipse_polyline's)
@@ -366,9 +366,75 @@ class _Track:
     def piece(self) -> np.ndarray:
         """The points added since the last piece, after that piece's last point: the next
         piece of the path as a trail draws it (the first piece: the first point alone)."""
-        part = self._xy[max(self._mark - 1, 0) : self._n]
-        self._mark = self._n
-        return part
+        start, end = self.span()
+        return self._xy[start:end]
+
+    def span(self) -> tuple[int, int]:
+        """The next piece (`piece`) as [start, end) in `xy` (whose points never change)."""
+        start, self._mark = max(self._mark - 1, 0), self._n
+        return start, self._n
+
+    def pieces(self, spans: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The pieces of `spans` (n, 2) [start, end) as a `columns.Strips` value of n rows of
+        one strip each: (their points one after the other, their lengths)."""
+        lengths = (spans[:, 1] - spans[:, 0]).astype(np.int32)
+        first = np.repeat(spans[:, 0] - np.cumsum(lengths) + lengths, lengths)
+        return self.xy[first + np.arange(len(first))], lengths
+
+
+class _VehicleRows:
+    """The vehicle's five entities of a batch (`world/vehicle`, `world/follow`,
+    `world/vehicle/arrow`, `world/vehicle_ellipse`, `world/path`), kept as one record a scan:
+    the pose and its covariance (12 numbers) and the path's piece in the track (`_Track.span`).
+    At the flush (`into`) the records become the five entities' rows, every row of a field at
+    once: the same values as a row a scan of each (`tests/experiments/test_recording_columns.py`)
+    at a fifth of the calls."""
+
+    def __init__(self, track: _Track, ellipse_scale: float) -> None:
+        self.track = track
+        self.scale2 = ellipse_scale**2
+        self.values = columns._Grow((12,), np.float64)  # [x, y, theta, P (3, 3) row by row]
+        self.spans = columns._Grow((2,), np.int64)
+        self.scan: list[int] = []
+        self.time: list[float] = []
+
+    def add(self, k: int, stamp_s: float | None, pose: np.ndarray, cov: np.ndarray) -> None:
+        g = self.values
+        if g.n == len(g.a):
+            g._room(1)
+        g.a[g.n, :3] = pose
+        g.a[g.n, 3:] = cov.reshape(-1)
+        g.n += 1
+        self.spans.put1(self.track.span())
+        self.scan.append(k)
+        self.time.append(np.nan if stamp_s is None else stamp_s)
+
+    def into(self, batch: _Batch) -> None:
+        """The records' rows into the batch's tables (nothing when there are none)."""
+        if self.scan:
+            scan, stamps, rows_of = self.take()
+            for path, spec, values in rows_of:
+                batch.table(path, spec).add_rows(scan, stamps, values)
+
+    def take(self) -> tuple[list[int], list[float], list]:
+        """(scans, times s, [(path, spec, values of every row of each field)]) of the
+        records added since the last take."""
+        v, spans = self.values.take(), self.spans.take()
+        scan, self.scan = self.scan, []
+        stamps, self.time = self.time, []
+        xyz = np.zeros((len(v), 3))
+        xyz[:, :2] = v[:, :2]
+        ellipses = np.empty((len(v), 6))  # [x, y, the position's covariance, scaled]
+        ellipses[:, :2] = v[:, :2]
+        ellipses[:, 2:] = v[:, [3, 4, 6, 7]] * self.scale2
+        rows_of = [
+            ("world/vehicle", _POSE, (xyz, v[:, 2])),
+            ("world/follow", _FOLLOW, (xyz,)),  # y mirrored: see _y_up
+            ("world/vehicle/arrow", _VEHICLE_ARROW, (np.sqrt(np.maximum(v[:, 11], 0.0)),)),
+            ("world/vehicle_ellipse", _VEHICLE_ELLIPSE, (ellipses,)),
+            ("world/path", _PATH, (self.track.pieces(spans),)),
+        ]
+        return scan, stamps, rows_of
 
 
 class _Batch:
@@ -393,8 +459,15 @@ class _Batch:
         self.max_s = max_s
         self.one_by_one = one_by_one
         self.tables: dict[tuple[str, columns.Spec], columns.Table] = {}
+        self.records: list = []  # whose rows are made at the send (`into(batch)`)
         self._n = 0
         self._since = time.monotonic()
+
+    def table(self, path: str, spec: columns.Spec) -> columns.Table:
+        table = self.tables.get((path, spec))
+        if table is None:
+            table = self.tables[(path, spec)] = spec.table()
+        return table
 
     def add(self, path: str, spec: columns.Spec, k: int, stamp_s: float | None, values) -> None:
         table = self.tables.get((path, spec))
@@ -410,6 +483,8 @@ class _Batch:
 
     def send(self) -> None:
         self._n, self._since = 0, time.monotonic()
+        for record in self.records:  # (`_VehicleRows`: made into rows now)
+            record.into(self)
         for (path, _), table in self.tables.items():
             if table.n:
                 self._send(path, *table.take())
@@ -569,6 +644,8 @@ class Recorder(NullRecorder):
             self.rec.log(_y_up(frame), rr.Transform3D(scale=[1.0, -1.0, 1.0]), static=True)
         one_by_one = self._batch_scans == 1
         self._batch = _Batch(self.rec, self._batch_scans, self.batch_s, one_by_one)
+        self._vehicle = _VehicleRows(self._est_path, self.ellipse_scale)
+        self._batch.records.append(self._vehicle)
 
     def _send_batch(self) -> None:
         """The map's ellipses at the last scan, when not yet logged; then the batch goes."""
@@ -677,6 +754,10 @@ class Recorder(NullRecorder):
             return
         table = spec.table()
         table.add(0, None, values)
+        self._log_now(path, table)
+
+    def _log_now(self, path: str, table: columns.Table) -> None:
+        """The table's one row logged at once, at rerun's current time (`rec.log`)."""
         _, _, cols = table.take()
         self.rec.log(path, [rows.Described(d, array) for d, array, _ in cols])
 
@@ -684,10 +765,10 @@ class Recorder(NullRecorder):
         """The frame entity's pose at this scan, once (a scan and its features share it)."""
         if pose is None:
             return
-        key = (self._k, frame, tuple(float(v) for v in pose))
+        key = (self._k, frame, *np.asarray(pose, float).tolist())
         if key != self._posed:
             self._posed = key
-            self._put(frame, _POSE, [[key[2][0], key[2][1], 0.0]], key[2][2:])
+            self._put(frame, _POSE, [[key[2], key[3], 0.0]], key[4:])
 
     def log_scan(self, scan: Scan, pose=None, path: str = "world/laser/scan") -> None:
         """Scan points in the laser frame at `path`. With `pose` (the laser's world pose), the
@@ -708,8 +789,7 @@ class Recorder(NullRecorder):
         kinds = np.asarray(features.segment_kind, np.int64).reshape(-1)
         self._put(f"{path}/segments", _SEGMENTS, columns.strips(strips), KIND_COLORS[kinds])
         self.log_circles(f"{path}/circles", features.circle_params, None, features.method)
-        ends = np.asarray(features.line_endpoints, float).reshape(-1, 2, 2)
-        self._put(f"{path}/lines", _LINES, columns.strips(ends))
+        self._put(f"{path}/lines", _LINES, np.asarray(features.line_endpoints).reshape(-1, 4))
         self._put(f"{path}/edges", _EDGES, np.asarray(features.edge_xy, float).reshape(-1, 2))
 
     def log_circles(
@@ -763,18 +843,18 @@ class Recorder(NullRecorder):
     def log_vehicle(self, pose, cov) -> None:
         """Estimated pose (frame entity and arrow), 95% position ellipse and the path so far."""
         pose = np.asarray(pose, float)
-        cov = np.asarray(cov, float)
         self._est_path.append(pose[:2])
         if self._skip():
             return
-        x, y, th = pose.tolist()
-        self._put("world/vehicle", _POSE, [[x, y, 0.0]], [th])
-        self._put("world/follow", _FOLLOW, [[x, y, 0.0]])  # y mirrored: see _y_up
-        self._put("world/vehicle/arrow", _VEHICLE_ARROW, [np.sqrt(max(cov[2, 2], 0.0))])
-        scaled = cov[:2, :2] * self.ellipse_scale**2
-        self._put("world/vehicle_ellipse", _VEHICLE_ELLIPSE, [[x, y, *scaled.reshape(-1)]])
-        piece = self._est_path.piece()
-        self._put("world/path", _PATH, (piece, np.array([len(piece)], np.int32)))
+        if self._stamp is not _NO_SCAN:
+            self._vehicle.add(self._k, self._stamp, pose, np.asarray(cov, float))
+            return
+        self._vehicle.add(0, None, pose, np.asarray(cov, float))  # before any scan: at once
+        _, _, rows_of = self._vehicle.take()
+        for path, spec, values in rows_of:
+            table = spec.table()
+            table.add_rows([0], [np.nan], values)
+            self._log_now(path, table)
 
     def log_landmarks(self, xy, cov, ids, existence=None) -> None:
         """The map; existence (n,): map policy "existence", each landmark's, in its label and
@@ -819,7 +899,7 @@ class Recorder(NullRecorder):
             return
         a = np.asarray(from_xy, float).reshape(-1, 2)
         b = np.asarray(to_xy, float).reshape(-1, 2)
-        self._put("world/associations", _ASSOCIATIONS, columns.strips(np.stack([a, b], axis=1)))
+        self._put("world/associations", _ASSOCIATIONS, np.concatenate((a, b), axis=1))
 
     def log_closure(self, event: dict) -> None:
         """A loop-closure match (`slam.closure.ClosureEvent.to_dict()`) as a line of the text

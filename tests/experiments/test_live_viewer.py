@@ -244,7 +244,7 @@ def test_extract_streams_to_a_viewer(run_file, sink, tmp_path):
 
 def test_ellipses_drawn_at_once_are_those_drawn_one_by_one():
     """The recording draws every landmark's ellipse each scan with one call; the outlines are
-    those of `ellipse_polyline`, bit for bit (the same eigh and products per matrix)."""
+    those of `ellipse_polyline`, bit for bit (the same closed-form products per matrix)."""
     from experiments.render.shapes import ellipse_polyline, ellipse_polylines
 
     rng = np.random.default_rng(0)
