@@ -438,6 +438,18 @@ def npz_cases(fmt: str, arrays: dict, tolerated, label_prefix: str = "") -> list
     return out
 
 
+def _parses(suffix: str, data: bytes) -> bool:
+    """Whether `data` is a valid TOML (".toml") or JSON (".json") document."""
+    import tomllib
+
+    try:
+        text = data.decode("utf-8")
+        tomllib.loads(text) if suffix == ".toml" else json.loads(text)
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError, json.JSONDecodeError):
+        return False
+    return True
+
+
 def file_cases(fmt: str, good: Callable[[Path], Path]) -> list[Case]:
     """Damage to the file as a whole: the key to name is the file's own name."""
 
@@ -450,17 +462,11 @@ def file_cases(fmt: str, good: Callable[[Path], Path]) -> list[Case]:
     def truncate(p):
         b = p.read_bytes()
         n = len(b) // 2
-        if b"\n" in (b[n - 1 : n], b[n : n + 1]):
-            # a cut at a line's end can leave a shorter valid text file (a TOML prefix that
-            # simply sets fewer keys): cut inside the next line of at least 4 bytes instead
-            i = n
-            while i < len(b):
-                j = b.find(b"\n", i)
-                j = len(b) if j < 0 else j
-                if j - i >= 4:
-                    n = i + (j - i) // 2
-                    break
-                i = j + 1
+        if p.suffix in (".toml", ".json"):
+            # a cut can leave a shorter valid file (a TOML prefix that sets fewer keys, a
+            # number cut short): cut further on, byte by byte, until the prefix no longer parses
+            while n < len(b) and _parses(p.suffix, b[:n]):
+                n += 1
         p.write_bytes(b[:n])
         return p
 
