@@ -225,7 +225,7 @@ class _ScanColumn:
         points, lengths = [], np.empty(len(geometry), np.int32)
         # the rows in runs of one laser geometry, each run at once: (rows, beams) ranges
         change = np.flatnonzero((geometry[1:] != geometry[:-1]).any(axis=1)) + 1
-        bounds = [0, *change.tolist(), len(geometry)]
+        bounds = [0, *change.tolist(), len(geometry)] if len(geometry) else []  # no rows: none
         for i, j in itertools.pairwise(bounds):
             n, a0, da = geometry[i].tolist()
             r = ranges[starts[i] : starts[i] + (j - i) * int(n)].reshape(j - i, int(n))

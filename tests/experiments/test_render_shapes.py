@@ -67,3 +67,15 @@ def test_one_ellipse_float32_and_none():
     f32 = ellipse_polylines(centers, covs, dtype=np.float32)
     assert f32.dtype == np.float32 and np.array_equal(f32, every.astype(np.float32))
     assert ellipse_polylines(np.zeros((0, 2)), np.zeros((0, 2, 2))).shape == (0, 41, 2)
+
+
+def test_a_scan_column_with_no_rows_takes_empty():
+    """A scan column taken before any row: no points and one offset (what a batch would send)."""
+    from experiments.render.columns import ScanPoints, _ScanColumn
+
+    col = _ScanColumn(ScanPoints())
+    points, offsets = col.take()
+    assert len(points) == 0 and offsets.tolist() == [0]
+    col.put((np.array([1.0, np.nan, 2.0]), 0.0, 0.5))
+    points, offsets = col.take()
+    assert len(points) == 2 and offsets.tolist() == [0, 2]
