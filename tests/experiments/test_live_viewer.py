@@ -243,8 +243,9 @@ def test_extract_streams_to_a_viewer(run_file, sink, tmp_path):
 
 
 def test_ellipses_drawn_at_once_are_those_drawn_one_by_one():
-    """The recording draws every landmark's ellipse each scan with one call; the outlines are
-    those of `ellipse_polyline`, bit for bit (the same closed-form products per matrix)."""
+    """The recording draws every landmark's ellipse each scan with one call; each outline is
+    the 2.4477-sigma (95%) ellipse numpy's eigh gives for its matrix (the same points,
+    whichever end of the axes eigh's signs start from)."""
     from experiments.render.shapes import ellipse_polyline, ellipse_polylines
 
     rng = np.random.default_rng(0)
@@ -254,6 +255,16 @@ def test_ellipses_drawn_at_once_are_those_drawn_one_by_one():
     covs[0] = [[1.0, 0.0], [0.0, 0.0]]  # degenerate: a segment
     one_by_one = np.array([ellipse_polyline(c, p) for c, p in zip(centers, covs)])
     assert np.array_equal(ellipse_polylines(centers, covs), one_by_one)
+    drawn = ellipse_polylines(centers, covs)
+    for c, p, line in zip(centers, covs, drawn):
+        w, v = np.linalg.eigh(p)
+        axes = v * (2.4477 * np.sqrt(np.clip(w, 0.0, None)))  # columns: the two semi-axes
+        # each drawn point is c + axes @ (cos t, sin t) for some t: the unit circle back
+        u = np.linalg.lstsq(axes, (line - c).T, rcond=None)[0] if w[0] > 1e-12 else None
+        if u is not None:
+            np.testing.assert_allclose(np.hypot(*u), 1.0, atol=1e-9)
+        else:  # the degenerate matrix: a segment along its one axis
+            np.testing.assert_allclose(np.abs(line - c).max(axis=0), np.abs(axes[:, 1]), atol=1e-9)
     assert ellipse_polylines(np.zeros((0, 2)), np.zeros((0, 2, 2))).shape == (0, 41, 2)
 
 
