@@ -10,11 +10,13 @@ from association.inputs import _KERNEL_RANKS, _ranks, _ranks_of
 
 
 @pytest.mark.parametrize("seed", range(20))
-def test_kernel_ranks_are_lexsort_ranks(seed):
+@pytest.mark.parametrize("size", ["drawn", 0, 1, 2])
+def test_kernel_ranks_are_lexsort_ranks(seed, size):
     """Rows drawn from few values (so many columns tie and whole rows repeat), with NaN and
-    -0.0 among them: the kernel's ranks equal the lexsort's, row for row."""
+    -0.0 among them: the kernel's ranks equal the lexsort's, row for row, for a drawn number
+    of rows and for none, one and two."""
     rng = np.random.default_rng(seed)
-    k = int(rng.integers(0, _KERNEL_RANKS + 1))
+    k = int(rng.integers(0, _KERNEL_RANKS + 1)) if size == "drawn" else size
     values = np.array([-1.0, -0.0, 0.0, 0.5, 2.0, np.nan])
     a = values[rng.integers(0, values.size, (k, 2))]
     b = values[rng.integers(0, values.size, (k, 4))]
