@@ -190,7 +190,10 @@ def made_once(tmp_path_factory, name: str, make) -> Path:
     the others wait for it, then read it (read-only, as the session fixtures say). A make that
     fails leaves the next one to try again."""
     base = tmp_path_factory.getbasetemp()
-    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    # popen workers' folders (popen-gw0, ...) sit in this run's own basetemp; any other layout
+    # (no xdist, other gateways) keeps to its own folder, never one shared across runs
+    shared = os.environ.get("PYTEST_XDIST_WORKER") and base.name.startswith("popen-")
+    root = base.parent if shared else base
     folder, made = root / f"once-{name}", root / f"once-{name}.made"
     with open(root / f"once-{name}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes

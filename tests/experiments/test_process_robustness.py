@@ -170,6 +170,10 @@ def warm():
     shutil.rmtree(scratch)
 
 warm()
+import threading
+# a fork copies only the forking thread: a thread left running by the warm-up (a progress
+# heartbeat) could hold a lock the children then wait on for ever
+assert threading.active_count() == 1, threading.enumerate()
 rng = random.Random(spec["seed"])
 results = []
 for i, kind in enumerate(spec["pairs"]):
