@@ -360,6 +360,8 @@ class MapPolicy:
         0), and leaves only when its existence falls below `existence_remove_prob`, so a trunk
         the extractor reports in, say, 60% of the scans that reach it accumulates its sightings
         (`slam.existence`, "Intermittent detection"). False: the paper's drop at a miss.
+        Its limit: a tentative that leaves the laser's reach is charged no miss and stays a
+        tentative to the end of the run (the set is not bounded yet; off by default).
         The window associator ("ihgr-window") keeps no tentatives: it has no effect there.
     """
 
@@ -1188,10 +1190,10 @@ def config_from_dict(cls, data: Mapping, path: str = ""):
 
 
 @functools.cache
-def _type_hints(cls) -> dict:
-    """`typing.get_type_hints(cls)`, resolved once per class (read only): resolving the
+def _type_hints(cls) -> Mapping:
+    """`typing.get_type_hints(cls)`, resolved once per class, read only: resolving the
     postponed annotations was over half the time of reading a sweep or configuration file."""
-    return typing.get_type_hints(cls)
+    return types.MappingProxyType(typing.get_type_hints(cls))
 
 
 _MAX_INT = 2**63 - 1  # TOML's integers are 64-bit

@@ -120,7 +120,9 @@ def derive_see_through(
     landmarks (as `beam_detection_rates` places them) in the scans of `scans` where at least
     min_beams of them were free and no measurement updated the landmark, the share that passed
     beyond it (none passed: half a beam over those counted, a rate the run cannot tell from 0;
-    the model needs q > 0)."""
+    the model needs q > 0). The beams counted include those a nearer return occluded, which
+    could neither pass nor hit: the rate is low by their share (kept as measured for the
+    figures of the lab notebook; to count free beams only when it is next used)."""
     through = reach = 0
     for ev, free, hit in _views(lg, seq, scans, established):
         missed = (free >= min_beams) & ~hit
