@@ -57,14 +57,33 @@ def npz_digest(path: Path) -> str:
     return h.hexdigest()
 
 
+def _feed(h, value) -> None:
+    """Hash a value: arrays by dtype, shape and bytes (inside dicts, lists and tuples too: a
+    repr would summarise a long array with "..."), anything else by its repr."""
+    if isinstance(value, np.ndarray):
+        h.update(f"{value.dtype.str}|{value.shape}|".encode())
+        h.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, dict):
+        h.update(f"dict{len(value)}|".encode())
+        for k, v in value.items():
+            h.update(f"{k!r}:".encode())
+            _feed(h, v)
+    elif isinstance(value, (list, tuple)):
+        h.update(f"{type(value).__name__}{len(value)}|".encode())
+        for v in value:
+            _feed(h, v)
+    else:
+        h.update(repr(value).encode())
+
+
 def log_digest(log) -> str:
-    """SHA-256 over the `SlamLog`'s arrays (its timings and config aside), field order."""
+    """SHA-256 over the `SlamLog`'s fields (its timings and config aside), field order."""
     h = hashlib.sha256()
     for name, value in vars(log).items():
         if name in ("timing_s", "config"):
             continue
         h.update(f"{name}|".encode())
-        h.update(repr(value).encode() if not isinstance(value, np.ndarray) else value.tobytes())
+        _feed(h, value)
     return h.hexdigest()
 
 
