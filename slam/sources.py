@@ -21,6 +21,7 @@ from slam.config import OWN_COVARIANCE, FeaturesConfig, MeasurementConfig, SlamC
 from slam.errors import SlamError
 from slam.measurement import MeasurementModel
 from slam.sequence import Sequence
+from slam.validators import readonly
 
 __all__ = ["DetectionsSource", "ExtractorSource", "GivenSource", "Measurements", "make_source"]
 
@@ -104,12 +105,12 @@ class DetectionsSource:
         self._z, self._R = self.model.measure(stored, seq.det_cov)
         c, s = np.cos(self._z[:, 1]), np.sin(self._z[:, 1])
         n = stored.shape[0]
-        self._circles = _readonly(
+        self._circles = readonly(
             np.column_stack([stored[:, 0] * c, stored[:, 0] * s, seq.det_radius])
         )
-        self._no_cov = _readonly(np.zeros((n, 3, 3)))
-        self._no_beams = _readonly(np.zeros((n, 2), np.int64))
-        self._no_rms = _readonly(np.full(n, np.nan))
+        self._no_cov = readonly(np.zeros((n, 3, 3)))
+        self._no_beams = readonly(np.zeros((n, 2), np.int64))
+        self._no_rms = readonly(np.full(n, np.nan))
 
     needs_scan = False  # the detections are read from the sequence: the loop builds no Scan
 
@@ -137,12 +138,6 @@ class DetectionsSource:
             n_beams=e.n_beams,
         )
         return f, self._z[a:b].copy(), self._R[a:b].copy()
-
-
-def _readonly(a: np.ndarray) -> np.ndarray:
-    """`a`, made read-only: its rows are shared by the scans' Features."""
-    a.setflags(write=False)
-    return a
 
 
 class GivenSource:
