@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from arm_probes import antenna_track  # docs/, beside this script
 from threadpoolctl import threadpool_limits
 
 from experiments.eval.gps import score_sequence
@@ -41,10 +42,6 @@ FIRST, SECOND = (1040.0, 1110.0), (1240.0, 1400.0)  # s: the arm's two visits
 WINDOW_S, STEP_S, BIN_S = 30.0, 5.0, 4.0
 
 
-def wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def dead_reckoned(log) -> np.ndarray:
     pose = np.zeros_like(log.pose)
     pose[0] = log.pose[0]
@@ -53,15 +50,11 @@ def dead_reckoned(log) -> np.ndarray:
     return pose
 
 
-def antenna(pose: np.ndarray, at: np.ndarray) -> np.ndarray:
-    return np.array([se2.compose(p, at)[:2] for p in pose])
-
-
 def gps_dr_poses(seq, log, vouched) -> np.ndarray:
     """(N, 3) each scan's pose: the dead-reckoned pose moved by the rigid fit of the
     dead-reckoned antenna to the vouched fixes within WINDOW_S / 2 (NaN without a fit)."""
     t, dr = log.scan_t, dead_reckoned(log)
-    a = antenna(dr, log.antenna_pose)
+    a = antenna_track(dr, log.antenna_pose)
     gt, gxy = seq.gps_t[vouched], seq.gps_xy[vouched]
     ag = np.c_[np.interp(gt, t, a[:, 0]), np.interp(gt, t, a[:, 1])]
     out = np.full_like(dr, np.nan)
@@ -111,7 +104,7 @@ def visits(log, lid, t, w) -> None:
 
 
 def corrections(log) -> np.ndarray:
-    dh = wrap(np.diff(log.pose[:, 2]))
+    dh = se2.wrap_angle(np.diff(log.pose[:, 2]))
     return np.r_[0.0, dh - log.odo_delta[1:, 2]]
 
 
@@ -159,7 +152,7 @@ def side(log) -> None:
 
 
 def displacement_errors(seq, log, vouched, spans=(10.0, 30.0, 60.0)) -> str:
-    a = antenna(log.pose, log.antenna_pose)
+    a = antenna_track(log.pose, log.antenna_pose)
     keep = vouched & (seq.gps_t >= log.scan_t[0]) & (seq.gps_t <= log.scan_t[-1])
     gt, g = seq.gps_t[keep], seq.gps_xy[keep]
     ag = np.c_[np.interp(gt, log.scan_t, a[:, 0]), np.interp(gt, log.scan_t, a[:, 1])]
