@@ -85,7 +85,10 @@ def installed(wheel, tmp_path_factory) -> Path:
     bin_dir = env_dir / "bin"
     pins = root / "constraints.txt"  # this environment's versions, not the newest releases
     pins.write_text(_run([*PIP, "freeze", "--exclude-editable"], root, dict(os.environ)))
-    install = ["--python", bin_dir / "python", "install", "-q", "-c", pins, wheel]
+    # --no-compile: pip would byte-compile every module of every dependency (scipy, numba,
+    # gtsam, ...; about 20 s of CPU), while the commands below import a few of them, which
+    # Python compiles as they load; what is installed, and so what the test checks, is the same
+    install = ["--python", bin_dir / "python", "install", "-q", "--no-compile", "-c", pins, wheel]
     _run([*PIP, *install], root, dict(os.environ))
     return bin_dir
 

@@ -12,6 +12,7 @@ examples take well under a minute on one core; derandomized in CI (`--hypothesis
 
 from __future__ import annotations
 
+import functools
 import itertools
 import json
 from pathlib import Path
@@ -147,11 +148,19 @@ def test_fuzz_config_files(folder, doc):
         assert SlamConfig.from_dict(cfg.to_dict()) == cfg
 
 
+@functools.cache
+def _sweep_mutations(study: str):
+    """The study's mutated sweep files, one strategy built once: not again at each example,
+    where building it (`st.composite` reads its function's source) and validating it took about
+    a quarter of the test's time. The same strategy, so the same examples."""
+    return mutated_tree(base_sweeps()[study], none=False)
+
+
 @pytest.mark.slow
 @FUZZ
 @given(study=st.sampled_from(["association", "slam", "circles"]), data=st.data())
 def test_fuzz_sweep_files(folder, study, data):
-    doc = data.draw(mutated_tree(base_sweeps()[study], none=False))
+    doc = data.draw(_sweep_mutations(study))
     path = _write_toml(folder, doc)
     if path is None:
         return
