@@ -346,6 +346,9 @@ class MapPolicy:
     existence_pd_max, existence_min_beams, existence_see_through_q: the sensor model's
         detection probability, the returns a trunk needs to be seen, the chance that a beam
         passes a real trunk's place (`slam.existence.ExistenceConfig`).
+    existence_pd_range_m, existence_pd_range_scale_m: Pd's range fall-off, pd_max / (1 +
+        exp((d - pd_range_m) / pd_range_scale_m)) at range d (persistent clutter's repeat_prob
+        falls alike; `slam.existence`, "Range fall-off"); inf: Pd does not fall with range.
     existence_false_per_scan: the extractor's false circles per scan (the clutter density is
         that spread over the view's range and field of view).
     existence_birth_prob: the existence of a new tentative: of the circles seen where nothing
@@ -403,6 +406,12 @@ class MapPolicy:
     )
     existence_keep_tentatives: bool = default(
         False, "paper: False, a tentative not seen again is dropped (drop_after_missed)"
+    )
+    existence_pd_range_m: float = default(
+        math.inf, "design: inf, Pd does not fall with range (as before); derived (split-half)"
+    )
+    existence_pd_range_scale_m: float = default(
+        5.0, "design: placeholder, used only with a finite pd_range_m; derived (split-half)"
     )
     existence_unreached_scans: int = default(
         0, "design: 0, a kept tentative out of reach stays to the end of the run (as before)"
@@ -469,6 +478,16 @@ class MapPolicy:
             raise SlamError(
                 "map_policy.existence_keep_tentatives: must be true or false, got "
                 f"{self.existence_keep_tentatives!r}"
+            )
+        v = self.existence_pd_range_m
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            raise SlamError(
+                f"map_policy.existence_pd_range_m: must be > 0 (inf: no fall-off), got {v!r}"
+            )
+        v = self.existence_pd_range_scale_m
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_pd_range_scale_m: must be finite and > 0, got {v!r}"
             )
         v = self.existence_unreached_scans
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:

@@ -35,6 +35,7 @@ from slam.existence import (
     beam_evidence,
     clutter_density,
     detection_probability,
+    falloff,
     gaussian_likelihood,
     update_existence,
     update_existence_persistent,
@@ -77,6 +78,8 @@ class LandmarkExistence:
             max_range_m=float(view.max_range),
             join_prob=float(policy.existence_join_prob),
             remove_prob=float(policy.existence_remove_prob),
+            pd_range_m=float(policy.existence_pd_range_m),
+            pd_range_scale_m=float(policy.existence_pd_range_scale_m),
         )
         fov = float(view.fov[1] - view.fov[0])
         self.kappa = clutter_density(
@@ -201,7 +204,8 @@ class LandmarkExistence:
             ev = beam_evidence(ranges, bearings, z_hat[idx, 0], z_hat[idx, 1], radius, cfg=self.cfg)
         pd = detection_probability(ev, z_hat[idx, 0], np.ones(idx.size, bool), self.cfg)
         # a landmark the association paired was seen, whatever the beams say of its reach
-        pd = np.where(detected[idx], self.cfg.pd_max, pd)
+        f = falloff(z_hat[idx, 0], self.cfg)
+        pd = np.where(detected[idx], self.cfg.pd_max if f is None else self.cfg.pd_max * f, pd)
         self._count_unreached(t_ids, ids[idx][pd > 0])
         r = r_before = self.of(ids[idx])
         r = np.where(np.isfinite(r), r, self.birth)
@@ -219,6 +223,7 @@ class LandmarkExistence:
                 through=ev.through,
                 repeat_prob=self.repeat,
                 cfg=self.cfg,
+                falloff=f,
             )
         for lid, v in zip(ids[idx].tolist(), r.tolist()):
             self.r[lid] = v
