@@ -498,17 +498,55 @@ def reach(extractor: str, variants: list[str]) -> dict:
     return out
 
 
+def table(logs: list[str]) -> dict:
+    """The halves table and the missed trees' misses, as markdown, from `reach` logs (their
+    printed rows; extractor: the log's name after "reach_")."""
+    rows = []
+    for path in logs:
+        ex = path.rsplit("reach_", 1)[-1].split(".")[0]
+        with open(path) as fh:
+            rows += [{"extractor": ex} | json.loads(x) for x in fh if x.startswith('{"variant"')]
+    print("| extractor | variant | derived on | judged on | P / R (landmarks) | tentatives, max |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        print(
+            f"| {r['extractor']} | {r['variant']} | {r['derived_on']} | {r['judged_on']} | "
+            f"{r['precision']:.3f} / {r['recall']:.3f} ({r['landmarks']}) | {r['tentatives_max']} |"
+        )
+    print()
+    print(
+        "| extractor | variant | judged on | fate | trees | sightings | misses | with see-through "
+        "| occluded in part | beyond 30 m | log-odds: sightings / misses (see-through part) "
+        "| rate measured at the misses | median range of the misses (m) |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        for fate, v in r["fates"].items():
+            print(
+                f"| {r['extractor']} | {r['variant']} | {r['judged_on']} | {fate} | {v['trees']} "
+                f"| {v['sightings']} | {v['misses']} | {v['misses_see_through']} "
+                f"| {v['misses_occluded_in_part']} | {v['misses_beyond_30m']} "
+                f"| {v['logodds_sightings']:+.0f} / {v['logodds_misses']:+.0f} "
+                f"({v['logodds_see_through']:+.0f}) | {v['rate_at_misses']:.2f} "
+                f"| {v['range_at_misses_median']:.1f} |"
+            )
+    return {"rows": rows}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
-        "extractor", choices=("detections", "paper", "geometric", "sim", "full", "reach")
+        "extractor", choices=("detections", "paper", "geometric", "sim", "full", "reach", "table")
     )
+    ap.add_argument("--logs", nargs="*", default=[], help="table: the reach runs' logs")
     ap.add_argument("--reach-of", default="detections", help="reach: the extractor")
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS)[:4], choices=list(VARIANTS))
     ap.add_argument("--out", required=True)
     args = ap.parse_args()
     if args.extractor == "sim":
         res = sim(args.variants)
+    elif args.extractor == "table":
+        res = table(args.logs)
     elif args.extractor == "reach":
         res = reach(args.reach_of, args.variants)
     elif args.extractor == "full":
