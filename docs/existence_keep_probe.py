@@ -11,6 +11,12 @@ existence: tentatives kept through their misses" were measured with it once.
     TRUNKSLAM_DATA=/work/shared/datasets .venv/bin/python -P docs/existence_keep_probe.py \
         full --variants "persistent, kept, q derived" --out /tmp/keep_full.json
 
+reach (`--reach-of` an extractor): the established landmarks' detection rate by range and free
+beams on each half of the confirm run (`existence_rates.range_detection_rates`), then per
+variant and derivation the seen reference trees by fate with what their misses were, from
+`LandmarkExistence.trace` (`diagnose_reach`); table (`--logs` of reach runs): those rows as
+the lab notebook's markdown tables (entry "why held-out trees are still missed").
+
 full: the whole Victoria Park run (7249 scans, published detections, IHGR, closure off: the
 preset as `reproduce victoria-park` runs it) with the existence policy and the settings derived
 on scans 1-2000 of the detections' confirm run, the first variant named: `real_run._one`'s row
