@@ -11,6 +11,12 @@ existence: tentatives kept through their misses" were measured with it once.
     TRUNKSLAM_DATA=/work/shared/datasets .venv/bin/python -P docs/existence_keep_probe.py \
         full --variants "persistent, kept, q derived" --out /tmp/keep_full.json
 
+reach (`--reach-of` an extractor): the established landmarks' detection rate by range and free
+beams on each half of the confirm run (`existence_rates.range_detection_rates`), then per
+variant and derivation the seen reference trees by fate with what their misses were, from
+`LandmarkExistence.trace` (`diagnose_reach`); table (`--logs` of reach runs): those rows as
+the lab notebook's markdown tables (entry "why held-out trees are still missed").
+
 full: the whole Victoria Park run (7249 scans, published detections, IHGR, closure off: the
 preset as `reproduce victoria-park` runs it) with the existence policy and the settings derived
 on scans 1-2000 of the detections' confirm run, the first variant named: `real_run._one`'s row
@@ -50,12 +56,19 @@ import time
 
 import numpy as np
 
-from experiments.eval.existence_rates import derive_existence, derive_persistent, derive_see_through
+from experiments.eval.existence_rates import (
+    MAX_BEAMS,
+    derive_existence,
+    derive_pd_range,
+    derive_persistent,
+    derive_see_through,
+    range_detection_rates,
+)
 from experiments.eval.map_quality import reference_in_our_frame
 from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 from experiments.paper.victoria_park.existence_policy import _features, _judge, _tag
 from experiments.paper.victoria_park.real_run import HALVES, run_config
-from slam import run_slam, se2
+from slam import existence_map, run_slam, se2
 from slam import tentatives as tentatives_module
 from slam.log import OUT_OF_RANGE, SKIPPED
 
@@ -84,6 +97,27 @@ VARIANTS = {
         "q": "derived",
     },
     "uniform, kept, q derived": {"map_policy.existence_keep_tentatives": True, "q": "derived"},
+    # the kept tentatives bounded: dropped after UNREACHED scans out of every beam's reach
+    "persistent, kept, q derived, bounded": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "q": "derived",
+    },
+    # Pd's range fall-off derived on the derivation half (`existence_rates.derive_pd_range`)
+    "persistent, kept, q derived, range, bounded": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "q": "derived",
+        "range": "derived",
+    },
+    "uniform, kept, q derived, range, bounded": {
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "q": "derived",
+        "range": "derived",
+    },
 }
 
 
@@ -93,7 +127,9 @@ def _settings(derived: dict, variant: str) -> dict:
     own = dict(VARIANTS[variant])
     if own.pop("q", None) == "derived":
         own["map_policy.existence_see_through_q"] = derived["see_through_q"]
-    return {k: v for k, v in derived.items() if k != "see_through_q"} | own
+    if own.pop("range", None) == "derived":
+        own |= derived["pd_range"]
+    return {k: v for k, v in derived.items() if k not in ("see_through_q", "pd_range")} | own
 
 
 FATES = (
@@ -183,14 +219,15 @@ def diagnose(lg, ref, dropped: dict, scans: tuple[int, int]) -> dict:
     }
 
 
-def probe(extractor: str, variants: list[str]) -> dict:
+def _base(extractor: str):
+    """The extractor's confirm_scans 3 run of scans 1-2000 and the settings derived on each half
+    and on the whole: (seq, ref, base config, features, run, {tag: settings})."""
     seq = load_victoria_park(n_scans=2000)
     ref = load_ss2002_reference()
     base = run_config(extractor, "ihgr").with_(
         **{"map_policy.confirm_scans": 3, "map_policy.prune_after_expected": 0}
     )
     feats = _features(seq, extractor, base)
-    t0 = time.time()
     lg = run_slam(seq, base, features=feats)
     whole = (0, 2000)
     derived = {}
@@ -200,6 +237,13 @@ def probe(extractor: str, variants: list[str]) -> dict:
         min_beams = settings["map_policy.existence_min_beams"]
         q = derive_see_through(lg, seq, h, min_beams)["settings"]
         derived[_tag(h)] = settings | {"see_through_q": q["map_policy.existence_see_through_q"]}
+        derived[_tag(h)]["pd_range"] = derive_pd_range(lg, seq, h, min_beams)["settings"]
+    return seq, ref, base, feats, lg, derived
+
+
+def probe(extractor: str, variants: list[str]) -> dict:
+    t0 = time.time()
+    seq, ref, base, feats, lg, derived = _base(extractor)
     out = {"extractor": extractor, "derived": derived, "base_s": time.time() - t0, "rows": []}
     a, b = (_tag(h) for h in HALVES)
     for variant in variants:
@@ -250,6 +294,8 @@ def _sim_drive(seed: int, variants: list[str]) -> list[dict]:
             mb = settings["map_policy.existence_min_beams"]
             q = derive_see_through(lg, seq, (0, seq.n_scans), mb)["settings"]
             settings["see_through_q"] = q["map_policy.existence_see_through_q"]
+            n = (0, seq.n_scans)
+            settings["pd_range"] = derive_pd_range(lg, seq, n, mb)["settings"]
             for variant in variants:
                 cfg = scfg.with_(
                     **{"map_policy.policy": "existence", **_settings(settings, variant)}
@@ -299,6 +345,7 @@ def full(variant: str) -> dict:
     mb = settings["map_policy.existence_min_beams"]
     q = derive_see_through(lg, seq2000, h, mb)["settings"]
     settings["see_through_q"] = q["map_policy.existence_see_through_q"]
+    settings["pd_range"] = derive_pd_range(lg, seq2000, h, mb)["settings"]
     cfg = base.with_(**{"map_policy.policy": "existence", **_settings(settings, variant)})
     row, run, _ = _one(variant, load_victoria_park(full=True), cfg, load_ss2002_reference())
     keep = ("rmse_vouched_m", "fixes_vouched", "rmse_m", "fixes", "rmse_2001_7249_m")
@@ -309,14 +356,205 @@ def full(variant: str) -> dict:
     return out
 
 
+RANGE_EDGES = np.array([0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 80.0])
+BEAM_BINS = ((1, 1), (2, 2), (3, 3), (4, 5), (6, 9), (10, MAX_BEAMS))
+
+
+def rate_table(lg, seq, half: tuple[int, int]) -> dict:
+    """The established landmarks' detection rate on `half` by range bin (RANGE_EDGES) and free
+    beams (BEAM_BINS): `existence_rates.range_detection_rates`, printed as a matrix."""
+    e, d = range_detection_rates(lg, seq, half, RANGE_EDGES)
+    cells = {}
+    for i in range(RANGE_EDGES.size - 1):
+        for lo, hi in BEAM_BINS:
+            n, k = int(e[i, lo : hi + 1].sum()), int(d[i, lo : hi + 1].sum())
+            cells[f"{RANGE_EDGES[i]:g}-{RANGE_EDGES[i + 1]:g} m, {lo}-{hi} beams"] = (k, n)
+    return {"expected": e.tolist(), "detected": d.tolist(), "cells": cells}
+
+
+class _Traces:
+    """Makes every `LandmarkExistence` of the runs inside record its updates (`trace`)."""
+
+    def __init__(self) -> None:
+        self.books: list = []
+        self._init = existence_map.LandmarkExistence.__init__
+
+    def __enter__(self):
+        books, init = self.books, self._init
+
+        def wrapped(book, *args, **kw):
+            init(book, *args, **kw)
+            book.trace = []
+            books.append(book)
+
+        existence_map.LandmarkExistence.__init__ = wrapped
+        return self
+
+    def __exit__(self, *exc) -> None:
+        existence_map.LandmarkExistence.__init__ = self._init
+
+    def flat(self) -> dict:
+        tr = self.books[-1].trace
+        return {k: np.concatenate([np.asarray(t[k]) for t in tr]) for k in tr[0] if k != "scan"} | {
+            "scan_of": np.concatenate([np.full(len(t["id"]), t["scan"]) for t in tr])
+        }
+
+
+def _logit(r: np.ndarray) -> np.ndarray:
+    r = np.clip(r, 1e-300, 1.0 - 1e-16)
+    return np.log(r) - np.log1p(-r)
+
+
+def _track_stats(tr: dict, tracks: set, q: float, e, d) -> dict:
+    """Over the existence updates of `tracks`: sightings, charged misses (Pd > 0, not detected),
+    and what the misses were: range, see-through, occlusion, log-odds lost (and the see-through
+    factor's part), the detection rate the deriving half measured at the misses' (range, free
+    beams) cells, and the detections the model (pd) and that rate expect over the scans the
+    model said it could be seen in."""
+    rows = np.isin(tr["id"], list(tracks))
+    det, pd = tr["detected"][rows], tr["pd"][rows]
+    reach = pd > 0
+    miss = reach & ~det
+    rb, ra = tr["r_before"][rows], tr["r_after"][rows]
+    ok = np.isfinite(rb)
+    dlo = np.where(ok, _logit(ra) - _logit(np.where(ok, rb, 0.5)), 0.0)
+    rng, free = tr["range_m"][rows], np.minimum(tr["free"][rows], MAX_BEAMS)
+    b = np.clip(np.searchsorted(RANGE_EDGES, rng, side="right") - 1, 0, RANGE_EDGES.size - 2)
+    rate = np.where(e[b, free] > 0, d[b, free] / np.maximum(e[b, free], 1), np.nan)
+    through = tr["through"][rows]
+    return {
+        "sightings": int(det.sum()),
+        "misses": int(miss.sum()),
+        "misses_see_through": int((miss & (through > 0)).sum()),
+        "misses_occluded_in_part": int((miss & (tr["reach"][rows] > tr["free"][rows])).sum()),
+        "misses_beyond_30m": int((miss & (rng >= 30.0)).sum()),
+        "logodds_misses": float(dlo[miss].sum()),
+        "logodds_see_through": float((through[miss] * math.log(q)).sum()),
+        "logodds_sightings": float(dlo[det].sum()),
+        "expected_by_model": float(pd[reach].sum()),
+        "expected_by_rate": float(np.nansum(rate[reach])),
+        "rate_at_misses": float(np.nanmean(rate[miss])) if miss.any() else math.nan,
+        "range_at_misses_median": float(np.median(rng[miss])) if miss.any() else math.nan,
+    }
+
+
+def diagnose_reach(lg, ref, dropped: dict, scans, tr: dict, q: float, e, d) -> dict:
+    """The seen reference trees of `scans` by fate ("found": a landmark within 1 m), and per
+    fate the sums of `_track_stats` over their circles' tracks."""
+    tw = _trees(lg, ref)
+    used = (lg.meas_status != OUT_OF_RANGE) & (lg.meas_status != SKIPPED)
+    used &= (lg.meas_scan >= scans[0]) & (lg.meas_scan < scans[1])
+    rows = np.flatnonzero(used)
+    xy = se2.observed_points(lg.pose[lg.meas_scan[rows]], lg.meas_z[rows], lg.laser_pose)
+    d_circle = np.linalg.norm(xy[:, None, :] - tw[None, :, :], axis=2)
+    d_map = np.linalg.norm(lg.landmark_xy[:, None, :] - tw[None, :, :], axis=2).min(axis=0)
+    out: dict = {}
+    for t in np.flatnonzero((d_circle <= 1.0).any(axis=0)):
+        tracks = {int(x) for x in lg.meas_track[rows[d_circle[:, t] <= 1.0]] if x >= 0}
+        fate = "found" if d_map[t] <= 1.0 else _fate(tracks, lg, dropped)
+        st = _track_stats(tr, tracks, q, e, d)
+        acc = out.setdefault(fate, {"trees": 0})
+        acc["trees"] += 1
+        for k, v in st.items():
+            if k in ("rate_at_misses", "range_at_misses_median"):
+                acc.setdefault(k, []).append(v)
+            else:
+                acc[k] = acc.get(k, 0) + v
+    for acc in out.values():
+        for k in ("rate_at_misses", "range_at_misses_median"):
+            v = np.array(acc[k])
+            acc[k] = float(np.nanmedian(v)) if np.isfinite(v).any() else math.nan
+    return out
+
+
+def reach(extractor: str, variants: list[str]) -> dict:
+    """The detection rates by range and free beams of each half, and per variant and half the
+    seen reference trees by fate with what their misses were (`diagnose_reach`)."""
+    seq, ref, base, feats, lg, derived = _base(extractor)
+    tables = {_tag(h): rate_table(lg, seq, h) for h in (*HALVES, (0, 2000))}
+    for tag, t in tables.items():
+        print(tag, json.dumps(t["cells"]), flush=True)
+    out = {"extractor": extractor, "derived": derived, "tables": tables, "rows": []}
+    a, b = (_tag(h) for h in HALVES)
+    for variant in variants:
+        for fit, judged in ((a, b), (b, a), ("1_2000", "1_2000")):
+            settings = _settings(derived[fit], variant)
+            cfg = base.with_(**{"map_policy.policy": "existence", **settings})
+            t0 = time.time()
+            with _Fates() as fates, _Traces() as traces:
+                run = run_slam(seq, cfg, features=feats)
+            lo, hi = (int(x) for x in judged.split("_"))
+            e, d = (np.array(tables[fit][k]) for k in ("expected", "detected"))
+            q = float(cfg.map_policy.existence_see_through_q)
+            row = {
+                "variant": variant,
+                "derived_on": fit,
+                "judged_on": judged,
+                **_judge(run, ref, judged),
+                "removed": len(run.departures or []),
+                "tentatives_max": int(run.n_tentative.max()),
+                "tentatives_at_end": int(run.n_tentative[-1]),
+                "seconds": round(time.time() - t0, 1),
+                "fates": diagnose_reach(
+                    run, ref, fates.dropped, (lo - 1, hi), traces.flat(), q, e, d
+                ),
+            }
+            print(json.dumps(row), flush=True)
+            out["rows"].append(row)
+    return out
+
+
+def table(logs: list[str]) -> dict:
+    """The halves table and the missed trees' misses, as markdown, from `reach` logs (their
+    printed rows; extractor: the log's name after "reach_")."""
+    rows = []
+    for path in logs:
+        ex = path.rsplit("reach_", 1)[-1].split(".")[0]
+        with open(path) as fh:
+            rows += [{"extractor": ex} | json.loads(x) for x in fh if x.startswith('{"variant"')]
+    print("| extractor | variant | derived on | judged on | P / R (landmarks) | tentatives, max |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        print(
+            f"| {r['extractor']} | {r['variant']} | {r['derived_on']} | {r['judged_on']} | "
+            f"{r['precision']:.3f} / {r['recall']:.3f} ({r['landmarks']}) | {r['tentatives_max']} |"
+        )
+    print()
+    print(
+        "| extractor | variant | judged on | fate | trees | sightings | misses | with see-through "
+        "| occluded in part | beyond 30 m | log-odds: sightings / misses (see-through part) "
+        "| rate measured at the misses | median range of the misses (m) |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        for fate, v in r["fates"].items():
+            print(
+                f"| {r['extractor']} | {r['variant']} | {r['judged_on']} | {fate} | {v['trees']} "
+                f"| {v['sightings']} | {v['misses']} | {v['misses_see_through']} "
+                f"| {v['misses_occluded_in_part']} | {v['misses_beyond_30m']} "
+                f"| {v['logodds_sightings']:+.0f} / {v['logodds_misses']:+.0f} "
+                f"({v['logodds_see_through']:+.0f}) | {v['rate_at_misses']:.2f} "
+                f"| {v['range_at_misses_median']:.1f} |"
+            )
+    return {"rows": rows}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("extractor", choices=("detections", "paper", "geometric", "sim", "full"))
+    ap.add_argument(
+        "extractor", choices=("detections", "paper", "geometric", "sim", "full", "reach", "table")
+    )
+    ap.add_argument("--logs", nargs="*", default=[], help="table: the reach runs' logs")
+    ap.add_argument("--reach-of", default="detections", help="reach: the extractor")
     ap.add_argument("--variants", nargs="*", default=list(VARIANTS)[:4], choices=list(VARIANTS))
     ap.add_argument("--out", required=True)
     args = ap.parse_args()
     if args.extractor == "sim":
         res = sim(args.variants)
+    elif args.extractor == "table":
+        res = table(args.logs)
+    elif args.extractor == "reach":
+        res = reach(args.reach_of, args.variants)
     elif args.extractor == "full":
         res = full(args.variants[0])
     else:

@@ -346,6 +346,9 @@ class MapPolicy:
     existence_pd_max, existence_min_beams, existence_see_through_q: the sensor model's
         detection probability, the returns a trunk needs to be seen, the chance that a beam
         passes a real trunk's place (`slam.existence.ExistenceConfig`).
+    existence_pd_range_m, existence_pd_range_scale_m: Pd's range fall-off, pd_max / (1 +
+        exp((d - pd_range_m) / pd_range_scale_m)) at range d (persistent clutter's repeat_prob
+        falls alike; `slam.existence`, "Range fall-off"); inf: Pd does not fall with range.
     existence_false_per_scan: the extractor's false circles per scan (the clutter density is
         that spread over the view's range and field of view).
     existence_birth_prob: the existence of a new tentative: of the circles seen where nothing
@@ -360,9 +363,13 @@ class MapPolicy:
         0), and leaves only when its existence falls below `existence_remove_prob`, so a trunk
         the extractor reports in, say, 60% of the scans that reach it accumulates its sightings
         (`slam.existence`, "Intermittent detection"). False: the paper's drop at a miss.
-        Its limit: a tentative that leaves the laser's reach is charged no miss and stays a
-        tentative to the end of the run (the set is not bounded yet; off by default).
+        A tentative that leaves the laser's reach is charged no miss; it stays a tentative
+        until `existence_unreached_scans` bounds it.
         The window associator ("ihgr-window") keeps no tentatives: it has no effect there.
+    existence_unreached_scans: with kept tentatives, a tentative the sensor model says no
+        beam could reach (Pd 0, not detected) in this many consecutive scans is dropped: the
+        car has left it behind and its existence can no longer change (0: never, the set of
+        kept tentatives is unbounded).
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -399,6 +406,15 @@ class MapPolicy:
     )
     existence_keep_tentatives: bool = default(
         False, "paper: False, a tentative not seen again is dropped (drop_after_missed)"
+    )
+    existence_pd_range_m: float = default(
+        math.inf, "design: inf, Pd does not fall with range (as before); derived (split-half)"
+    )
+    existence_pd_range_scale_m: float = default(
+        5.0, "design: placeholder, used only with a finite pd_range_m; derived (split-half)"
+    )
+    existence_unreached_scans: int = default(
+        0, "design: 0, a kept tentative out of reach stays to the end of the run (as before)"
     )
     existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
     existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
@@ -462,6 +478,21 @@ class MapPolicy:
             raise SlamError(
                 "map_policy.existence_keep_tentatives: must be true or false, got "
                 f"{self.existence_keep_tentatives!r}"
+            )
+        v = self.existence_pd_range_m
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
+            raise SlamError(
+                f"map_policy.existence_pd_range_m: must be > 0 (inf: no fall-off), got {v!r}"
+            )
+        v = self.existence_pd_range_scale_m
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_pd_range_scale_m: must be finite and > 0, got {v!r}"
+            )
+        v = self.existence_unreached_scans
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+            raise SlamError(
+                f"map_policy.existence_unreached_scans: must be an integer >= 0, got {v!r}"
             )
         v = self.existence_min_beams
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:

@@ -19,6 +19,14 @@ extractor can see. Each scan:
    Pd = pd_max when at least `min_beams` of the reaching beams are not occluded (the
    extractor needs that many beams on a trunk to fit a circle), else 0; and 0 out of the
    field of view or beyond `max_range_m`.
+   **Range fall-off** (`pd_range_m` finite; inf, the default, leaves Pd as above): the
+   extractor reports what enough beams reach less often the farther it is (on Victoria Park,
+   trunks with 2 free beams: ~0.8 of the scans at 10-30 m, ~0.5 at 30-40 m, ~0.1 at 40-50 m),
+   so Pd = pd_max f(d) with f(d) = 1 / (1 + exp((d - pd_range_m) / pd_range_scale_m)), the
+   range where it halves and how fast; a detection's Pd is pd_max f(d) too. Against
+   persistent clutter the object's repeat_prob falls the same way (repeat_prob f(d): the
+   extractor sees any object less far away), so a far sighting or miss weighs what a near
+   one does, scaled by what the extractor can still report there (`falloff`).
 3. **Update** (`update_existence`), Bayes' rule on the two hypotheses "real" / "not real":
    - detected (a measurement associated, with likelihood g = N(nu; 0, S) under "real"):
      r' = r Pd g / (r Pd g + (1 - r) kappa), with kappa the clutter density (false
@@ -95,6 +103,7 @@ __all__ = [
     "clutter_density",
     "decide",
     "detection_probability",
+    "falloff",
     "gaussian_likelihood",
     "initial_existence",
     "predict_existence",
@@ -114,6 +123,7 @@ class ExistenceConfig:
     survival: probability that a real trunk is still there one scan later.
     max_range_m: no detection at or beyond this range (the sensor's), m.
     join_prob, remove_prob: the decisions' thresholds, remove_prob < join_prob.
+    pd_range_m, pd_range_scale_m: the range fall-off of Pd (module doc; inf: none), m, m (> 0).
     """
 
     pd_max: float = 0.9
@@ -124,6 +134,8 @@ class ExistenceConfig:
     max_range_m: float = 80.0
     join_prob: float = 0.99
     remove_prob: float = 0.01
+    pd_range_m: float = math.inf
+    pd_range_scale_m: float = 5.0
 
     def __post_init__(self) -> None:
         for name in ("pd_max", "survival", "join_prob", "remove_prob"):
@@ -147,6 +159,14 @@ class ExistenceConfig:
                 f"ExistenceConfig.remove_prob: must be below join_prob ({self.join_prob!r}), "
                 f"got {self.remove_prob!r}"
             )
+        if not (isinstance(self.pd_range_m, (int, float)) and self.pd_range_m > 0):
+            raise ValueError(
+                f"ExistenceConfig.pd_range_m: must be > 0 (inf: no fall-off), got "
+                f"{self.pd_range_m!r}"
+            )
+        v = self.pd_range_scale_m
+        if not (isinstance(v, (int, float)) and 0.0 < v < math.inf):
+            raise ValueError(f"ExistenceConfig.pd_range_scale_m: must be finite and > 0, got {v!r}")
 
 
 class BeamEvidence(NamedTuple):
@@ -195,12 +215,22 @@ def beam_evidence(
 def detection_probability(
     ev: BeamEvidence, lm_range_m: np.ndarray, in_fov: np.ndarray, cfg: ExistenceConfig
 ) -> np.ndarray:
-    """(L,) Pd: pd_max where at least min_beams reaching beams are not occluded, in the field of
-    view and inside max_range_m; 0 elsewhere."""
+    """(L,) Pd: pd_max (times the range fall-off, if any) where at least min_beams reaching
+    beams are not occluded, in the field of view and inside max_range_m; 0 elsewhere."""
     free = ev.reach - ev.occluded
     ok = (free >= cfg.min_beams) & np.asarray(in_fov, bool)
     ok &= np.asarray(lm_range_m, dtype=np.float64) < cfg.max_range_m
-    return np.where(ok, cfg.pd_max, 0.0)
+    f = falloff(lm_range_m, cfg)
+    return np.where(ok, cfg.pd_max if f is None else cfg.pd_max * f, 0.0)
+
+
+def falloff(lm_range_m: np.ndarray, cfg: ExistenceConfig) -> np.ndarray | None:
+    """(L,) the range fall-off f(d) of Pd (module doc), or None without one (pd_range_m inf)."""
+    if math.isinf(cfg.pd_range_m):
+        return None
+    d = np.asarray(lm_range_m, dtype=np.float64)
+    x = np.clip((d - cfg.pd_range_m) / cfg.pd_range_scale_m, -700.0, 700.0)
+    return 1.0 / (1.0 + np.exp(x))
 
 
 def clutter_density(false_per_scan: float, max_range_m: float, fov_rad: float) -> float:
@@ -273,12 +303,14 @@ def update_existence_persistent(
     through: np.ndarray,
     repeat_prob: float,
     cfg: ExistenceConfig,
+    falloff: np.ndarray | None = None,
 ) -> np.ndarray:
     """(L,) the existence after one scan against persistent clutter (module doc, "Persistent
     clutter"): "not a tree" is an object at the landmark's place that the extractor reports
     again with probability repeat_prob in a scan whose beams reach it (pd > 0), its circle's
     centre spread by its shape (likelihood_object: N(nu; 0, S + the shape's covariance));
-    "tree" is as `update_existence`. likelihood: N(nu; 0, S) where detected."""
+    "tree" is as `update_existence`. likelihood: N(nu; 0, S) where detected. falloff: (L,)
+    the range fall-off f(d) that scales repeat_prob as it scales Pd (module doc; None: 1)."""
     r = np.asarray(r, dtype=np.float64)
     pd = np.asarray(pd, dtype=np.float64)
     det = np.asarray(detected, bool)
@@ -292,6 +324,8 @@ def update_existence_persistent(
     # neither hypothesis reports what the beams cannot reach (a detection has pd > 0: the
     # caller gives a paired landmark pd_max)
     repeat = np.where((pd > 0) | det, repeat_prob, 0.0)
+    if falloff is not None:
+        repeat = repeat * np.asarray(falloff, dtype=np.float64)
     yes = np.where(det, r * pd * g, r * (1.0 - pd) * pass_through)
     no = (1.0 - r) * np.where(det, repeat * g0, 1.0 - repeat)
     total = yes + no

@@ -14,7 +14,10 @@ The map managers read it (`slam.map_managers`): a tentative joins the map when i
 reaches `join_prob` (in a scan it was seen in), a window track joins when the existence of its
 sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`
 leaves the map, reported in `MapDecisions.removed` for the loop to marginalise. A new
-tentative starts at `map_policy.existence_birth_prob`.
+tentative starts at `map_policy.existence_birth_prob`. With kept tentatives
+(`existence_keep_tentatives`) and `existence_unreached_scans` N > 0, a tentative no beam could
+reach (Pd 0 and not detected) in N consecutive scans is dropped too (`unreached`): its
+existence can no longer change.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ from slam.existence import (
     beam_evidence,
     clutter_density,
     detection_probability,
+    falloff,
     gaussian_likelihood,
     update_existence,
     update_existence_persistent,
@@ -74,6 +78,8 @@ class LandmarkExistence:
             max_range_m=float(view.max_range),
             join_prob=float(policy.existence_join_prob),
             remove_prob=float(policy.existence_remove_prob),
+            pd_range_m=float(policy.existence_pd_range_m),
+            pd_range_scale_m=float(policy.existence_pd_range_scale_m),
         )
         fov = float(view.fov[1] - view.fov[0])
         self.kappa = clutter_density(
@@ -90,6 +96,13 @@ class LandmarkExistence:
         self.shape_var = float(policy.existence_shape_sd_m) ** 2
         self.r: dict[int, float] = {}
         self.radius: dict[int, float] = {}
+        # kept tentatives out of reach: consecutive scans without a reaching beam, by id
+        limit = policy.existence_unreached_scans if policy.existence_keep_tentatives else 0
+        self.unreached_limit = int(limit)
+        self.out_of_reach: dict[int, int] = {}
+        # a list to record every scan's update in (diagnosis; None: nothing recorded): per
+        # scan a dict of (n,) arrays over the landmarks and tentatives it updated
+        self.trace: list | None = None
 
     def born(self, lid: int, radius_m: float) -> None:
         """A new tentative `lid` seen with a circle of radius_m (NaN: unknown)."""
@@ -107,6 +120,23 @@ class LandmarkExistence:
     def leaves(self, ids) -> np.ndarray:
         """(n,) bool: existence below remove_prob."""
         return self.of(ids) < self.cfg.remove_prob
+
+    def unreached(self, ids) -> np.ndarray:
+        """(n,) bool: tentatives out of every beam's reach for `existence_unreached_scans`
+        consecutive scans (none when that is 0 or tentatives are not kept)."""
+        if not self.unreached_limit:
+            return np.zeros(len(ids), bool)
+        n = np.array([self.out_of_reach.get(int(i), 0) for i in ids], np.int64)
+        return n >= self.unreached_limit
+
+    def _count_unreached(self, t_ids: np.ndarray, reached: np.ndarray) -> None:
+        """One scan of the tentatives' out-of-reach counts (reached: ids with Pd > 0)."""
+        if not self.unreached_limit:
+            return
+        hit = set(reached.tolist())
+        self.out_of_reach = {
+            i: 0 if i in hit else self.out_of_reach.get(i, 0) + 1 for i in t_ids.tolist()
+        }
 
     def track_existence(self, n_sightings: int, R: np.ndarray, range_m: float = math.inf) -> float:
         """The existence of a window track seen in n_sightings scans, each a detection with the
@@ -160,6 +190,7 @@ class LandmarkExistence:
         look |= detected
         idx = np.flatnonzero(look)
         if not idx.size:
+            self._count_unreached(t_ids, idx)
             return
         radius = np.array([self.radius.get(int(i), DEFAULT_RADIUS_M) for i in ids[idx]])
         scan = meas.scan
@@ -173,8 +204,10 @@ class LandmarkExistence:
             ev = beam_evidence(ranges, bearings, z_hat[idx, 0], z_hat[idx, 1], radius, cfg=self.cfg)
         pd = detection_probability(ev, z_hat[idx, 0], np.ones(idx.size, bool), self.cfg)
         # a landmark the association paired was seen, whatever the beams say of its reach
-        pd = np.where(detected[idx], self.cfg.pd_max, pd)
-        r = self.of(ids[idx])
+        f = falloff(z_hat[idx, 0], self.cfg)
+        pd = np.where(detected[idx], self.cfg.pd_max if f is None else self.cfg.pd_max * f, pd)
+        self._count_unreached(t_ids, ids[idx][pd > 0])
+        r = r_before = self.of(ids[idx])
         r = np.where(np.isfinite(r), r, self.birth)
         if self.repeat is None:
             r = update_existence(
@@ -190,9 +223,23 @@ class LandmarkExistence:
                 through=ev.through,
                 repeat_prob=self.repeat,
                 cfg=self.cfg,
+                falloff=f,
             )
         for lid, v in zip(ids[idx].tolist(), r.tolist()):
             self.r[lid] = v
+        if self.trace is not None:
+            free, k = ev.reach - ev.occluded, meas.k
+            self.trace.append(
+                {
+                    "scan": k,
+                    "id": ids[idx],
+                    "range_m": z_hat[idx, 0],
+                    "free": free,
+                    "reach": ev.reach,
+                }
+                | {"through": ev.through, "pd": pd, "detected": detected[idx]}
+                | {"r_before": r_before, "r_after": r}
+            )
 
     def _detections(self, state, meas, a, tentatives, *, z_hat, H5):
         """(detected (L,) bool, likelihood (L,), likelihood under a non-tree object (L,)) of

@@ -302,6 +302,7 @@ class TentativeMap:
             seen = np.zeros(len(tent), bool)
             seen[list(matched)] = True
             join, gone = book.joins(tent.ids) & seen, book.leaves(tent.ids)
+            gone |= book.unreached(tent.ids) & ~seen
         out.remove_unlikely(state, book)
         self.tent, confirm = tent.step(matched, new, meas.k, policy, join=join, gone=gone)
         for ti in confirm:

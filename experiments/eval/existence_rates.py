@@ -36,10 +36,18 @@ See-through (`derive_see_through`, used only when asked for; `docs/existence_kee
 6. see_through_q: the chance that a beam
    passes a real trunk's place in a scan where the trunk was not reported: of the beams that
    reach the established landmarks of 1. in the scans they were missed with at least min_beams
-   free beams, the share that passed beyond them (no return, or one farther than the trunk's
-   far side plus `ExistenceConfig.gap_m`). It is the rate of the "real" hypothesis's
+   free beams, the share of their free beams (not occluded: a beam that returned nearer than
+   the trunk says nothing of it) that passed beyond them (no return, or one farther than the
+   trunk's far side plus `ExistenceConfig.gap_m`). It is the rate of the "real" hypothesis's
    see-through factor q^n at a miss (`slam.existence`, step 3), measured where that factor
    applies.
+
+Range fall-off (`derive_pd_range`, used only when asked for):
+7. pd_max, pd_range_m, pd_range_scale_m: the maximum-likelihood logistic fall-off of the
+   detection rate with range (`slam.existence`, "Range fall-off") over the views of 1. with at
+   least min_beams free beams, binned by metre of range. On Victoria Park the rate at 2 free
+   beams is about 0.8 at 10-30 m and 0.1 at 40-50 m: one pd_max over all ranges charges a far
+   trunk's many misses as if it were near.
 """
 
 from __future__ import annotations
@@ -59,8 +67,10 @@ __all__ = [
     "WELL_SEEN",
     "beam_detection_rates",
     "derive_existence",
+    "derive_pd_range",
     "derive_persistent",
     "derive_see_through",
+    "range_detection_rates",
     "truncated_geometric_p",
 ]
 
@@ -97,7 +107,7 @@ def _views(lg, seq, scans: tuple[int, int], established: int):
         ev = beam_evidence(scan.ranges_m, bearings, z[j, 0], z[j, 1], radius[j], cfg=cfg)
         free = np.minimum(ev.reach - ev.occluded, MAX_BEAMS)
         hit = np.array([(k, int(i)) in seen for i in ids[j]])
-        yield ev, free, hit
+        yield ev, free, hit, z[j, 0]
 
 
 def beam_detection_rates(
@@ -107,36 +117,95 @@ def beam_detection_rates(
     the landmarks of the final map associated in more than `established` scans."""
     expected = np.zeros(MAX_BEAMS + 1, np.int64)
     detected = np.zeros(MAX_BEAMS + 1, np.int64)
-    for _, free, hit in _views(lg, seq, scans, established):
+    for _, free, hit, _ in _views(lg, seq, scans, established):
         np.add.at(expected, free, 1)
         np.add.at(detected, free, hit.astype(np.int64))
     return expected, detected
 
 
+def range_detection_rates(
+    lg, seq, scans: tuple[int, int], edges_m: np.ndarray, established: int = ESTABLISHED
+) -> tuple[np.ndarray, np.ndarray]:
+    """(expected, detected), (len(edges_m) - 1, MAX_BEAMS + 1) int64 each: as
+    `beam_detection_rates`, by range bin [edges_m[i], edges_m[i + 1]) of the landmark (m, the
+    run's pose) and free beams; views outside the edges are not counted."""
+    edges = np.asarray(edges_m, dtype=np.float64)
+    expected = np.zeros((edges.size - 1, MAX_BEAMS + 1), np.int64)
+    detected = np.zeros_like(expected)
+    for _, free, hit, range_m in _views(lg, seq, scans, established):
+        b = np.searchsorted(edges, range_m, side="right") - 1
+        ok = (b >= 0) & (b < edges.size - 1)
+        np.add.at(expected, (b[ok], free[ok]), 1)
+        np.add.at(detected, (b[ok], free[ok]), hit[ok].astype(np.int64))
+    return expected, detected
+
+
+def derive_pd_range(
+    lg, seq, scans: tuple[int, int], min_beams: int, established: int = ESTABLISHED
+) -> dict:
+    """Pd's range fall-off measured on the run (module doc, 7): the maximum-likelihood pd_max,
+    pd_range_m and pd_range_scale_m of Pd(d) = pd_max / (1 + exp((d - pd_range_m) / scale))
+    over the views of the established landmarks with at least min_beams free beams (in 1 m
+    range bins; grid steps 0.01, 0.5 m and 0.25 m)."""
+    edges = np.arange(0.0, float(seq.scan_max_range) + 1.0, 1.0)
+    e, d = range_detection_rates(lg, seq, scans, edges, established)
+    n, k = e[:, min_beams:].sum(axis=1), d[:, min_beams:].sum(axis=1)
+    if not n.sum():
+        raise DataError(
+            f"derive_pd_range: no established landmark was in view with {min_beams} free beams "
+            f"or more in scans {scans}: no fall-off to derive"
+        )
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    d50 = np.arange(1.0, edges[-1] + 0.5, 0.5)
+    scale = np.arange(0.25, 20.0 + 0.25, 0.25)
+    x = (mid[None, None, :] - d50[:, None, None]) / scale[None, :, None]
+    f = 1.0 / (1.0 + np.exp(np.clip(x, -700.0, 700.0)))  # (d50, scale, bins)
+    best = (-np.inf, 0.0, 0.0, 0.0)
+    for pd in np.arange(0.05, 1.0, 0.01):
+        p = np.clip(pd * f, 1e-12, 1.0 - 1e-12)
+        ll = (k * np.log(p) + (n - k) * np.log1p(-p)).sum(axis=2)
+        i, j = np.unravel_index(np.argmax(ll), ll.shape)
+        if ll[i, j] > best[0]:
+            best = (float(ll[i, j]), float(pd), float(d50[i]), float(scale[j]))
+    return {
+        "settings": {
+            "map_policy.existence_pd_max": round(best[1], 2),
+            "map_policy.existence_pd_range_m": best[2],
+            "map_policy.existence_pd_range_scale_m": best[3],
+        },
+        "views": int(n.sum()),
+        "detected": int(k.sum()),
+        "log_likelihood": best[0],
+    }
+
+
 def derive_see_through(
     lg, seq, scans: tuple[int, int], min_beams: int, established: int = ESTABLISHED
 ) -> dict:
-    """see_through_q measured on the run (module doc, 6): of the beams reaching the established
-    landmarks (as `beam_detection_rates` places them) in the scans of `scans` where at least
-    min_beams of them were free and no measurement updated the landmark, the share that passed
-    beyond it (none passed: half a beam over those counted, a rate the run cannot tell from 0;
-    the model needs q > 0). The beams counted include those a nearer return occluded, which
-    could neither pass nor hit: the rate is low by their share (kept as measured for the
-    figures of the lab notebook; to count free beams only when it is next used)."""
-    through = reach = 0
-    for ev, free, hit in _views(lg, seq, scans, established):
+    """see_through_q measured on the run (module doc, 6): of the free beams (reaching, not
+    occluded by a nearer return) of the established landmarks (as `beam_detection_rates`
+    places them) in the scans of `scans` where at least min_beams of them were free and no
+    measurement updated the landmark, the share that passed beyond it (none passed: half a beam
+    over those counted, a rate the run cannot tell from 0; the model needs q > 0). An occluded
+    beam could neither pass nor hit: it is not evidence and is not counted (before 2026-11-29
+    h41f it was, which biased q low by the occluded share: "missed_beams_reaching" keeps that
+    count)."""
+    through = reach = free_beams = 0
+    for ev, free, hit, _ in _views(lg, seq, scans, established):
         missed = (free >= min_beams) & ~hit
         through += int(ev.through[missed].sum())
         reach += int(ev.reach[missed].sum())
-    if not reach:
+        free_beams += int((ev.reach - ev.occluded)[missed].sum())
+    if not free_beams:
         raise DataError(
             f"derive_see_through: no established landmark was missed with {min_beams} free "
             f"beams or more in scans {scans}: no see-through rate to derive"
         )
-    q = max(through, 0.5) / reach
+    q = max(through, 0.5) / free_beams
     return {
         "settings": {"map_policy.existence_see_through_q": float(min(q, 1.0))},
         "missed_beams_reaching": reach,
+        "missed_beams_free": free_beams,
         "missed_beams_through": through,
     }
 

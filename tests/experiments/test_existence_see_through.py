@@ -26,14 +26,35 @@ def test_q_is_the_share_of_beams_passing_beyond_a_trunk_in_the_scans_it_was_miss
     seq, lg = run
     d = derive_see_through(lg, seq, (0, seq.n_scans), MIN_BEAMS)
     q = d["settings"]["map_policy.existence_see_through_q"]
-    assert d["missed_beams_reaching"] > 20
-    assert q == d["missed_beams_through"] / d["missed_beams_reaching"]
+    assert d["missed_beams_free"] > 20
+    assert d["missed_beams_free"] <= d["missed_beams_reaching"]
+    assert q == d["missed_beams_through"] / d["missed_beams_free"]
     assert 0 < q < 0.3
     through = reach = 0
-    for ev, free, _ in _views(lg, seq, (0, seq.n_scans), ESTABLISHED):
+    for ev, free, _, _ in _views(lg, seq, (0, seq.n_scans), ESTABLISHED):
         use = free >= MIN_BEAMS
         through, reach = through + ev.through[use].sum(), reach + ev.reach[use].sum()
     assert reach > d["missed_beams_reaching"] and not np.isclose(through / reach, q)
+
+
+def test_an_occluded_beam_is_not_evidence_q_counts_free_beams_only(monkeypatch):
+    """Two views where the landmark was missed with enough free beams: 6 beams reach it, 2 of
+    them returned nearer (occluded), 1 passed beyond; and 3 reach, none occluded, 2 passed.
+    q is 3 through over the 7 free beams, not over the 9 reaching; a detected view and one
+    with fewer than min_beams free beams add nothing."""
+    from experiments.eval import existence_rates
+    from slam.existence import BeamEvidence
+
+    def views(lg, seq, scans, established):
+        ev = BeamEvidence(np.array([6, 3, 5, 2]), np.array([2, 0, 0, 1]), np.array([1, 2, 4, 1]))
+        hit = np.array([False, False, True, False])
+        yield ev, ev.reach - ev.occluded, hit, np.full(4, 10.0)
+
+    monkeypatch.setattr(existence_rates, "_views", views)
+    d = derive_see_through(None, None, (0, 1), min_beams=2)
+    assert d["missed_beams_reaching"] == 9 and d["missed_beams_free"] == 7
+    assert d["missed_beams_through"] == 3
+    assert d["settings"]["map_policy.existence_see_through_q"] == 3 / 7
 
 
 def test_no_missed_established_landmark_derives_nothing_and_says_why(run):

@@ -113,3 +113,61 @@ def test_the_default_drops_a_tentative_at_its_first_miss_as_before():
 def test_keep_tentatives_must_be_a_boolean(value):
     with pytest.raises(SlamError, match="existence_keep_tentatives"):
         SlamConfig().with_(**{"map_policy.existence_keep_tentatives": value})
+
+
+UNREACHED = 5  # existence_unreached_scans of the tests below
+
+
+def _behind(manager, book, state, scans: range) -> list[bool]:
+    """Scans with the car turned away from the tentative (no beam reaches it, Pd 0): whether
+    the first tentative is still kept after each."""
+    state.x[2] = math.pi
+    lid = min(book.r)
+    kept = []
+    for k in scans:
+        _existence_scan(manager, book, state, _trunk_scan(k, seen=False))
+        kept.append(lid in manager.tent.ids.tolist())
+    return kept
+
+
+def test_a_kept_tentative_out_of_reach_is_dropped_after_unreached_scans():
+    """Seen once, then behind the laser: its existence cannot change, and it is dropped in
+    exactly the existence_unreached_scans-th scan out of reach; a scan in reach (a miss in
+    view) restarts the count; 0 (the default) keeps it to the end, as before."""
+    policy = _policy(keep=True) | {"existence_unreached_scans": UNREACHED}
+    manager, book = _existence_manager("ihgr", **policy)
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    _existence_scan(manager, book, state, _trunk_scan(0))
+    kept = _behind(manager, book, state, range(1, 2 * UNREACHED))
+    assert kept == [k < UNREACHED for k in range(1, 2 * UNREACHED)]
+    assert book.r[0] == book.birth  # dropped out of reach, not by its existence
+
+    manager, book = _existence_manager("ihgr", **policy)
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    _existence_scan(manager, book, state, _trunk_scan(0))
+    assert all(_behind(manager, book, state, range(1, UNREACHED)))
+    state.x[2] = 0.0  # facing it again: missed in view, its existence falls
+    _existence_scan(manager, book, state, _trunk_scan(UNREACHED, seen=False))
+    assert book.r[0] < book.birth
+    kept = _behind(manager, book, state, range(UNREACHED + 1, 3 * UNREACHED))
+    assert kept == [k < 2 * UNREACHED for k in range(UNREACHED + 1, 3 * UNREACHED)]
+
+    manager, book = _existence_manager("ihgr", **_policy(keep=True))
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    _existence_scan(manager, book, state, _trunk_scan(0))
+    assert all(_behind(manager, book, state, range(1, 4 * UNREACHED)))
+
+
+def test_unreached_scans_needs_kept_tentatives():
+    """Tentatives dropped at their first miss (the default) are never counted out of reach."""
+    manager, book = _existence_manager(
+        "ihgr", existence_pd_max=0.6, existence_unreached_scans=UNREACHED
+    )
+    assert book.unreached_limit == 0
+    assert not book.unreached(np.array([0, 1])).any()
+
+
+@pytest.mark.parametrize("value", [-1, 2.5, True, "5"])
+def test_unreached_scans_must_be_a_whole_number_at_least_0(value):
+    with pytest.raises(SlamError, match="existence_unreached_scans"):
+        SlamConfig().with_(**{"map_policy.existence_unreached_scans": value})
