@@ -11,9 +11,12 @@ Prints (one full run, about a minute on one core):
    through the filter's pose of its scan: in every measurement row the run logs (tentative
    chains included, as re-tracked when a tentative joins) and in the filter's own updates.
 2. The mean bearing innovation of the filter's updates by window, side and range.
-3. The same innovations fitted per window and side as a rotation plus an along-track shift d
-   (innovation = rotation + d sin(bearing) / range: a car further ahead than the filter
-   predicts sees every tree further back), beside the mean speed.
+3. The same innovations fitted per window, on both sides together and per side, as a
+   rotation plus an along-track shift d and a sideways shift l of the car (innovation =
+   rotation + d sin(bearing) / range + l cos(bearing) / range: a car further ahead than the
+   filter predicts sees every tree further back), with standard errors clustered by blocks
+   of 25 scans, beside the mean speed. A heading error of the car is not a pure rotation
+   here: with the laser 3.78 m ahead it adds a sideways term too.
 
 Diagnosis only: nothing here sets a default.
 """
@@ -29,7 +32,8 @@ from slam import run_slam
 from slam.se2 import observed_points
 
 WINDOWS = ((0, 450), (1000, 1040), (1040, 1072), (1072, 1110), (1270, 1400))  # s
-ARM = ((1000, 1110), (1240, 1400))  # s: the arm's two visits
+ARM = ((1000, 1110), (1240, 1400))  # s: the arm's two visits (the first visit proper: 1040-1072)
+BLOCK_SCANS = 25  # scans: the blocks the fit's standard errors are clustered by
 GROUPS = {
     "left": lambda z: z[:, 1] > 0,
     "right": lambda z: z[:, 1] <= 0,
@@ -37,22 +41,34 @@ GROUPS = {
 }
 
 
-def jumps(log, scan, lm, z) -> np.ndarray:
-    """Times of the jumps over 2 m between consecutive sightings (< 1 s apart) of a landmark."""
+def jumps(log, scan, lm, z) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The jumps over 2 m between consecutive sightings (< 1 s apart) of a landmark: (their
+    times, lengths (m), the later sighting's range (m))."""
     keep = lm >= 0
     scan, lm, z = scan[keep], lm[keep], z[keep]
     w = observed_points(log.pose[scan], z, log.laser_pose)
     o = np.lexsort((scan, lm))
-    scan, lm, w = scan[o], lm[o], w[o]
+    scan, lm, w, z = scan[o], lm[o], w[o], z[o]
     t = log.scan_t[scan]
-    same = (lm[1:] == lm[:-1]) & (np.diff(t) < 1.0)
-    big = same & (np.linalg.norm(np.diff(w, axis=0), axis=1) > 2.0)
-    return t[1:][big]
+    step = np.linalg.norm(np.diff(w, axis=0), axis=1)
+    big = (lm[1:] == lm[:-1]) & (np.diff(t) < 1.0) & (step > 2.0)
+    return t[1:][big], step[big], z[1:, 0][big]
 
 
-def print_jumps(name: str, t: np.ndarray) -> None:
+def print_jumps(log, name: str, jumped) -> None:
+    t, length, range_m = jumped
     arm = sum(int(((t >= a) & (t < b)).sum()) for a, b in ARM)
-    print(f"{name}: {len(t)} jumps over 2 m, {arm} of them on the arm's two visits")
+    share = sum(min(b, log.scan_t[-1]) - a for a, b in ARM) / (log.scan_t[-1] - log.scan_t[0])
+    line = (
+        f"{name}: {len(t)} jumps over 2 m, {arm} on the arm's two visits ({share:.1%} of the run)"
+    )
+    if len(t):
+        pl, pr = np.percentile(length, [25, 50, 75]), np.percentile(range_m, [5, 50, 95])
+        line += (
+            f"; length quartiles {pl[0]:.1f} / {pl[1]:.1f} / {pl[2]:.1f} m (max "
+            f"{length.max():.1f}), range 5/50/95% {pr[0]:.0f} / {pr[1]:.0f} / {pr[2]:.0f} m"
+        )
+    print(line)
 
 
 def innovations(log) -> None:
@@ -69,29 +85,46 @@ def innovations(log) -> None:
             )
 
 
+def clustered_fit(A: np.ndarray, y: np.ndarray, block: np.ndarray):
+    """Least squares y ~ A c with standard errors clustered by `block` (residuals correlated
+    within a block of scans, independent between blocks)."""
+    c = np.linalg.lstsq(A, y, rcond=None)[0]
+    e = y - A @ c
+    bread = np.linalg.inv(A.T @ A)
+    g = np.zeros((np.unique(block).size, A.shape[1]))
+    np.add.at(g, np.unique(block, return_inverse=True)[1], A * e[:, None])
+    return c, np.sqrt(np.diag(bread @ (g.T @ g) @ bread))
+
+
 def along_track(log) -> None:
+    """Bearing innovation = rotation + d sin(b) / r + l cos(b) / r (a car further ahead by d
+    sees a tree's bearing grow by d sin(b) / r; a car further left by l, by l cos(b) / r),
+    fitted per window on both sides together and per side; standard errors clustered by
+    blocks of BLOCK_SCANS scans."""
     s, z = log.obs_scan, log.obs_z
     t = log.scan_t[s]
     step = np.hypot(log.odo_delta[:, 0], log.odo_delta[:, 1])
     speed = np.r_[np.nan, step[1:] / np.diff(log.scan_t)][s]
+    sides = {"both": lambda z: np.ones(len(z), bool)} | dict(list(GROUPS.items())[:2])
     for lo, hi in WINDOWS:
-        for name, group in list(GROUPS.items())[:2]:
+        for name, group in sides.items():
             q = (t >= lo) & (t < hi) & group(z) & np.isfinite(speed)
-            A = np.c_[np.ones(q.sum()), np.sin(z[q, 1]) / z[q, 0]]
-            c = np.linalg.lstsq(A, log.obs_innov[q, 1], rcond=None)[0]
-            se = np.sqrt(np.diag(np.linalg.inv(A.T @ A)) * np.var(log.obs_innov[q, 1] - A @ c))
+            r, b = z[q, 0], z[q, 1]
+            A = np.c_[np.ones(q.sum()), np.sin(b) / r, np.cos(b) / r]
+            c, se = clustered_fit(A, log.obs_innov[q, 1], s[q] // BLOCK_SCANS)
             print(
                 f"{lo}-{hi} s {name}: rotation {np.degrees(c[0]):+.3f} deg (se "
                 f"{np.degrees(se[0]):.3f}), along-track {100 * c[1]:+.2f} cm (se "
-                f"{100 * se[1]:.2f}), mean speed {speed[q].mean():.2f} m/s"
+                f"{100 * se[1]:.2f}), sideways {100 * c[2]:+.2f} cm (se {100 * se[2]:.2f}), "
+                f"mean speed {speed[q].mean():.2f} m/s"
             )
 
 
 def main() -> None:
     threadpool_limits(1)
     log = run_slam(load_victoria_park(full=True), run_config("detections", "ihgr"))
-    print_jumps("every logged sighting", jumps(log, log.meas_scan, log.meas_track, log.meas_z))
-    print_jumps("the filter's updates", jumps(log, log.obs_scan, log.obs_landmark, log.obs_z))
+    print_jumps(log, "every logged sighting", jumps(log, log.meas_scan, log.meas_track, log.meas_z))
+    print_jumps(log, "the filter's updates", jumps(log, log.obs_scan, log.obs_landmark, log.obs_z))
     innovations(log)
     along_track(log)
 

@@ -366,10 +366,11 @@ class MapPolicy:
         A tentative that leaves the laser's reach is charged no miss; it stays a tentative
         until `existence_unreached_scans` bounds it.
         The window associator ("ihgr-window") keeps no tentatives: it has no effect there.
-    existence_unreached_scans: with kept tentatives, a tentative the sensor model says no
-        beam could reach (Pd 0, not detected) in this many consecutive scans is dropped: the
-        car has left it behind and its existence can no longer change (0: never, the set of
-        kept tentatives is unbounded).
+    existence_unreached_scans: with kept tentatives, a tentative the sensor model gave Pd 0
+        (outside the view or the reach, or with fewer than `existence_min_beams` free beams)
+        and that was not detected, in this many consecutive scans, is dropped: it could not
+        have been confirmed in them, mostly because the car has left it behind (0: never, the
+        set of kept tentatives is unbounded).
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")

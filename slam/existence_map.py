@@ -15,9 +15,11 @@ reaches `join_prob` (in a scan it was seen in), a window track joins when the ex
 sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`
 leaves the map, reported in `MapDecisions.removed` for the loop to marginalise. A new
 tentative starts at `map_policy.existence_birth_prob`. With kept tentatives
-(`existence_keep_tentatives`) and `existence_unreached_scans` N > 0, a tentative no beam could
-reach (Pd 0 and not detected) in N consecutive scans is dropped too (`unreached`): its
-existence can no longer change.
+(`existence_keep_tentatives`) and `existence_unreached_scans` N > 0, a tentative the sensor
+model gave Pd 0 (outside the view or the reach, or with fewer than `min_beams` free beams:
+hidden behind a nearer return) and that was not detected, in N consecutive scans, is dropped
+too (`unreached`): it could not have been confirmed in those scans. Its existence may still
+have fallen meanwhile, by the beams seen through its place.
 """
 
 from __future__ import annotations
@@ -141,13 +143,14 @@ class LandmarkExistence:
     def track_existence(self, n_sightings: int, R: np.ndarray, range_m: float = math.inf) -> float:
         """The existence of a window track seen in n_sightings scans, each a detection with the
         likelihood of an innovation of NIS 2 (its mean) under S = 2 R (two sightings' noise);
-        range_m: its range (persistent clutter's shape term). Against persistent clutter a
+        range_m: its range (the range fall-off of Pd, persistent clutter's shape term). Against persistent clutter a
         track gains about pd_max / repeat_prob a sighting, and a window holds at most
         window_scans of them: it joins only when that is enough (the single-scan associator's
         tentatives have no such limit)."""
         S = 2.0 * np.asarray(R, dtype=np.float64)
         g = math.exp(-1.0) / (2.0 * math.pi * math.sqrt(max(np.linalg.det(S), 1e-300)))
-        ratio = self.cfg.pd_max * g / self.kappa
+        f = falloff(np.array([float(range_m)]), self.cfg)  # a detection's Pd: pd_max f(d)
+        ratio = self.cfg.pd_max * (1.0 if f is None else float(f[0])) * g / self.kappa
         if self.repeat is not None:  # persistent clutter: against an object at the place
             J = np.diag([1.0, 1.0 / max(float(range_m), 1e-3) ** 2])  # world xy -> range, bearing
             ratio = (

@@ -52,6 +52,8 @@ Range fall-off (`derive_pd_range`, used only when asked for):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from experiments.errors import DataError
@@ -146,8 +148,19 @@ def derive_pd_range(
     """Pd's range fall-off measured on the run (module doc, 7): the maximum-likelihood pd_max,
     pd_range_m and pd_range_scale_m of Pd(d) = pd_max / (1 + exp((d - pd_range_m) / scale))
     over the views of the established landmarks with at least min_beams free beams (in 1 m
-    range bins; grid steps 0.01, 0.5 m and 0.25 m)."""
-    edges = np.arange(0.0, float(seq.scan_max_range) + 1.0, 1.0)
+    range bins up to the farthest view counted; grid steps 0.01, 0.5 m and 0.25 m)."""
+    if not 1 <= min_beams <= MAX_BEAMS:
+        raise DataError(
+            f"derive_pd_range: min_beams must be 1-{MAX_BEAMS} (free beams are counted apart "
+            f"up to MAX_BEAMS), got {min_beams!r}"
+        )
+    far = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
+    if not math.isfinite(far) or far <= 0:
+        raise DataError(
+            "derive_pd_range: needs a finite range limit (the scans' max range or "
+            f"measurement.max_range_m) to bin the views by range, got {far!r}"
+        )
+    edges = np.arange(0.0, far + 1.0, 1.0)
     e, d = range_detection_rates(lg, seq, scans, edges, established)
     n, k = e[:, min_beams:].sum(axis=1), d[:, min_beams:].sum(axis=1)
     if not n.sum():
@@ -155,6 +168,8 @@ def derive_pd_range(
             f"derive_pd_range: no established landmark was in view with {min_beams} free beams "
             f"or more in scans {scans}: no fall-off to derive"
         )
+    last = int(np.flatnonzero(n)[-1]) + 1  # the grid spans the farthest view counted
+    edges, n, k = edges[: last + 1], n[:last], k[:last]
     mid = 0.5 * (edges[:-1] + edges[1:])
     d50 = np.arange(1.0, edges[-1] + 0.5, 0.5)
     scale = np.arange(0.25, 20.0 + 0.25, 0.25)

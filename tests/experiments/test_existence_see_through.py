@@ -61,3 +61,22 @@ def test_no_missed_established_landmark_derives_nothing_and_says_why(run):
     seq, lg = run
     with pytest.raises(DataError, match="no established landmark was missed"):
         derive_see_through(lg, seq, (0, seq.n_scans), MIN_BEAMS, established=10000)
+
+
+def test_range_bins_add_up_to_the_beam_rates_and_split_them_by_range(run):
+    """`range_detection_rates` over 1 m bins covering every view sums, over its range bins, to
+    `beam_detection_rates`' counts; with the bins cut at the median view's range, each half
+    holds a share of them, and a view beyond the last edge is not counted."""
+    from experiments.eval.existence_rates import beam_detection_rates, range_detection_rates
+
+    seq, lg = run
+    scans = (0, seq.n_scans)
+    e, d = beam_detection_rates(lg, seq, scans)
+    assert e.sum() > 50
+    edges = np.arange(0.0, float(seq.scan_max_range) + 1.0, 1.0)
+    er, dr = range_detection_rates(lg, seq, scans, edges)
+    assert er.sum(axis=0).tolist() == e.tolist() and dr.sum(axis=0).tolist() == d.tolist()
+    ranges = np.concatenate([r for *_, r in _views(lg, seq, scans, ESTABLISHED)])
+    mid = float(np.median(ranges))
+    near, _ = range_detection_rates(lg, seq, scans, np.array([0.0, mid]))
+    assert near.sum() == int((ranges < mid).sum()) and 0 < near.sum() < e.sum()

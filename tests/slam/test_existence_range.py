@@ -105,12 +105,65 @@ def test_derive_pd_range_recovers_the_fall_off_from_counts(monkeypatch):
 
     monkeypatch.setattr(existence_rates, "range_detection_rates", rates)
     seq = SimpleNamespace(scan_max_range=80.0)
-    out = existence_rates.derive_pd_range(None, seq, (0, 1), min_beams=2)["settings"]
+    lg = SimpleNamespace(config={"measurement": {"max_range_m": 80.0}})
+    out = existence_rates.derive_pd_range(lg, seq, (0, 1), min_beams=2)["settings"]
     assert out["map_policy.existence_pd_max"] == pytest.approx(0.75, abs=0.005)
     assert out["map_policy.existence_pd_range_m"] == pytest.approx(36.0, abs=0.25)
     assert out["map_policy.existence_pd_range_scale_m"] == pytest.approx(4.0, abs=0.125)
     with pytest.raises(existence_rates.DataError, match="no established landmark"):
-        existence_rates.derive_pd_range(None, seq, (0, 1), min_beams=3)
+        existence_rates.derive_pd_range(lg, seq, (0, 1), min_beams=3)
+
+
+def test_derive_pd_range_names_a_bad_beam_count_or_an_unbounded_range(monkeypatch):
+    """min_beams beyond the beams counted apart, or no finite range to bin by (a scan's max
+    range and measurement.max_range_m both inf): a DataError naming it, never numpy's
+    allocation error."""
+    monkeypatch.setattr(existence_rates, "range_detection_rates", None)  # never reached
+    seq = SimpleNamespace(scan_max_range=math.inf)
+    lg = SimpleNamespace(config={"measurement": {"max_range_m": math.inf}})
+    with pytest.raises(existence_rates.DataError, match="finite range limit"):
+        existence_rates.derive_pd_range(lg, seq, (0, 1), min_beams=2)
+    too_many = existence_rates.MAX_BEAMS + 1
+    with pytest.raises(existence_rates.DataError, match="min_beams must be"):
+        existence_rates.derive_pd_range(lg, seq, (0, 1), min_beams=too_many)
+
+
+def test_a_detection_at_the_half_range_has_half_pd_max(monkeypatch):
+    """The trace of a tentative seen at 10 m with pd_range_m 10: its Pd in the scans it is
+    detected is pd_max / 2 (a detection's Pd is pd_max f(d), `LandmarkExistence.update`), and
+    pd_max without the fall-off."""
+    pds = []
+    for pd_range in (10.0, math.inf):
+        manager, book = _existence_manager(
+            "ihgr",
+            existence_pd_max=0.6,
+            existence_pd_range_m=pd_range,
+            existence_pd_range_scale_m=2.0,
+            existence_keep_tentatives=True,
+        )
+        book.trace = []
+        state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+        for k in range(2):
+            _existence_scan(manager, book, state, _trunk_scan(k))
+        seen = [row for row in book.trace if row["detected"].any()]
+        assert [row["scan"] for row in seen] == [1]  # the birth scan has nothing to update
+        pds.append(float(seen[0]["pd"][seen[0]["detected"]][0]))
+    assert pds == [pytest.approx(0.3, rel=1e-12), pytest.approx(0.6, rel=1e-12)]
+
+
+def test_a_window_track_gains_pd_max_f_a_sighting_against_uniform_clutter():
+    """track_existence at the half range: each sighting after the first adds log(1/2) to the
+    log-odds it has without the fall-off (pd_max f g / kappa a sighting)."""
+    R = np.diag([1e-2, 1e-4])
+    lo = []
+    for pd_range in (10.0, math.inf):
+        _, book = _existence_manager(
+            "ihgr-window", existence_pd_range_m=pd_range, existence_pd_range_scale_m=2.0
+        )
+        lo.append([_logit(book.track_existence(n, R, 10.0)) for n in (1, 2, 3)])
+    assert lo[0][0] == pytest.approx(lo[1][0], rel=1e-12)  # the birth: no sighting yet
+    for n in (1, 2):
+        assert lo[0][n] - lo[1][n] == pytest.approx(n * math.log(0.5), rel=1e-9)
 
 
 def test_the_default_is_no_fall_off():
