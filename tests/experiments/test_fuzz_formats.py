@@ -152,7 +152,7 @@ def test_fuzz_config_files(folder, doc):
 def _sweep_mutations(study: str):
     """The study's mutated sweep files, one strategy built once: not again at each example,
     where building it (`st.composite` reads its function's source) and validating it took about
-    a quarter of the test's time. The same strategy, so the same examples."""
+    half of the test's CPU (33.5 -> 17.8 s measured). The same strategy, so the same examples."""
     return mutated_tree(base_sweeps()[study], none=False)
 
 
