@@ -1,6 +1,8 @@
 """The single-scan association's inputs in one numba call (`slam.map_managers.TentativeMap`):
 which landmarks and tentatives can be in view, which measurements gate with something at the
-new-feature gate, and the sub-problem on the candidates that do.
+new-feature gate, and the sub-problem on the candidates that do; and, for loop closure's
+revisit detection, the old landmarks in view and the spread of their predictions
+(`revisit_spread`).
 
 The same operations as the numpy code it replaced (`se2.observe`, `View.contains`, the
 candidates' [pose, point] covariances read from P's lower triangle, `project_blocks`, the
@@ -19,7 +21,7 @@ from numba import njit
 from association.gating import pair_d2
 from slam.se2 import observe_kernel
 
-__all__ = ["project_blocks", "scan_candidates", "sub_problem", "view_bounds"]
+__all__ = ["project_blocks", "revisit_spread", "scan_candidates", "sub_problem", "view_bounds"]
 
 
 def view_bounds(view) -> tuple[float, float, bool, float]:
@@ -174,3 +176,39 @@ def sub_problem(H5, cand, P_lm, cov_t):
         a = n_sub + 2 * t
         P_sub[a : a + 2, a : a + 2] = cov_t[t]
     return H, P_sub
+
+
+@njit(cache=True)
+def revisit_spread(P, lm_xy, seen_s, before_s, sensor, sensor_yaw, heading, bounds):
+    """Loop closure's revisit detection before its gate (`slam.closure.LoopCloser.revisit`):
+    the landmarks last seen before `before_s` (seen_s (n,) s, each landmark's last sighting)
+    whose predictions are in view (`bounds`: `view_bounds`), as state positions (c,), and the
+    largest metric sd of each one's predicted measurement (c,), sqrt(max(S_rr, r^2 S_bb))
+    with S = H5 C5 H5^T on its [pose, point] block (`project_blocks`: np.einsum's sums to the
+    bit). P (d, d): its lower triangle read; lm_xy (n, 2); sensor: `se2.sensor_numbers`."""
+    lo, hi, every, r_max = bounds
+    px, py, dpx, dpy = sensor
+    old = np.flatnonzero(seen_s < before_s)
+    m = np.empty((old.size, 2))
+    for a in range(old.size):
+        m[a, 0], m[a, 1] = lm_xy[old[a], 0], lm_xy[old[a], 1]
+    z_hat, H5_all = observe_kernel(m, px, py, dpx, dpy, heading, sensor_yaw)
+    keep = np.flatnonzero(_in_view(z_hat, lo, hi, every, r_max))
+    cand = old[keep]
+    H5 = np.empty((cand.size, 2, 5))
+    C5 = np.empty((cand.size, 5, 5))
+    for a in range(cand.size):
+        H5[a] = H5_all[keep[a]]
+        i = cand[a]
+        for u in range(5):
+            cu = u if u < 3 else 3 + 2 * i + (u - 3)
+            for v in range(5):
+                cv = v if v < 3 else 3 + 2 * i + (v - 3)
+                C5[a, u, v] = _sym(P, cu, cv)
+    S = project_blocks(H5, C5)
+    sd = np.empty(cand.size)
+    for a in range(cand.size):
+        r = z_hat[keep[a], 0]
+        s_r, s_b = S[a, 0, 0], r * r * S[a, 1, 1]
+        sd[a] = math.sqrt(s_r if (s_r >= s_b or s_r != s_r) else s_b)  # np.maximum's
+    return cand, sd

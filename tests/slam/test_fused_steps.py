@@ -1,6 +1,7 @@
 """The per-scan work fused into one numba call each (issue 40, speed) against the code they
 replaced, kept here as their oracles: `slam.scan_candidates.scan_candidates` (the single-scan
-association's inputs) and `slam.ekf._batch_inputs` (`Filter.update`'s). Both do the same
+association's inputs), `slam.ekf._batch_inputs` (`Filter.update`'s), and loop closure's
+`slam.scan_candidates.revisit_spread` and `slam.closure._nearest_far`. Both do the same
 operations in the same order, so they must agree to the bit, not to a tolerance."""
 
 from __future__ import annotations
@@ -10,9 +11,16 @@ import pytest
 
 from association import gate_matrix
 from slam import se2
+from slam.closure import SAME_TREE_M, _k_nearest, _nearest_far
 from slam.ekf import EkfState, Filter, _batch_blocks, _batch_inputs, landmark_columns
 from slam.map_managers import View
-from slam.scan_candidates import project_blocks, scan_candidates, sub_problem, view_bounds
+from slam.scan_candidates import (
+    project_blocks,
+    revisit_spread,
+    scan_candidates,
+    sub_problem,
+    view_bounds,
+)
 
 LASER = np.array([3.78, 0.5, -0.0187])
 POSE_COLS = np.array([0, 1, 2], np.int64)
@@ -154,3 +162,67 @@ def test_batch_inputs_find_a_landmark_twice():
     R = np.tile(np.diag([0.03**2, 0.003**2]), (3, 1, 1))
     with pytest.raises(ValueError, match="appears twice"):
         state.update(idx, z, R, LASER)
+
+
+def _revisit_numpy(state, seen, before, view):
+    """`LoopCloser.revisit`'s steps before its gate, as they were written."""
+    cand = np.flatnonzero(seen < before)
+    z_hat, H5 = se2.observe(state.pose, state.landmarks_xy[cand], LASER)
+    inside = view.contains(z_hat)
+    cand, z_hat, H5 = cand[inside], z_hat[inside], H5[inside]
+    C5 = state.cov(landmark_columns(cand))
+    S = np.einsum("nij,njk,nlk->nil", H5, C5, H5)
+    return cand, np.sqrt(np.maximum(S[:, 0, 0], z_hat[:, 0] ** 2 * S[:, 1, 1]))
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_revisit_spread_equals_the_numpy_steps_to_the_bit(seed):
+    """The sds come from np.einsum in the code it replaced: `project_blocks` sums its 25
+    products in einsum's order, so they agree to the bit too."""
+    rng = np.random.default_rng(200 + seed)
+    state = _filter(rng, int(rng.integers(0, 80)), lower_only=seed % 2 == 1)
+    seen = rng.uniform(0, 100, state.n_landmarks)
+    seen[rng.random(state.n_landmarks) < 0.1] = np.nan  # never seen (seen_at's default)
+    view = View((-np.pi / 2, np.pi / 2), 30.0, margin_m=1.0, margin_rad=0.05)
+    got = revisit_spread(
+        state.P_lower,
+        state.landmarks_xy,
+        seen,
+        60.0,
+        se2.sensor_numbers(state.pose, LASER),
+        float(LASER[2]),
+        float(state.pose[2]),
+        view_bounds(view),
+    )
+    want = _revisit_numpy(state, seen, 60.0, view)
+    assert np.array_equal(got[0], want[0])
+    assert got[1].tobytes() == want[1].tobytes()
+
+
+def _nearest_numpy(xy, pos, k, match_m):
+    """`LoopCloser._nearest_other_tree`'s search as it was written (before its loop over
+    the close ones)."""
+    d, j = _k_nearest(np.ascontiguousarray(xy), xy[pos], k)
+    other = d > match_m
+    close = other & (d <= SAME_TREE_M)
+    far = other & ~close
+    first = np.argmax(far, axis=1)
+    rows = np.arange(d.shape[0])
+    return np.where(far[rows, first], d[rows, first], np.inf), close, d, j
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_nearest_far_equals_the_numpy_steps(seed):
+    """Clustered points (trees mapped twice within SAME_TREE_M) and a match_m on either side
+    of it, with landmarks whose k nearest hold no far one (inf)."""
+    rng = np.random.default_rng(300 + seed)
+    n = int(rng.integers(2, 60))
+    centres = rng.uniform(-20, 20, (max(n // 2, 1), 2))
+    xy = centres[rng.integers(0, centres.shape[0], n)] + rng.normal(scale=0.7, size=(n, 2))
+    pos = rng.choice(n, int(rng.integers(1, n + 1)), replace=False).astype(np.int64)
+    k = min(16, n)
+    for match_m in (0.3, 1.0, 2.0):
+        got = _nearest_far(xy, pos, k, match_m)
+        want = _nearest_numpy(xy, pos, k, match_m)
+        for a, b in zip(got, want):
+            assert np.array_equal(a, b)
