@@ -91,6 +91,7 @@ Every check that reaches step 2 is recorded as a `ClosureEvent` (accepted or why
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 
@@ -539,7 +540,7 @@ class LoopCloser:
         order = np.argsort(np.hypot(*(xy[pairs[:, 0]] - xy[pairs[:, 1]]).T), kind="stable")
         pairs = pairs[order]
         d_nn = self._nearest_other_tree(state, pairs.reshape(-1)).reshape(-1, 2).min(axis=1)
-        gate = float(chi2.ppf(self.cfg.jc_prob, 2))
+        gate = _chi2_quantile(self.cfg.jc_prob, 2)
         keep, drop, used = [], [], set()
         for (a, b), reach in zip(pairs, 0.5 * d_nn):
             ia, ib = int(ids[a]), int(ids[b])
@@ -577,7 +578,7 @@ class LoopCloser:
             return []
         xy, ids = state.landmarks_xy, state.landmark_ids
         d = np.hypot(*(xy[recent][:, None, :] - xy[old][None, :, :]).transpose(2, 0, 1))
-        gate = float(chi2.ppf(self.cfg.jc_prob, 2))
+        gate = _chi2_quantile(self.cfg.jc_prob, 2)
         keep, drop = [], []
         for i in range(recent.size):
             near = np.flatnonzero(d[i] < 2.0 * self.cfg.match_m)
@@ -609,6 +610,13 @@ def _pairs_within(xy: np.ndarray, r: float) -> np.ndarray:
                 out[p, 0], out[p, 1] = a, b
                 p += 1
     return out[:p]
+
+
+@functools.lru_cache(maxsize=32)
+def _chi2_quantile(prob: float, dof: int) -> float:
+    """float(chi2.ppf(prob, dof)), kept: the duplicate sweep asks for the same one at every
+    sweep, and scipy's ppf costs more than the sweep's own arithmetic."""
+    return float(chi2.ppf(prob, dof))
 
 
 @njit(cache=True)
