@@ -376,6 +376,8 @@ def prepare(z, R, z_hat, H, P, gate_prob: float, *, validate: bool = True) -> Pr
             R = np.broadcast_to(R, (m, 2, 2))
         H = np.ascontiguousarray(H, np.float64)
         P = np.ascontiguousarray(P, np.float64)
+        if R.ndim == 3 and max(m, z_hat.shape[0]) <= _KERNEL_RANKS:  # a scan's few: one call
+            return _trusted_prepared(z, R, z_hat, H, P, gate=gate_threshold(gate_prob))
         S_feat = _project_cov_trusted(H, P) if z_hat.shape[0] else np.zeros((0, 2, 2))
     m, n = z.shape[0], z_hat.shape[0]
     gate = gate_threshold(gate_prob)
@@ -424,6 +426,74 @@ def prepare(z, R, z_hat, H, P, gate_prob: float, *, validate: bool = True) -> Pr
         rank_meas=rank_meas,
         rank_feat=rank_feat,
         **pairs,
+    )
+
+
+def _trusted_prepared(z, R, z_hat, H, P, *, gate: float) -> Prepared:
+    """`prepare`'s trusted path for at most `_KERNEL_RANKS` measurements and features: the
+    same kernels (`_project_cov_trusted`, `_rank_kernel`, `_gated_pairs`) in one call,
+    the pairs sorted by their (unique) rank pairs as np.lexsort sorts them."""
+    f = np.ascontiguousarray
+    z, R, z_hat = f(z), f(R), f(z_hat)
+    S_feat, rank_meas, rank_feat, ii, jj, nu, S, d2, l11, l22, bad = _trusted_kernel(
+        z, R, z_hat, H, P, gate
+    )
+    if bad[0] >= 0:  # cannot happen with R > 0 and H P H^T >= 0, kept as a guard
+        raise AssociationError(
+            f"P, R: innovation covariance S[{bad[0]}, {bad[1]}] is not positive definite"
+        )
+    logdet = 2.0 * (np.log(l11) + np.log(l22))  # as `chol2_solve`
+    return Prepared(
+        z=z,
+        R=R,
+        z_hat=z_hat,
+        S_feat=S_feat,
+        H=H,
+        P=P,
+        gate=gate,
+        rank_meas=rank_meas,
+        rank_feat=rank_feat,
+        pair_i=ii,
+        pair_j=jj,
+        nu=nu,
+        S=S,
+        d2=d2,
+        logdet_S=logdet,
+    )
+
+
+@njit(cache=True)
+def _trusted_kernel(z, R, z_hat, H, P, gate):
+    """`_trusted_prepared`'s arrays: (S_feat, rank_meas, rank_feat, then the gated pairs'
+    ii, jj, nu, S, d2, l11, l22 in canonical order, bad). Ranks are permutations, so the
+    key rank_meas[i] n + rank_feat[j] is unique per pair and any sort orders the pairs as
+    the stable lexsort did."""
+    m, n = z.shape[0], z_hat.shape[0]
+    S_feat = _project_cov_trusted(H, P) if n else np.zeros((0, 2, 2))
+    rank_meas = _rank_kernel(z, R.reshape(m, 4))
+    rank_feat = _rank_kernel(z_hat, S_feat.reshape(n, 4))
+    if m and n:
+        ii, jj, nu, S, d2, l11, l22, bad = _gated_pairs(z, R, z_hat, S_feat, gate)
+    else:
+        ii, jj = np.zeros(0, np.int64), np.zeros(0, np.int64)
+        nu, S, d2 = np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0)
+        l11, l22, bad = np.zeros(0), np.zeros(0), np.full(2, -1, np.int64)
+    key = np.empty(ii.size, np.int64)
+    for t in range(ii.size):
+        key[t] = rank_meas[ii[t]] * n + rank_feat[jj[t]]
+    order = np.argsort(key)
+    return (
+        S_feat,
+        rank_meas,
+        rank_feat,
+        ii[order],
+        jj[order],
+        nu[order],
+        S[order],
+        d2[order],
+        l11[order],
+        l22[order],
+        bad,
     )
 
 

@@ -79,6 +79,7 @@ def check_rounding_options(options: dict) -> dict:
     return dict(options)
 
 
+_UNION_FIND_MAX = 2000  # entries: below, `_union_find`; above, scipy's labelling
 _DENSE_MAX_ENTRIES = 40_000  # below this, a dense A is faster through linprog than a sparse one
 
 
@@ -182,7 +183,7 @@ def _components(n_rows: int, indptr: np.ndarray, indices: np.ndarray) -> _Compon
     Labels number the components in the order of their smallest union-find root (rows joined by
     a column hang under the column's first row); large problems go to scipy's labelling."""
     n_cols = indptr.size - 1
-    if indices.size > 2000:
+    if indices.size > _UNION_FIND_MAX:
         col = np.repeat(np.arange(n_cols), np.diff(indptr)) + n_rows
         g = sp.coo_array((np.ones(indices.size), (indices, col)), shape=(n_rows + n_cols,) * 2)
         k, labels = connected_components(g, directed=False)
@@ -304,6 +305,38 @@ def _presolve(problem, components, chosen, active):
     return bound
 
 
+@njit(cache=True)
+def _settle(c, n_rows, indptr, indices, exact, presolve):
+    """`ihgr_round_csc`'s first steps on a small problem (at most `_UNION_FIND_MAX` entries) in
+    one call: (the first exact row without a column or -1, the components (`_union_find`),
+    chosen, active, the presolve's cost, whether a column is still active). Loops over the
+    rows and entries."""
+    n_cols = c.size
+    row_has_col = np.zeros(n_rows, np.bool_)
+    for e in range(indices.size):
+        row_has_col[indices[e]] = True
+    bad = -1
+    for r in range(n_rows):
+        if exact[r] and not row_has_col[r]:
+            bad = r
+            break
+    chosen = np.zeros(n_cols, np.bool_)
+    active = np.ones(n_cols, np.bool_)
+    if bad >= 0 or n_cols == 0:
+        none = np.zeros(0, np.int64)
+        return bad, 0, none, none, chosen, active, 0.0, n_cols > 0
+    n_comp, row_lab, col_lab = _union_find(n_rows, indptr, indices)
+    bound = 0.0
+    if presolve:
+        bound += _presolve(
+            (c, n_rows, indptr, indices, exact), (n_comp, row_lab, col_lab), chosen, active
+        )
+    open_cols = False
+    for h in range(n_cols):
+        open_cols = open_cols or active[h]
+    return bad, n_comp, row_lab, col_lab, chosen, active, bound, open_cols
+
+
 def _solve_lp(problem: _Csc, cols: np.ndarray, rows: np.ndarray):
     """LP relaxation of `problem` over columns `cols` and rows `rows`; <= rows get slack columns
     so that HiGHS sees only equalities. Returns (x over cols, optimum)."""
@@ -348,42 +381,16 @@ def ihgr_round(
     )
 
 
-def ihgr_round_csc(
-    c: np.ndarray,
-    n_rows: int,
-    indptr: np.ndarray,
-    indices: np.ndarray,
-    exact: np.ndarray,
-    *,
-    eps: float = 1e-6,
-    fix_ones: bool = False,
-    presolve: bool = True,
-) -> RoundingResult:
-    """`ihgr_round` on a problem given in CSC index form (column h covers rows
-    indices[indptr[h]:indptr[h + 1]]), without the input checks: for problems this package
-    builds itself, valid by construction (the single-scan program), where the checks and the
-    sparse-matrix round trip would cost more than the solve."""
-    n_cols = c.size
-    row_has_col = np.bincount(indices, minlength=n_rows) > 0
-    if (exact & ~row_has_col).any():
-        r = int(np.flatnonzero(exact & ~row_has_col)[0])
-        raise RuntimeError(f"IHGR: infeasible, exact row {r} has no column")
-    if n_cols == 0:
-        return _no_columns("ihgr")
-    problem = _Csc(c, n_rows, indptr, indices, exact)
-    components = _components(n_rows, indptr, indices)
+def _round_by_lp(problem: _Csc, components: _Components, chosen, active, bound, *, eps, fix_ones):
+    """IHGR's LP and rounding rounds on the columns still `active` after the presolve (in
+    place on `chosen` and `active`); returns (bound plus the first LP's optimum, LP solves,
+    whether the first LP was fractional)."""
+    c, n_rows, indptr, indices, exact = problem
     counts = np.diff(indptr)
-    chosen = np.zeros(n_cols, bool)
-    active = np.ones(n_cols, bool)  # columns still in play
-    bound = 0.0
-
-    if presolve:  # single-choice components settled without an LP (`_presolve`)
-        bound += _presolve(tuple(problem), tuple(components), chosen, active)
     solves = 0
     fractional = False
-    if active.any():  # else presolve settled every component (most scans): no LP
-        covered = np.zeros(n_rows, bool)
-        covered[indices[np.repeat(chosen, counts)]] = True
+    covered = np.zeros(n_rows, bool)
+    covered[indices[np.repeat(chosen, counts)]] = True
     while active.any():
         cols = np.flatnonzero(active)
         in_play = np.bincount(indices[np.repeat(active, counts)], minlength=n_rows) > 0
@@ -411,6 +418,52 @@ def ihgr_round_csc(
         # remove every column that shares a row with a fixed one (the fixed ones included)
         conflict = np.add.reduceat(covered[indices].astype(np.int64), indptr[:-1]) > 0
         active &= ~conflict
+    return bound, solves, fractional
+
+
+def ihgr_round_csc(
+    c: np.ndarray,
+    n_rows: int,
+    indptr: np.ndarray,
+    indices: np.ndarray,
+    exact: np.ndarray,
+    *,
+    eps: float = 1e-6,
+    fix_ones: bool = False,
+    presolve: bool = True,
+) -> RoundingResult:
+    """`ihgr_round` on a problem given in CSC index form (column h covers rows
+    indices[indptr[h]:indptr[h + 1]]), without the input checks: for problems this package
+    builds itself, valid by construction (the single-scan program), where the checks and the
+    sparse-matrix round trip would cost more than the solve."""
+    n_cols = c.size
+    if indices.size <= _UNION_FIND_MAX:  # the feasibility check to the presolve in one call
+        settled = _settle(c, n_rows, indptr, indices, exact, presolve)
+        bad, n_comp, row_lab, col_lab, chosen, active, bound, open_cols = settled
+        components = _Components(n_comp, row_lab, col_lab)
+    else:
+        row_has_col = np.bincount(indices, minlength=n_rows) > 0
+        bad = int(np.flatnonzero(exact & ~row_has_col)[0]) if (exact & ~row_has_col).any() else -1
+    if bad >= 0:
+        raise RuntimeError(f"IHGR: infeasible, exact row {bad} has no column")
+    if n_cols == 0:
+        return _no_columns("ihgr")
+    if indices.size > _UNION_FIND_MAX:
+        components = _components(n_rows, indptr, indices)
+        chosen = np.zeros(n_cols, bool)
+        active = np.ones(n_cols, bool)  # columns still in play
+        bound = 0.0
+        if presolve:  # single-choice components settled without an LP (`_presolve`)
+            bound += _presolve(
+                (c, n_rows, indptr, indices, exact), tuple(components), chosen, active
+            )
+        open_cols = bool(active.any())
+    solves, fractional = 0, False
+    if open_cols:  # else presolve settled every component (most scans): no LP
+        problem = _Csc(c, n_rows, indptr, indices, exact)
+        bound, solves, fractional = _round_by_lp(
+            problem, components, chosen, active, bound, eps=eps, fix_ones=fix_ones
+        )
     sel = np.flatnonzero(chosen)
     return RoundingResult(
         selected=sel,

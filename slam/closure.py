@@ -91,6 +91,7 @@ Every check that reaches step 2 is recorded as a `ClosureEvent` (accepted or why
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields
 
@@ -101,7 +102,7 @@ from scipy.stats import chi2
 
 from slam import rigid, se2
 from slam.config import ClosureConfig
-from slam.ekf import landmark_columns
+from slam.scan_candidates import revisit_spread, view_bounds
 from slam.se2 import procrustes_2d
 
 __all__ = [
@@ -217,6 +218,7 @@ class LoopCloser:
         self.hold_frame = bool(hold_frame)
         self.scan_t = history.scan_t
         self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
+        self._view_bounds = view_bounds(view)
         self.events: list[ClosureEvent] = []
         self._together: dict[int, set] = {}  # id -> ids within SAME_TREE_M seen in one scan
         self._frame = None  # after a re-registration: (ids, positions) of the old map held
@@ -266,17 +268,18 @@ class LoopCloser:
         ids = state.landmark_ids
         if ids.size < 2:
             return Revisit()
-        cand = np.flatnonzero(self.history.seen_at(ids, t) < t - self.cfg.old_s)
+        cand, sd = revisit_spread(  # the old landmarks in view, their predictions' sds
+            state.P_lower,
+            state.landmarks_xy,
+            self.history.seen_at(ids, t),
+            t - self.cfg.old_s,
+            se2.sensor_numbers(state.pose, self.laser),
+            float(self.laser[2]),
+            float(state.pose[2]),
+            self._view_bounds,
+        )
         if not cand.size:
             return Revisit()
-        z_hat, H5 = se2.observe(state.pose, state.landmarks_xy[cand], self.laser)
-        view = self.view.contains(z_hat)
-        cand, z_hat, H5 = cand[view], z_hat[view], H5[view]
-        if not cand.size:
-            return Revisit()
-        C5 = state.cov(landmark_columns(cand))
-        S = np.einsum("nij,njk,nlk->nil", H5, C5, H5)
-        sd = np.sqrt(np.maximum(S[:, 0, 0], z_hat[:, 0] ** 2 * S[:, 1, 1]))
         out = np.zeros(ids.size, bool)
         out[cand] = self.gate_radius * sd >= 0.5 * self._nearest_other_tree(state, cand)
         n_hidden = int(out.sum())
@@ -289,13 +292,9 @@ class LoopCloser:
         one (`seen_together`); a landmark closer, or never seen with it, is this tree mapped
         again."""
         xy, ids = state.landmarks_xy, state.landmark_ids
-        d, j = _k_nearest(np.ascontiguousarray(xy), xy[pos], min(NEIGHBOURS, ids.size))
-        # d ascends along each row: the answer is its first entry that is another tree
-        other = d > self.cfg.match_m
-        close = other & (d <= SAME_TREE_M)
-        far = other & ~close
-        first = np.argmax(far, axis=1)
-        out = np.where(far[np.arange(d.shape[0]), first], d[np.arange(d.shape[0]), first], np.inf)
+        out, close, d, j = _nearest_far(
+            np.ascontiguousarray(xy), pos, min(NEIGHBOURS, ids.size), self.cfg.match_m
+        )
         for r in np.flatnonzero(close.any(axis=1)).tolist():
             together = self._together.get(int(ids[pos[r]]), ())
             for q, dq in zip(j[r, close[r]].tolist(), d[r, close[r]].tolist()):
@@ -541,7 +540,7 @@ class LoopCloser:
         order = np.argsort(np.hypot(*(xy[pairs[:, 0]] - xy[pairs[:, 1]]).T), kind="stable")
         pairs = pairs[order]
         d_nn = self._nearest_other_tree(state, pairs.reshape(-1)).reshape(-1, 2).min(axis=1)
-        gate = float(chi2.ppf(self.cfg.jc_prob, 2))
+        gate = _chi2_quantile(self.cfg.jc_prob, 2)
         keep, drop, used = [], [], set()
         for (a, b), reach in zip(pairs, 0.5 * d_nn):
             ia, ib = int(ids[a]), int(ids[b])
@@ -579,7 +578,7 @@ class LoopCloser:
             return []
         xy, ids = state.landmarks_xy, state.landmark_ids
         d = np.hypot(*(xy[recent][:, None, :] - xy[old][None, :, :]).transpose(2, 0, 1))
-        gate = float(chi2.ppf(self.cfg.jc_prob, 2))
+        gate = _chi2_quantile(self.cfg.jc_prob, 2)
         keep, drop = [], []
         for i in range(recent.size):
             near = np.flatnonzero(d[i] < 2.0 * self.cfg.match_m)
@@ -611,6 +610,38 @@ def _pairs_within(xy: np.ndarray, r: float) -> np.ndarray:
                 out[p, 0], out[p, 1] = a, b
                 p += 1
     return out[:p]
+
+
+@functools.lru_cache(maxsize=32)
+def _chi2_quantile(prob: float, dof: int) -> float:
+    """float(chi2.ppf(prob, dof)), kept: the duplicate sweep asks for the same one at every
+    sweep, and scipy's ppf costs more than the sweep's own arithmetic."""
+    return float(chi2.ppf(prob, dof))
+
+
+@njit(cache=True)
+def _nearest_far(xy: np.ndarray, pos: np.ndarray, k: int, match_m: float):
+    """`LoopCloser._nearest_other_tree`'s search: for each landmark xy[pos[r]], its k nearest
+    (`_k_nearest`: d, j (q, k), nearest first), the nearest farther than SAME_TREE_M (and
+    than match_m), inf if none (q,), and which of the k are closer, but farther than match_m
+    (close (q, k)): d ascends along each row, so the first such entry is the answer unless a
+    close one is another tree."""
+    q = pos.size
+    query = np.empty((q, 2))
+    for r in range(q):
+        query[r, 0], query[r, 1] = xy[pos[r], 0], xy[pos[r], 1]
+    d, j = _k_nearest(xy, query, k)
+    out = np.full(q, np.inf)
+    close = np.zeros((q, k), np.bool_)
+    for r in range(q):
+        found = False
+        for c in range(k):
+            if d[r, c] > match_m:
+                if d[r, c] <= SAME_TREE_M:
+                    close[r, c] = True
+                elif not found:
+                    out[r], found = d[r, c], True
+    return out, close, d, j
 
 
 @njit(cache=True)

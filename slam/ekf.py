@@ -51,7 +51,7 @@ from numba import njit
 from scipy.linalg import blas
 
 from slam.errors import SlamError
-from slam.se2 import inverse_observe, observe, wrap_angle
+from slam.se2 import inverse_observe, observe, observe_kernel, sensor_numbers, wrap_angle
 
 __all__ = [
     "EkfState",
@@ -84,6 +84,12 @@ class _Estimate:
     @property
     def _lower(self) -> np.ndarray:
         return self.P
+
+    @property
+    def P_lower(self) -> np.ndarray:
+        """The covariance's storage, whose lower triangle is current (a `Filter`'s upper one may
+        lag): for kernels that read P[max(r, c), min(r, c)]. A view: do not write to it."""
+        return self._lower
 
     @property
     def dim(self) -> int:
@@ -372,17 +378,23 @@ class Filter(_Estimate):
         k = idx.size
         if k == 0:
             return UpdateResult(np.zeros((0, 2)), np.zeros((0, 0)), math.nan)
-        z = np.asarray(z, dtype=np.float64).reshape(k, 2)
-        R = np.asarray(R, dtype=np.float64).reshape(k, 2, 2)
-        if len(set(idx.tolist())) != k:
+        z = np.ascontiguousarray(z, dtype=np.float64).reshape(k, 2)
+        R = np.ascontiguousarray(R, dtype=np.float64).reshape(k, 2, 2)
+        # nu = z - z_hat (bearing wrapped), the columns the batch touches ([x, y, theta, then
+        # each landmark's pair]) and H on them (FEJ: at the landmarks' first estimates)
+        sensor = sensor_numbers(self.pose, laser_pose)
+        nu, cols, Hc, R_blk, twice = _batch_inputs(
+            self.landmarks_xy,
+            self.first_xy,
+            idx,
+            z,
+            R,
+            sensor,
+            (float(self.x[2]), float(laser_pose[2])),
+            self.first_estimates,
+        )
+        if twice:
             raise SlamError("update.idx: a landmark appears twice in one batch")
-        z_hat, H5 = observe(self.pose, self.landmarks_xy[idx], laser_pose)
-        if self.first_estimates:  # FEJ: Jacobians at the landmarks' first estimates
-            H5 = observe(self.pose, self.first_xy[idx], laser_pose)[1]
-        nu = z - z_hat
-        nu[:, 1] = wrap_angle(nu[:, 1])
-        # The columns the batch touches, [x, y, theta, then each landmark's pair], and H on them.
-        cols, Hc, R_blk = _batch_blocks(idx, H5, R)
         P = self._P
         HP = Hc @ _sym_rows(P, cols)  # (q, d) = (P H^T)^T, from whole rows of P
         S = Hc @ HP[:, cols].T + R_blk
@@ -450,6 +462,37 @@ class Filter(_Estimate):
         self.landmark_ids = np.delete(self.landmark_ids, pos)
         self.copy_of = np.delete(self.copy_of, copies)
         self.first_xy = np.delete(self.first_xy, pos, axis=0)
+
+
+@njit(cache=True)
+def _batch_inputs(lm_xy, first_xy, idx, z, R, sensor, headings, first_estimates: bool):
+    """`Filter.update`'s inputs in one call (its dozen array operations cost more than the
+    arithmetic): (nu (k, 2), cols, Hc, R_blk (`_batch_blocks`), whether a landmark appears
+    twice in idx) for measurements z (k, 2), R (k, 2, 2) of the landmarks at positions idx
+    (k,) (lm_xy (n, 2); first_xy (n, 2) their first estimates, for the Jacobians when
+    first_estimates); sensor: `se2.sensor_numbers`'s four numbers, headings: (the vehicle's,
+    the sensor's yaw). The same operations as `se2.observe` and `se2.wrap_angle`, to the bit.
+    Loops bounded by k."""
+    k = idx.size
+    twice = False
+    seen = np.sort(idx)
+    for j in range(1, k):
+        twice = twice or seen[j] == seen[j - 1]
+    m = np.empty((k, 2))
+    for j in range(k):
+        m[j, 0], m[j, 1] = lm_xy[idx[j], 0], lm_xy[idx[j], 1]
+    px, py, dpx, dpy = sensor
+    z_hat, H5 = observe_kernel(m, px, py, dpx, dpy, headings[0], headings[1])
+    if first_estimates:
+        for j in range(k):
+            m[j, 0], m[j, 1] = first_xy[idx[j], 0], first_xy[idx[j], 1]
+        H5 = observe_kernel(m, px, py, dpx, dpy, headings[0], headings[1])[1]
+    nu = np.empty((k, 2))
+    for j in range(k):
+        nu[j, 0] = z[j, 0] - z_hat[j, 0]
+        nu[j, 1] = np.pi - np.mod(np.pi - (z[j, 1] - z_hat[j, 1]), 2.0 * np.pi)  # wrap_angle
+    cols, Hc, R_blk = _batch_blocks(idx, H5, R)
+    return nu, cols, Hc, R_blk, twice
 
 
 @njit(cache=True)

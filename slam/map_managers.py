@@ -24,13 +24,13 @@ and report the landmarks whose existence fell below remove_prob (`MapDecisions.r
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-from numba import njit
 
 from association import gate_matrix
 from slam import se2
@@ -38,6 +38,8 @@ from slam.ekf import Filter, landmark_columns
 from slam.errors import SlamError
 from slam.existence_map import LandmarkExistence, radii
 from slam.log import AMBIGUOUS, CONFIRMED, OUT_OF_RANGE, TENTATIVE_HIT
+from slam.scan_candidates import project_blocks as _project_kernel
+from slam.scan_candidates import scan_candidates, view_bounds
 from slam.sources import Measurements
 from slam.tentatives import MapPolicy, Tentatives, sighting
 
@@ -150,6 +152,11 @@ class _Context:
     next_id: int = 0
     existence: LandmarkExistence | None = None  # map_policy "existence" only
 
+    @functools.cached_property
+    def view_bounds(self) -> tuple:
+        """The view's bounds as the association's kernel compares them (`view_bounds`)."""
+        return view_bounds(self.view)
+
     def new_id(self) -> int:
         self.next_id += 1
         return self.next_id - 1
@@ -228,34 +235,28 @@ class TentativeMap:
         the sub-state [pose, those landmarks, those tentatives]: exact, and the cost no longer
         grows with the map."""
         ctx, tent = self.ctx, self.tent
-        z_lm, H_lm = se2.observe(state.pose, state.landmarks_xy, ctx.laser)
-        z_t, H_t = se2.observe(state.pose, tent.xy, ctx.laser)
-        lm_idx = np.flatnonzero(ctx.view.contains(z_lm) & _shown(hidden, z_lm.shape[0]))
-        t_idx = np.flatnonzero(ctx.view.contains(z_t))
-        n_l, n = lm_idx.size, lm_idx.size + t_idx.size
-        m = meas.z.shape[0]
-        assign = np.full(m, -1, np.int64)
-        ambiguous = np.zeros(m, bool)
-        use = np.flatnonzero(meas.status != OUT_OF_RANGE)
-        if not (use.size and n):
-            return ScanAssociation(assign, ambiguous, lm_idx, t_idx)
-        zh = np.concatenate([z_lm[lm_idx], z_t[t_idx]])
-        H5 = np.concatenate([H_lm[lm_idx], H_t[t_idx]])  # (n, 2, 5)
-        C5 = np.zeros((n, 5, 5))  # covariance of [pose, point] of each candidate
-        C5[:n_l] = state.cov(landmark_columns(lm_idx))
-        C5[n_l:, :3, :3] = state.pose_cov
-        C5[n_l:, 3:, 3:] = tent.cov[t_idx]
-        z_use, R_use = meas.z[use], meas.R[use]
-        gated = gate_matrix(z_use, R_use, zh, _project(H5, C5), ctx.gate_new)  # (m_use, n)
-        ambiguous[use] = gated.any(axis=1)
-        cand = np.flatnonzero(gated.any(axis=0))
+        lm_xy = state.landmarks_xy
+        hidden = np.zeros(lm_xy.shape[0], bool) if hidden is None else np.asarray(hidden, bool)
+        lm_idx, t_idx, use, ambiguous, cand, zh_cand, H, P_sub = scan_candidates(
+            state.P_lower,
+            state.pose,
+            lm_xy,
+            hidden,
+            tent.xy,
+            tent.cov,
+            se2.sensor_numbers(state.pose, ctx.laser),
+            float(ctx.laser[2]),
+            meas.z,
+            meas.R,
+            meas.status != OUT_OF_RANGE,
+            ctx.view_bounds,
+            ctx.gate_new,
+        )
+        assign = np.full(meas.z.shape[0], -1, np.int64)
         if cand.size:
-            c_lm = cand[cand < n_l]
-            sub = np.concatenate([_POSE, landmark_columns(lm_idx[c_lm])[:, 3:].ravel()])
-            c_t = t_idx[cand[cand >= n_l] - n_l]  # the tentatives, after the landmarks
-            H, P_sub = _sub_problem(H5, cand, state.cov(sub), tent.cov[c_t])
+            z_use, R_use = meas.z[use], meas.R[use]
             a_use = self.associator(
-                z_use, R_use, zh[cand], H, P_sub, gate_prob=ctx.gate_prob, **ctx.params
+                z_use, R_use, zh_cand, H, P_sub, gate_prob=ctx.gate_prob, **ctx.params
             )
             a_use = np.asarray(a_use, dtype=np.int64)
             assign[use] = np.where(a_use >= 0, cand[np.maximum(a_use, 0)], -1)
@@ -542,45 +543,3 @@ def make_map_manager(
 def _project(H5: np.ndarray, C5: np.ndarray) -> np.ndarray:
     """(n, 2, 2) H5_j C5_j H5_j^T of each candidate's [pose, point] block."""
     return _project_kernel(np.ascontiguousarray(H5), np.ascontiguousarray(C5))
-
-
-@njit(cache=True)
-def _project_kernel(H5, C5):
-    n = H5.shape[0]
-    out = np.zeros((n, 2, 2))
-    for t in range(n):
-        for i in range(2):
-            for u in range(2):
-                acc = 0.0
-                for j in range(5):
-                    hij = H5[t, i, j]
-                    for k in range(5):
-                        acc += hij * C5[t, j, k] * H5[t, u, k]
-                out[t, i, u] = acc
-    return out
-
-
-@njit(cache=True)
-def _sub_problem(H5, cand, P_lm, cov_t):
-    """The association's sub-problem on the state [pose, candidate landmarks, candidate
-    tentatives]: H (nc, 2, 3 + 2 nc), candidate j's point in columns 3 + 2 j, 4 + 2 j, and its
-    covariance P_sub, which is P_lm (the pose and the candidate landmarks, from the filter)
-    followed by the tentatives' own 2 x 2 blocks cov_t (no correlation with anything). The
-    candidates `cand` index H5, landmarks first."""
-    nc = cand.size
-    d = 3 + 2 * nc
-    H = np.zeros((nc, 2, d))
-    for j in range(nc):
-        c = cand[j]
-        for r in range(2):
-            for q in range(3):
-                H[j, r, q] = H5[c, r, q]
-            H[j, r, 3 + 2 * j] = H5[c, r, 3]
-            H[j, r, 4 + 2 * j] = H5[c, r, 4]
-    P_sub = np.zeros((d, d))
-    n_sub = P_lm.shape[0]
-    P_sub[:n_sub, :n_sub] = P_lm
-    for t in range(cov_t.shape[0]):
-        a = n_sub + 2 * t
-        P_sub[a : a + 2, a : a + 2] = cov_t[t]
-    return H, P_sub

@@ -28,9 +28,11 @@ __all__ = [
     "inverse",
     "inverse_observe",
     "observe",
+    "observe_kernel",
     "observed_points",
     "procrustes_2d",
     "rotate",
+    "sensor_numbers",
     "sensor_position",
     "sinc_and_derivative",
     "to_frame",
@@ -105,12 +107,13 @@ def to_frame(T_ab, p_a) -> np.ndarray:
 def sensor_position(pose, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
     """World position p_S (2,) of a sensor mounted at `sensor_pose` (vehicle frame) when the
     vehicle is at `pose`, and d p_S / d theta (2,)."""
-    px, py, dpx, dpy = _sensor_position(pose, sensor_pose)
+    px, py, dpx, dpy = sensor_numbers(pose, sensor_pose)
     return np.array([px, py]), np.array([dpx, dpy])
 
 
-def _sensor_position(pose, sensor_pose) -> tuple[float, float, float, float]:
-    """`sensor_position` as four numbers (p_S x, y; d p_S / d theta x, y), without arrays."""
+def sensor_numbers(pose, sensor_pose) -> tuple[float, float, float, float]:
+    """`sensor_position` as four numbers (p_S x, y; d p_S / d theta x, y), without arrays
+    (what `observe_kernel` takes)."""
     c, s = math.cos(pose[2]), math.sin(pose[2])
     lx, ly = float(sensor_pose[0]), float(sensor_pose[1])
     return pose[0] + c * lx - s * ly, pose[1] + s * lx + c * ly, -s * lx - c * ly, c * lx - s * ly
@@ -127,15 +130,16 @@ def observe(pose, landmarks_xy, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
     with respect to [x, y, theta, m_x, m_y].
     """
     m = np.ascontiguousarray(landmarks_xy, dtype=np.float64).reshape(-1, 2)
-    px, py, dpx, dpy = _sensor_position(pose, sensor_pose)
-    return _observe_kernel(m, px, py, dpx, dpy, float(pose[2]), float(sensor_pose[2]))
+    px, py, dpx, dpy = sensor_numbers(pose, sensor_pose)
+    return observe_kernel(m, px, py, dpx, dpy, float(pose[2]), float(sensor_pose[2]))
 
 
 @njit(cache=True)
-def _observe_kernel(m, px, py, dpx, dpy, th, sth):
+def observe_kernel(m, px, py, dpx, dpy, th, sth):
     """`observe` for the sensor at world position (px, py), d p_S / d theta = (dpx, dpy),
-    vehicle heading th and sensor yaw sth: one pass over the points (the per-call cost of the
-    numpy version, some 20 array operations, dominated the run loop's)."""
+    vehicle heading th and sensor yaw sth (`sensor_numbers`), callable from other kernels:
+    one pass over the points (the per-call cost of the numpy version, some 20 array
+    operations, dominated the run loop's)."""
     k = m.shape[0]
     z = np.empty((k, 2))
     H = np.zeros((k, 2, 5))

@@ -95,3 +95,19 @@ def test_csc_problem_equals_the_vectorised_form(seed, validate):
     assert got[1] == want[1]
     for a, b in zip(got[:1] + got[2:], want[:1] + want[2:]):
         assert a.dtype == b.dtype and np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_trusted_prepare_equals_the_checked_one_to_the_bit(seed):
+    """The trusted path's one-call kernel (`inputs._trusted_prepared`, up to _KERNEL_RANKS
+    measurements and features) gives every field of the checked path's `Prepared`, the
+    pairs in the same canonical order, to the bit; also with one R for all measurements."""
+    rng = np.random.default_rng(400 + seed)
+    m, n = int(rng.integers(0, 12)), int(rng.integers(0, 16))
+    z, R, z_hat, H, P = _scene(rng, m, n)
+    for R_arg in (R, np.diag([2e-3, 3e-4])):
+        a = prepare(z, R_arg, z_hat, H, P, 0.99, validate=True)
+        b = prepare(z, R_arg, z_hat, H, P, 0.99, validate=False)
+        for name in vars(a):
+            x, y = getattr(a, name), getattr(b, name)
+            assert np.asarray(x).tobytes() == np.asarray(y).tobytes(), name

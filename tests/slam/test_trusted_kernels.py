@@ -11,7 +11,8 @@ from association.inputs import chol2_solve
 from slam import se2
 from slam.closure import _k_nearest, _pairs_within
 from slam.ekf import _batch_blocks
-from slam.map_managers import _project_kernel, _sub_problem
+from slam.scan_candidates import project_blocks as _project_kernel
+from slam.scan_candidates import sub_problem as _sub_problem
 from slam.vehicle import _pieces
 
 _PAIR = np.array([0, 1])
