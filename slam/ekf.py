@@ -378,6 +378,11 @@ class Filter(_Estimate):
         k = idx.size
         if k == 0:
             return UpdateResult(np.zeros((0, 2)), np.zeros((0, 0)), math.nan)
+        n = self.landmarks_xy.shape[0]
+        if idx.min() < 0 or idx.max() >= n:  # the kernel below reads idx unchecked
+            raise SlamError(
+                f"update.idx: landmark positions must be in [0, {n}), got {idx.tolist()}"
+            )
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(k, 2)
         R = np.ascontiguousarray(R, dtype=np.float64).reshape(k, 2, 2)
         # nu = z - z_hat (bearing wrapped), the columns the batch touches ([x, y, theta, then

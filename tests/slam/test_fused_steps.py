@@ -226,3 +226,18 @@ def test_nearest_far_equals_the_numpy_steps(seed):
         want = _nearest_numpy(xy, pos, k, match_m)
         for a, b in zip(got, want):
             assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("bad", [-1, 5, 40])
+def test_an_update_of_a_landmark_position_outside_the_state_is_refused(bad):
+    """The fused kernel reads idx unchecked: an index outside [0, n) is the update's clear
+    error before it (numpy's indexing raised one before the kernel; a negative index wrapped)."""
+    rng = np.random.default_rng(7)
+    state = _filter(rng, 5, lower_only=False)
+    idx = np.array([1, bad], np.int64)
+    z = np.array([[5.0, 0.1], [6.0, -0.1]])
+    R = np.tile(np.diag([0.03**2, 0.003**2]), (2, 1, 1))
+    before = state.x.copy()
+    with pytest.raises(ValueError, match=r"update.idx: landmark positions must be in \[0, 5\)"):
+        state.update(idx, z, R, LASER)
+    assert state.x.tobytes() == before.tobytes()
