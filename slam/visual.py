@@ -36,9 +36,12 @@ def show_scan(vis, seq, laser: np.ndarray, state, result) -> None:
     vis.set_scan(k, float(seq.scan_t[k]))
     T_world_vehicle = state.pose
     T_world_laser = se2.compose(T_world_vehicle, laser)
-    scan = seq.scan(k) if meas.scan is None else meas.scan  # a detections source reads none
-    vis.log_scan(scan, T_world_laser)
-    vis.log_features(scan, meas.features, T_world_laser)
+    scan = meas.scan  # a detections source reads none: the sequence's, when it has ranges
+    if scan is None and seq.scan_ranges is not None:
+        scan = seq.scan(k)
+    if scan is not None:  # (a sequence of detections alone has no return to draw)
+        vis.log_scan(scan, T_world_laser)
+    vis.log_features(scan, meas.features, T_world_laser)  # its segments need the scan
     vis.log_vehicle(T_world_vehicle, state.pose_cov)
     if result.existence is None:
         vis.log_landmarks(state.landmarks_xy, state.landmark_covs, state.landmark_ids)

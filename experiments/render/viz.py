@@ -778,13 +778,18 @@ class Recorder(NullRecorder):
         self._log_pose(_parent(path), pose)
         self._put(path, _SCAN, (scan.ranges_m, scan.angle_min_rad, scan.angle_increment_rad))
 
-    def log_features(self, scan: Scan, features: Features, pose=None, path="world/laser/features"):
+    def log_features(
+        self, scan: Scan | None, features: Features, pose=None, path="world/laser/features"
+    ):
         """Segments, circles, lines and edges in the laser frame under `path`; with `pose`, as
-        `log_scan` (the parent of `path` gets the laser's world pose)."""
+        `log_scan` (the parent of `path` gets the laser's world pose). scan: the scan the
+        segments index (None: features without segments, e.g. a sequence of detections)."""
         if self._skip():
             return
         self._log_pose(_parent(path), pose)
         beams = features.segment_beams
+        if len(beams) and scan is None:
+            raise ValueError("log_features: segments need the scan their beams index, got None")
         strips = [scan.points_xy[features.beams(a, b)] for a, b in beams] if len(beams) else []
         kinds = np.asarray(features.segment_kind, np.int64).reshape(-1)
         self._put(f"{path}/segments", _SEGMENTS, columns.strips(strips), KIND_COLORS[kinds])

@@ -83,6 +83,31 @@ def test_the_scan_is_shown_from_its_record():
     assert "log_closure" not in vis.calls and "log_duplicates" not in vis.calls
 
 
+def test_a_sequence_of_detections_alone_logs_no_scan():
+    """No raw ranges and no scan in the record (a detections source): no scan to draw, so no
+    `log_scan` (it was an all-NaN scan built at every scan); the features go without one, the
+    laser's pose with them."""
+    import dataclasses
+
+    seq = drive_sequence(1.5, 0.0, n_scans=5)
+    one = np.array([0, 2], np.int64)  # a detection in scans 0 and 2; the ranges dropped
+    seq = dataclasses.replace(
+        seq,
+        scan_ranges=None,
+        det_scan=one,
+        det_range=np.array([10.0, 9.0]),
+        det_bearing=np.zeros(2),
+        det_radius=np.full(2, 0.2),
+    )
+    f, res = _result(np.array([-1, -1]))
+    vis = Calls()
+    show_scan(vis, seq, LASER, f, res)
+    assert "log_scan" not in vis.calls
+    ((scan, features, pose),) = vis.calls["log_features"]
+    assert scan is None and features is None
+    np.testing.assert_array_equal(pose, f.pose)  # LASER is the identity
+
+
 def test_a_run_shows_every_scan_once_with_its_used_measurements():
     """A whole run through a visualiser: one set_scan per scan in order, and the lines drawn
     per scan are the measurements the log says updated a landmark."""
