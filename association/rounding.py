@@ -79,7 +79,7 @@ def check_rounding_options(options: dict) -> dict:
     return dict(options)
 
 
-_UNION_FIND_MAX = 2000  # entries: below, `_union_find`; above, scipy's labelling
+_UNION_FIND_MAX = 2000  # entries: at most, `_settle` (`_union_find`); more, scipy's labelling
 _DENSE_MAX_ENTRIES = 40_000  # below this, a dense A is faster through linprog than a sparse one
 
 
@@ -435,8 +435,19 @@ def ihgr_round_csc(
     """`ihgr_round` on a problem given in CSC index form (column h covers rows
     indices[indptr[h]:indptr[h + 1]]), without the input checks: for problems this package
     builds itself, valid by construction (the single-scan program), where the checks and the
-    sparse-matrix round trip would cost more than the solve."""
+    sparse-matrix round trip would cost more than the solve. Only what would read memory out
+    of bounds is checked (row indices, exact's length): a ValueError."""
     n_cols = c.size
+    # the kernels below index rows by `indices` unchecked: what would read out of bounds is
+    # refused (the other input checks are left to the caller)
+    if np.shape(exact) != (n_rows,) or (
+        indices.size and (int(indices.min()) < 0 or int(indices.max()) >= n_rows)
+    ):
+        raise ValueError(
+            f"ihgr_round_csc: needs exact of shape ({n_rows},) and row indices in [0, {n_rows}), "
+            f"got exact {np.shape(exact)} and rows {indices.min() if indices.size else '-'}.."
+            f"{indices.max() if indices.size else '-'}"
+        )
     if indices.size <= _UNION_FIND_MAX:  # the feasibility check to the presolve in one call
         settled = _settle(c, n_rows, indptr, indices, exact, presolve)
         bad, n_comp, row_lab, col_lab, chosen, active, bound, open_cols = settled

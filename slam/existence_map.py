@@ -143,10 +143,10 @@ class LandmarkExistence:
     def track_existence(self, n_sightings: int, R: np.ndarray, range_m: float = math.inf) -> float:
         """The existence of a window track seen in n_sightings scans, each a detection with the
         likelihood of an innovation of NIS 2 (its mean) under S = 2 R (two sightings' noise);
-        range_m: its range (the range fall-off of Pd, persistent clutter's shape term). Against persistent clutter a
-        track gains about pd_max / repeat_prob a sighting, and a window holds at most
-        window_scans of them: it joins only when that is enough (the single-scan associator's
-        tentatives have no such limit)."""
+        range_m: its range (the range fall-off of Pd, persistent clutter's shape term).
+        Against persistent clutter a track gains about pd_max / repeat_prob a sighting, and a
+        window holds at most window_scans of them: it joins only when that is enough (the
+        single-scan associator's tentatives have no such limit)."""
         S = 2.0 * np.asarray(R, dtype=np.float64)
         g = math.exp(-1.0) / (2.0 * math.pi * math.sqrt(max(np.linalg.det(S), 1e-300)))
         f = falloff(np.array([float(range_m)]), self.cfg)  # a detection's Pd: pd_max f(d)

@@ -184,8 +184,9 @@ def revisit_spread(P, lm_xy, seen_s, before_s, sensor, sensor_yaw, heading, boun
     the landmarks last seen before `before_s` (seen_s (n,) s, each landmark's last sighting)
     whose predictions are in view (`bounds`: `view_bounds`), as state positions (c,), and the
     largest metric sd of each one's predicted measurement (c,), sqrt(max(S_rr, r^2 S_bb))
-    with S = H5 C5 H5^T on its [pose, point] block (`project_blocks`: np.einsum's sums to the
-    bit). P (d, d): its lower triangle read; lm_xy (n, 2); sensor: `se2.sensor_numbers`."""
+    with S = H5 C5 H5^T on its [pose, point] block (`project_blocks`; with numpy 2.4 the same
+    bits as the np.einsum it replaced, which numpy does not promise across versions).
+    P (d, d): its lower triangle read; lm_xy (n, 2); sensor: `se2.sensor_numbers`."""
     lo, hi, every, r_max = bounds
     px, py, dpx, dpy = sensor
     old = np.flatnonzero(seen_s < before_s)

@@ -31,7 +31,8 @@ class Measurements:
     """Scan k's circles as measurements of their centres, laser frame.
 
     scan: the `features.Scan` (None without raw ranges, and from a source that does not read
-    it, `needs_scan` False: `slam.visual.show_scan` then builds it); features: its `Features`
+    it, `needs_scan` False: `slam.visual.show_scan` then builds it when the sequence has
+    ranges); features: its `Features`
     (for the log and the visualiser); z (m, 2) [range m, bearing rad] and R (m, 2, 2) from the
     source's measurement model; status (m,) int64 as measured: NEW_TENTATIVE, or OUT_OF_RANGE
     beyond the usable range (`slam.log` codes; the scan's final status is
@@ -43,6 +44,19 @@ class Measurements:
     z: np.ndarray
     R: np.ndarray
     status: np.ndarray
+
+    def __post_init__(self) -> None:
+        # the map managers' kernels index z, R and status together, unchecked
+        m = np.shape(self.z)[0] if np.ndim(self.z) == 2 else -1
+        if (
+            np.shape(self.z) != (m, 2)
+            or np.shape(self.R) != (m, 2, 2)
+            or np.shape(self.status) != (m,)
+        ):
+            raise SlamError(
+                "Measurements: needs z (m, 2), R (m, 2, 2) and status (m,) of one m, got "
+                f"{np.shape(self.z)}, {np.shape(self.R)} and {np.shape(self.status)}"
+            )
 
     @property
     def radius_m(self) -> np.ndarray:

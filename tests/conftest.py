@@ -27,6 +27,7 @@ as before.
 from __future__ import annotations
 
 import fcntl
+import hashlib
 import os
 import shutil
 import subprocess
@@ -65,10 +66,26 @@ def _cache_folder(config: pytest.Config, name: str) -> Path:
     return config.rootpath / ".pytest_cache" / "d" / f"numba-{name}"
 
 
+def _kernel_sources_digest(root: Path) -> str:
+    """A digest of every source file of the packages that hold numba kernels. numba drops a
+    cached kernel only when its own file changes, not when a kernel it calls from another file
+    does (`slam.scan_candidates` calls `slam.se2.observe_kernel`): a warm cache keyed by every
+    source never serves a kernel compiled against an older callee."""
+    h = hashlib.sha256()
+    for package in ("features", "association", "slam"):
+        for path in sorted((root / package).rglob("*.py")):
+            h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
 def _warm_shared_cache(config: pytest.Config) -> None:
     """Compile every kernel once, in one process, into the folder the workers copy (see the
-    module docstring). A warm-up that fails leaves the workers to compile as they go."""
-    folder = _cache_folder(config, "warm")
+    module docstring), a folder per state of the kernels' sources (`_kernel_sources_digest`;
+    the others are removed). A warm-up that fails leaves the workers to compile as they go."""
+    folder = _cache_folder(config, f"warm-{_kernel_sources_digest(config.rootpath)}")
+    for old in folder.parent.glob(folder.name.split("-warm-")[0] + "-warm-*"):
+        if old != folder and old.is_dir():
+            shutil.rmtree(old, ignore_errors=True)
     folder.mkdir(parents=True, exist_ok=True)
     env = {**os.environ, "NUMBA_CACHE_DIR": str(folder), "OMP_NUM_THREADS": "1"}
     try:  # its two lines show at once: a cold warm-up takes a minute

@@ -181,3 +181,56 @@ def test_small_problem_components_partition_as_scipy_does():
         pairs = set(zip(np.r_[row_lab, col_lab].tolist(), ref.tolist()))
         assert len(pairs) == k
         np.testing.assert_array_equal(col_lab, row_lab[indices[indptr[:-1]]])
+
+
+def _csc(A):
+    A = np.asarray(A)
+    rows = [np.flatnonzero(A[:, h]) for h in range(A.shape[1])]
+    indptr = np.concatenate([[0], np.cumsum([r.size for r in rows])]).astype(np.int64)
+    return indptr, np.concatenate(rows).astype(np.int64)
+
+
+def test_both_paths_of_the_csc_rounding_give_the_same_result(monkeypatch):
+    """`ihgr_round_csc` settles small problems in one kernel (`_settle`, at most
+    `_UNION_FIND_MAX` entries) and large ones by scipy's labelling; forced down the large path,
+    every problem gives the same selection, cost, bound and solves, presolve on and off; an
+    infeasible problem is refused on both."""
+    from association import rounding
+
+    rng = np.random.default_rng(11)
+    problems = [random_assignment(rng, int(rng.integers(1, 9)), int(rng.integers(1, 9)), 0.4)]
+    problems += [random_multiscan(rng) for _ in range(20)] + [
+        random_assignment(rng, int(rng.integers(1, 9)), int(rng.integers(1, 9)), 0.5)
+        for _ in range(40)
+    ]
+    for presolve in (True, False):
+        for c, A, e in problems:
+            indptr, indices = _csc(A)
+            args = (np.asarray(c, float), A.shape[0], indptr, indices, e)
+            small = rounding.ihgr_round_csc(*args, presolve=presolve)
+            with monkeypatch.context() as m:
+                m.setattr(rounding, "_UNION_FIND_MAX", -1)
+                large = rounding.ihgr_round_csc(*args, presolve=presolve)
+            assert small.selected.tolist() == large.selected.tolist()
+            assert (small.cost, small.lp_bound, small.lp_solves) == (
+                large.cost,
+                large.lp_bound,
+                large.lp_solves,
+            )
+    A = np.array([[1, 0], [0, 0]])  # row 1 exact, no column covers it
+    indptr, indices = _csc(A)
+    for limit in (rounding._UNION_FIND_MAX, -1):
+        monkeypatch.setattr(rounding, "_UNION_FIND_MAX", limit)
+        with pytest.raises(RuntimeError, match="exact row 1 has no column"):
+            rounding.ihgr_round_csc(np.zeros(2), 2, indptr, indices, np.ones(2, bool))
+
+
+@pytest.mark.parametrize("rows, exact_len", [([0, 5], 2), ([0, -1], 2), ([0, 1], 1)])
+def test_csc_rows_outside_the_problem_are_refused_before_the_kernels(rows, exact_len):
+    """The kernels index rows unchecked: a row index outside [0, n_rows) or an `exact` of
+    another length is a ValueError, not a read out of bounds (a crash, or a silent answer)."""
+    from association.rounding import ihgr_round_csc
+
+    indptr, indices = np.array([0, 1, 2], np.int64), np.array(rows, np.int64)
+    with pytest.raises(ValueError, match="ihgr_round_csc: needs exact of shape"):
+        ihgr_round_csc(np.zeros(2), 2, indptr, indices, np.ones(exact_len, bool))

@@ -11,6 +11,7 @@ import pytest
 
 from slam import SlamConfig
 from slam.ekf import Filter, initial_state
+from slam.errors import SlamError
 from slam.log import CONFIRMED, NEW_TENTATIVE, OUT_OF_RANGE
 from slam.map_managers import MapDecisions, MapManager, View, make_map_manager
 from slam.sources import Measurements
@@ -199,3 +200,18 @@ def test_against_persistent_clutter_a_trunk_joins_after_the_sightings_pd_over_re
     assert (
         _map_the_trunk(manager, book, Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6)))[1] == 2
     )
+
+
+@pytest.mark.parametrize(
+    ("z", "R", "status"),
+    [
+        (np.zeros((2, 2)), np.zeros((2, 2, 2)), np.zeros(3, np.int64)),  # status too long
+        (np.zeros((2, 2)), np.zeros((1, 2, 2)), np.zeros(2, np.int64)),  # R too short
+        (np.zeros((2, 3)), np.zeros((2, 2, 2)), np.zeros(2, np.int64)),  # z not (m, 2)
+    ],
+)
+def test_measurements_of_mismatched_lengths_are_refused(z, R, status):
+    """The map managers' kernels read z, R and status by one index, unchecked: a record whose
+    arrays disagree is a SlamError naming the shapes, not a read out of bounds."""
+    with pytest.raises(SlamError, match=r"Measurements: needs z \(m, 2\)"):
+        Measurements(0, None, None, z, R, status)
