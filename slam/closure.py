@@ -218,7 +218,8 @@ class LoopCloser:
         self.hold_frame = bool(hold_frame)
         self.scan_t = history.scan_t
         self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
-        self._view_bounds = view_bounds(view)
+        # (None: a closer used without a view, by its parts' tests; the steps that need it ask)
+        self._view_bounds = None if view is None else view_bounds(view)
         self.events: list[ClosureEvent] = []
         self._together: dict[int, set] = {}  # id -> ids within SAME_TREE_M seen in one scan
         self._frame = None  # after a re-registration: (ids, positions) of the old map held

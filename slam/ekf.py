@@ -53,6 +53,8 @@ from scipy.linalg import blas
 from slam.errors import SlamError
 from slam.se2 import inverse_observe, observe, observe_kernel, sensor_numbers, wrap_angle
 
+_SE2_OBSERVE = observe  # `Filter.update` fuses this model; another one takes the numpy steps
+
 __all__ = [
     "EkfState",
     "Filter",
@@ -387,17 +389,20 @@ class Filter(_Estimate):
         R = np.ascontiguousarray(R, dtype=np.float64).reshape(k, 2, 2)
         # nu = z - z_hat (bearing wrapped), the columns the batch touches ([x, y, theta, then
         # each landmark's pair]) and H on them (FEJ: at the landmarks' first estimates)
-        sensor = sensor_numbers(self.pose, laser_pose)
-        nu, cols, Hc, R_blk, twice = _batch_inputs(
-            self.landmarks_xy,
-            self.first_xy,
-            idx,
-            z,
-            R,
-            sensor,
-            (float(self.x[2]), float(laser_pose[2])),
-            self.first_estimates,
-        )
+        if observe is _SE2_OBSERVE:  # the sensor model, fused
+            sensor = sensor_numbers(self.pose, laser_pose)
+            nu, cols, Hc, R_blk, twice = _batch_inputs(
+                self.landmarks_xy,
+                self.first_xy,
+                idx,
+                z,
+                R,
+                sensor,
+                (float(self.x[2]), float(laser_pose[2])),
+                self.first_estimates,
+            )
+        else:  # another observation model put in its place (the closed-form tests' linear one)
+            nu, cols, Hc, R_blk, twice = self._batch_inputs_of(observe, idx, z, R, laser_pose)
         if twice:
             raise SlamError("update.idx: a landmark appears twice in one batch")
         P = self._P
@@ -416,6 +421,17 @@ class Filter(_Estimate):
         _subtract_gram(P, W, mirror=False)
         self._mirrored = False
         return UpdateResult(nu, S, nis, logdet)
+
+    def _batch_inputs_of(self, observe_fn, idx, z, R, laser_pose):
+        """`_batch_inputs` by the numpy steps it fused, through `observe_fn` (an observation
+        model other than `se2.observe`)."""
+        z_hat, H5 = observe_fn(self.pose, self.landmarks_xy[idx], laser_pose)
+        if self.first_estimates:  # FEJ: Jacobians at the landmarks' first estimates
+            H5 = observe_fn(self.pose, self.first_xy[idx], laser_pose)[1]
+        nu = z - z_hat
+        nu[:, 1] = wrap_angle(nu[:, 1])
+        cols, Hc, R_blk = _batch_blocks(idx, H5, R)
+        return nu, cols, Hc, R_blk, len(set(idx.tolist())) != idx.size
 
     def add_landmark(
         self, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray, landmark_id: int
