@@ -421,6 +421,32 @@ def _round_by_lp(problem: _Csc, components: _Components, chosen, active, bound, 
     return bound, solves, fractional
 
 
+def _settle_small(problem: _Csc, presolve: bool):
+    """`ihgr_round_csc`'s first steps by `_settle`, in one call: (the first exact row without a
+    column or -1, the components, chosen, active, the presolve's cost, whether a column is
+    still active)."""
+    bad, n_comp, row_lab, col_lab, chosen, active, bound, open_cols = _settle(*problem, presolve)
+    return bad, _Components(n_comp, row_lab, col_lab), chosen, active, bound, open_cols
+
+
+def _settle_large(problem: _Csc, presolve: bool):
+    """`_settle_small`'s answer by numpy and scipy's labelling (`_components`), for problems
+    of more than `_UNION_FIND_MAX` entries."""
+    c, n_rows, indptr, indices, exact = problem
+    n_cols = c.size
+    row_has_col = np.bincount(indices, minlength=n_rows) > 0
+    missing = np.flatnonzero(exact & ~row_has_col)
+    chosen = np.zeros(n_cols, bool)
+    active = np.ones(n_cols, bool)  # columns still in play
+    if missing.size or n_cols == 0:
+        return (int(missing[0]) if missing.size else -1), None, chosen, active, 0.0, n_cols > 0
+    components = _components(n_rows, indptr, indices)
+    bound = 0.0
+    if presolve:  # single-choice components settled without an LP (`_presolve`)
+        bound += _presolve(tuple(problem), tuple(components), chosen, active)
+    return -1, components, chosen, active, bound, bool(active.any())
+
+
 def ihgr_round_csc(
     c: np.ndarray,
     n_rows: int,
@@ -448,30 +474,15 @@ def ihgr_round_csc(
             f"got exact {np.shape(exact)} and rows {indices.min() if indices.size else '-'}.."
             f"{indices.max() if indices.size else '-'}"
         )
-    if indices.size <= _UNION_FIND_MAX:  # the feasibility check to the presolve in one call
-        settled = _settle(c, n_rows, indptr, indices, exact, presolve)
-        bad, n_comp, row_lab, col_lab, chosen, active, bound, open_cols = settled
-        components = _Components(n_comp, row_lab, col_lab)
-    else:
-        row_has_col = np.bincount(indices, minlength=n_rows) > 0
-        bad = int(np.flatnonzero(exact & ~row_has_col)[0]) if (exact & ~row_has_col).any() else -1
+    problem = _Csc(c, n_rows, indptr, indices, exact)
+    settle = _settle_small if indices.size <= _UNION_FIND_MAX else _settle_large
+    bad, components, chosen, active, bound, open_cols = settle(problem, presolve)
     if bad >= 0:
         raise RuntimeError(f"IHGR: infeasible, exact row {bad} has no column")
     if n_cols == 0:
         return _no_columns("ihgr")
-    if indices.size > _UNION_FIND_MAX:
-        components = _components(n_rows, indptr, indices)
-        chosen = np.zeros(n_cols, bool)
-        active = np.ones(n_cols, bool)  # columns still in play
-        bound = 0.0
-        if presolve:  # single-choice components settled without an LP (`_presolve`)
-            bound += _presolve(
-                (c, n_rows, indptr, indices, exact), tuple(components), chosen, active
-            )
-        open_cols = bool(active.any())
     solves, fractional = 0, False
     if open_cols:  # else presolve settled every component (most scans): no LP
-        problem = _Csc(c, n_rows, indptr, indices, exact)
         bound, solves, fractional = _round_by_lp(
             problem, components, chosen, active, bound, eps=eps, fix_ones=fix_ones
         )

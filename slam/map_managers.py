@@ -38,8 +38,7 @@ from slam.ekf import Filter, landmark_columns
 from slam.errors import SlamError
 from slam.existence_map import LandmarkExistence, radii
 from slam.log import AMBIGUOUS, CONFIRMED, OUT_OF_RANGE, TENTATIVE_HIT
-from slam.scan_candidates import project_blocks as _project_kernel
-from slam.scan_candidates import scan_candidates, view_bounds
+from slam.scan_candidates import project_blocks, scan_candidates, view_bounds
 from slam.sources import Measurements
 from slam.tentatives import MapPolicy, Tentatives, sighting
 
@@ -542,4 +541,4 @@ def make_map_manager(
 
 def _project(H5: np.ndarray, C5: np.ndarray) -> np.ndarray:
     """(n, 2, 2) H5_j C5_j H5_j^T of each candidate's [pose, point] block."""
-    return _project_kernel(np.ascontiguousarray(H5), np.ascontiguousarray(C5))
+    return project_blocks(np.ascontiguousarray(H5), np.ascontiguousarray(C5))
