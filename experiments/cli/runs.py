@@ -132,6 +132,10 @@ def slam_cmd(
     and the run log the smoother reads (`trunkslam smooth`)."""
     if config is None and not dump_config:  # a --config's errors are said first, as ever
         check_input(input, "sequence file")
+    if config is not None:  # a misspelt preset or a missing file: said before the imports below
+        from experiments.io.config_file import preset_path
+
+        preset_path(config)
     if input is not None and not dump_config and Path(input).is_file():  # else: its error first
         from experiments.render.cold_start import say_if_cold
 
