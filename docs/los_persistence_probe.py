@@ -14,19 +14,30 @@ Prints (one full run and a fit per pass, under a minute on one core):
 2. Persistence: the correlation of b between two passes of one landmark, and the spread of b
    split into the part shared by a landmark's passes and the part of each pass (passes with a
    standard error under `WELL_DETERMINED_M`).
+3. The same passes pooled (`experiments.eval.trace_bias.trace_fit`), each with its own centre,
+   with four terms shared by all: a range offset b0, an offset p0 across the line of sight, a
+   bearing scale e and a range scale g, on scans 1-2000 and after (passes that end by 450 s,
+   and those after).
+4. With `--scales e1,e2,...`: the full run again with every bearing multiplied by 1 + e, the
+   pooled fit of scans 1-2000 on it, and its RMSE on the vouched GPS fixes (a minute per run).
 
 Diagnosis only: nothing here sets a default.
 """
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
+
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from experiments.eval.gps import score_sequence
+from experiments.eval.trace_bias import sight_lines, trace_fit, trace_passes
+from experiments.eval.vouched import vouched_for_sequence
 from experiments.io.victoria_park import load_victoria_park
 from experiments.paper.victoria_park.real_run import run_config
 from slam import run_slam
-from slam.se2 import observed_points, transform_points
 
 PASS_GAP_S = 2.0  # s: `measurement.pass_gap_s`, the pass of the pass-offset model
 MIN_SIGHTINGS = 6  # a pass needs this many sightings to fit c and b
@@ -49,20 +60,38 @@ def line_of_sight_fit(w: np.ndarray, u: np.ndarray) -> tuple[float, float]:
 
 def pass_offsets(log) -> np.ndarray:
     """One row per pass that qualifies: (landmark, start time s, b m, se m)."""
-    s, lm, z = log.obs_scan, log.obs_landmark, log.obs_z
-    w = observed_points(log.pose[s], z, log.laser_pose)
-    laser = np.array([transform_points(p, log.laser_pose[:2][None])[0] for p in log.pose])[s]
-    u = (w - laser) / np.linalg.norm(w - laser, axis=1)[:, None]
-    t = log.scan_t[s]
-    rows = []
-    for landmark in np.unique(lm):
-        m = np.flatnonzero(lm == landmark)
-        m = m[np.argsort(t[m], kind="stable")]
-        for part in np.split(m, np.flatnonzero(np.diff(t[m]) > PASS_GAP_S) + 1):
-            turn = np.degrees(np.ptp(np.unwrap(np.arctan2(u[part, 1], u[part, 0]))))
-            if len(part) >= MIN_SIGHTINGS and turn >= MIN_TURN_DEG:
-                rows.append((landmark, t[part[0]], *line_of_sight_fit(w[part], u[part])))
-    return np.array(rows)
+    w, u = sight_lines(log)
+    t, lm = log.scan_t[log.obs_scan], log.obs_landmark
+    passes = trace_passes(log, gap_s=PASS_GAP_S, min_sightings=MIN_SIGHTINGS,
+                          min_turn_rad=np.radians(MIN_TURN_DEG))  # fmt: skip
+    return np.array([(lm[p[0]], t[p[0]], *line_of_sight_fit(w[p], u[p])) for p in passes])
+
+
+def fit_words(f) -> str:
+    return (
+        f"b0 {100 * f.range_offset_m:+.2f} cm (se {100 * f.se[0]:.2f}), p0 "
+        f"{100 * f.across_offset_m:+.2f} cm (se {100 * f.se[1]:.2f}), bearing scale e "
+        f"{100 * f.bearing_scale:+.3f}% (se {100 * f.se[2]:.3f}), range scale g "
+        f"{100 * f.range_scale:+.3f}% (se {100 * f.se[3]:.3f})"
+    )
+
+
+def print_pooled(log) -> None:
+    for lo, hi, name in ((0, 450, "scans 1-2000"), (450, np.inf, "after")):
+        f = trace_fit(log, lo, hi)
+        print(f"pooled, {name} ({f.passes} passes): {fit_words(f)}")
+
+
+def print_scaled(seq, cfg, scales: list[float]) -> None:
+    vouched = vouched_for_sequence(seq, cfg)
+    for e in scales:
+        scaled = dataclasses.replace(seq, det_bearing=seq.det_bearing * (1.0 + e))
+        log = run_slam(scaled, cfg)
+        rmse = score_sequence(scaled, log.scan_t, log.pose, log.antenna_pose, vouched=vouched)
+        print(
+            f"bearings x (1 {e:+.4f}): pooled on scans 1-2000 {fit_words(trace_fit(log, 0, 450))}"
+            f"; full run {rmse.vouched_rmse:.3f} m vouched"
+        )
 
 
 def print_spread(R: np.ndarray) -> None:
@@ -101,11 +130,18 @@ def print_persistence(R: np.ndarray) -> None:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scales", default="", help="part 4: comma-separated bearing scales e")
+    args = ap.parse_args()
     threadpool_limits(1)
-    log = run_slam(load_victoria_park(full=True), run_config("detections", "ihgr"))
+    seq, cfg = load_victoria_park(full=True), run_config("detections", "ihgr")
+    log = run_slam(seq, cfg)
     R = pass_offsets(log)
     print_spread(R)
     print_persistence(R)
+    print_pooled(log)
+    if args.scales:
+        print_scaled(seq, cfg, [float(v) for v in args.scales.split(",")])
 
 
 if __name__ == "__main__":
