@@ -130,16 +130,7 @@ def slam_cmd(
     """EKF-SLAM over a sequence as its settings say: trajectory (TUM and CSV with covariance),
     map, config.toml (the whole configuration: `--config` with it reproduces the run), summary,
     and the run log the smoother reads (`trunkslam smooth`)."""
-    if config is None and not dump_config:  # a --config's errors are said first, as ever
-        check_input(input, "sequence file")
-    if config is not None:  # a misspelt preset or a missing file: said before the imports below
-        from experiments.io.config_file import preset_path
-
-        preset_path(config)
-    if input is not None and not dump_config and Path(input).is_file():  # else: its error first
-        from experiments.render.cold_start import say_if_cold
-
-        say_if_cold()  # a first run's first line, before the imports below (seconds)
+    _before_imports(input, config, dump_config)
     from experiments.io.config_file import config_toml, load_slam_config
     from experiments.pipeline.slam import run_slam_file
     from experiments.render.progress import Progress
@@ -182,6 +173,21 @@ def slam_cmd(
             with Progress() as progress:
                 summary = smooth_run(out, progress=_smoother_progress(progress))
             _echo_smoothed(summary)
+
+
+def _before_imports(input: Path | None, config, dump_config: bool) -> None:
+    """What `slam` says before its imports (seconds): an input or a --config that is refused
+    (a --config's errors first, as ever), else a first run's compile notice."""
+    if config is None and not dump_config:
+        check_input(input, "sequence file")
+    if config is not None:  # a misspelt preset or a missing file
+        from experiments.io.config_file import preset_path
+
+        preset_path(config)
+    if input is not None and not dump_config and Path(input).is_file():  # else: its error first
+        from experiments.render.cold_start import say_if_cold
+
+        say_if_cold()
 
 
 def _slam_words(s: dict) -> str:
