@@ -378,6 +378,7 @@ def test_calibration_writes_what_the_preset_holds():
         preset.start.gps_fit_m,
         preset.map_policy.confirm_scans,
         pass_offset_sd_m=preset.measurement.pass_offset_sd_m,
+        range_bias=preset.measurement.range_bias["bailey"],
     ).to_dict()
     want = preset.to_dict()
 
@@ -432,6 +433,26 @@ def test_the_preset_start_stretch_follows_its_rule_on_scans_1_2000(vp_dir):
     later = [h for d, h, _ in rows if d >= cfg.start.gps_fit_m]
     assert max(later) - min(later) <= 2 * vp_start.TOLERANCE_DEG
     assert rows[-1][0] > 900  # scans 1-2000 drive about a kilometre
+
+
+@pytest.mark.slow
+@pytest.mark.data
+def test_the_preset_range_bias_is_the_trace_fixed_point_on_scans_1_2000(vp_dir):
+    """The preset's range bias of the published detections is what the calibration's step
+    (`derive_range_bias`) derives on scans 1-2000 from the preset's other settings: three runs,
+    the last one's trace fit within the tolerance, the first one's range error the largest."""
+    from experiments.io.config_file import load_slam_config, preset_path
+    from experiments.paper.victoria_park.calibration import RANGE_BIAS_RUNS, derive_range_bias
+
+    cfg = load_slam_config(preset_path("victoria_park_ute"))
+    want = cfg.measurement.range_bias["bailey"]
+    assert want[0] > 0.03 and want[1] < -0.001  # centres too far near the ute, too near far out
+    before = cfg.with_(**{"measurement.range_bias": {"bailey": (0.0, 0.0)}})
+    got, fits = derive_range_bias(load_victoria_park(vp_dir, n_scans=2000), before, RANGE_BIAS_RUNS)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    first, last = fits[0][1], fits[-1][1]
+    assert abs(last.range_offset_m) < 0.002 and abs(last.range_scale) < 2e-4
+    assert abs(first.range_offset_m) > 10 * abs(last.range_offset_m) and first.passes > 200
 
 
 @pytest.mark.slow

@@ -71,6 +71,14 @@ above uses the paper's 3): the number with the best map against the 2002 SLAM sc
 reference trees of the same scans (`vp_map_policy.confirm_sweep`, `derive_confirm`; no GPS
 either).
 
+Then, with every setting above, the published detections' range error (`derive_range_bias`,
+`experiments.eval.trace_bias`): a static trunk's sightings within a pass, projected through the
+filter's poses, trace a shape that a range offset and scale draw along the line of sight; the
+range bias (a, b) of `measurement.range_bias.bailey` (r -> r - (a + b r); the detections'
+method, which our `bailey` extractor on the raw scans shares) is the fixed point of running
+the filter with it and fitting what is left, on the same scans. J cannot see it either: the
+filter's poses and map take the error up, and its innovations are then small. No GPS.
+
 Last, with every setting above (the preset, white measurement errors), the trunk's centre
 offset shared by a pass (`measurement.pass_offset_sd_m`) by leave-one-pass-out prediction of
 the landmarks' passes on the same scans (`pass_offset.derive`,
@@ -96,6 +104,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from experiments.errors import ConfigError, MissingDataError
+from experiments.eval import trace_bias
 from experiments.io.config_file import preset_toml
 from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 from experiments.io.writers import write_atomic
@@ -133,6 +142,8 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 FIT_SCANS = 2000
+RANGE_BIAS_METHOD = "bailey"  # the published detections' det_method: the key of their range bias
+RANGE_BIAS_RUNS = 6  # the fixed point's bound (Victoria Park: 3 runs)
 MAX_WIDENINGS = 4  # of the consistency step's bracket (x16 either way)
 EVALUATIONS = {False: 200, True: 320}  # Nelder-Mead's budget, without and with the motion terms
 LN_AREA = math.log(80.0 * math.pi)  # the measurement space of the ute's laser, m x rad
@@ -397,8 +408,10 @@ class VpCalibration:
     latency_rows: `latency_profile` at the preset's noise, latency_s: its `derive_latency`;
     start_rows: `vp_start.headings` along the preset's path; start_fit_m: the metres of GPS the
     start is fitted to (`vp_start.derive`); confirm_rows: `vp_map_policy.confirm_sweep` with
-    that noise and start, confirm_scans: its `derive_confirm`; pass_offset: the pass offset
-    derived with all of these (`vp_pass_offset.derive`); seconds: the time it took.
+    that noise and start, confirm_scans: its `derive_confirm`; range_bias: (a m, b per m) of the
+    published detections (`derive_range_bias`), range_bias_fits: the trace fit of each of its
+    runs; pass_offset: the pass offset derived with all of these (`vp_pass_offset.derive`);
+    seconds: the time it took.
     """
 
     steer: object
@@ -414,6 +427,8 @@ class VpCalibration:
     start_fit_m: float
     confirm_rows: list
     confirm_scans: int
+    range_bias: tuple[float, float]
+    range_bias_fits: list
     pass_offset: object
     seconds: float
 
@@ -425,6 +440,7 @@ class VpCalibration:
             self.start_fit_m,
             self.confirm_scans,
             latency_s=self.latency_s,
+            range_bias=self.range_bias,
         )  # the pass offset is derived, not adopted (module doc)
 
 
@@ -459,7 +475,11 @@ def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpC
         seq, preset_config(theta, steer.steering, start_fit_m, latency_s=latency), ref
     )
     confirm = vp_map_policy.derive_confirm(confirm_rows)
-    white = preset_config(theta, steer.steering, start_fit_m, confirm, latency_s=latency)
+    at_confirm = preset_config(theta, steer.steering, start_fit_m, confirm, latency_s=latency)
+    bias, bias_fits = derive_range_bias(seq, at_confirm, 1 if quick else RANGE_BIAS_RUNS)
+    white = preset_config(
+        theta, steer.steering, start_fit_m, confirm, latency_s=latency, range_bias=bias
+    )
     return VpCalibration(
         steer=steer,
         fits=fits,
@@ -474,6 +494,8 @@ def calibration_study(seq, full, ref, quick: bool = False, progress=None) -> VpC
         start_fit_m=start_fit_m,
         confirm_rows=confirm_rows,
         confirm_scans=confirm,
+        range_bias=bias,
+        range_bias_fits=bias_fits,
         pass_offset=vp_pass_offset.derive(seq, white),
         seconds=time.perf_counter() - t0,
     )
@@ -509,6 +531,10 @@ def _manifest_entry(st: VpCalibration) -> dict:
         "start_headings_deg": st.start_rows,
         "confirm_scans": st.confirm_scans,
         "confirm_sweep": st.confirm_rows,
+        "range_bias": {RANGE_BIAS_METHOD: list(st.range_bias)},
+        "range_bias_runs": [
+            {"bias": list(b), **dataclasses.asdict(f)} for b, f in st.range_bias_fits
+        ],
         "pass_offset_sd_m": list(st.pass_offset.sd_m),
         "pass_offset_median_white": list(st.pass_offset.median_white),
         "pass_offset_corr_rad": st.pass_offset.drift.corr_rad,
@@ -614,6 +640,21 @@ def run(ctx) -> None:
     )
 
 
+def derive_range_bias(seq, cfg: SlamConfig, max_runs: int) -> tuple[tuple[float, float], list]:
+    """The published detections' range bias on `seq` with `cfg`'s other settings
+    (`trace_bias.derive_range_bias`, its fixed point within `max_runs` runs; the module doc):
+    ((a m, b per m), one (bias, `TraceFit`) per run). A smoke run (`max_runs` 1) that has not
+    settled returns its one fit's composition."""
+
+    def run(bias):
+        return run_slam(seq, cfg.with_(**{"measurement.range_bias": {RANGE_BIAS_METHOD: bias}}))
+
+    if max_runs > 1:
+        return trace_bias.derive_range_bias(run, max_iterations=max_runs)
+    fit = trace_bias.trace_fit(run((0.0, 0.0)))
+    return trace_bias.compose_range_bias((0.0, 0.0), fit), [((0.0, 0.0), fit)]
+
+
 def preset_config(
     theta,
     steering: SteeringCalibration,
@@ -621,13 +662,15 @@ def preset_config(
     confirm_scans: int | None = None,
     latency_s: float = 0.0,
     pass_offset_sd_m=(0.0, 0.0),
+    range_bias=(0.0, 0.0),
 ) -> SlamConfig:
     """The preset: the fixed settings (BASE), the fitted parameters `theta` (the model's 6 or
     8), the steering calibration, the start fitted along the filter's own path over the
     first `start_fit_m` metres of GPS (`vp_start`), the map policy's `confirm_scans`
     (`vp_map_policy.derive_confirm`; None: BASE's, the paper's 3), the laser latency
-    (`derive_latency`); white errors unless `pass_offset_sd_m` is given (the calibration derives
-    the pass offset, `vp_pass_offset.derive`, and does not set it)."""
+    (`derive_latency`), the published detections' `range_bias` (a m, b per m;
+    `derive_range_bias`); white errors unless `pass_offset_sd_m` is given (the calibration
+    derives the pass offset, `vp_pass_offset.derive`, and does not set it)."""
     confirm = BASE.map_policy.confirm_scans if confirm_scans is None else int(confirm_scans)
     base = BASE.with_(
         **{
@@ -637,6 +680,8 @@ def preset_config(
             "map_policy.confirm_scans": confirm,
             "vehicle.laser_latency_s": float(latency_s),
             "measurement.pass_offset_sd_m": [float(v) for v in pass_offset_sd_m],
+            "measurement.range_bias": dict(BASE.measurement.range_bias)
+            | {RANGE_BIAS_METHOD: tuple(map(float, range_bias))},
         }
     )
     return config_from(theta, base)
@@ -654,6 +699,9 @@ start is fitted to along the filter's own path (the shortest stretch from which 
 agree on the heading). Fixed: FEJ, start floors 0.3 m and 1 deg,
 the same constant measurement model for every extractor, scans at rest skipped (1 mm).
 Then the map policy's confirm_scans: the best map (F1) against the 2002 reference trees.
+Then the published detections' range bias (measurement.range_bias.bailey, which our bailey
+extractor shares): the fixed point of the trunks' traces within a pass on scans 1-2000
+(experiments/eval/trace_bias.py).
 Last, the trunk's offset shared by a pass: derived by the leave-one-pass-out criterion on
 scans 1-2000 (experiments/eval/pass_offsets.py) and reported in the manifest, not set here:
 white errors (measurement.pass_offset_sd_m = [0, 0]; its page says why).
