@@ -55,6 +55,7 @@ import math
 import time
 
 import numpy as np
+from scipy.stats import chi2
 
 from experiments.eval.existence_rates import (
     MAX_BEAMS,
@@ -71,6 +72,10 @@ from experiments.paper.victoria_park.real_run import HALVES, run_config
 from slam import existence_map, run_slam, se2
 from slam import tentatives as tentatives_module
 from slam.log import OUT_OF_RANGE, SKIPPED
+
+# the see-through tolerance's k: sqrt(chi2_2(0.95)), the half-width of the 95% ellipse's
+# projection on an axis (`slam.existence`, "See-through tolerance")
+K95 = math.sqrt(float(chi2.ppf(0.95, 2)))
 
 VARIANTS = {
     "uniform": {},
@@ -115,6 +120,33 @@ VARIANTS = {
     "uniform, kept, q derived, range, bounded": {
         "map_policy.existence_keep_tentatives": True,
         "map_policy.existence_unreached_scans": 100,
+        "q": "derived",
+        "range": "derived",
+    },
+    # a tentative placed by its sightings fused (`existence_fuse_tentatives`), and the
+    # see-through tolerance at the 95% region (`existence_see_through_k`, K95; not tuned)
+    "persistent, kept, q derived, range, bounded, fused": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "q": "derived",
+        "range": "derived",
+    },
+    "persistent, kept, q derived, range, bounded, fused, tolerance": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
+        "q": "derived",
+        "range": "derived",
+    },
+    "uniform, kept, q derived, range, bounded, fused, tolerance": {
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
         "q": "derived",
         "range": "derived",
     },
@@ -449,10 +481,13 @@ def diagnose_reach(lg, ref, dropped: dict, scans, tr: dict, q: float, e, d) -> d
     d_circle = np.linalg.norm(xy[:, None, :] - tw[None, :, :], axis=2)
     d_map = np.linalg.norm(lg.landmark_xy[:, None, :] - tw[None, :, :], axis=2).min(axis=0)
     out: dict = {}
+    per_tree: list = []
     for t in np.flatnonzero((d_circle <= 1.0).any(axis=0)):
         tracks = {int(x) for x in lg.meas_track[rows[d_circle[:, t] <= 1.0]] if x >= 0}
         fate = "found" if d_map[t] <= 1.0 else _fate(tracks, lg, dropped)
         st = _track_stats(tr, tracks, q, e, d)
+        if fate != "found":
+            per_tree.append({"fate": fate, "cause": _cause(fate, st)} | st)
         acc = out.setdefault(fate, {"trees": 0})
         acc["trees"] += 1
         for k, v in st.items():
@@ -464,7 +499,33 @@ def diagnose_reach(lg, ref, dropped: dict, scans, tr: dict, q: float, e, d) -> d
         for k in ("rate_at_misses", "range_at_misses_median"):
             v = np.array(acc[k])
             acc[k] = float(np.nanmedian(v)) if np.isfinite(v).any() else math.nan
-    return out
+    causes = [t["cause"] for t in per_tree]
+    return out | {"causes": {c: causes.count(c) for c in CAUSES}, "missed_trees": per_tree}
+
+
+CAUSES = (
+    "see-through beams: most of the misses' loss",
+    "misses without see-through: seen too rarely",
+    "mapped > 1 m away",
+    "tentative pending at the end",
+    "no track of its own",
+    "dropped at a miss",
+)
+
+
+def _cause(fate: str, st: dict) -> str:
+    """A missed tree's cause (CAUSES): for the trees their existence dropped (a tentative below
+    remove_prob, or a landmark that left the map), whether the see-through factor's part
+    (n log q) is more than half of what their charged misses cost in log-odds; otherwise
+    their fate."""
+    if fate in ("left the map by existence", "tentative: existence below remove_prob"):
+        lost, seen_through = st["logodds_misses"], st["logodds_see_through"]
+        return CAUSES[0] if lost < 0 and seen_through < 0.5 * lost else CAUSES[1]
+    return {
+        "mapped > 1 m away": CAUSES[2],
+        "tentative pending at the end": CAUSES[3],
+        "circles never a track of their own": CAUSES[4],
+    }.get(fate, CAUSES[5])
 
 
 def reach(extractor: str, variants: list[str]) -> dict:
@@ -528,6 +589,8 @@ def table(logs: list[str]) -> dict:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         for fate, v in r["fates"].items():
+            if fate in ("causes", "missed_trees"):
+                continue
             print(
                 f"| {r['extractor']} | {r['variant']} | {r['judged_on']} | {fate} | {v['trees']} "
                 f"| {v['sightings']} | {v['misses']} | {v['misses_see_through']} "
@@ -536,6 +599,17 @@ def table(logs: list[str]) -> dict:
                 f"({v['logodds_see_through']:+.0f}) | {v['rate_at_misses']:.2f} "
                 f"| {v['range_at_misses_median']:.1f} |"
             )
+    print()
+    print("| extractor | variant | derived on | judged on | missed | " + " | ".join(CAUSES) + " |")
+    print("|---|---|---|---|---|" + "---|" * len(CAUSES))
+    for r in rows:
+        c = r["fates"].get("causes")
+        if c is None:
+            continue
+        print(
+            f"| {r['extractor']} | {r['variant']} | {r['derived_on']} | {r['judged_on']} "
+            f"| {sum(c.values())} | " + " | ".join(str(c[k]) for k in CAUSES) + " |"
+        )
     return {"rows": rows}
 
 
