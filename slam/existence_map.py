@@ -10,6 +10,10 @@ called by the loop), on the predicted state:
    S = H C H^T + R of the candidate's [pose, point] block, as the association gated it;
 3. Bayes' rule updates their existence (`slam.existence.update_existence`); landmarks the loop
    closure hid from the association learn nothing in that scan.
+With `existence_see_through_k` > 0 the beams of step 1 are counted with the see-through
+tolerance (`slam.existence`, "See-through tolerance"), each place's range and bearing sd from
+its [pose, point] covariance (a tentative's own, fused with `existence_fuse_tentatives`,
+beside the pose's).
 The map managers read it (`slam.map_managers`): a tentative joins the map when its existence
 reaches `join_prob` (in a scan it was seen in), a window track joins when the existence of its
 sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`

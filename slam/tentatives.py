@@ -8,6 +8,8 @@ Tentative features live outside the filter state, so a false feature (a bush tha
 trunk once) never moves the vehicle estimate: each keeps its world position and covariance from
 its latest sighting (computed as a landmark initialisation would, `slam.se2.inverse_observe`), the
 number of scans it was associated in, and the number of consecutive scans it was missed in.
+With the existence policy and `existence_fuse_tentatives`, the position and covariance are
+instead those of all its sightings fused (`fuse`).
 For association they are offered alongside the map's landmarks with a covariance that ignores
 their correlation with the vehicle (their first-sighting covariance already contains the
 vehicle's uncertainty, so the gate is, if anything, too wide).
