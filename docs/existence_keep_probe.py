@@ -55,6 +55,7 @@ import math
 import time
 
 import numpy as np
+from scipy.stats import chi2
 
 from experiments.eval.existence_rates import (
     MAX_BEAMS,
@@ -68,9 +69,13 @@ from experiments.eval.map_quality import reference_in_our_frame
 from experiments.io.victoria_park import load_ss2002_reference, load_victoria_park
 from experiments.paper.victoria_park.existence_policy import _features, _judge, _tag
 from experiments.paper.victoria_park.real_run import HALVES, run_config
-from slam import existence_map, run_slam, se2
+from slam import SlamConfig, existence_map, run_slam, se2
 from slam import tentatives as tentatives_module
 from slam.log import OUT_OF_RANGE, SKIPPED
+
+# the see-through tolerance's k: sqrt(chi2_2(0.95)), the half-width of the 95% ellipse's
+# projection on an axis (`slam.existence`, "See-through tolerance")
+K95 = math.sqrt(float(chi2.ppf(0.95, 2)))
 
 VARIANTS = {
     "uniform": {},
@@ -115,6 +120,33 @@ VARIANTS = {
     "uniform, kept, q derived, range, bounded": {
         "map_policy.existence_keep_tentatives": True,
         "map_policy.existence_unreached_scans": 100,
+        "q": "derived",
+        "range": "derived",
+    },
+    # a tentative placed by its sightings fused (`existence_fuse_tentatives`), and the
+    # see-through tolerance at the 95% region (`existence_see_through_k`, K95; not tuned)
+    "persistent, kept, q derived, range, bounded, fused": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "q": "derived",
+        "range": "derived",
+    },
+    "persistent, kept, q derived, range, bounded, fused, tolerance": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
+        "q": "derived",
+        "range": "derived",
+    },
+    "uniform, kept, q derived, range, bounded, fused, tolerance": {
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
         "q": "derived",
         "range": "derived",
     },
@@ -435,6 +467,8 @@ def _track_stats(tr: dict, tracks: set, q: float, e, d) -> dict:
         "expected_by_rate": float(np.nansum(rate[reach])),
         "rate_at_misses": float(np.nanmean(rate[miss])) if miss.any() else math.nan,
         "range_at_misses_median": float(np.median(rng[miss])) if miss.any() else math.nan,
+        # the existence after the tracks' last update (the latest scan any of them was updated)
+        "r_last": float(ra[np.argmax(tr["scan_of"][rows])]) if rows.any() else math.nan,
     }
 
 
@@ -449,10 +483,13 @@ def diagnose_reach(lg, ref, dropped: dict, scans, tr: dict, q: float, e, d) -> d
     d_circle = np.linalg.norm(xy[:, None, :] - tw[None, :, :], axis=2)
     d_map = np.linalg.norm(lg.landmark_xy[:, None, :] - tw[None, :, :], axis=2).min(axis=0)
     out: dict = {}
+    per_tree: list = []
     for t in np.flatnonzero((d_circle <= 1.0).any(axis=0)):
         tracks = {int(x) for x in lg.meas_track[rows[d_circle[:, t] <= 1.0]] if x >= 0}
         fate = "found" if d_map[t] <= 1.0 else _fate(tracks, lg, dropped)
         st = _track_stats(tr, tracks, q, e, d)
+        if fate != "found":
+            per_tree.append({"fate": fate, "cause": _cause(fate, st)} | st)
         acc = out.setdefault(fate, {"trees": 0})
         acc["trees"] += 1
         for k, v in st.items():
@@ -464,7 +501,44 @@ def diagnose_reach(lg, ref, dropped: dict, scans, tr: dict, q: float, e, d) -> d
         for k in ("rate_at_misses", "range_at_misses_median"):
             v = np.array(acc[k])
             acc[k] = float(np.nanmedian(v)) if np.isfinite(v).any() else math.nan
-    return out
+    causes = [t["cause"] for t in per_tree]
+    return out | {"causes": {c: causes.count(c) for c in CAUSES}, "missed_trees": per_tree}
+
+
+CAUSES = (
+    "out of reach before joining (unreached bound)",
+    "sightings weighed against it",
+    "see-through beams: most of the misses' loss",
+    "misses without see-through: seen too rarely",
+    "mapped > 1 m away",
+    "tentative pending at the end",
+    "no track of its own",
+    "dropped at a miss",
+)
+
+
+REMOVE_PROB = SlamConfig().map_policy.existence_remove_prob  # the variants keep the default
+
+
+def _cause(fate: str, st: dict) -> str:
+    """A missed tree's cause (CAUSES): a tentative dropped with its existence still at or above
+    remove_prob was dropped by the unreached bound; for the trees their existence dropped (a
+    tentative below remove_prob, or a landmark that left the map), whether their sightings
+    gained nothing in log-odds (persistent clutter's object hypothesis fits them as well), or
+    else whether the see-through factor's part (n log q) is more than half of what their
+    charged misses cost; otherwise their fate."""
+    if fate == "tentative: existence below remove_prob" and st["r_last"] >= REMOVE_PROB:
+        return CAUSES[0]  # dropped by existence_unreached_scans, its existence above the bar
+    if fate in ("left the map by existence", "tentative: existence below remove_prob"):
+        lost, seen_through = st["logodds_misses"], st["logodds_see_through"]
+        if st["logodds_sightings"] <= 0:
+            return CAUSES[1]
+        return CAUSES[2] if lost < 0 and seen_through < 0.5 * lost else CAUSES[3]
+    return {
+        "mapped > 1 m away": CAUSES[4],
+        "tentative pending at the end": CAUSES[5],
+        "circles never a track of their own": CAUSES[6],
+    }.get(fate, CAUSES[7])
 
 
 def reach(extractor: str, variants: list[str]) -> dict:
@@ -504,6 +578,24 @@ def reach(extractor: str, variants: list[str]) -> dict:
     return out
 
 
+def _bailey() -> dict:
+    """(derived_on, judged_on) tags -> `bailey`'s (precision, recall) with confirm_scans derived
+    on the same half: the snapshot's docs/results/victoria_park_split_half.csv (the reference
+    precision of issue 41)."""
+    import csv
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent / "results" / "victoria_park_split_half.csv"
+    out = {}
+    with open(path) as fh:
+        for row in csv.DictReader(fh):
+            if row["extractor"] == "bailey":
+                tags = [x.split()[1].split("-") for x in (row["derived_on"], row["judged_on"])]
+                key = tuple(f"{lo}_{hi}" for lo, hi in tags)
+                out[key] = (float(row["precision"]), float(row["recall"]))
+    return out
+
+
 def table(logs: list[str]) -> dict:
     """The halves table and the missed trees' misses, as markdown, from `reach` logs (their
     printed rows; extractor: the log's name after "reach_")."""
@@ -512,12 +604,18 @@ def table(logs: list[str]) -> dict:
         ex = path.rsplit("reach_", 1)[-1].split(".")[0]
         with open(path) as fh:
             rows += [{"extractor": ex} | json.loads(x) for x in fh if x.startswith('{"variant"')]
-    print("| extractor | variant | derived on | judged on | P / R (landmarks) | tentatives, max |")
-    print("|---|---|---|---|---|---|")
+    bailey = _bailey()
+    print(
+        "| extractor | variant | derived on | judged on | P / R (landmarks) | tentatives, max "
+        "| `bailey` P / R (confirm_scans derived) |"
+    )
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
+        b = bailey[(r["derived_on"], r["judged_on"])]
         print(
             f"| {r['extractor']} | {r['variant']} | {r['derived_on']} | {r['judged_on']} | "
-            f"{r['precision']:.3f} / {r['recall']:.3f} ({r['landmarks']}) | {r['tentatives_max']} |"
+            f"{r['precision']:.3f} / {r['recall']:.3f} ({r['landmarks']}) | {r['tentatives_max']} "
+            f"| {b[0]:.3f} / {b[1]:.3f} |"
         )
     print()
     print(
@@ -528,6 +626,8 @@ def table(logs: list[str]) -> dict:
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         for fate, v in r["fates"].items():
+            if fate in ("causes", "missed_trees"):
+                continue
             print(
                 f"| {r['extractor']} | {r['variant']} | {r['judged_on']} | {fate} | {v['trees']} "
                 f"| {v['sightings']} | {v['misses']} | {v['misses_see_through']} "
@@ -536,6 +636,26 @@ def table(logs: list[str]) -> dict:
                 f"({v['logodds_see_through']:+.0f}) | {v['rate_at_misses']:.2f} "
                 f"| {v['range_at_misses_median']:.1f} |"
             )
+    print()
+    print(
+        "| extractor | variant | derived on | judged on | missed | "
+        + " | ".join(CAUSES)
+        + " | see-through ones: landmarks that left the map | their misses' median range (m) |"
+    )
+    print("|---|---|---|---|---|" + "---|" * (len(CAUSES) + 2))
+    for r in rows:
+        c = r["fates"].get("causes")
+        if c is None:
+            continue
+        see = [t for t in r["fates"]["missed_trees"] if t["cause"] == CAUSES[2]]
+        left = sum(t["fate"] == "left the map by existence" for t in see)
+        rng = np.nanmedian([t["range_at_misses_median"] for t in see]) if see else math.nan
+        print(
+            f"| {r['extractor']} | {r['variant']} | {r['derived_on']} | {r['judged_on']} "
+            f"| {sum(c.values())} | "
+            + " | ".join(str(c[k]) for k in CAUSES)
+            + f" | {left} | {rng:.1f} |"
+        )
     return {"rows": rows}
 
 

@@ -371,6 +371,15 @@ class MapPolicy:
         and that was not detected, in this many consecutive scans, is dropped: it could not
         have been confirmed in them, mostly because the car has left it behind (0: never, the
         set of kept tentatives is unbounded).
+    existence_fuse_tentatives: with the existence policy, a tentative's position is its
+        sightings fused (`slam.tentatives.fuse`: the inverse-covariance-weighted mean, its
+        covariance shrinking) instead of its latest sighting, before its beams are counted
+        (and for association). False: the latest sighting, as the paper's tentatives.
+    existence_see_through_k: the see-through tolerance (`slam.existence`, "See-through
+        tolerance"): a beam passing a landmark's or tentative's place is evidence against it
+        only beyond its predicted position's k-sigma region plus the trunk's radius, and none
+        when a beam returned inside that region; 0: no tolerance. sqrt(chi2_2(0.95)) = 2.448 is
+        the 95% region.
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -416,6 +425,12 @@ class MapPolicy:
     )
     existence_unreached_scans: int = default(
         0, "design: 0, a kept tentative out of reach stays to the end of the run (as before)"
+    )
+    existence_fuse_tentatives: bool = default(
+        False, "paper: False, a tentative is placed by its latest sighting"
+    )
+    existence_see_through_k: float = default(
+        0.0, "design: 0, no tolerance (as before); 2.448 = sqrt(chi2_2(0.95)), the 95% region"
     )
     existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
     existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
@@ -489,6 +504,16 @@ class MapPolicy:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
             raise SlamError(
                 f"map_policy.existence_pd_range_scale_m: must be finite and > 0, got {v!r}"
+            )
+        if not isinstance(self.existence_fuse_tentatives, bool):
+            raise SlamError(
+                "map_policy.existence_fuse_tentatives: must be true or false, got "
+                f"{self.existence_fuse_tentatives!r}"
+            )
+        v = self.existence_see_through_k
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_see_through_k: must be finite and >= 0, got {v!r}"
             )
         v = self.existence_unreached_scans
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:

@@ -63,6 +63,17 @@ extractor can see. Each scan:
    (1 - c')) a scan and joins once the sum passes logit(join_prob) - logit(birth); a one-off
    false circle is missed in every following scan that reaches it and falls below remove_prob
    after logit(birth) - logit(remove_prob) over -log((1 - Pd) / (1 - c')) such scans.
+   **See-through tolerance** (`see_through_k` k > 0, the filter passes each landmark's
+   predicted range and bearing sd, sd_r and sd_b, from its position's and the pose's
+   covariance). A landmark placed with an error of a few dm is missed by beams that pass
+   the real trunk's place, or hit it a little farther than the landmark: such beams are not
+   evidence that nothing is there. With the tolerance a reaching beam counts as see-through
+   only when its return lies beyond the k-sigma region grown by the radius and the gap (range
+   > d + a + gap_m + k sd_r), and no beam counts when any beam whose bearing is within the
+   trunk's half-width + k sd_b returned inside that region (|range - d| <= a + gap_m + k sd_r:
+   the trunk may be what it hit). k is a chi-square quantile, not a tuned value: the map
+   policy's `existence_see_through_k` names it (sqrt(chi2_2(0.95)) = 2.448, the half-width of
+   the 95% ellipse's projection on an axis).
 4. **Decisions** (`decide`): a tentative joins the map when r >= `join_prob` ("at least this
    probable that it is a real trunk"); a landmark is removed when r < `remove_prob` ("less
    probable than this that it is real"). A new tentative starts at `initial_existence(birth,
@@ -124,6 +135,7 @@ class ExistenceConfig:
     max_range_m: no detection at or beyond this range (the sensor's), m.
     join_prob, remove_prob: the decisions' thresholds, remove_prob < join_prob.
     pd_range_m, pd_range_scale_m: the range fall-off of Pd (module doc; inf: none), m, m (> 0).
+    see_through_k: the see-through tolerance's k-sigma (module doc; 0: none), >= 0.
     """
 
     pd_max: float = 0.9
@@ -136,6 +148,7 @@ class ExistenceConfig:
     remove_prob: float = 0.01
     pd_range_m: float = math.inf
     pd_range_scale_m: float = 5.0
+    see_through_k: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("pd_max", "survival", "join_prob", "remove_prob"):
@@ -167,6 +180,9 @@ class ExistenceConfig:
         v = self.pd_range_scale_m
         if not (isinstance(v, (int, float)) and 0.0 < v < math.inf):
             raise ValueError(f"ExistenceConfig.pd_range_scale_m: must be finite and > 0, got {v!r}")
+        v = self.see_through_k
+        if not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
+            raise ValueError(f"ExistenceConfig.see_through_k: must be finite and >= 0, got {v!r}")
 
 
 class BeamEvidence(NamedTuple):
@@ -190,11 +206,14 @@ def beam_evidence(
     radius_m: np.ndarray,
     cfg: ExistenceConfig,
     bearing_sigma_rad: np.ndarray | float = 0.0,
+    place_sigma: np.ndarray | None = None,
 ) -> BeamEvidence:
     """The beams of one scan (ranges_m (B,), NaN = no return; bearings_rad (B,), laser frame)
     that reach each landmark (lm_range_m, lm_bearing_rad, radius_m: (L,), laser frame) within
     its angular half-width asin(radius / range) (+ bearing_sigma_rad), and how many of them are
-    occluded or pass through (module doc)."""
+    occluded or pass through (module doc). place_sigma (L, 2): the sd of each landmark's
+    predicted (range m, bearing rad), for the see-through tolerance (module doc; with
+    cfg.see_through_k > 0; None or k 0: none)."""
     d = np.asarray(lm_range_m, dtype=np.float64)[:, None]
     a = np.asarray(radius_m, dtype=np.float64)[:, None]
     half = np.arcsin(np.clip(a / np.maximum(d, 1e-12), 0.0, 1.0))
@@ -205,10 +224,17 @@ def beam_evidence(
     with np.errstate(invalid="ignore"):
         near = r < d - a - cfg.gap_m
         beyond = ~np.isfinite(r) | (r > d + a + cfg.gap_m)
+    through = (reach & beyond).sum(axis=1).astype(np.int64)
+    if place_sigma is not None and cfg.see_through_k > 0:
+        sig = np.asarray(place_sigma, dtype=np.float64).reshape(-1, 2)
+        edge = a + cfg.gap_m + cfg.see_through_k * sig[:, :1]  # the k-sigma region's depth
+        wide = np.abs(db) <= half + cfg.see_through_k * sig[:, 1:]  # and its bearing span
+        with np.errstate(invalid="ignore"):
+            inside = wide & np.isfinite(r) & (np.abs(r - d) <= edge)
+            beyond = ~np.isfinite(r) | (r > d + edge)
+        through = np.where(inside.any(axis=1), 0, (reach & beyond).sum(axis=1)).astype(np.int64)
     return BeamEvidence(
-        reach.sum(axis=1).astype(np.int64),
-        (reach & near).sum(axis=1).astype(np.int64),
-        (reach & beyond).sum(axis=1).astype(np.int64),
+        reach.sum(axis=1).astype(np.int64), (reach & near).sum(axis=1).astype(np.int64), through
     )
 
 

@@ -10,6 +10,10 @@ called by the loop), on the predicted state:
    S = H C H^T + R of the candidate's [pose, point] block, as the association gated it;
 3. Bayes' rule updates their existence (`slam.existence.update_existence`); landmarks the loop
    closure hid from the association learn nothing in that scan.
+With `existence_see_through_k` > 0 the beams of step 1 are counted with the see-through
+tolerance (`slam.existence`, "See-through tolerance"), each place's range and bearing sd from
+its [pose, point] covariance (a tentative's own, fused with `existence_fuse_tentatives`,
+beside the pose's).
 The map managers read it (`slam.map_managers`): a tentative joins the map when its existence
 reaches `join_prob` (in a scan it was seen in), a window track joins when the existence of its
 sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`
@@ -82,6 +86,7 @@ class LandmarkExistence:
             remove_prob=float(policy.existence_remove_prob),
             pd_range_m=float(policy.existence_pd_range_m),
             pd_range_scale_m=float(policy.existence_pd_range_scale_m),
+            see_through_k=float(policy.existence_see_through_k),
         )
         fov = float(view.fov[1] - view.fov[0])
         self.kappa = clutter_density(
@@ -196,15 +201,10 @@ class LandmarkExistence:
             self._count_unreached(t_ids, idx)
             return
         radius = np.array([self.radius.get(int(i), DEFAULT_RADIUS_M) for i in ids[idx]])
-        scan = meas.scan
-        if scan is None:  # no beams: in view means reachable, nothing seen through
-            n = idx.size
-            reach, through = np.full(n, self.cfg.min_beams, np.int64), np.zeros(n, np.int64)
-            ev = BeamEvidence(reach, np.zeros(n, np.int64), through)
-        else:
-            ranges = np.asarray(scan.ranges_m, dtype=np.float64)
-            bearings = scan.angle_min_rad + scan.angle_increment_rad * np.arange(ranges.size)
-            ev = beam_evidence(ranges, bearings, z_hat[idx, 0], z_hat[idx, 1], radius, cfg=self.cfg)
+        sig = None
+        if self.cfg.see_through_k > 0:  # the see-through tolerance (`slam.existence`)
+            sig = self._place_sigma(state, tentatives, idx, H5[idx])
+        ev = self._evidence(meas.scan, z_hat[idx], radius, sig)
         pd = detection_probability(ev, z_hat[idx, 0], np.ones(idx.size, bool), self.cfg)
         # a landmark the association paired was seen, whatever the beams say of its reach
         f = falloff(z_hat[idx, 0], self.cfg)
@@ -243,6 +243,36 @@ class LandmarkExistence:
                 | {"through": ev.through, "pd": pd, "detected": detected[idx]}
                 | {"r_before": r_before, "r_after": r}
             )
+
+    def _evidence(self, scan, z_hat: np.ndarray, radius: np.ndarray, sig) -> BeamEvidence:
+        """The beam evidence of the landmarks predicted at z_hat (n, 2) (`beam_evidence`; sig:
+        their place's sd for the see-through tolerance, or None)."""
+        n = z_hat.shape[0]
+        if scan is None:  # no beams: in view means reachable, nothing seen through
+            reach, through = np.full(n, self.cfg.min_beams, np.int64), np.zeros(n, np.int64)
+            return BeamEvidence(reach, np.zeros(n, np.int64), through)
+        ranges = np.asarray(scan.ranges_m, dtype=np.float64)
+        bearings = scan.angle_min_rad + scan.angle_increment_rad * np.arange(ranges.size)
+        return beam_evidence(
+            ranges, bearings, z_hat[:, 0], z_hat[:, 1], radius, cfg=self.cfg, place_sigma=sig
+        )
+
+    @staticmethod
+    def _place_sigma(state: Filter, tentatives, idx: np.ndarray, H: np.ndarray) -> np.ndarray:
+        """(n, 2) the sd of the predicted (range, bearing) of [landmarks, tentatives][idx]
+        from their [pose, point] covariance (H (n, 2, 5) its Jacobian): a landmark's 5 x 5 block
+        of the state, a tentative's (fused) covariance beside the pose's, uncorrelated, as the
+        association offers them."""
+        n_lm = state.landmark_ids.size
+        C5 = np.zeros((idx.size, 5, 5))
+        lm = idx < n_lm
+        if lm.any():
+            C5[lm] = state.cov(landmark_columns(idx[lm]))
+        if (~lm).any():
+            C5[~lm, :3, :3] = state.pose_cov
+            C5[~lm, 3:, 3:] = tentatives.cov[idx[~lm] - n_lm]
+        S = np.einsum("nij,njk,nlk->nil", H, C5, H)
+        return np.sqrt(np.maximum(np.stack([S[:, 0, 0], S[:, 1, 1]], axis=1), 0.0))
 
     def _detections(self, state, meas, a, tentatives, *, z_hat, H5):
         """(detected (L,) bool, likelihood (L,), likelihood under a non-tree object (L,)) of

@@ -8,6 +8,8 @@ Tentative features live outside the filter state, so a false feature (a bush tha
 trunk once) never moves the vehicle estimate: each keeps its world position and covariance from
 its latest sighting (computed as a landmark initialisation would, `slam.se2.inverse_observe`), the
 number of scans it was associated in, and the number of consecutive scans it was missed in.
+With the existence policy and `existence_fuse_tentatives`, the position and covariance are
+instead those of all its sightings fused (`fuse`).
 For association they are offered alongside the map's landmarks with a covariance that ignores
 their correlation with the vehicle (their first-sighting covariance already contains the
 vehicle's uncertainty, so the gate is, if anything, too wide).
@@ -22,7 +24,7 @@ import numpy as np
 from slam.config import MapPolicy
 from slam.se2 import inverse_observe
 
-__all__ = ["Tentatives", "sighting"]
+__all__ = ["Tentatives", "fuse", "sighting"]
 
 
 def sighting(
@@ -34,11 +36,27 @@ def sighting(
     return m, 0.5 * (C + C.T)
 
 
+def fuse(
+    xy: np.ndarray, cov: np.ndarray, m: np.ndarray, C: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """A tentative's position xy (2,) with covariance cov (2, 2) fused with a new sighting m (2,)
+    of covariance C (2, 2), as a static point's Kalman update (information form): cov' =
+    (cov^-1 + C^-1)^-1, xy' = cov' (cov^-1 xy + C^-1 m). Over its sightings this is their
+    inverse-covariance-weighted mean (map policy `existence_fuse_tentatives`). The sightings'
+    errors are taken as independent: the part of their covariance the vehicle's pose brings is
+    shared by sightings close in time, so cov' is, if anything, too small."""
+    K = np.linalg.solve((cov + C).T, cov.T).T  # cov (cov + C)^-1, the Kalman gain
+    fused = xy + K @ (m - xy)
+    P = cov - K @ cov
+    return fused, 0.5 * (P + P.T)
+
+
 @dataclass(frozen=True, eq=False)
 class Tentatives:
     """The tentative features.
 
-    xy: (t, 2) world position of each, m (latest sighting). cov: (t, 2, 2) its covariance.
+    xy: (t, 2) world position of each, m (latest sighting; fused over its sightings with
+    `existence_fuse_tentatives`, `fuse`). cov: (t, 2, 2) its covariance.
     hits: (t,) scans it has been associated in. missed: (t,) consecutive scans without a hit.
     first_scan: (t,) scan index of the first sighting. ids: (t,) stable ids (the landmark id
     it keeps if it joins the map).
@@ -91,11 +109,11 @@ class Tentatives:
         hits = self.hits.copy()
         missed = self.missed + 1
         xy, cov = (self.xy.copy(), self.cov.copy()) if matched else (self.xy, self.cov)
+        fusing = policy.by_existence and policy.existence_fuse_tentatives
         for i, (m, C) in matched.items():
             hits[i] += 1
             missed[i] = 0
-            xy[i] = m
-            cov[i] = C
+            xy[i], cov[i] = fuse(xy[i], cov[i], m, C) if fusing else (m, C)
         if join is None:
             confirm = np.flatnonzero(hits >= policy.confirm_scans).tolist()
         else:
