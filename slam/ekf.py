@@ -447,7 +447,7 @@ class Filter(_Estimate):
             raise SlamError(f"add_landmark.landmark_id: {landmark_id} is already in the state")
         m, Gx, Gz = inverse_observe(self.pose, z, laser_pose)
         d, e = self.dim, 3 + 2 * self.n_landmarks  # e: where it goes, before any hidden copy
-        P = np.zeros((d + 2, d + 2))
+        P = np.empty((d + 2, d + 2))  # every block is written below: no zeroing of d^2
         old = self._P  # the order of the rows is kept: the triangles stay where they were
         P[:e, :e] = old[:e, :e]  # its upper triangle lags as much as the old one did
         P[e + 2 :, :e] = old[e:, :e]

@@ -84,3 +84,26 @@ def test_observe_within_is_observe_kernel_within_range():
     np.testing.assert_array_equal(H_in[near], H[near])
     np.testing.assert_array_equal(z_in[:, 0], z[:, 0])  # every range, NaN included
     assert np.all(H_in[~near] == 0.0) and np.all(z_in[~near, 1] == 0.0)
+
+
+def test_add_landmark_writes_every_entry_of_the_grown_covariance(monkeypatch):
+    """`Filter.add_landmark` grows P into an uninitialised array (no zeroing of d^2): with that
+    array filled with NaN, every entry must still be written, hidden copies included."""
+    rng = np.random.default_rng(5)
+    n = 6
+    A = rng.normal(size=(3 + 2 * n, 3 + 2 * n))
+    f = Filter(EkfState(rng.normal(size=3 + 2 * n), A @ A.T, np.arange(n)))
+    f.append_copies([1, 4], np.tile(0.1 * np.eye(2), (2, 1, 1)))
+    real_empty = np.empty
+
+    def nan_empty(shape, *args, **kwargs):
+        out = real_empty(shape, *args, **kwargs)
+        out.fill(np.nan)
+        return out
+
+    monkeypatch.setattr(np, "empty", nan_empty)
+    f.add_landmark(np.array([5.0, 0.3]), 0.01 * np.eye(2), np.zeros(3), landmark_id=99)
+    monkeypatch.undo()
+    assert f.dim == 3 + 2 * (n + 1) + 4
+    assert np.all(np.isfinite(f.P))
+    assert f.landmark_ids[-1] == 99 and np.array_equal(f.copy_of, [1, 4])
