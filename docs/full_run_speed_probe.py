@@ -13,8 +13,10 @@ thread. "hash" writes each run's files as `trunkslam slam` does (`run_slam_file`
 the SHA-256 of map.csv, trajectory.csv and of run_log.npz's arrays (names, dtypes, shapes and
 bytes; the zip's own bytes carry the write time), and of every array of the `SlamLog` but its
 timings; with --expect it exits 1 when one differs. "profile" runs both once untimed (numba
-compiles or loads its kernels), then each under cProfile, and prints its CPU seconds and the
-top functions by cumulative and by own time.
+compiles or loads its kernels), then each once unprofiled (its CPU and wall seconds, and ms a
+scan in each phase of the loop against the whole run's: what lies outside the four phases)
+and once under cProfile: Python calls a step and the top functions by cumulative and by own
+time with their calls a step (cProfile's own overhead inflates every Python call's time).
 """
 
 from __future__ import annotations
@@ -22,7 +24,6 @@ from __future__ import annotations
 import argparse
 import cProfile
 import hashlib
-import io
 import json
 import pstats
 import sys
@@ -121,24 +122,61 @@ def hash_runs(seq_path: Path, expect: Path | None, save: Path | None) -> int:
 
 
 def profile_runs(seq_path: Path, top: int) -> int:
-    """Profile both runs after an untimed one; print CPU seconds and the top functions."""
+    """Profile both runs after an untimed one; print CPU seconds, where the run's time goes
+    against the loop's four timed phases (`phase_split`), and the top functions with their
+    calls per step."""
     seq = load_sequence(seq_path)
     run_slam(seq, config(True))  # numba compiles or loads every kernel both runs use
     for name, closure in RUNS.items():
         cfg = config(closure)
         c0, t0 = time.process_time(), time.perf_counter()
-        run_slam(seq, cfg)
+        log = run_slam(seq, cfg)
         cpu, wall = time.process_time() - c0, time.perf_counter() - t0
         prof = cProfile.Profile()
         prof.enable()
         run_slam(seq, cfg)
         prof.disable()
+        stats = pstats.Stats(prof)
+        steps = next(v[0] for k, v in stats.stats.items() if k[2] == "step" and "loop" in k[0])
         print(f"== {name}: {cpu:.2f} s CPU, {wall:.2f} s wall (unprofiled run)")
+        print(phase_split(log, wall))
+        print(
+            f"profiled: {steps} steps (the run's scans, the GPS start's first pass, the "
+            f"warm-up), {stats.total_calls / steps:.0f} Python calls a step"
+        )
         for key in ("cumulative", "tottime"):
-            text = io.StringIO()
-            pstats.Stats(prof, stream=text).sort_stats(key).print_stats(top)
-            print(text.getvalue())
+            print(per_step_table(stats, key, top, steps))
     return 0
+
+
+def phase_split(log, wall: float) -> str:
+    """The unprofiled run's wall seconds against its log's phase times (`SlamLog.timing_s`,
+    the run's scans only): predict, associate, update and manage (the four phases; features
+    is the measure step), the rest of the steps' timed total, and what lies outside them
+    (the first pass and warm-up, the scan's record, log and bookkeeping, the final log)."""
+    t = {k: float(np.sum(v)) for k, v in log.timing_s.items()}
+    four = sum(t[k] for k in ("predict", "associate", "update", "manage"))
+    n = log.n_scans
+    parts = ", ".join(f"{k} {1e3 * t[k] / n:.3f}" for k in t)
+    return (
+        f"ms a scan over {n} scans: {parts}; the four phases {1e3 * four / n:.3f}, the whole "
+        f"run {1e3 * wall / n:.3f} ({1e3 * (wall - four) / n:.3f} outside the four phases)"
+    )
+
+
+def per_step_table(stats: pstats.Stats, key: str, top: int, steps: int) -> str:
+    """The top functions by `key` ("cumulative" or "tottime"): own and cumulative seconds,
+    share of the profiled run, calls per step."""
+    rows = sorted(stats.stats.items(), key=lambda kv: -kv[1][3 if key == "cumulative" else 2])
+    total = max(v[3] for v in stats.stats.values())
+    out = [f"-- by {key}: own s, cumulative s, % of the run, calls a step, function"]
+    for (path, line, fn), (_, ncalls, own, cum, _) in rows[:top]:
+        where = f"{Path(path).parent.name}/{Path(path).name}:{line}" if line else path
+        out.append(
+            f"{own:7.2f} {cum:7.2f} {100 * (cum if key == 'cumulative' else own) / total:5.1f}% "
+            f"{ncalls / steps:7.2f}  {fn} ({where})"
+        )
+    return "\n".join(out)
 
 
 def main(argv=None) -> int:

@@ -155,8 +155,10 @@ class _Estimate:
 
     def positions_of(self, landmark_ids) -> np.ndarray:
         """`index_of` for many ids at once: (k,) positions, -1 where an id is not in the
-        state (one sort, not a scan of the state per id)."""
-        ids = np.asarray(landmark_ids, dtype=np.int64).reshape(-1)
+        state (one sort, or for a few ids `_positions`)."""
+        ids = np.ascontiguousarray(landmark_ids, dtype=np.int64).reshape(-1)
+        if ids.size <= _FEW_IDS:  # a scan's few: a pass over the state per id
+            return _positions(np.ascontiguousarray(self.landmark_ids, dtype=np.int64), ids)
         if not self.landmark_ids.size:
             return np.full(ids.size, -1, np.int64)
         order = np.argsort(self.landmark_ids, kind="stable")
@@ -445,7 +447,7 @@ class Filter(_Estimate):
             raise SlamError(f"add_landmark.landmark_id: {landmark_id} is already in the state")
         m, Gx, Gz = inverse_observe(self.pose, z, laser_pose)
         d, e = self.dim, 3 + 2 * self.n_landmarks  # e: where it goes, before any hidden copy
-        P = np.zeros((d + 2, d + 2))
+        P = np.empty((d + 2, d + 2))  # every block is written below: no zeroing of d^2
         old = self._P  # the order of the rows is kept: the triangles stay where they were
         P[:e, :e] = old[:e, :e]  # its upper triangle lags as much as the old one did
         P[e + 2 :, :e] = old[e:, :e]
@@ -483,6 +485,20 @@ class Filter(_Estimate):
         self.landmark_ids = np.delete(self.landmark_ids, pos)
         self.copy_of = np.delete(self.copy_of, copies)
         self.first_xy = np.delete(self.first_xy, pos, axis=0)
+
+
+@njit(cache=True)
+def _positions(landmark_ids: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """The position of each of ids (k,) in landmark_ids (n,), distinct ids, -1 where absent:
+    a pass over the state per id (k is a scan's few landmarks; the sort and search this
+    replaced cost more than k passes over hundreds). Loops bounded by k and n."""
+    out = np.full(ids.size, -1, np.int64)
+    for a in range(ids.size):
+        for i in range(landmark_ids.size):
+            if landmark_ids[i] == ids[a]:
+                out[a] = i
+                break
+    return out
 
 
 @njit(cache=True)
@@ -571,6 +587,10 @@ def _mirror_lower(P: np.ndarray) -> None:
 
 
 _POSE_COLS = np.array([[0, 1, 2]], np.int64)
+
+# `positions_of` looks up at most this many ids by passes over the state (k passes over n ids
+# cost less than the sort and search up to a few dozen)
+_FEW_IDS = 32
 
 
 def _pair_cols(pos: np.ndarray) -> np.ndarray:

@@ -20,6 +20,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit, types
+from numba.extending import intrinsic
 
 from slam.ekf import Filter
 from slam.errors import SlamError
@@ -164,15 +166,65 @@ def move_rigidly(state: Filter, theta: float, t: np.ndarray) -> None:
     pts = np.stack([state.x[xy], state.x[xy + 1]], axis=1) @ R.T + t
     state.x[xy], state.x[xy + 1] = pts[:, 0], pts[:, 1]
     state.x[2] = float(wrap_angle(state.x[2] + theta))
-    P = state.P
-    for a in xy:  # J P J^T, J block diagonal: rotate each position's rows, then columns
-        P[a : a + 2, :] = R @ P[a : a + 2, :]
-    for a in xy:
-        P[:, a : a + 2] = P[:, a : a + 2] @ R.T
+    _rotate_positions(state.P, c, s)  # J P J^T, J block diagonal (P mirrored, both written)
     state.first_xy = state.first_xy @ R.T + t
     state.prior_pose = np.array(
         [*(R @ state.prior_pose[:2] + t), wrap_angle(state.prior_pose[2] + theta)]
     )
+
+
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a b + c rounded once (LLVM's fma), for kernels that must give the bits of a BLAS
+    kernel built on fused multiply-adds."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+
+    return sig, codegen
+
+
+@njit(cache=True)
+def _rotate_positions(P: np.ndarray, c: float, s: float) -> None:
+    """P <- J P J^T in place, J = R(theta) (c = cos theta, s = sin theta) on the rows of every
+    position (the pose's x, y and each 2-D slot after it), identity on the heading: in one
+    pass over P's rows, each row pair rotated, then its column pairs. The same rounding as
+    the numpy form it replaced (the rows of each pair by R @ P[a:a + 2, :], then the columns
+    by P[:, a:a + 2] @ R.T, with OpenBLAS, whose kernels sum each entry's two products as
+    fma(second, ., first) in the order of k): the same bits, where that pass read and wrote
+    the whole matrix twice, the second time by columns. Loops bounded by P's size."""
+    d = P.shape[0]
+    row0 = np.empty(d)
+    row1 = np.empty(d)
+    for a in range(d):
+        if a == 2 or (a > 2 and (a - 3) % 2) or a == 1:
+            continue  # a pair's second row (or the heading, done below)
+        for j in range(d):  # rows a, a + 1: R @ P[a:a + 2, :]
+            p0, p1 = P[a, j], P[a + 1, j]
+            row0[j] = _fma(-s, p1, c * p0)
+            row1[j] = _fma(c, p1, s * p0)
+        _rotate_columns(row0, c, s)
+        _rotate_columns(row1, c, s)
+        for j in range(d):
+            P[a, j], P[a + 1, j] = row0[j], row1[j]
+    for j in range(d):  # the heading's row: its columns only
+        row0[j] = P[2, j]
+    _rotate_columns(row0, c, s)
+    for j in range(d):
+        P[2, j] = row0[j]
+
+
+@njit(cache=True)
+def _rotate_columns(row: np.ndarray, c: float, s: float) -> None:
+    """One row of Q @ R.T on every position's column pair (columns 0, 1, then 3, 4, ...)."""
+    d = row.size
+    for b in range(d):
+        if b == 2 or (b > 2 and (b - 3) % 2) or b == 1:
+            continue
+        q0, q1 = row[b], row[b + 1]
+        row[b] = _fma(q1, -s, q0 * c)
+        row[b + 1] = _fma(q1, c, q0 * s)
 
 
 def _pair_constraint(state: Filter, keep_ids, drop_ids, sigma_m: float):

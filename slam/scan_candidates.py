@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from association.gating import pair_d2
-from slam.se2 import observe_kernel
+from slam.se2 import observe_kernel, observe_within
 
 __all__ = ["project_blocks", "revisit_spread", "scan_candidates", "sub_problem", "view_bounds"]
 
@@ -71,7 +71,7 @@ def scan_candidates(
     lo, hi, every, r_max = bounds
     px, py, dpx, dpy = sensor
     th = pose[2]
-    z_lm, H_lm = observe_kernel(lm_xy, px, py, dpx, dpy, th, sensor_yaw)
+    z_lm, H_lm = observe_within(lm_xy, px, py, dpx, dpy, th, sensor_yaw, r_max)
     z_t, H_t = observe_kernel(tent_xy, px, py, dpx, dpy, th, sensor_yaw)
     lm_idx = np.flatnonzero(_in_view(z_lm, lo, hi, every, r_max) & ~hidden)
     t_idx = np.flatnonzero(_in_view(z_t, lo, hi, every, r_max))
@@ -193,7 +193,7 @@ def revisit_spread(P, lm_xy, seen_s, before_s, sensor, sensor_yaw, heading, boun
     m = np.empty((old.size, 2))
     for a in range(old.size):
         m[a, 0], m[a, 1] = lm_xy[old[a], 0], lm_xy[old[a], 1]
-    z_hat, H5_all = observe_kernel(m, px, py, dpx, dpy, heading, sensor_yaw)
+    z_hat, H5_all = observe_within(m, px, py, dpx, dpy, heading, sensor_yaw, r_max)
     keep = np.flatnonzero(_in_view(z_hat, lo, hi, every, r_max))
     cand = old[keep]
     H5 = np.empty((cand.size, 2, 5))

@@ -29,6 +29,7 @@ __all__ = [
     "inverse_observe",
     "observe",
     "observe_kernel",
+    "observe_within",
     "observed_points",
     "procrustes_2d",
     "rotate",
@@ -164,6 +165,41 @@ def observe_kernel(m, px, py, dpx, dpy, th, sth):
         H[i, 1, 3] = bx
         H[i, 1, 4] = by
     z[:, 1] = np.pi - np.mod(np.pi - b, 2.0 * np.pi)  # `wrap_angle`
+    return z, H
+
+
+@njit(cache=True)
+def observe_within(m, px, py, dpx, dpy, th, sth, r_max):
+    """`observe_kernel` for the points within r_max of the sensor, the same bits; a point
+    farther (or at a NaN range) gets its range only, bearing 0 and H 0, which a view test
+    that also asks range <= r_max reads as out of view (`slam.scan_candidates`): the bearing
+    and Jacobian of the hundreds of landmarks out of range cost most of a scan's pass."""
+    k = m.shape[0]
+    z = np.empty((k, 2))
+    H = np.zeros((k, 2, 5))
+    for i in range(k):
+        dx = m[i, 0] - px
+        dy = m[i, 1] - py
+        q = dx * dx + dy * dy
+        r = math.sqrt(q)
+        z[i, 0] = r
+        if not r <= r_max:
+            z[i, 1] = 0.0
+            continue
+        b = math.atan2(dy, dx) - th - sth
+        z[i, 1] = np.pi - np.mod(np.pi - b, 2.0 * np.pi)  # `wrap_angle`
+        rx, ry = dx / r, dy / r  # d range / d m
+        bx, by = -dy / q, dx / q  # d bearing / d m
+        H[i, 0, 0] = -rx
+        H[i, 0, 1] = -ry
+        H[i, 0, 2] = -(rx * dpx + ry * dpy)
+        H[i, 0, 3] = rx
+        H[i, 0, 4] = ry
+        H[i, 1, 0] = -bx
+        H[i, 1, 1] = -by
+        H[i, 1, 2] = -(bx * dpx + by * dpy) - 1.0
+        H[i, 1, 3] = bx
+        H[i, 1, 4] = by
     return z, H
 
 
