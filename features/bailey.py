@@ -257,7 +257,7 @@ def _unrotate(det: _Detection, rot: int, n_beams: int, fov_lo: float) -> _Detect
     seg_rank[seg_order] = np.arange(K)
     seg_first, seg_last, keep = seg_first[seg_order], seg_last[seg_order], keep[seg_order]
     col_order = np.argsort(out[1], kind="stable")  # increasing bearing
-    out = out[:, col_order]
+    out = out.take(col_order, axis=1)  # C order, as the kernel's own: one signature of `_circles`
     det_seg = seg_rank[det_seg[col_order]]
     return _Detection(out, seg_first, seg_last, keep, det_seg)
 

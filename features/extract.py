@@ -786,6 +786,9 @@ def _kernel_beams(scan: Scan) -> _Beams:
         return _Beams(scan.ranges_m, scan.angle_min_rad, gamma, False, 0)
     shift = _seam(scan.ranges_m)
     ranges = np.roll(scan.ranges_m, -shift)
+    # read-only as `Scan.ranges_m` is: numba types a read-only array apart, and a writable one
+    # here compiled the kernel and its callees a second time (some 16 s of a cold warm-up)
+    ranges.flags.writeable = False
     return _Beams(ranges, scan.angle_min_rad + shift * gamma, gamma, True, shift)
 
 

@@ -19,7 +19,8 @@ of the same name, and two processes compiling different signatures take the same
 so one signature's entry can end up naming the other's code. So that a fresh clone does not
 compile every kernel once per worker, the controlling process first compiles them once, alone,
 into a shared folder (`python -m experiments.bench.warm`: every extractor, a short simulated
-drive with each associator and loop closure), and each worker starts from a copy of it: its own
+drive with each associator and loop closure; a cold folder in two processes, each writing a
+folder of its own, then merged), and each worker starts from a copy of it: its own
 folder, warm. A signature the warm-up did not compile is compiled by the worker that needs it,
 as before.
 """

@@ -1,4 +1,4 @@
-"""Compile (or load) the numba kernels of a whole run once, in one process, into numba's cache.
+"""Compile (or load) the numba kernels of a whole run once, into numba's cache.
 
 `python -m experiments.bench.warm` runs every extractor on a small scan (`local.warm_kernels`),
 then a short simulated drive through the loop once per association method, with the single-scan
@@ -7,17 +7,35 @@ and signatures a run and the test suite use. `make test`, `make check` and CI ru
 the test workers start (tests/conftest.py), into a cache folder that each worker then copies
 as its own: a fresh clone compiles each kernel once instead of once per worker.
 
+Into an empty cache folder (`NUMBA_CACHE_DIR`, a fresh clone's) with `--jobs 2` (the default on
+two cores or more), the compilation is split in two processes (`PARTS`: the extractors and the
+GPS scoring; the loop's kernels on a drive of given features), each into a folder of its own:
+numba's cache is not safe for two processes writing one kernel, so neither writes the other's
+folder. Their kernels are then copied into the cache folder, each kernel's files from one part
+(`merge_kernels`), and the whole warm-up runs once more in this process: it loads them, and
+compiles whatever signature the parts left out. The parts share no kernel (a cold run of both
+compiled none twice, and the last pass compiled none), so on two idle cores the cold warm-up
+takes the longer part's time instead of the sum. A folder that holds kernels already is warmed
+in this process alone, as before.
+
 It prints one line when it starts and one with its time, so a cold first run is not a silence.
 """
 
 from __future__ import annotations
 
+import argparse
+import os
+import shutil
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
-__all__ = ["warm_every_kernel"]
+__all__ = ["PARTS", "merge_kernels", "warm_every_kernel", "warm_in_parts"]
 
 WARM_SCANS = 30  # enough for landmarks to join the map, be re-observed and the window to fill
+AVENUE_TREES = 60  # the loop part's drive (`experiments.sim.landmarks.avenue`): 35 scans
 
 
 def warm_every_kernel() -> float:
@@ -41,6 +59,40 @@ def warm_every_kernel() -> float:
     _warm_unicycle()
     _warm_full_circle()
     return time.perf_counter() - t0
+
+
+def _warm_extractors() -> None:
+    """Part "extractors": every extractor (a half and a full circle), the GPS scoring and the
+    unicycle model: no kernel of the loop's."""
+    import numpy as np
+
+    from experiments.eval.vouched import vouched_for_sequence
+    from experiments.exec.local import warm_kernels
+    from experiments.sim import CycabParams, simulate_cycab_run
+    from slam import SlamConfig
+
+    warm_kernels()
+    _warm_full_circle()
+    seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=WARM_SCANS))
+    vouched_for_sequence(seq, SlamConfig().with_(**{"closure.enabled": True}))
+    _warm_unicycle()
+
+
+def _warm_loop() -> None:
+    """Part "loop": the loop with each associator and loop closure, on a drive of given
+    features (an avenue's circle centres: no extractor kernel)."""
+    import numpy as np
+
+    from experiments.sim.landmarks import avenue
+    from slam import SlamConfig, run_slam
+
+    seq, feats = avenue(AVENUE_TREES, np.random.default_rng(0))
+    base = SlamConfig().with_(**{"closure.enabled": True})
+    for method in ("ihgr", "jcbb", "nn", "ihgr-window"):
+        run_slam(seq, base, features=feats, association=method, warm_up=False)
+
+
+PARTS = {"extractors": _warm_extractors, "loop": _warm_loop}
 
 
 def _warm_unicycle() -> None:
@@ -71,9 +123,73 @@ def _warm_full_circle() -> None:
         extract_features(scan, m)
 
 
-def main() -> None:
-    print("numba kernels: compiling or loading (a fresh clone: about a minute)", flush=True)
-    seconds = warm_every_kernel()
+def merge_kernels(target: Path, parts: list[Path]) -> int:
+    """Copy into the numba cache folder `target` each kernel that one of the folders `parts`
+    holds and `target` does not: its data files, then its index, all from the first part that
+    holds it (a kernel's files as one: an index never names another folder's data). The count
+    of kernels copied."""
+    copied = 0
+    for part in parts:
+        for index in sorted(part.rglob("*.nbi")):
+            sub = index.parent.relative_to(part)
+            if (target / sub / index.name).exists():
+                continue
+            (target / sub).mkdir(parents=True, exist_ok=True)
+            for data in sorted(index.parent.glob(f"{index.name.removesuffix('.nbi')}.*.nbc")):
+                shutil.copy2(data, target / sub / data.name)
+            shutil.copy2(index, target / sub / index.name)
+            copied += 1
+    return copied
+
+
+def warm_in_parts(target: Path) -> float:
+    """Warm the empty cache folder `target` in two processes, then in this one (see the module
+    doc); the seconds it took. A part that fails leaves its kernels to this process."""
+    t0 = time.perf_counter()
+    target.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix=".warm-", dir=target.parent))
+    try:
+        runs = []
+        for name in PARTS:
+            env = {**os.environ, "NUMBA_CACHE_DIR": str(scratch / name)}
+            args = [sys.executable, "-m", "experiments.bench.warm", "--part", name]
+            runs.append(subprocess.Popen(args, env=env))
+        done = [run.wait() == 0 for run in runs]
+        merge_kernels(target, [scratch / n for n, ok in zip(PARTS, done) if ok])
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    warm_every_kernel()
+    return time.perf_counter() - t0
+
+
+def _holds_kernels(folder: Path) -> bool:
+    return folder.is_dir() and next(folder.rglob("*.nbi"), None) is not None
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(
+        prog="python -m experiments.bench.warm",
+        description="Compile or load every numba kernel a run and the tests use.",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=2 if (os.cpu_count() or 1) >= 2 else 1,
+        help="processes for a cold cache folder (NUMBA_CACHE_DIR, empty): 2 splits the "
+        "compilation in two parts (default: %(default)s); 1 compiles in this process",
+    )
+    parser.add_argument("--part", choices=list(PARTS), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.jobs < 1:
+        parser.error(f"--jobs: must be >= 1, got {args.jobs}")
+    if args.part is not None:  # one part, into its own folder (warm_in_parts)
+        PARTS[args.part]()
+        return
+    folder = os.environ.get("NUMBA_CACHE_DIR")
+    split = args.jobs >= 2 and folder and not _holds_kernels(Path(folder))
+    how = " in two processes" if split else ""
+    print(f"numba kernels: compiling or loading{how} (a fresh clone: about a minute)", flush=True)
+    seconds = warm_in_parts(Path(folder)) if split else warm_every_kernel()
     print(f"numba kernels: ready in {seconds:.1f} s", flush=True)
 
 

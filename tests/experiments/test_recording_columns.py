@@ -38,6 +38,14 @@ class _Archetypes:
         self.log = rec.rec.log
         self.path: list = []
         self.truth: list = []
+        self.empty: set = set()
+
+    def _items(self, path, n, row):
+        """As the recorder: a row of no item after a row of none at `path` is not logged."""
+        if n == 0 and path in self.empty:
+            return
+        (self.empty.add if n == 0 else self.empty.discard)(path)
+        self.log(path, row)
 
     def set_scan(self, k, stamp_s=None):
         self.rec.set_scan(k, stamp_s)
@@ -58,16 +66,21 @@ class _Archetypes:
         pts = scan.points_xy
         strips = [pts[features.beams(a, b)] for a, b in features.segment_beams]
         kinds = viz.KIND_COLORS[np.asarray(features.segment_kind, np.int64).reshape(-1)]
-        self.log(f"{path}/segments", rr.LineStrips2D(strips, radii=_ui(1.5), colors=kinds))
+        segments = rr.LineStrips2D(strips, radii=_ui(1.5), colors=kinds)
+        self._items(f"{path}/segments", len(strips), segments)
         c = np.asarray(features.circle_params, float).reshape(-1, 3)
         rgb = [viz.METHOD_COLORS[features.method]]
         labels = {"labels": [f"r={r:.2f} m" for r in c[:, 2]]} if len(c) else {}
         outlines = list(circle_polylines(c))
-        self.log(f"{path}/circles", rr.LineStrips2D(outlines, radii=_ui(1.5), colors=rgb, **labels))
+        circles = rr.LineStrips2D(outlines, radii=_ui(1.5), colors=rgb, **labels)
+        self._items(f"{path}/circles", len(c), circles)
         ends = list(np.asarray(features.line_endpoints, float).reshape(-1, 2, 2))
-        self.log(f"{path}/lines", rr.LineStrips2D(ends, radii=_ui(2.0), colors=[[60, 120, 255]]))
+        lines = rr.LineStrips2D(ends, radii=_ui(2.0), colors=[[60, 120, 255]])
+        self._items(f"{path}/lines", len(ends), lines)
         edges = np.asarray(features.edge_xy, float).reshape(-1, 2)
-        self.log(f"{path}/edges", rr.Points2D(edges, radii=_ui(4.0), colors=[[255, 40, 40]]))
+        self._items(
+            f"{path}/edges", len(edges), rr.Points2D(edges, radii=_ui(4.0), colors=[[255, 40, 40]])
+        )
 
     def log_vehicle(self, pose, cov):
         pose, cov = np.asarray(pose, float), np.asarray(cov, float)
@@ -115,21 +128,22 @@ class _Archetypes:
         """The map's ellipses at the last scan, when the recorder has not logged them there."""
         if self.rec._map is not None:
             _, xy, covs = self.rec._map
-            self.log_ellipses(xy, covs)
+            self.log_ellipses(xy, np.asarray(covs, float) * self.rec.ellipse_scale**2)
             self.rec._map = None
         self.rec.close()
 
     def log_tentatives(self, xy):
         xy = np.asarray(xy, float).reshape(-1, 2)
-        self.log("world/tentative", rr.Points2D(xy, radii=_ui(3.0), colors=[[255, 200, 0]]))
+        self._items(
+            "world/tentative", len(xy), rr.Points2D(xy, radii=_ui(3.0), colors=[[255, 200, 0]])
+        )
 
     def log_associations(self, from_xy, to_xy):
         a = np.asarray(from_xy, float).reshape(-1, 2)
         b = np.asarray(to_xy, float).reshape(-1, 2)
         lines = list(np.stack([a, b], axis=1))
-        self.log(
-            "world/associations", rr.LineStrips2D(lines, radii=_ui(1.0), colors=[[0, 200, 255]])
-        )
+        lines = rr.LineStrips2D(lines, radii=_ui(1.0), colors=[[0, 200, 255]])
+        self._items("world/associations", len(a), lines)
 
     def log_truth(self, pose):
         pose = np.asarray(pose, float)
