@@ -33,6 +33,17 @@ KEPT = {
 }
 
 
+# Settings a preset changed on purpose since the record, each a named change of its own (the
+# record stays frozen; the test checks that each of these did change and nothing else did)
+CHANGED_SINCE = {
+    "victoria_park_ute": {
+        # the calibration's range-bias step (experiments/eval/trace_bias.py, issue 39)
+        "measurement.range_bias.bailey"
+    },
+    "cycab": set(),
+}
+
+
 def _leaves(d: dict, path: str = "") -> dict:
     out = {}
     for k, v in d.items():
@@ -57,7 +68,7 @@ def test_a_preset_resolves_to_what_it_did_before_the_neutral_defaults(name, now)
     # every setting of the record (a setting added since is not in it: its default decides)
     before, after = _leaves(BEFORE[name]), _leaves(_json_plain(now()))
     differ = {k: (v, after.get(k, "missing")) for k, v in before.items() if after.get(k) != v}
-    assert not differ, f"{name}: settings changed (before, after): {differ}"
+    assert set(differ) == CHANGED_SINCE[name], f"{name}: settings changed (before, after): {differ}"
     assert len(before) > 90  # every setting, not a section
 
 
