@@ -136,10 +136,17 @@ def merge_kernels(target: Path, parts: list[Path]) -> int:
                 continue
             (target / sub).mkdir(parents=True, exist_ok=True)
             for data in sorted(index.parent.glob(f"{index.name.removesuffix('.nbi')}.*.nbc")):
-                shutil.copy2(data, target / sub / data.name)
-            shutil.copy2(index, target / sub / index.name)
+                _copy_atomic(data, target / sub / data.name)
+            _copy_atomic(index, target / sub / index.name)
             copied += 1
     return copied
+
+
+def _copy_atomic(src: Path, dst: Path) -> None:
+    """Copy to a temporary name beside `dst`, then rename: a reader never sees half a file."""
+    tmp = dst.with_name(f"{dst.name}.tmp-{os.getpid()}")
+    shutil.copy2(src, tmp)
+    os.replace(tmp, dst)
 
 
 def warm_in_parts(target: Path) -> float:

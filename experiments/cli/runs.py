@@ -183,7 +183,9 @@ def _before_imports(input: Path | None, config, dump_config: bool) -> None:
     if config is not None:  # a misspelt preset or a missing file
         from experiments.io.config_file import preset_path
 
-        preset_path(config)
+        found = preset_path(config)
+        if isinstance(found, Path):  # a preset of the package is there by construction
+            check_input(found, "config file")
     if input is not None and not dump_config and Path(input).is_file():  # else: its error first
         from experiments.render.cold_start import say_if_cold
 

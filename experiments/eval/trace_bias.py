@@ -51,13 +51,15 @@ __all__ = [
 GAP_S = 2.0  # s: `measurement.pass_gap_s`, the filter's pass
 MIN_SIGHTINGS = 6  # per pass: a centre (2) and the shared terms need more rows than that
 MIN_TURN_RAD = math.radians(30.0)  # the line of sight's turn over a pass
+MAX_CONDITION = 1e12  # of the fit's normal matrix (Victoria Park: about 1e6)
 
 
 @dataclass(frozen=True)
 class TraceFit:
     """The shared terms of `trace_fit` (module docstring) and their standard errors (same order:
     range offset m, across offset m, bearing scale, range scale), from `passes` passes holding
-    `sightings` sightings."""
+    `sightings` sightings. The errors treat the rows as independent with one variance; a
+    pass's shared offset makes them somewhat optimistic."""
 
     range_offset_m: float
     across_offset_m: float
@@ -70,8 +72,15 @@ class TraceFit:
 
 def sight_lines(log) -> tuple[np.ndarray, np.ndarray]:
     """World points of the filter's updates (through their scans' poses) and the unit lines of
-    sight from the laser to them."""
+    sight from the laser to them; `DataError` naming the rows when a pose or a measurement is
+    not finite (a pass would otherwise drop out unseen)."""
     poses = log.pose[log.obs_scan]
+    bad = ~(np.isfinite(poses).all(axis=1) & np.isfinite(log.obs_z).all(axis=1))
+    if bad.any():
+        raise DataError(
+            f"trace fit: {int(bad.sum())} of {len(bad)} updates have a pose or a measurement "
+            f"that is not finite (first at update {int(np.flatnonzero(bad)[0])})"
+        )
     w = se2.observed_points(poses, log.obs_z, log.laser_pose)
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
     lx, ly = log.laser_pose[0], log.laser_pose[1]
@@ -119,6 +128,12 @@ def trace_fit(log, t_lo=-math.inf, t_hi=math.inf, **pass_rules) -> TraceFit:
     X, y = _within(terms, which, sizes), _within(w, which, sizes)
     X, y = X.reshape(2 * n, 4), y.ravel()  # each pass's centre eliminated (its mean removed)
     normal = X.T @ X
+    if not np.linalg.cond(normal) < MAX_CONDITION:
+        raise DataError(
+            f"trace fit: the {len(passes)} passes cannot tell the four terms apart (normal "
+            f"matrix condition {np.linalg.cond(normal):.3g}): the range or the view must vary "
+            "within the passes"
+        )
     shared = np.linalg.solve(normal, X.T @ y)
     e = y - X @ shared
     dof = max(2 * n - 2 * len(passes) - 4, 1)
@@ -151,6 +166,10 @@ def derive_range_bias(run: Callable[[tuple[float, float]], object], *, t_lo=-mat
     """The fixed point of (run the filter with a range bias, fit the trace, compose): `run`
     maps a range bias to the run's log. Returns the bias and the history, one (bias, fit) per
     run; `DataError` when it has not converged within `max_iterations` runs."""
+    if not (isinstance(max_iterations, int) and max_iterations >= 1):
+        raise ValueError(
+            f"derive_range_bias: max_iterations must be an int >= 1, got {max_iterations!r}"
+        )
     bias, history = (0.0, 0.0), []
     for i in range(max_iterations):
         fit = trace_fit(run(bias), t_lo, t_hi)
@@ -160,8 +179,9 @@ def derive_range_bias(run: Callable[[tuple[float, float]], object], *, t_lo=-mat
         if abs(fit.range_offset_m) < tol_m and abs(fit.range_scale) < tol_per_m:
             return bias, history
         bias = compose_range_bias(bias, fit)
+    (a, b), fit = history[-1]
     raise DataError(
-        f"range bias: the trace fit did not settle in {max_iterations} runs (last bias "
-        f"{bias[0]:+.4f} m {bias[1]:+.5f} per m, fit b0 {fit.range_offset_m:+.4f} m, "
-        f"g {fit.range_scale:+.5f})"
+        f"range bias: the trace fit did not settle in {max_iterations} runs (the last ran with "
+        f"a {a:+.4f} m, b {b:+.6f} per m and left b0 {fit.range_offset_m:+.4f} m, g "
+        f"{fit.range_scale:+.6f}; the next would be a {bias[0]:+.4f} m, b {bias[1]:+.6f})"
     )

@@ -898,7 +898,7 @@ class Recorder(NullRecorder):
             ).astype(np.uint8)
             self._put("world/landmarks", _LANDMARKS_EXISTENCE, xy, colors, labels)
         last_ids, last_s = self._map_logged
-        self._map = (ids, xy.copy(), cov)  # (scaled when the ellipses are logged)
+        self._map = (ids, xy.copy(), np.array(cov, dtype=float))  # scaled when logged
         if (
             not isinstance(self._stamp, float)
             or last_s is None

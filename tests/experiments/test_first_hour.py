@@ -171,6 +171,7 @@ def test_the_first_answers_load_no_heavy_package(tmp_path):
     assert _loaded(["extract", "missing.npz"], tmp_path) == []
     (tmp_path / "run.npz").write_bytes(b"")  # a misspelt preset is refused before the input loads
     assert _loaded(["slam", "run.npz", "--config", "victoria_park"], tmp_path) == []
+    assert _loaded(["slam", "run.npz", "--config", "missing.toml"], tmp_path) == []
 
 
 @pytest.mark.slow

@@ -84,8 +84,27 @@ def test_the_fixed_point_settles_and_says_when_it_does_not():
     bias, history = derive_range_bias(run)
     assert len(history) == 2 and runs[0] == (0.0, 0.0)  # exact poses: one correction settles it
     assert bias == pytest.approx((0.07, -0.0023), abs=1e-6)
-    with pytest.raises(DataError, match="did not settle in 1 runs"):
+    with pytest.raises(
+        DataError, match=r"did not settle in 1 runs \(the last ran with a \+0\.0000"
+    ):
         derive_range_bias(run, max_iterations=1)
+    with pytest.raises(ValueError, match="max_iterations must be an int >= 1"):
+        derive_range_bias(run, max_iterations=0)
+
+
+def test_a_pose_or_measurement_not_finite_is_named():
+    for field, row in (("obs_z", 5), ("pose", 3)):
+        log = drive()
+        getattr(log, field)[row, 0] = np.nan
+        with pytest.raises(DataError, match="not finite"):
+            trace_fit(log)
+
+
+def test_passes_that_cannot_tell_the_terms_apart_are_refused():
+    log = drive()
+    log.obs_z[:, 0] = 10.0  # every range alike: the range offset and scale are one column
+    with pytest.raises(DataError, match="cannot tell the four terms apart"):
+        trace_fit(log)
 
 
 def test_passes_need_a_turn_and_a_window():

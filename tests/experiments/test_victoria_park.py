@@ -450,6 +450,7 @@ def test_the_preset_range_bias_is_the_trace_fixed_point_on_scans_1_2000(vp_dir):
     before = cfg.with_(**{"measurement.range_bias": {"bailey": (0.0, 0.0)}})
     got, fits = derive_range_bias(load_victoria_park(vp_dir, n_scans=2000), before, RANGE_BIAS_RUNS)
     np.testing.assert_allclose(got, want, rtol=1e-9)
+    assert len(fits) == 3  # the runs of the fixed point (the notebook's derivation)
     first, last = fits[0][1], fits[-1][1]
     assert abs(last.range_offset_m) < 0.002 and abs(last.range_scale) < 2e-4
     assert abs(first.range_offset_m) > 10 * abs(last.range_offset_m) and first.passes > 200
