@@ -51,7 +51,7 @@ __all__ = [
 GAP_S = 2.0  # s: `measurement.pass_gap_s`, the filter's pass
 MIN_SIGHTINGS = 6  # per pass: a centre (2) and the shared terms need more rows than that
 MIN_TURN_RAD = math.radians(30.0)  # the line of sight's turn over a pass
-MAX_CONDITION = 1e12  # of the fit's normal matrix (Victoria Park: about 1e6)
+MAX_CONDITION = 1e12  # of the fit's normal matrix (scans 1-2000 of Victoria Park: about 2e3)
 
 
 @dataclass(frozen=True)
