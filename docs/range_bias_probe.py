@@ -1,8 +1,9 @@
 """Probe behind the lab notebook's entry "The published detections' range error from the
 trunks' traces": the range bias (`measurement.range_bias.bailey`, the published detections'
-method) derived on scans 1-2000 by the trace fit's fixed point (`experiments.eval.trace_bias`;
-no GPS), then the runs it was judged by, each once: scans 1-2000 and the full run, closure off
-and on, without and with it (VP preset, published detections, IHGR).
+method) derived on scans 1-2000 by the calibration's step (`derive_range_bias`, the trace fit's
+fixed point of `experiments.eval.trace_bias`; no GPS), then the runs it was judged by, each
+once: scans 1-2000 and the full run, closure off and on, without and with it (VP preset,
+published detections, IHGR).
 
     TRUNKSLAM_DATA=../shared/datasets PYTHONPATH=. .venv/bin/python docs/range_bias_probe.py
 
@@ -16,22 +17,23 @@ from __future__ import annotations
 from threadpoolctl import threadpool_limits
 
 from experiments.eval.gps import score_sequence
-from experiments.eval.trace_bias import derive_range_bias
 from experiments.eval.vouched import vouched_for_sequence
 from experiments.io.victoria_park import load_victoria_park
+from experiments.paper.victoria_park.calibration import (
+    RANGE_BIAS_METHOD,
+    RANGE_BIAS_RUNS,
+    derive_range_bias,
+)
 from experiments.paper.victoria_park.real_run import run_config
 from slam import SlamConfig, run_slam
 
-METHOD = "bailey"  # the published detections' `det_method`: the key of their range bias
-
 
 def with_bias(cfg: SlamConfig, bias) -> SlamConfig:
-    return cfg.with_(**{"measurement.range_bias": {METHOD: tuple(bias)}})
+    return cfg.with_(**{"measurement.range_bias": {RANGE_BIAS_METHOD: tuple(bias)}})
 
 
 def derive(cfg: SlamConfig) -> tuple[float, float]:
-    part = load_victoria_park(n_scans=2000)
-    bias, history = derive_range_bias(lambda b: run_slam(part, with_bias(cfg, b)))
+    bias, history = derive_range_bias(load_victoria_park(n_scans=2000), cfg, RANGE_BIAS_RUNS)
     for (a, b), f in history:
         print(
             f"bias a {a:+.4f} m, b {b:+.6f} per m: fit b0 {100 * f.range_offset_m:+.2f} cm (se "

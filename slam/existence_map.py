@@ -258,11 +258,10 @@ class LandmarkExistence:
         )
 
     @staticmethod
-    def _place_sigma(state: Filter, tentatives, idx: np.ndarray, H: np.ndarray) -> np.ndarray:
-        """(n, 2) the sd of the predicted (range, bearing) of [landmarks, tentatives][idx]
-        from their [pose, point] covariance (H (n, 2, 5) its Jacobian): a landmark's 5 x 5 block
-        of the state, a tentative's (fused) covariance beside the pose's, uncorrelated, as the
-        association offers them."""
+    def _pose_point_covs(state: Filter, tentatives, idx: np.ndarray) -> np.ndarray:
+        """(n, 5, 5) the [pose, point] covariance of [landmarks, tentatives][idx]: a landmark's
+        block of the state, a tentative's (fused) covariance beside the pose's, uncorrelated,
+        as the association offers them."""
         n_lm = state.landmark_ids.size
         C5 = np.zeros((idx.size, 5, 5))
         lm = idx < n_lm
@@ -271,6 +270,15 @@ class LandmarkExistence:
         if (~lm).any():
             C5[~lm, :3, :3] = state.pose_cov
             C5[~lm, 3:, 3:] = tentatives.cov[idx[~lm] - n_lm]
+        return C5
+
+    @staticmethod
+    def _place_sigma(state: Filter, tentatives, idx: np.ndarray, H: np.ndarray) -> np.ndarray:
+        """(n, 2) the sd of the predicted (range, bearing) of [landmarks, tentatives][idx]
+        from their [pose, point] covariance (H (n, 2, 5) its Jacobian): a landmark's 5 x 5 block
+        of the state, a tentative's (fused) covariance beside the pose's, uncorrelated, as the
+        association offers them."""
+        C5 = LandmarkExistence._pose_point_covs(state, tentatives, idx)
         S = np.einsum("nij,njk,nlk->nil", H, C5, H)
         return np.sqrt(np.maximum(np.stack([S[:, 0, 0], S[:, 1, 1]], axis=1), 0.0))
 
@@ -283,16 +291,9 @@ class LandmarkExistence:
         rows = np.flatnonzero(a.assign >= 0)
         if not rows.size:
             return detected, g, g_obj
-        n_l = a.lm_idx.size
         j = a.assign[rows]
         cand = np.concatenate([a.lm_idx, n_lm + a.t_idx]).astype(np.int64)[j]  # into z_hat
-        C5 = np.zeros((rows.size, 5, 5))
-        is_lm = j < n_l
-        if is_lm.any():
-            C5[is_lm] = state.cov(landmark_columns(cand[is_lm]))
-        if (~is_lm).any():
-            C5[~is_lm, :3, :3] = state.pose_cov
-            C5[~is_lm, 3:, 3:] = tentatives.cov[cand[~is_lm] - n_lm]
+        C5 = self._pose_point_covs(state, tentatives, cand)
         H = H5[cand]
         S = np.einsum("nij,njk,nlk->nil", H, C5, H) + meas.R[rows]
         nu = meas.z[rows] - z_hat[cand]

@@ -136,6 +136,24 @@ def observe(pose, landmarks_xy, sensor_pose) -> tuple[np.ndarray, np.ndarray]:
 
 
 @njit(cache=True)
+def _jacobian_row(H, i, dx, dy, q, r, dpx, dpy):
+    """Row i of `observe_kernel`'s H: the range and bearing of the point (dx, dy) from the
+    sensor (q = dx^2 + dy^2, r = sqrt(q)) against [x, y, theta, m_x, m_y]."""
+    rx, ry = dx / r, dy / r  # d range / d m
+    bx, by = -dy / q, dx / q  # d bearing / d m
+    H[i, 0, 0] = -rx
+    H[i, 0, 1] = -ry
+    H[i, 0, 2] = -(rx * dpx + ry * dpy)
+    H[i, 0, 3] = rx
+    H[i, 0, 4] = ry
+    H[i, 1, 0] = -bx
+    H[i, 1, 1] = -by
+    H[i, 1, 2] = -(bx * dpx + by * dpy) - 1.0
+    H[i, 1, 3] = bx
+    H[i, 1, 4] = by
+
+
+@njit(cache=True)
 def observe_kernel(m, px, py, dpx, dpy, th, sth):
     """`observe` for the sensor at world position (px, py), d p_S / d theta = (dpx, dpy),
     vehicle heading th and sensor yaw sth (`sensor_numbers`), callable from other kernels:
@@ -152,18 +170,7 @@ def observe_kernel(m, px, py, dpx, dpy, th, sth):
         r = math.sqrt(q)
         z[i, 0] = r
         b[i] = math.atan2(dy, dx) - th - sth
-        rx, ry = dx / r, dy / r  # d range / d m
-        bx, by = -dy / q, dx / q  # d bearing / d m
-        H[i, 0, 0] = -rx
-        H[i, 0, 1] = -ry
-        H[i, 0, 2] = -(rx * dpx + ry * dpy)
-        H[i, 0, 3] = rx
-        H[i, 0, 4] = ry
-        H[i, 1, 0] = -bx
-        H[i, 1, 1] = -by
-        H[i, 1, 2] = -(bx * dpx + by * dpy) - 1.0
-        H[i, 1, 3] = bx
-        H[i, 1, 4] = by
+        _jacobian_row(H, i, dx, dy, q, r, dpx, dpy)
     z[:, 1] = np.pi - np.mod(np.pi - b, 2.0 * np.pi)  # `wrap_angle`
     return z, H
 
@@ -188,18 +195,7 @@ def observe_within(m, px, py, dpx, dpy, th, sth, r_max):
             continue
         b = math.atan2(dy, dx) - th - sth
         z[i, 1] = np.pi - np.mod(np.pi - b, 2.0 * np.pi)  # `wrap_angle`
-        rx, ry = dx / r, dy / r  # d range / d m
-        bx, by = -dy / q, dx / q  # d bearing / d m
-        H[i, 0, 0] = -rx
-        H[i, 0, 1] = -ry
-        H[i, 0, 2] = -(rx * dpx + ry * dpy)
-        H[i, 0, 3] = rx
-        H[i, 0, 4] = ry
-        H[i, 1, 0] = -bx
-        H[i, 1, 1] = -by
-        H[i, 1, 2] = -(bx * dpx + by * dpy) - 1.0
-        H[i, 1, 3] = bx
-        H[i, 1, 4] = by
+        _jacobian_row(H, i, dx, dy, q, r, dpx, dpy)
     return z, H
 
 

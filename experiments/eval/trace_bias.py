@@ -93,7 +93,13 @@ def trace_passes(log, t_lo=-math.inf, t_hi=math.inf, *, gap_s=GAP_S, min_sightin
                  min_turn_rad=MIN_TURN_RAD) -> list[np.ndarray]:  # fmt: skip
     """The passes `trace_fit` uses, each an index array into the log's updates in time order,
     of those that start in [t_lo, t_hi) s and end before t_hi."""
-    _, u = sight_lines(log)
+    rules = {"gap_s": gap_s, "min_sightings": min_sightings, "min_turn_rad": min_turn_rad}
+    return _passes(log, sight_lines(log)[1], (t_lo, t_hi), **rules)
+
+
+def _passes(log, u, window, *, gap_s, min_sightings, min_turn_rad) -> list[np.ndarray]:
+    """`trace_passes` with the updates' unit lines of sight u given."""
+    t_lo, t_hi = window
     t = log.scan_t[log.obs_scan]
     out = []
     for landmark in np.unique(log.obs_landmark):
@@ -111,14 +117,15 @@ def trace_passes(log, t_lo=-math.inf, t_hi=math.inf, *, gap_s=GAP_S, min_sightin
 def trace_fit(log, t_lo=-math.inf, t_hi=math.inf, **pass_rules) -> TraceFit:
     """Fit the shared terms over the passes of `trace_passes(log, t_lo, t_hi, **pass_rules)`;
     `DataError` when there are too few passes to fit them."""
-    passes = trace_passes(log, t_lo, t_hi, **pass_rules)
+    w_all, u_all = sight_lines(log)
+    rules = {"gap_s": GAP_S, "min_sightings": MIN_SIGHTINGS, "min_turn_rad": MIN_TURN_RAD}
+    passes = _passes(log, u_all, (t_lo, t_hi), **(rules | pass_rules))
     n = sum(len(p) for p in passes)
     if len(passes) < 2 or 2 * n < 2 * len(passes) + 4 + 1:
         raise DataError(
             f"trace fit: {len(passes)} passes of {n} sightings in [{t_lo}, {t_hi}) s; it needs "
             "at least 2 passes whose line of sight turns enough"
         )
-    w_all, u_all = sight_lines(log)
     idx = np.concatenate(passes)
     w, u, z = w_all[idx], u_all[idx], log.obs_z[idx]
     v = np.c_[-u[:, 1], u[:, 0]]
