@@ -76,6 +76,9 @@ from slam.log import OUT_OF_RANGE, SKIPPED
 # the see-through tolerance's k: sqrt(chi2_2(0.95)), the half-width of the 95% ellipse's
 # projection on an axis (`slam.existence`, "See-through tolerance")
 K95 = math.sqrt(float(chi2.ppf(0.95, 2)))
+# the beam footprint of the see-through count: half the beam step, the ray's own angular
+# uncertainty (`slam.existence`, "Beam footprint"; the data state no beam divergence)
+HALF_STEP = 0.5
 
 VARIANTS = {
     "uniform": {},
@@ -142,6 +145,18 @@ VARIANTS = {
         "q": "derived",
         "range": "derived",
     },
+    # a see-through beam's footprint (half the beam step, + k sd_bearing) inside the trunk
+    # (`existence_see_through_footprint`), q derived with the same count
+    "persistent, kept, q derived, range, bounded, fused, tolerance, footprint": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
+        "map_policy.existence_see_through_footprint": HALF_STEP,
+        "q": "derived",
+        "range": "derived",
+    },
     "uniform, kept, q derived, range, bounded, fused, tolerance": {
         "map_policy.existence_keep_tentatives": True,
         "map_policy.existence_unreached_scans": 100,
@@ -157,11 +172,14 @@ def _settings(derived: dict, variant: str) -> dict:
     """The variant's settings: the derived ones, its own, and the derived see_through_q where
     it asks for it."""
     own = dict(VARIANTS[variant])
+    footprint = own.get("map_policy.existence_see_through_footprint", 0.0) > 0
     if own.pop("q", None) == "derived":
-        own["map_policy.existence_see_through_q"] = derived["see_through_q"]
+        q = derived["see_through_q_footprint" if footprint else "see_through_q"]
+        own["map_policy.existence_see_through_q"] = q
     if own.pop("range", None) == "derived":
         own |= derived["pd_range"]
-    return {k: v for k, v in derived.items() if k not in ("see_through_q", "pd_range")} | own
+    mine = ("see_through_q", "see_through_q_footprint", "pd_range")
+    return {k: v for k, v in derived.items() if k not in mine} | own
 
 
 FATES = (
@@ -269,6 +287,8 @@ def _base(extractor: str):
         min_beams = settings["map_policy.existence_min_beams"]
         q = derive_see_through(lg, seq, h, min_beams)["settings"]
         derived[_tag(h)] = settings | {"see_through_q": q["map_policy.existence_see_through_q"]}
+        qf = derive_see_through(lg, seq, h, min_beams, footprint_steps=HALF_STEP)["settings"]
+        derived[_tag(h)]["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
         derived[_tag(h)]["pd_range"] = derive_pd_range(lg, seq, h, min_beams)["settings"]
     return seq, ref, base, feats, lg, derived
 
@@ -327,6 +347,8 @@ def _sim_drive(seed: int, variants: list[str]) -> list[dict]:
             q = derive_see_through(lg, seq, (0, seq.n_scans), mb)["settings"]
             settings["see_through_q"] = q["map_policy.existence_see_through_q"]
             n = (0, seq.n_scans)
+            qf = derive_see_through(lg, seq, n, mb, footprint_steps=HALF_STEP)["settings"]
+            settings["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
             settings["pd_range"] = derive_pd_range(lg, seq, n, mb)["settings"]
             for variant in variants:
                 cfg = scfg.with_(
@@ -377,6 +399,8 @@ def full(variant: str) -> dict:
     mb = settings["map_policy.existence_min_beams"]
     q = derive_see_through(lg, seq2000, h, mb)["settings"]
     settings["see_through_q"] = q["map_policy.existence_see_through_q"]
+    qf = derive_see_through(lg, seq2000, h, mb, footprint_steps=HALF_STEP)["settings"]
+    settings["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
     settings["pd_range"] = derive_pd_range(lg, seq2000, h, mb)["settings"]
     cfg = base.with_(**{"map_policy.policy": "existence", **_settings(settings, variant)})
     row, run, _ = _one(variant, load_victoria_park(full=True), cfg, load_ss2002_reference())

@@ -380,6 +380,12 @@ class MapPolicy:
         only beyond its predicted position's k-sigma region plus the trunk's radius, and none
         when a beam returned inside that region; 0: no tolerance. sqrt(chi2_2(0.95)) = 2.448 is
         the 95% region.
+    existence_see_through_footprint: a beam counts as passing beyond a landmark or tentative
+        only when its footprint, this many beam steps either side of its ray (+ k sd_bearing
+        with the tolerance), lies inside the trunk's angular half-width asin(radius / range)
+        (`slam.existence`, "Beam footprint"); 0: none. 0.5 is half the beam step, the ray's
+        own angular uncertainty: at 35 m and a 0.5 deg step no beam counts against a trunk of
+        radius 0.15 m.
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -431,6 +437,9 @@ class MapPolicy:
     )
     existence_see_through_k: float = default(
         0.0, "design: 0, no tolerance (as before); 2.448 = sqrt(chi2_2(0.95)), the 95% region"
+    )
+    existence_see_through_footprint: float = default(
+        0.0, "design: 0, none (as before); sensor: 0.5, half the beam step, the ray's own spread"
     )
     existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
     existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
@@ -514,6 +523,11 @@ class MapPolicy:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < math.inf:
             raise SlamError(
                 f"map_policy.existence_see_through_k: must be finite and >= 0, got {v!r}"
+            )
+        v = self.existence_see_through_footprint
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_see_through_footprint: must be finite and >= 0, got {v!r}"
             )
         v = self.existence_unreached_scans
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:

@@ -74,6 +74,17 @@ extractor can see. Each scan:
    the trunk may be what it hit). k is a chi-square quantile, not a tuned value: the map
    policy's `existence_see_through_k` names it (sqrt(chi2_2(0.95)) = 2.448, the half-width of
    the 95% ellipse's projection on an axis).
+   **Beam footprint** (`footprint_steps` f > 0; 0, the default: none). A beam's bearing is
+   known to within its share of the angular grid, so a beam at bearing offset db from a
+   landmark of radius a at range d may pass anywhere within f x the beam step of db: at 35 m a
+   0.5 deg step is 0.31 m, a trunk's width, and a beam whose nominal ray crosses the trunk's
+   edge may have passed beside it. With the footprint a reaching beam counts as see-through
+   only when its whole footprint lies inside the trunk's disk, grown by nothing and shrunk by
+   the landmark's bearing uncertainty: |db| + f step + k sd_b <= asin(a / d) (k sd_b with the
+   see-through tolerance; the rest of the tolerance unchanged). f = 0.5 is half the step, the
+   ray's own angular uncertainty (the Victoria Park data state no beam divergence). At 35 m a
+   trunk of radius 0.15 m (asin = 0.246 deg) then has no see-through beam at a 0.5 deg step
+   (0.246 - 0.25 < 0): the grid is too coarse there to say that a beam passed it.
 4. **Decisions** (`decide`): a tentative joins the map when r >= `join_prob` ("at least this
    probable that it is a real trunk"); a landmark is removed when r < `remove_prob` ("less
    probable than this that it is real"). A new tentative starts at `initial_existence(birth,
@@ -136,6 +147,8 @@ class ExistenceConfig:
     join_prob, remove_prob: the decisions' thresholds, remove_prob < join_prob.
     pd_range_m, pd_range_scale_m: the range fall-off of Pd (module doc; inf: none), m, m (> 0).
     see_through_k: the see-through tolerance's k-sigma (module doc; 0: none), >= 0.
+    footprint_steps: a beam's angular footprint, in beam steps, that must lie inside the
+        trunk for the beam to count as see-through (module doc, "Beam footprint"; 0: none).
     """
 
     pd_max: float = 0.9
@@ -149,6 +162,7 @@ class ExistenceConfig:
     pd_range_m: float = math.inf
     pd_range_scale_m: float = 5.0
     see_through_k: float = 0.0
+    footprint_steps: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("pd_max", "survival", "join_prob", "remove_prob"):
@@ -183,6 +197,9 @@ class ExistenceConfig:
         v = self.see_through_k
         if not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
             raise ValueError(f"ExistenceConfig.see_through_k: must be finite and >= 0, got {v!r}")
+        v = self.footprint_steps
+        if not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
+            raise ValueError(f"ExistenceConfig.footprint_steps: must be finite and >= 0, got {v!r}")
 
 
 class BeamEvidence(NamedTuple):
@@ -213,7 +230,9 @@ def beam_evidence(
     its angular half-width asin(radius / range) (+ bearing_sigma_rad), and how many of them are
     occluded or pass through (module doc). place_sigma (L, 2): the sd of each landmark's
     predicted (range m, bearing rad), for the see-through tolerance (module doc; with
-    cfg.see_through_k > 0; None or k 0: none)."""
+    cfg.see_through_k > 0; None or k 0: none). With cfg.footprint_steps > 0 a see-through beam's
+    footprint must lie inside the trunk (module doc, "Beam footprint"; the beam step is that of
+    bearings[0:2], a uniform grid)."""
     d = np.asarray(lm_range_m, dtype=np.float64)[:, None]
     a = np.asarray(radius_m, dtype=np.float64)[:, None]
     half = np.arcsin(np.clip(a / np.maximum(d, 1e-12), 0.0, 1.0))
@@ -225,6 +244,7 @@ def beam_evidence(
         near = r < d - a - cfg.gap_m
         beyond = ~np.isfinite(r) | (r > d + a + cfg.gap_m)
     through = (reach & beyond).sum(axis=1).astype(np.int64)
+    sig = None
     if place_sigma is not None and cfg.see_through_k > 0:
         sig = np.asarray(place_sigma, dtype=np.float64).reshape(-1, 2)
         edge = a + cfg.gap_m + cfg.see_through_k * sig[:, :1]  # the k-sigma region's depth
@@ -233,9 +253,25 @@ def beam_evidence(
             inside = wide & np.isfinite(r) & (np.abs(r - d) <= edge)
             beyond = ~np.isfinite(r) | (r > d + edge)
         through = np.where(inside.any(axis=1), 0, (reach & beyond).sum(axis=1)).astype(np.int64)
+    if cfg.footprint_steps > 0:
+        through = np.minimum(
+            through, _inside_footprint(db, half, beyond, bearings_rad, cfg, sig=sig)
+        )
     return BeamEvidence(
         reach.sum(axis=1).astype(np.int64), (reach & near).sum(axis=1).astype(np.int64), through
     )
+
+
+def _inside_footprint(db, half, beyond, bearings_rad, cfg: ExistenceConfig, *, sig) -> np.ndarray:
+    """(L,) the beams beyond each landmark whose footprint (cfg.footprint_steps beam steps
+    either side, + k sd_b with the tolerance's sig) lies inside its angular half-width (module
+    doc, "Beam footprint")."""
+    b = np.asarray(bearings_rad, dtype=np.float64)
+    step = abs(float(b[1] - b[0])) if b.size > 1 else 0.0
+    margin = cfg.footprint_steps * step
+    if sig is not None:
+        margin = margin + cfg.see_through_k * sig[:, 1:]
+    return ((np.abs(db) + margin <= half) & beyond).sum(axis=1).astype(np.int64)
 
 
 def detection_probability(

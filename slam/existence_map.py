@@ -13,7 +13,9 @@ called by the loop), on the predicted state:
 With `existence_see_through_k` > 0 the beams of step 1 are counted with the see-through
 tolerance (`slam.existence`, "See-through tolerance"), each place's range and bearing sd from
 its [pose, point] covariance (a tentative's own, fused with `existence_fuse_tentatives`,
-beside the pose's).
+beside the pose's). With `existence_see_through_footprint` > 0 a see-through beam's footprint
+(that many beam steps either side of its ray, + k sd_bearing with the tolerance) must lie inside
+the trunk (`slam.existence`, "Beam footprint"); a landmark's radius is the last circle's.
 The map managers read it (`slam.map_managers`): a tentative joins the map when its existence
 reaches `join_prob` (in a scan it was seen in), a window track joins when the existence of its
 sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`
@@ -87,6 +89,7 @@ class LandmarkExistence:
             pd_range_m=float(policy.existence_pd_range_m),
             pd_range_scale_m=float(policy.existence_pd_range_scale_m),
             see_through_k=float(policy.existence_see_through_k),
+            footprint_steps=float(policy.existence_see_through_footprint),
         )
         fov = float(view.fov[1] - view.fov[0])
         self.kappa = clutter_density(

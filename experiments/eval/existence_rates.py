@@ -86,15 +86,17 @@ def _radius(lg, lid: int) -> float:
     return float(np.median(r)) if r.size else DEFAULT_RADIUS_M
 
 
-def _views(lg, seq, scans: tuple[int, int], established: int):
+def _views(lg, seq, scans: tuple[int, int], established: int, footprint_steps: float = 0.0):
     """Per scan of `scans` in which some landmark of the final map associated in more than
     `established` scans is in view after it joined: (its beam evidence, free beams (clipped at
-    MAX_BEAMS), whether a measurement updated it), arrays over those landmarks."""
+    MAX_BEAMS), whether a measurement updated it), arrays over those landmarks.
+    footprint_steps: the see-through count's beam footprint (`slam.existence`, "Beam
+    footprint"; 0: none)."""
     est = lg.landmark_n_obs > established
     ids, xy, first = lg.landmark_id[est], lg.landmark_xy[est], lg.landmark_first_scan[est]
     radius = np.array([_radius(lg, int(i)) for i in ids])
     seen = set(zip(lg.obs_scan.tolist(), lg.obs_landmark.tolist()))
-    cfg = ExistenceConfig(max_range_m=float(seq.scan_max_range))
+    cfg = ExistenceConfig(max_range_m=float(seq.scan_max_range), footprint_steps=footprint_steps)
     max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
     for k in range(scans[0], min(scans[1], lg.n_scans)):
         if lg.scan_skipped[k] or not ids.size:
@@ -195,7 +197,13 @@ def derive_pd_range(
 
 
 def derive_see_through(
-    lg, seq, scans: tuple[int, int], min_beams: int, established: int = ESTABLISHED
+    lg,
+    seq,
+    scans: tuple[int, int],
+    min_beams: int,
+    established: int = ESTABLISHED,
+    *,
+    footprint_steps: float = 0.0,
 ) -> dict:
     """see_through_q measured on the run (module doc, 6): of the free beams (reaching, not
     occluded by a nearer return) of the established landmarks (as `beam_detection_rates`
@@ -204,9 +212,11 @@ def derive_see_through(
     over those counted, a rate the run cannot tell from 0; the model needs q > 0). An occluded
     beam could neither pass nor hit: it is not evidence and is not counted (before 2026-11-29
     h41f it was, which biased q low by the occluded share: "missed_beams_reaching" keeps that
-    count)."""
+    count). footprint_steps: beams counted as passing beyond with the beam footprint the run
+    will use (`map_policy.existence_see_through_footprint`; 0: none), so that q is the rate of
+    the count the filter makes."""
     through = reach = free_beams = 0
-    for ev, free, hit, _ in _views(lg, seq, scans, established):
+    for ev, free, hit, _ in _views(lg, seq, scans, established, footprint_steps):
         missed = (free >= min_beams) & ~hit
         through += int(ev.through[missed].sum())
         reach += int(ev.reach[missed].sum())

@@ -45,7 +45,7 @@ def test_an_occluded_beam_is_not_evidence_q_counts_free_beams_only(monkeypatch):
     from experiments.eval import existence_rates
     from slam.existence import BeamEvidence
 
-    def views(lg, seq, scans, established):
+    def views(lg, seq, scans, established, footprint_steps=0.0):
         ev = BeamEvidence(np.array([6, 3, 5, 2]), np.array([2, 0, 0, 1]), np.array([1, 2, 4, 1]))
         hit = np.array([False, False, True, False])
         yield ev, ev.reach - ev.occluded, hit, np.full(4, 10.0)
