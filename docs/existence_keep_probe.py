@@ -63,6 +63,7 @@ from experiments.eval.existence_rates import (
     derive_pd_range,
     derive_persistent,
     derive_see_through,
+    derive_see_through_by_range,
     range_detection_rates,
 )
 from experiments.eval.map_quality import reference_in_our_frame
@@ -157,6 +158,27 @@ VARIANTS = {
         "q": "derived",
         "range": "derived",
     },
+    # see_through_q per 10 m range bin, derived on the derivation half
+    # (`existence_rates.derive_see_through_by_range`; with the footprint: its count)
+    "persistent, kept, q by range, range, bounded, fused, tolerance": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
+        "q": "by range",
+        "range": "derived",
+    },
+    "persistent, kept, q by range, range, bounded, fused, tolerance, footprint": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
+        "map_policy.existence_see_through_footprint": HALF_STEP,
+        "q": "by range",
+        "range": "derived",
+    },
     "uniform, kept, q derived, range, bounded, fused, tolerance": {
         "map_policy.existence_keep_tentatives": True,
         "map_policy.existence_unreached_scans": 100,
@@ -173,12 +195,16 @@ def _settings(derived: dict, variant: str) -> dict:
     it asks for it."""
     own = dict(VARIANTS[variant])
     footprint = own.get("map_policy.existence_see_through_footprint", 0.0) > 0
-    if own.pop("q", None) == "derived":
+    how = own.pop("q", None)
+    if how in ("derived", "by range"):
         q = derived["see_through_q_footprint" if footprint else "see_through_q"]
         own["map_policy.existence_see_through_q"] = q
+    if how == "by range":
+        own |= derived["q_by_range_footprint" if footprint else "q_by_range"]
     if own.pop("range", None) == "derived":
         own |= derived["pd_range"]
-    mine = ("see_through_q", "see_through_q_footprint", "pd_range")
+    mine = ("see_through_q", "see_through_q_footprint", "pd_range", "q_by_range")
+    mine += ("q_by_range_footprint",)
     return {k: v for k, v in derived.items() if k not in mine} | own
 
 
@@ -289,6 +315,9 @@ def _base(extractor: str):
         derived[_tag(h)] = settings | {"see_through_q": q["map_policy.existence_see_through_q"]}
         qf = derive_see_through(lg, seq, h, min_beams, footprint_steps=HALF_STEP)["settings"]
         derived[_tag(h)]["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
+        for key, f in (("q_by_range", 0.0), ("q_by_range_footprint", HALF_STEP)):
+            qr = derive_see_through_by_range(lg, seq, h, min_beams, footprint_steps=f)
+            derived[_tag(h)][key] = qr["settings"]
         derived[_tag(h)]["pd_range"] = derive_pd_range(lg, seq, h, min_beams)["settings"]
     return seq, ref, base, feats, lg, derived
 
@@ -349,6 +378,9 @@ def _sim_drive(seed: int, variants: list[str]) -> list[dict]:
             n = (0, seq.n_scans)
             qf = derive_see_through(lg, seq, n, mb, footprint_steps=HALF_STEP)["settings"]
             settings["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
+            for key, f in (("q_by_range", 0.0), ("q_by_range_footprint", HALF_STEP)):
+                qr = derive_see_through_by_range(lg, seq, n, mb, footprint_steps=f)
+                settings[key] = qr["settings"]
             settings["pd_range"] = derive_pd_range(lg, seq, n, mb)["settings"]
             for variant in variants:
                 cfg = scfg.with_(
@@ -401,6 +433,9 @@ def full(variant: str) -> dict:
     settings["see_through_q"] = q["map_policy.existence_see_through_q"]
     qf = derive_see_through(lg, seq2000, h, mb, footprint_steps=HALF_STEP)["settings"]
     settings["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
+    for key, f in (("q_by_range", 0.0), ("q_by_range_footprint", HALF_STEP)):
+        qr = derive_see_through_by_range(lg, seq2000, h, mb, footprint_steps=f)
+        settings[key] = qr["settings"]
     settings["pd_range"] = derive_pd_range(lg, seq2000, h, mb)["settings"]
     cfg = base.with_(**{"map_policy.policy": "existence", **_settings(settings, variant)})
     row, run, _ = _one(variant, load_victoria_park(full=True), cfg, load_ss2002_reference())
