@@ -24,6 +24,12 @@ on scans 1-2000 of the detections' confirm run, the first variant named: `real_r
 
 (-P: docs/experiments/, the site's pages, would shadow the package.)
 
+The variants ending in "footprint" count a see-through beam only when its footprint, half the
+beam step (HALF_STEP) + k sd_bearing, lies inside the trunk (`existence_see_through_footprint`),
+with q derived with the same count; "q by range" takes q per 10 m range bin
+(`derive_see_through_by_range`). The lab notebook's entry "a see-through beam's footprint, and
+the see-through rate by range" was measured with them once.
+
 sim: `reproduce sim-clutter`'s 20 drives (its seeds: root seed 0), both scenes, `paper` and
 `geometric`: the confirm run, then the existence policy with the settings derived from it
 (as `sim_clutter._existence_row`, persistent clutter included) for each variant; precision and
