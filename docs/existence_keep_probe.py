@@ -24,6 +24,12 @@ on scans 1-2000 of the detections' confirm run, the first variant named: `real_r
 
 (-P: docs/experiments/, the site's pages, would shadow the package.)
 
+The variants ending in "footprint" count a see-through beam only when its footprint, half the
+beam step (HALF_STEP) + k sd_bearing, lies inside the trunk (`existence_see_through_footprint`),
+with q derived with the same count; "q by range" takes q per 10 m range bin
+(`derive_see_through_by_range`). The lab notebook's entry "a see-through beam's footprint, and
+the see-through rate by range" was measured with them once.
+
 sim: `reproduce sim-clutter`'s 20 drives (its seeds: root seed 0), both scenes, `paper` and
 `geometric`: the confirm run, then the existence policy with the settings derived from it
 (as `sim_clutter._existence_row`, persistent clutter included) for each variant; precision and
@@ -63,6 +69,7 @@ from experiments.eval.existence_rates import (
     derive_pd_range,
     derive_persistent,
     derive_see_through,
+    derive_see_through_by_range,
     range_detection_rates,
 )
 from experiments.eval.map_quality import reference_in_our_frame
@@ -76,6 +83,9 @@ from slam.log import OUT_OF_RANGE, SKIPPED
 # the see-through tolerance's k: sqrt(chi2_2(0.95)), the half-width of the 95% ellipse's
 # projection on an axis (`slam.existence`, "See-through tolerance")
 K95 = math.sqrt(float(chi2.ppf(0.95, 2)))
+# the beam footprint of the see-through count: half the beam step, the ray's own angular
+# uncertainty (`slam.existence`, "Beam footprint"; the data state no beam divergence)
+HALF_STEP = 0.5
 
 VARIANTS = {
     "uniform": {},
@@ -142,6 +152,39 @@ VARIANTS = {
         "q": "derived",
         "range": "derived",
     },
+    # a see-through beam's footprint (half the beam step, + k sd_bearing) inside the trunk
+    # (`existence_see_through_footprint`), q derived with the same count
+    "persistent, kept, q derived, range, bounded, fused, tolerance, footprint": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
+        "map_policy.existence_see_through_footprint": HALF_STEP,
+        "q": "derived",
+        "range": "derived",
+    },
+    # see_through_q per 10 m range bin, derived on the derivation half
+    # (`existence_rates.derive_see_through_by_range`; with the footprint: its count)
+    "persistent, kept, q by range, range, bounded, fused, tolerance": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
+        "q": "by range",
+        "range": "derived",
+    },
+    "persistent, kept, q by range, range, bounded, fused, tolerance, footprint": {
+        "map_policy.existence_clutter": "persistent",
+        "map_policy.existence_keep_tentatives": True,
+        "map_policy.existence_unreached_scans": 100,
+        "map_policy.existence_fuse_tentatives": True,
+        "map_policy.existence_see_through_k": K95,
+        "map_policy.existence_see_through_footprint": HALF_STEP,
+        "q": "by range",
+        "range": "derived",
+    },
     "uniform, kept, q derived, range, bounded, fused, tolerance": {
         "map_policy.existence_keep_tentatives": True,
         "map_policy.existence_unreached_scans": 100,
@@ -157,11 +200,18 @@ def _settings(derived: dict, variant: str) -> dict:
     """The variant's settings: the derived ones, its own, and the derived see_through_q where
     it asks for it."""
     own = dict(VARIANTS[variant])
-    if own.pop("q", None) == "derived":
-        own["map_policy.existence_see_through_q"] = derived["see_through_q"]
+    footprint = own.get("map_policy.existence_see_through_footprint", 0.0) > 0
+    how = own.pop("q", None)
+    if how in ("derived", "by range"):
+        q = derived["see_through_q_footprint" if footprint else "see_through_q"]
+        own["map_policy.existence_see_through_q"] = q
+    if how == "by range":
+        own |= derived["q_by_range_footprint" if footprint else "q_by_range"]
     if own.pop("range", None) == "derived":
         own |= derived["pd_range"]
-    return {k: v for k, v in derived.items() if k not in ("see_through_q", "pd_range")} | own
+    mine = ("see_through_q", "see_through_q_footprint", "pd_range", "q_by_range")
+    mine += ("q_by_range_footprint",)
+    return {k: v for k, v in derived.items() if k not in mine} | own
 
 
 FATES = (
@@ -269,6 +319,11 @@ def _base(extractor: str):
         min_beams = settings["map_policy.existence_min_beams"]
         q = derive_see_through(lg, seq, h, min_beams)["settings"]
         derived[_tag(h)] = settings | {"see_through_q": q["map_policy.existence_see_through_q"]}
+        qf = derive_see_through(lg, seq, h, min_beams, footprint_steps=HALF_STEP)["settings"]
+        derived[_tag(h)]["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
+        for key, f in (("q_by_range", 0.0), ("q_by_range_footprint", HALF_STEP)):
+            qr = derive_see_through_by_range(lg, seq, h, min_beams, footprint_steps=f)
+            derived[_tag(h)][key] = qr["settings"]
         derived[_tag(h)]["pd_range"] = derive_pd_range(lg, seq, h, min_beams)["settings"]
     return seq, ref, base, feats, lg, derived
 
@@ -327,6 +382,11 @@ def _sim_drive(seed: int, variants: list[str]) -> list[dict]:
             q = derive_see_through(lg, seq, (0, seq.n_scans), mb)["settings"]
             settings["see_through_q"] = q["map_policy.existence_see_through_q"]
             n = (0, seq.n_scans)
+            qf = derive_see_through(lg, seq, n, mb, footprint_steps=HALF_STEP)["settings"]
+            settings["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
+            for key, f in (("q_by_range", 0.0), ("q_by_range_footprint", HALF_STEP)):
+                qr = derive_see_through_by_range(lg, seq, n, mb, footprint_steps=f)
+                settings[key] = qr["settings"]
             settings["pd_range"] = derive_pd_range(lg, seq, n, mb)["settings"]
             for variant in variants:
                 cfg = scfg.with_(
@@ -377,6 +437,11 @@ def full(variant: str) -> dict:
     mb = settings["map_policy.existence_min_beams"]
     q = derive_see_through(lg, seq2000, h, mb)["settings"]
     settings["see_through_q"] = q["map_policy.existence_see_through_q"]
+    qf = derive_see_through(lg, seq2000, h, mb, footprint_steps=HALF_STEP)["settings"]
+    settings["see_through_q_footprint"] = qf["map_policy.existence_see_through_q"]
+    for key, f in (("q_by_range", 0.0), ("q_by_range_footprint", HALF_STEP)):
+        qr = derive_see_through_by_range(lg, seq2000, h, mb, footprint_steps=f)
+        settings[key] = qr["settings"]
     settings["pd_range"] = derive_pd_range(lg, seq2000, h, mb)["settings"]
     cfg = base.with_(**{"map_policy.policy": "existence", **_settings(settings, variant)})
     row, run, _ = _one(variant, load_victoria_park(full=True), cfg, load_ss2002_reference())

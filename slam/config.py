@@ -380,6 +380,17 @@ class MapPolicy:
         only beyond its predicted position's k-sigma region plus the trunk's radius, and none
         when a beam returned inside that region; 0: no tolerance. sqrt(chi2_2(0.95)) = 2.448 is
         the 95% region.
+    existence_see_through_footprint: a beam counts as passing beyond a landmark or tentative
+        only when its footprint, this many beam steps either side of its ray (+ k sd_bearing
+        with the tolerance), lies inside the trunk's angular half-width asin(radius / range)
+        (`slam.existence`, "Beam footprint"); 0: none. 0.5 is half the beam step, the ray's
+        own angular uncertainty: at 35 m and a 0.5 deg step no beam counts against a trunk of
+        radius 0.15 m.
+    existence_see_through_q_by_range, existence_see_through_q_bin_m: the see-through rate per
+        range bin [i bin, (i + 1) bin) (the last bin's beyond the table), each in (0, 1], in
+        place of existence_see_through_q (`slam.existence`, "See-through rate by range"; (),
+        the default: one q at every range). Derived per bin on a run's own established
+        landmarks (`existence_rates.derive_see_through_by_range`).
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -432,6 +443,15 @@ class MapPolicy:
     existence_see_through_k: float = default(
         0.0, "design: 0, no tolerance (as before); 2.448 = sqrt(chi2_2(0.95)), the 95% region"
     )
+    existence_see_through_footprint: float = default(
+        0.0, "design: 0, none (as before); sensor: 0.5, half the beam step, the ray's own spread"
+    )
+    existence_see_through_q_by_range: tuple[float, ...] = default(
+        (), "design: (), one see-through rate at every range (as before); derived per bin"
+    )
+    existence_see_through_q_bin_m: float = default(
+        10.0, "design: 10 m, the bins Pd's range fall-off is read in (10-30, 30-40, 40-50 m)"
+    )
     existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
     existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
 
@@ -460,6 +480,23 @@ class MapPolicy:
     def by_existence(self) -> bool:
         """Whether landmarks join and leave the map by their existence (`slam.existence`)."""
         return self.policy == "existence"
+
+    def _check_q_by_range(self) -> None:
+        v = self.existence_see_through_q_by_range
+        ok = isinstance(v, (tuple, list)) and len(v) <= 100
+        if not ok or not all(
+            isinstance(q, (int, float)) and not isinstance(q, bool) and 0.0 < q <= 1.0 for q in v
+        ):
+            raise SlamError(
+                "map_policy.existence_see_through_q_by_range: expected a list of at most 100 "
+                f"rates in (0, 1], got {v!r}"
+            )
+        object.__setattr__(self, "existence_see_through_q_by_range", tuple(float(q) for q in v))
+        v = self.existence_see_through_q_bin_m
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_see_through_q_bin_m: must be finite and > 0, got {v!r}"
+            )
 
     def _check_existence(self) -> None:
         if self.policy not in ("confirm", "existence"):
@@ -515,6 +552,12 @@ class MapPolicy:
             raise SlamError(
                 f"map_policy.existence_see_through_k: must be finite and >= 0, got {v!r}"
             )
+        v = self.existence_see_through_footprint
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 <= v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_see_through_footprint: must be finite and >= 0, got {v!r}"
+            )
+        self._check_q_by_range()
         v = self.existence_unreached_scans
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise SlamError(
@@ -1296,6 +1339,10 @@ def _convert(tp, value, path: str):
         if not isinstance(value, Mapping):
             raise SlamError(f"{path}: expected a table, got {_shown(value)}")
         return dict(value)
+    if origin is tuple and len(args) == 2 and args[1] is Ellipsis:  # any length
+        if not isinstance(value, (list, tuple)):
+            raise SlamError(f"{path}: expected a list of numbers, got {_shown(value)}")
+        return tuple(_convert(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
     if origin is tuple:
         if not isinstance(value, (list, tuple)) or len(value) != len(args):
             raise SlamError(f"{path}: expected a list of {len(args)} numbers, got {_shown(value)}")

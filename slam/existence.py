@@ -74,6 +74,24 @@ extractor can see. Each scan:
    the trunk may be what it hit). k is a chi-square quantile, not a tuned value: the map
    policy's `existence_see_through_k` names it (sqrt(chi2_2(0.95)) = 2.448, the half-width of
    the 95% ellipse's projection on an axis).
+   **Beam footprint** (`footprint_steps` f > 0; 0, the default: none). A beam's bearing is
+   known to within its share of the angular grid, so a beam at bearing offset db from a
+   landmark of radius a at range d may pass anywhere within f x the beam step of db: at 35 m a
+   0.5 deg step is 0.31 m, a trunk's width, and a beam whose nominal ray crosses the trunk's
+   edge may have passed beside it. With the footprint a reaching beam counts as see-through
+   only when its whole footprint lies inside the trunk's disk, grown by nothing and shrunk by
+   the landmark's bearing uncertainty: |db| + f step + k sd_b <= asin(a / d) (k sd_b with the
+   see-through tolerance; the rest of the tolerance unchanged). f = 0.5 is half the step, the
+   ray's own angular uncertainty (the Victoria Park data state no beam divergence). At 35 m a
+   trunk of radius 0.15 m (asin = 0.246 deg) then has no see-through beam at a 0.5 deg step
+   (0.246 - 0.25 < 0): the grid is too coarse there to say that a beam passed it.
+   **See-through rate by range** (`q_by_range` non-empty; (), the default: one q). The chance
+   that a beam passes a real trunk's place grows with range (the beam step and the position
+   error grow against the trunk's width), so one q measured over every range charges a near
+   trunk's see-through beams too little and a far one's too much. With a table, a landmark at
+   range d uses q_by_range[i], i = floor(d / q_bin_m) (the last bin's beyond the table):
+   the rate measured per bin on the run's own established landmarks
+   (`experiments.eval.existence_rates.derive_see_through_by_range`).
 4. **Decisions** (`decide`): a tentative joins the map when r >= `join_prob` ("at least this
    probable that it is a real trunk"); a landmark is removed when r < `remove_prob` ("less
    probable than this that it is real"). A new tentative starts at `initial_existence(birth,
@@ -118,6 +136,7 @@ __all__ = [
     "gaussian_likelihood",
     "initial_existence",
     "predict_existence",
+    "see_through_q",
     "update_existence",
     "update_existence_persistent",
 ]
@@ -136,6 +155,10 @@ class ExistenceConfig:
     join_prob, remove_prob: the decisions' thresholds, remove_prob < join_prob.
     pd_range_m, pd_range_scale_m: the range fall-off of Pd (module doc; inf: none), m, m (> 0).
     see_through_k: the see-through tolerance's k-sigma (module doc; 0: none), >= 0.
+    footprint_steps: a beam's angular footprint, in beam steps, that must lie inside the
+        trunk for the beam to count as see-through (module doc, "Beam footprint"; 0: none).
+    q_by_range, q_bin_m: see_through_q per range bin [i q_bin_m, (i + 1) q_bin_m), each in
+        (0, 1] (module doc, "See-through rate by range"; (): see_through_q at every range), m.
     """
 
     pd_max: float = 0.9
@@ -149,6 +172,9 @@ class ExistenceConfig:
     pd_range_m: float = math.inf
     pd_range_scale_m: float = 5.0
     see_through_k: float = 0.0
+    footprint_steps: float = 0.0
+    q_by_range: tuple[float, ...] = ()
+    q_bin_m: float = 10.0
 
     def __post_init__(self) -> None:
         for name in ("pd_max", "survival", "join_prob", "remove_prob"):
@@ -183,6 +209,16 @@ class ExistenceConfig:
         v = self.see_through_k
         if not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
             raise ValueError(f"ExistenceConfig.see_through_k: must be finite and >= 0, got {v!r}")
+        v = self.footprint_steps
+        if not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
+            raise ValueError(f"ExistenceConfig.footprint_steps: must be finite and >= 0, got {v!r}")
+        if not all(isinstance(q, (int, float)) and 0.0 < q <= 1.0 for q in self.q_by_range):
+            raise ValueError(
+                f"ExistenceConfig.q_by_range: each must be in (0, 1], got {self.q_by_range!r}"
+            )
+        v = self.q_bin_m
+        if not (isinstance(v, (int, float)) and 0.0 < v < math.inf):
+            raise ValueError(f"ExistenceConfig.q_bin_m: must be finite and > 0, got {v!r}")
 
 
 class BeamEvidence(NamedTuple):
@@ -213,7 +249,9 @@ def beam_evidence(
     its angular half-width asin(radius / range) (+ bearing_sigma_rad), and how many of them are
     occluded or pass through (module doc). place_sigma (L, 2): the sd of each landmark's
     predicted (range m, bearing rad), for the see-through tolerance (module doc; with
-    cfg.see_through_k > 0; None or k 0: none)."""
+    cfg.see_through_k > 0; None or k 0: none). With cfg.footprint_steps > 0 a see-through beam's
+    footprint must lie inside the trunk (module doc, "Beam footprint"; the beam step is that of
+    bearings[0:2], a uniform grid)."""
     d = np.asarray(lm_range_m, dtype=np.float64)[:, None]
     a = np.asarray(radius_m, dtype=np.float64)[:, None]
     half = np.arcsin(np.clip(a / np.maximum(d, 1e-12), 0.0, 1.0))
@@ -225,6 +263,7 @@ def beam_evidence(
         near = r < d - a - cfg.gap_m
         beyond = ~np.isfinite(r) | (r > d + a + cfg.gap_m)
     through = (reach & beyond).sum(axis=1).astype(np.int64)
+    sig = None
     if place_sigma is not None and cfg.see_through_k > 0:
         sig = np.asarray(place_sigma, dtype=np.float64).reshape(-1, 2)
         edge = a + cfg.gap_m + cfg.see_through_k * sig[:, :1]  # the k-sigma region's depth
@@ -233,9 +272,25 @@ def beam_evidence(
             inside = wide & np.isfinite(r) & (np.abs(r - d) <= edge)
             beyond = ~np.isfinite(r) | (r > d + edge)
         through = np.where(inside.any(axis=1), 0, (reach & beyond).sum(axis=1)).astype(np.int64)
+    if cfg.footprint_steps > 0:
+        through = np.minimum(
+            through, _inside_footprint(db, half, beyond, bearings_rad, cfg, sig=sig)
+        )
     return BeamEvidence(
         reach.sum(axis=1).astype(np.int64), (reach & near).sum(axis=1).astype(np.int64), through
     )
+
+
+def _inside_footprint(db, half, beyond, bearings_rad, cfg: ExistenceConfig, *, sig) -> np.ndarray:
+    """(L,) the beams beyond each landmark whose footprint (cfg.footprint_steps beam steps
+    either side, + k sd_b with the tolerance's sig) lies inside its angular half-width (module
+    doc, "Beam footprint")."""
+    b = np.asarray(bearings_rad, dtype=np.float64)
+    step = abs(float(b[1] - b[0])) if b.size > 1 else 0.0
+    margin = cfg.footprint_steps * step
+    if sig is not None:
+        margin = margin + cfg.see_through_k * sig[:, 1:]
+    return ((np.abs(db) + margin <= half) & beyond).sum(axis=1).astype(np.int64)
 
 
 def detection_probability(
@@ -257,6 +312,17 @@ def falloff(lm_range_m: np.ndarray, cfg: ExistenceConfig) -> np.ndarray | None:
     d = np.asarray(lm_range_m, dtype=np.float64)
     x = np.clip((d - cfg.pd_range_m) / cfg.pd_range_scale_m, -700.0, 700.0)
     return 1.0 / (1.0 + np.exp(x))
+
+
+def see_through_q(lm_range_m: np.ndarray, cfg: ExistenceConfig) -> np.ndarray:
+    """(L,) the see-through rate q of landmarks at these ranges: q_by_range's bin (the last
+    beyond the table), or see_through_q everywhere without a table (module doc)."""
+    d = np.asarray(lm_range_m, dtype=np.float64)
+    if not cfg.q_by_range:
+        return np.full(d.shape, float(cfg.see_through_q))
+    table = np.asarray(cfg.q_by_range, dtype=np.float64)
+    i = np.clip(np.floor(np.nan_to_num(d / cfg.q_bin_m)), 0, table.size - 1).astype(np.int64)
+    return table[i]
 
 
 def clutter_density(false_per_scan: float, max_range_m: float, fov_rad: float) -> float:
@@ -300,9 +366,11 @@ def update_existence(
     through: np.ndarray,
     kappa: float,
     cfg: ExistenceConfig,
+    q: np.ndarray | None = None,
 ) -> np.ndarray:
     """(L,) the existence after one scan (module doc, step 3). likelihood: N(nu; 0, S) of the
-    associated measurement where detected (ignored elsewhere); through: see-through beams."""
+    associated measurement where detected (ignored elsewhere); through: see-through beams;
+    q: (L,) each landmark's see-through rate (`see_through_q`; None: cfg.see_through_q)."""
     r = np.asarray(r, dtype=np.float64)
     pd = np.asarray(pd, dtype=np.float64)
     det = np.asarray(detected, bool)
@@ -312,7 +380,8 @@ def update_existence(
         )
     g = np.where(det, np.asarray(likelihood, dtype=np.float64), 0.0)
     yes_det, no_det = r * pd * g, (1.0 - r) * kappa
-    pass_through = cfg.see_through_q ** np.asarray(through, dtype=np.float64)
+    q = cfg.see_through_q if q is None else np.asarray(q, dtype=np.float64)
+    pass_through = q ** np.asarray(through, dtype=np.float64)
     yes_miss, no_miss = r * (1.0 - pd) * pass_through, 1.0 - r
     yes = np.where(det, yes_det, yes_miss)
     no = np.where(det, no_det, no_miss)
@@ -330,13 +399,15 @@ def update_existence_persistent(
     repeat_prob: float,
     cfg: ExistenceConfig,
     falloff: np.ndarray | None = None,
+    q: np.ndarray | None = None,
 ) -> np.ndarray:
     """(L,) the existence after one scan against persistent clutter (module doc, "Persistent
     clutter"): "not a tree" is an object at the landmark's place that the extractor reports
     again with probability repeat_prob in a scan whose beams reach it (pd > 0), its circle's
     centre spread by its shape (likelihood_object: N(nu; 0, S + the shape's covariance));
     "tree" is as `update_existence`. likelihood: N(nu; 0, S) where detected. falloff: (L,)
-    the range fall-off f(d) that scales repeat_prob as it scales Pd (module doc; None: 1)."""
+    the range fall-off f(d) that scales repeat_prob as it scales Pd (module doc; None: 1).
+    q: (L,) each landmark's see-through rate (`see_through_q`; None: cfg.see_through_q)."""
     r = np.asarray(r, dtype=np.float64)
     pd = np.asarray(pd, dtype=np.float64)
     det = np.asarray(detected, bool)
@@ -346,7 +417,8 @@ def update_existence_persistent(
         )
     g = np.where(det, np.asarray(likelihood, dtype=np.float64), 0.0)
     g0 = np.where(det, np.asarray(likelihood_object, dtype=np.float64), 0.0)
-    pass_through = cfg.see_through_q ** np.asarray(through, dtype=np.float64)
+    q = cfg.see_through_q if q is None else np.asarray(q, dtype=np.float64)
+    pass_through = q ** np.asarray(through, dtype=np.float64)
     # neither hypothesis reports what the beams cannot reach (a detection has pd > 0: the
     # caller gives a paired landmark pd_max)
     repeat = np.where((pd > 0) | det, repeat_prob, 0.0)

@@ -13,7 +13,11 @@ called by the loop), on the predicted state:
 With `existence_see_through_k` > 0 the beams of step 1 are counted with the see-through
 tolerance (`slam.existence`, "See-through tolerance"), each place's range and bearing sd from
 its [pose, point] covariance (a tentative's own, fused with `existence_fuse_tentatives`,
-beside the pose's).
+beside the pose's). With `existence_see_through_footprint` > 0 a see-through beam's footprint
+(that many beam steps either side of its ray, + k sd_bearing with the tolerance) must lie inside
+the trunk (`slam.existence`, "Beam footprint"); a landmark's radius is the last circle's.
+With `existence_see_through_q_by_range` a landmark's see-through rate is its range bin's
+(`slam.existence.see_through_q`).
 The map managers read it (`slam.map_managers`): a tentative joins the map when its existence
 reaches `join_prob` (in a scan it was seen in), a window track joins when the existence of its
 sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`
@@ -43,6 +47,7 @@ from slam.existence import (
     detection_probability,
     falloff,
     gaussian_likelihood,
+    see_through_q,
     update_existence,
     update_existence_persistent,
 )
@@ -87,6 +92,9 @@ class LandmarkExistence:
             pd_range_m=float(policy.existence_pd_range_m),
             pd_range_scale_m=float(policy.existence_pd_range_scale_m),
             see_through_k=float(policy.existence_see_through_k),
+            footprint_steps=float(policy.existence_see_through_footprint),
+            q_by_range=tuple(float(q) for q in policy.existence_see_through_q_by_range),
+            q_bin_m=float(policy.existence_see_through_q_bin_m),
         )
         fov = float(view.fov[1] - view.fov[0])
         self.kappa = clutter_density(
@@ -212,9 +220,10 @@ class LandmarkExistence:
         self._count_unreached(t_ids, ids[idx][pd > 0])
         r = r_before = self.of(ids[idx])
         r = np.where(np.isfinite(r), r, self.birth)
+        q = see_through_q(z_hat[idx, 0], self.cfg) if self.cfg.q_by_range else None
         if self.repeat is None:
             r = update_existence(
-                r, pd, detected[idx], g[idx], ev.through, kappa=self.kappa, cfg=self.cfg
+                r, pd, detected[idx], g[idx], ev.through, kappa=self.kappa, cfg=self.cfg, q=q
             )
         else:
             r = update_existence_persistent(
@@ -227,6 +236,7 @@ class LandmarkExistence:
                 repeat_prob=self.repeat,
                 cfg=self.cfg,
                 falloff=f,
+                q=q,
             )
         for lid, v in zip(ids[idx].tolist(), r.tolist()):
             self.r[lid] = v

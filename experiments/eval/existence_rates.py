@@ -42,6 +42,11 @@ See-through (`derive_see_through`, used only when asked for; `docs/existence_kee
    see-through factor q^n at a miss (`slam.existence`, step 3), measured where that factor
    applies.
 
+See-through by range (`derive_see_through_by_range`, used only when asked for):
+6b. see_through_q_by_range: the rate of 6. per range bin of the landmark (the run's pose),
+   [i bin_m, (i + 1) bin_m) up to the view's range (`see_through_rates`: a bin with no free
+   beam takes the pooled q of 6.; none passed: half a beam over those counted, as 6.).
+
 Range fall-off (`derive_pd_range`, used only when asked for):
 7. pd_max, pd_range_m, pd_range_scale_m: the maximum-likelihood logistic fall-off of the
    detection rate with range (`slam.existence`, "Range fall-off") over the views of 1. with at
@@ -72,7 +77,9 @@ __all__ = [
     "derive_pd_range",
     "derive_persistent",
     "derive_see_through",
+    "derive_see_through_by_range",
     "range_detection_rates",
+    "see_through_rates",
     "truncated_geometric_p",
 ]
 
@@ -86,15 +93,17 @@ def _radius(lg, lid: int) -> float:
     return float(np.median(r)) if r.size else DEFAULT_RADIUS_M
 
 
-def _views(lg, seq, scans: tuple[int, int], established: int):
+def _views(lg, seq, scans: tuple[int, int], established: int, footprint_steps: float = 0.0):
     """Per scan of `scans` in which some landmark of the final map associated in more than
     `established` scans is in view after it joined: (its beam evidence, free beams (clipped at
-    MAX_BEAMS), whether a measurement updated it), arrays over those landmarks."""
+    MAX_BEAMS), whether a measurement updated it), arrays over those landmarks.
+    footprint_steps: the see-through count's beam footprint (`slam.existence`, "Beam
+    footprint"; 0: none)."""
     est = lg.landmark_n_obs > established
     ids, xy, first = lg.landmark_id[est], lg.landmark_xy[est], lg.landmark_first_scan[est]
     radius = np.array([_radius(lg, int(i)) for i in ids])
     seen = set(zip(lg.obs_scan.tolist(), lg.obs_landmark.tolist()))
-    cfg = ExistenceConfig(max_range_m=float(seq.scan_max_range))
+    cfg = ExistenceConfig(max_range_m=float(seq.scan_max_range), footprint_steps=footprint_steps)
     max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
     for k in range(scans[0], min(scans[1], lg.n_scans)):
         if lg.scan_skipped[k] or not ids.size:
@@ -195,7 +204,13 @@ def derive_pd_range(
 
 
 def derive_see_through(
-    lg, seq, scans: tuple[int, int], min_beams: int, established: int = ESTABLISHED
+    lg,
+    seq,
+    scans: tuple[int, int],
+    min_beams: int,
+    established: int = ESTABLISHED,
+    *,
+    footprint_steps: float = 0.0,
 ) -> dict:
     """see_through_q measured on the run (module doc, 6): of the free beams (reaching, not
     occluded by a nearer return) of the established landmarks (as `beam_detection_rates`
@@ -204,9 +219,11 @@ def derive_see_through(
     over those counted, a rate the run cannot tell from 0; the model needs q > 0). An occluded
     beam could neither pass nor hit: it is not evidence and is not counted (before 2026-11-29
     h41f it was, which biased q low by the occluded share: "missed_beams_reaching" keeps that
-    count)."""
+    count). footprint_steps: beams counted as passing beyond with the beam footprint the run
+    will use (`map_policy.existence_see_through_footprint`; 0: none), so that q is the rate of
+    the count the filter makes."""
     through = reach = free_beams = 0
-    for ev, free, hit, _ in _views(lg, seq, scans, established):
+    for ev, free, hit, _ in _views(lg, seq, scans, established, footprint_steps):
         missed = (free >= min_beams) & ~hit
         through += int(ev.through[missed].sum())
         reach += int(ev.reach[missed].sum())
@@ -222,6 +239,49 @@ def derive_see_through(
         "missed_beams_reaching": reach,
         "missed_beams_free": free_beams,
         "missed_beams_through": through,
+    }
+
+
+def see_through_rates(through: np.ndarray, free: np.ndarray, pooled: float) -> np.ndarray:
+    """(n,) q per bin from its see-through (n,) and free (n,) beam counts (module doc, 6b):
+    max(through, 0.5) / free, at most 1; `pooled` where a bin has no free beam."""
+    t = np.asarray(through, dtype=np.float64)
+    f = np.asarray(free, dtype=np.float64)
+    q = np.maximum(t, 0.5) / np.maximum(f, 1.0)
+    return np.where(f > 0, np.minimum(q, 1.0), float(pooled))
+
+
+def derive_see_through_by_range(
+    lg,
+    seq,
+    scans: tuple[int, int],
+    min_beams: int,
+    bin_m: float = 10.0,
+    *,
+    footprint_steps: float = 0.0,
+) -> dict:
+    """see_through_q per range bin measured on the run (module doc, 6b), with the count of
+    `derive_see_through` (footprint_steps as there): {"settings":
+    {"map_policy.existence_see_through_q_by_range": [...], "..._q_bin_m": bin_m}, counts}."""
+    max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
+    n = max(int(math.ceil(max_range / bin_m)), 1)
+    through, free_beams = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    for ev, free, hit, range_m in _views(lg, seq, scans, ESTABLISHED, footprint_steps):
+        missed = (free >= min_beams) & ~hit
+        i = np.minimum((range_m[missed] // bin_m).astype(np.int64), n - 1)
+        np.add.at(through, i, ev.through[missed])
+        np.add.at(free_beams, i, (ev.reach - ev.occluded)[missed])
+    pooled = derive_see_through(lg, seq, scans, min_beams, footprint_steps=footprint_steps)
+    q = see_through_rates(
+        through, free_beams, pooled["settings"]["map_policy.existence_see_through_q"]
+    )
+    return {
+        "settings": {
+            "map_policy.existence_see_through_q_by_range": [float(x) for x in q],
+            "map_policy.existence_see_through_q_bin_m": float(bin_m),
+        },
+        "missed_beams_free": free_beams.tolist(),
+        "missed_beams_through": through.tolist(),
     }
 
 

@@ -5,7 +5,13 @@ import numpy as np
 import pytest
 
 from experiments.errors import DataError
-from experiments.eval.existence_rates import ESTABLISHED, _views, derive_see_through
+from experiments.eval.existence_rates import (
+    ESTABLISHED,
+    _views,
+    derive_see_through,
+    derive_see_through_by_range,
+    see_through_rates,
+)
 from slam import run_slam
 from tests.experiments.test_existence_policy_run import clutter_drive
 
@@ -45,7 +51,7 @@ def test_an_occluded_beam_is_not_evidence_q_counts_free_beams_only(monkeypatch):
     from experiments.eval import existence_rates
     from slam.existence import BeamEvidence
 
-    def views(lg, seq, scans, established):
+    def views(lg, seq, scans, established, footprint_steps=0.0):
         ev = BeamEvidence(np.array([6, 3, 5, 2]), np.array([2, 0, 0, 1]), np.array([1, 2, 4, 1]))
         hit = np.array([False, False, True, False])
         yield ev, ev.reach - ev.occluded, hit, np.full(4, 10.0)
@@ -80,3 +86,22 @@ def test_range_bins_add_up_to_the_beam_rates_and_split_them_by_range(run):
     mid = float(np.median(ranges))
     near, _ = range_detection_rates(lg, seq, scans, np.array([0.0, mid]))
     assert near.sum() == int((ranges < mid).sum()) and 0 < near.sum() < e.sum()
+
+
+def test_q_by_range_splits_the_pooled_counts_into_range_bins(run):
+    """derive_see_through_by_range counts the beams derive_see_through counts, split by the
+    landmark's range: per 10 m bin the counts sum to the pooled ones, each bin's q is
+    see_through_rates of its counts (the pooled q where a bin has no free beam), and the bins
+    cover the view's range."""
+    seq, lg = run
+    d = derive_see_through(lg, seq, (0, seq.n_scans), MIN_BEAMS)
+    b = derive_see_through_by_range(lg, seq, (0, seq.n_scans), MIN_BEAMS, bin_m=10.0)
+    free, through = np.array(b["missed_beams_free"]), np.array(b["missed_beams_through"])
+    assert free.sum() == d["missed_beams_free"] and through.sum() == d["missed_beams_through"]
+    assert (free > 0).sum() >= 2  # the drive's trunks are missed at more than one range
+    q = b["settings"]["map_policy.existence_see_through_q_by_range"]
+    pooled = d["settings"]["map_policy.existence_see_through_q"]
+    assert q == see_through_rates(through, free, pooled).tolist()
+    max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
+    assert len(q) == int(np.ceil(max_range / 10.0))
+    assert b["settings"]["map_policy.existence_see_through_q_bin_m"] == 10.0
