@@ -4,6 +4,13 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
+# The tests run with Python's bytecode cache whatever the environment says: where
+# PYTHONDONTWRITEBYTECODE is set (some shells and CI images set it), every pytest worker rewrites
+# and compiles every test module again at collection, and every command a test starts compiles
+# the project's modules again (lab notebook, 2026-11-29). The caches are __pycache__ folders,
+# ignored by git, as in any Python project.
+PYTEST := PYTHONDONTWRITEBYTECODE= $(BIN)/python -m pytest
+
 .PHONY: reproduce test check format install bench docs report clean strip-notebooks
 
 $(BIN)/python:
@@ -38,14 +45,14 @@ test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
-	TRUNKSLAM_BUILT_SITE=build/site $(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci --durations=25
+	TRUNKSLAM_BUILT_SITE=build/site $(PYTEST) -q -n auto --dist loadscope --hypothesis-profile=ci --durations=25
 
 # The fast tier, for every change: lint, format, and the tests not marked slow (each under
 # about 1 s; pyproject.toml's `slow` marker), and the 25 slowest of them.
 check: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
-	$(BIN)/python -m pytest -q -n auto --dist loadscope --hypothesis-profile=ci --durations=25 -m "not slow"
+	$(PYTEST) -q -n auto --dist loadscope --hypothesis-profile=ci --durations=25 -m "not slow"
 
 # each benchmark prints its table and writes it to bench_results/ for the performance page; one
 # BLAS/OpenMP thread, as the figures say (a multi-threaded BLAS on a busy machine is slower)
