@@ -210,7 +210,7 @@ def test_durations_for_planning():
     assert snap.duration("table3 table4") == format_duration(seconds["table3 table4"])
     assert snap.duration() == format_duration(sum(seconds.values()))
     # an experiment only a later run recorded: that run's manifest
-    cal = json.loads((REPO / "docs/results/manifest_results_cal2.json").read_text())
+    cal = json.loads((REPO / "docs/results/manifest_results_cal3.json").read_text())
     want = format_duration(cal["seconds"]["victoria-park-calibration"])
     assert snap.duration("victoria-park-calibration") == want
 

@@ -103,11 +103,11 @@ def test_a_reproduce_run_replaces_its_files_and_keeps_the_others(project, tmp_pa
     assert set(before) <= set(after), "report removed a file it did not make"
     kept_calibration = "victoria_park_calibration.csv"
     assert after[kept_calibration] == before[kept_calibration]
-    assert "kept from results_cal2: victoria-park-calibration" in res.output
+    assert "kept from results_cal3: victoria-park-calibration" in res.output
     assert "kept from bench_results: bench_association.md" in res.output
     record = json.loads((snap / RECORD).read_text())
     assert record["files"]["table3.csv"] == "results"
-    assert record["files"][kept_calibration] == "results_cal2"
+    assert record["files"][kept_calibration] == "results_cal3"
     n_src = len([p for p in src.iterdir()])
     assert f"{n_src} replaced, 0 added" in res.output
     assert f"about {Snapshot(snap).duration()} on two cores" in " ".join(
@@ -313,10 +313,10 @@ def test_snapshot_record_reads_origins_from_the_manifests(tmp_path):
     shutil.copytree(REPO / "docs" / "results", snap)
     (snap / RECORD).unlink()
     record = snapshot_record(snap)
-    assert record["files"]["victoria_park_ute.toml"] == "results_cal2"
+    assert record["files"]["victoria_park_ute.toml"] == "results_cal3"
     assert record["files"]["bench_slam.md"] == "bench_results"
     assert record["files"]["manifest.json"] == "results"
-    assert record["origins"]["results_cal2"]["experiments"] == ["victoria-park-calibration"]
+    assert record["origins"]["results_cal3"]["experiments"] == ["victoria-park-calibration"]
 
 
 @pytest.mark.slow

@@ -348,9 +348,9 @@ def test_the_motion_terms_must_buy_more_likelihood_than_they_cost():
 
 def test_calibration_writes_what_the_preset_holds():
     """The calibration's fixed settings (BASE), its parameter vector (the motion-dependent
-    model, the one its BIC chose), steering calibration, start stretch and confirm_scans
-    rebuild the shipped preset exactly, so `reproduce victoria-park-calibration` writes the
-    preset's settings."""
+    model, the one its BIC chose), steering calibration, laser latency, start stretch,
+    confirm_scans and range bias rebuild the shipped preset exactly, so `reproduce
+    victoria-park-calibration` writes the preset's settings."""
     from experiments.io.config_file import load_slam_config, preset_path
     from experiments.paper.victoria_park.calibration import preset_config
 
@@ -377,6 +377,7 @@ def test_calibration_writes_what_the_preset_holds():
         preset.vehicle.steering,
         preset.start.gps_fit_m,
         preset.map_policy.confirm_scans,
+        latency_s=preset.vehicle.laser_latency_s,
         pass_offset_sd_m=preset.measurement.pass_offset_sd_m,
         range_bias=preset.measurement.range_bias["bailey"],
     ).to_dict()

@@ -38,7 +38,9 @@ KEPT = {
 CHANGED_SINCE = {
     "victoria_park_ute": {
         # the calibration's range-bias step (experiments/eval/trace_bias.py, issue 39)
-        "measurement.range_bias.bailey"
+        "measurement.range_bias.bailey",
+        # the calibration's laser-latency step (latency_profile, derive_latency; issue 39)
+        "vehicle.laser_latency_s",
     },
     "cycab": set(),
 }
