@@ -136,6 +136,7 @@ __all__ = [
     "gaussian_likelihood",
     "initial_existence",
     "predict_existence",
+    "range_bin",
     "see_through_q",
     "update_existence",
     "update_existence_persistent",
@@ -210,12 +211,16 @@ class ExistenceConfig:
         if not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
             raise ValueError(f"ExistenceConfig.see_through_k: must be finite and >= 0, got {v!r}")
         v = self.footprint_steps
-        if not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
             raise ValueError(f"ExistenceConfig.footprint_steps: must be finite and >= 0, got {v!r}")
-        if not all(isinstance(q, (int, float)) and 0.0 < q <= 1.0 for q in self.q_by_range):
-            raise ValueError(
-                f"ExistenceConfig.q_by_range: each must be in (0, 1], got {self.q_by_range!r}"
-            )
+        v = self.q_by_range
+        if not isinstance(v, (tuple, list)) or not all(
+            isinstance(q, (int, float)) and not isinstance(q, bool) and 0.0 < q <= 1.0 for q in v
+        ):
+            shown = repr(v) if len(repr(v)) <= 80 else repr(v)[:77] + "..."
+            raise ValueError(f"ExistenceConfig.q_by_range: each must be in (0, 1], got {shown}")
+        # a tuple, so that the frozen config stays hashable when given a list
+        object.__setattr__(self, "q_by_range", tuple(float(q) for q in v))
         v = self.q_bin_m
         if not (isinstance(v, (int, float)) and 0.0 < v < math.inf):
             raise ValueError(f"ExistenceConfig.q_bin_m: must be finite and > 0, got {v!r}")
@@ -254,8 +259,8 @@ def beam_evidence(
     bearings[0:2], a uniform grid)."""
     d = np.asarray(lm_range_m, dtype=np.float64)[:, None]
     a = np.asarray(radius_m, dtype=np.float64)[:, None]
-    half = np.arcsin(np.clip(a / np.maximum(d, 1e-12), 0.0, 1.0))
-    half = half + np.asarray(bearing_sigma_rad, dtype=np.float64).reshape(-1, 1)
+    own = np.arcsin(np.clip(a / np.maximum(d, 1e-12), 0.0, 1.0))  # the trunk's own half-width
+    half = own + np.asarray(bearing_sigma_rad, dtype=np.float64).reshape(-1, 1)
     db = _wrap(np.asarray(bearings_rad)[None, :] - np.asarray(lm_bearing_rad)[:, None])
     reach = np.abs(db) <= half  # (L, B)
     r = np.asarray(ranges_m, dtype=np.float64)[None, :]
@@ -274,23 +279,29 @@ def beam_evidence(
         through = np.where(inside.any(axis=1), 0, (reach & beyond).sum(axis=1)).astype(np.int64)
     if cfg.footprint_steps > 0:
         through = np.minimum(
-            through, _inside_footprint(db, half, beyond, bearings_rad, cfg, sig=sig)
+            through, _inside_footprint(db, own, beyond, bearings_rad, cfg, sig=sig)
         )
     return BeamEvidence(
         reach.sum(axis=1).astype(np.int64), (reach & near).sum(axis=1).astype(np.int64), through
     )
 
 
-def _inside_footprint(db, half, beyond, bearings_rad, cfg: ExistenceConfig, *, sig) -> np.ndarray:
+def _inside_footprint(db, own, beyond, bearings_rad, cfg: ExistenceConfig, *, sig) -> np.ndarray:
     """(L,) the beams beyond each landmark whose footprint (cfg.footprint_steps beam steps
-    either side, + k sd_b with the tolerance's sig) lies inside its angular half-width (module
-    doc, "Beam footprint")."""
-    b = np.asarray(bearings_rad, dtype=np.float64)
-    step = abs(float(b[1] - b[0])) if b.size > 1 else 0.0
+    either side, + k sd_b with the tolerance's sig) lies inside its own angular half-width
+    asin(a / d), `own` (L, 1), not widened by the bearing uncertainty (module doc, "Beam
+    footprint")."""
+    b = np.asarray(bearings_rad, dtype=np.float64).ravel()
+    if b.size < 2:
+        raise ValueError(
+            "beam_evidence: the beam footprint (cfg.footprint_steps > 0) needs the beam step, "
+            f"from at least 2 bearings; got {b.size}"
+        )
+    step = abs(float(b[1] - b[0]))
     margin = cfg.footprint_steps * step
     if sig is not None:
         margin = margin + cfg.see_through_k * sig[:, 1:]
-    return ((np.abs(db) + margin <= half) & beyond).sum(axis=1).astype(np.int64)
+    return ((np.abs(db) + margin <= own) & beyond).sum(axis=1).astype(np.int64)
 
 
 def detection_probability(
@@ -321,8 +332,15 @@ def see_through_q(lm_range_m: np.ndarray, cfg: ExistenceConfig) -> np.ndarray:
     if not cfg.q_by_range:
         return np.full(d.shape, float(cfg.see_through_q))
     table = np.asarray(cfg.q_by_range, dtype=np.float64)
-    i = np.clip(np.floor(np.nan_to_num(d / cfg.q_bin_m)), 0, table.size - 1).astype(np.int64)
-    return table[i]
+    return table[range_bin(d, cfg.q_bin_m, table.size)]
+
+
+def range_bin(range_m: np.ndarray, bin_m: float, n: int) -> np.ndarray:
+    """(L,) int64 the range bin [i bin_m, (i + 1) bin_m) of each range, i = floor(range /
+    bin_m) (Python's //, so that the filter and the derivation agree at every edge), clipped
+    to 0 .. n - 1 (the last bin holds everything beyond; NaN lands in bin 0)."""
+    d = np.nan_to_num(np.asarray(range_m, dtype=np.float64))
+    return np.clip(np.floor_divide(d, float(bin_m)), 0, n - 1).astype(np.int64)
 
 
 def clutter_density(false_per_scan: float, max_range_m: float, fov_rad: float) -> float:
@@ -370,10 +388,12 @@ def update_existence(
 ) -> np.ndarray:
     """(L,) the existence after one scan (module doc, step 3). likelihood: N(nu; 0, S) of the
     associated measurement where detected (ignored elsewhere); through: see-through beams;
-    q: (L,) each landmark's see-through rate (`see_through_q`; None: cfg.see_through_q)."""
+    q: (L,) each landmark's see-through rate (`see_through_q`; None: cfg.see_through_q, an
+    error when cfg.q_by_range is set)."""
     r = np.asarray(r, dtype=np.float64)
     pd = np.asarray(pd, dtype=np.float64)
     det = np.asarray(detected, bool)
+    _check_q(q, cfg, "update_existence")
     if det.any() and not kappa > 0:
         raise ValueError(
             f"update_existence: a detection needs clutter density kappa > 0, got {kappa!r}"
@@ -407,10 +427,12 @@ def update_existence_persistent(
     centre spread by its shape (likelihood_object: N(nu; 0, S + the shape's covariance));
     "tree" is as `update_existence`. likelihood: N(nu; 0, S) where detected. falloff: (L,)
     the range fall-off f(d) that scales repeat_prob as it scales Pd (module doc; None: 1).
-    q: (L,) each landmark's see-through rate (`see_through_q`; None: cfg.see_through_q)."""
+    q: (L,) each landmark's see-through rate (`see_through_q`; None: cfg.see_through_q, an
+    error when cfg.q_by_range is set)."""
     r = np.asarray(r, dtype=np.float64)
     pd = np.asarray(pd, dtype=np.float64)
     det = np.asarray(detected, bool)
+    _check_q(q, cfg, "update_existence_persistent")
     if not 0.0 < repeat_prob < 1.0:
         raise ValueError(
             f"update_existence_persistent: repeat_prob must be in (0, 1), got {repeat_prob!r}"
@@ -428,6 +450,15 @@ def update_existence_persistent(
     no = (1.0 - r) * np.where(det, repeat * g0, 1.0 - repeat)
     total = yes + no
     return np.where(total > 0, yes / np.where(total > 0, total, 1.0), r)
+
+
+def _check_q(q, cfg: ExistenceConfig, name: str) -> None:
+    if q is None and cfg.q_by_range:
+        raise ValueError(
+            f"{name}: cfg.q_by_range is set, so each landmark's q must be given "
+            "(q=see_through_q(range, cfg)); got q=None, which would charge the single "
+            "see_through_q"
+        )
 
 
 def decide(r: np.ndarray, cfg: ExistenceConfig) -> tuple[np.ndarray, np.ndarray]:

@@ -43,8 +43,8 @@ def test_a_miss_is_charged_with_the_bins_q():
     got = update_existence(r, pd, np.zeros(2, bool), np.zeros(2), np.full(2, 2), 1.0, cfg, q=q)
     want = [0.5 * 0.4 * x**2 / (0.5 * 0.4 * x**2 + 0.5) for x in (0.05, 0.6)]
     assert got.tolist() == pytest.approx(want, rel=1e-12)
-    one = update_existence(r, pd, np.zeros(2, bool), np.zeros(2), np.full(2, 2), 1.0, cfg)
-    assert one.tolist() == pytest.approx([0.5 * 0.4 * 0.16 / (0.5 * 0.4 * 0.16 + 0.5)] * 2)
+    with pytest.raises(ValueError, match="q_by_range is set"):  # no silent single q
+        update_existence(r, pd, np.zeros(2, bool), np.zeros(2), np.full(2, 2), 1.0, cfg)
 
 
 def test_off_by_default_and_checked():
