@@ -63,7 +63,7 @@ import numpy as np
 
 from experiments.errors import DataError
 from slam import se2
-from slam.existence import ExistenceConfig, beam_evidence
+from slam.existence import ExistenceConfig, beam_evidence, range_bin
 from slam.existence_map import DEFAULT_RADIUS_M
 from slam.log import AMBIGUOUS, NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED
 from slam.tentatives import sighting
@@ -203,6 +203,31 @@ def derive_pd_range(
     }
 
 
+def _see_through_counts(
+    lg, seq, scans, min_beams: int, *, established: int, footprint_steps: float, bin_m, n: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(through, reaching, free) beam counts (n,) int64 each, per range bin (`range_bin`; one
+    walk over the scans): the views of `derive_see_through` (module doc, 6)."""
+    through, reach, free_beams = (np.zeros(n, np.int64) for _ in range(3))
+    for ev, free, hit, range_m in _views(lg, seq, scans, established, footprint_steps):
+        missed = (free >= min_beams) & ~hit
+        i = range_bin(range_m[missed], bin_m, n)
+        np.add.at(through, i, ev.through[missed])
+        np.add.at(reach, i, ev.reach[missed])
+        np.add.at(free_beams, i, (ev.reach - ev.occluded)[missed])
+    return through, reach, free_beams
+
+
+def _pooled_q(through: np.ndarray, free_beams: np.ndarray, name: str, *, min_beams, scans) -> float:
+    """max(through, 0.5) / free over every bin, at most 1; a DataError with no free beam."""
+    if not int(free_beams.sum()):
+        raise DataError(
+            f"{name}: no established landmark was missed with {min_beams} free "
+            f"beams or more in scans {scans}: no see-through rate to derive"
+        )
+    return float(min(max(int(through.sum()), 0.5) / int(free_beams.sum()), 1.0))
+
+
 def derive_see_through(
     lg,
     seq,
@@ -220,25 +245,28 @@ def derive_see_through(
     beam could neither pass nor hit: it is not evidence and is not counted (before 2026-11-29
     h41f it was, which biased q low by the occluded share: "missed_beams_reaching" keeps that
     count). footprint_steps: beams counted as passing beyond with the beam footprint the run
-    will use (`map_policy.existence_see_through_footprint`; 0: none), so that q is the rate of
-    the count the filter makes."""
-    through = reach = free_beams = 0
-    for ev, free, hit, _ in _views(lg, seq, scans, established, footprint_steps):
-        missed = (free >= min_beams) & ~hit
-        through += int(ev.through[missed].sum())
-        reach += int(ev.reach[missed].sum())
-        free_beams += int((ev.reach - ev.occluded)[missed].sum())
-    if not free_beams:
-        raise DataError(
-            f"derive_see_through: no established landmark was missed with {min_beams} free "
-            f"beams or more in scans {scans}: no see-through rate to derive"
-        )
-    q = max(through, 0.5) / free_beams
+    will use (`map_policy.existence_see_through_footprint`; 0: none). What is counted is the
+    filter's count with the footprint but without the see-through tolerance
+    (`map_policy.existence_see_through_k`: the landmarks' covariances are not in the run's log,
+    so no k-sigma region is applied here): with the tolerance on, the filter counts fewer
+    see-through beams (a subset of these), and this q is an upper bound of the rate of the
+    filter's count."""
+    through, reach, free_beams = _see_through_counts(
+        lg,
+        seq,
+        scans,
+        min_beams,
+        established=established,
+        footprint_steps=footprint_steps,
+        bin_m=1.0,
+        n=1,
+    )
+    q = _pooled_q(through, free_beams, "derive_see_through", min_beams=min_beams, scans=scans)
     return {
-        "settings": {"map_policy.existence_see_through_q": float(min(q, 1.0))},
-        "missed_beams_reaching": reach,
-        "missed_beams_free": free_beams,
-        "missed_beams_through": through,
+        "settings": {"map_policy.existence_see_through_q": q},
+        "missed_beams_reaching": int(reach.sum()),
+        "missed_beams_free": int(free_beams.sum()),
+        "missed_beams_through": int(through.sum()),
     }
 
 
@@ -261,20 +289,25 @@ def derive_see_through_by_range(
     footprint_steps: float = 0.0,
 ) -> dict:
     """see_through_q per range bin measured on the run (module doc, 6b), with the count of
-    `derive_see_through` (footprint_steps as there): {"settings":
-    {"map_policy.existence_see_through_q_by_range": [...], "..._q_bin_m": bin_m}, counts}."""
+    `derive_see_through` (footprint_steps and what is counted as there; a view's bin is
+    `slam.existence.range_bin`, the filter's): {"settings":
+    {"map_policy.existence_see_through_q_by_range": [...], "..._q_bin_m": bin_m}, counts}.
+    A bin with no free beam takes the pooled q, from the bins' summed counts."""
     max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
     n = max(int(math.ceil(max_range / bin_m)), 1)
-    through, free_beams = np.zeros(n, np.int64), np.zeros(n, np.int64)
-    for ev, free, hit, range_m in _views(lg, seq, scans, ESTABLISHED, footprint_steps):
-        missed = (free >= min_beams) & ~hit
-        i = np.minimum((range_m[missed] // bin_m).astype(np.int64), n - 1)
-        np.add.at(through, i, ev.through[missed])
-        np.add.at(free_beams, i, (ev.reach - ev.occluded)[missed])
-    pooled = derive_see_through(lg, seq, scans, min_beams, footprint_steps=footprint_steps)
-    q = see_through_rates(
-        through, free_beams, pooled["settings"]["map_policy.existence_see_through_q"]
+    through, _, free_beams = _see_through_counts(
+        lg,
+        seq,
+        scans,
+        min_beams,
+        established=ESTABLISHED,
+        footprint_steps=footprint_steps,
+        bin_m=bin_m,
+        n=n,
     )
+    name = "derive_see_through_by_range"
+    pooled = _pooled_q(through, free_beams, name, min_beams=min_beams, scans=scans)
+    q = see_through_rates(through, free_beams, pooled)
     return {
         "settings": {
             "map_policy.existence_see_through_q_by_range": [float(x) for x in q],
