@@ -384,13 +384,15 @@ class MapPolicy:
         only when its footprint, this many beam steps either side of its ray (+ k sd_bearing
         with the tolerance), lies inside the trunk's angular half-width asin(radius / range)
         (`slam.existence`, "Beam footprint"); 0: none. 0.5 is half the beam step, the ray's
-        own angular uncertainty: at 35 m and a 0.5 deg step no beam counts against a trunk of
+        own angular uncertainty (a design choice: the data state no beam divergence): at 35 m
+        and a 0.5 deg step no beam counts against a trunk of
         radius 0.15 m.
     existence_see_through_q_by_range, existence_see_through_q_bin_m: the see-through rate per
         range bin [i bin, (i + 1) bin) (the last bin's beyond the table), each in (0, 1], in
         place of existence_see_through_q (`slam.existence`, "See-through rate by range"; (),
         the default: one q at every range). Derived per bin on a run's own established
-        landmarks (`existence_rates.derive_see_through_by_range`).
+        landmarks (`existence_rates.derive_see_through_by_range`). At most 100 rates: a
+        design bound on the table's length, not a measured one.
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -444,13 +446,17 @@ class MapPolicy:
         0.0, "design: 0, no tolerance (as before); 2.448 = sqrt(chi2_2(0.95)), the 95% region"
     )
     existence_see_through_footprint: float = default(
-        0.0, "design: 0, none (as before); sensor: 0.5, half the beam step, the ray's own spread"
+        0.0,
+        "design: 0, none (as before); design: 0.5, half the beam step (the data state no beam "
+        "divergence)",
     )
     existence_see_through_q_by_range: tuple[float, ...] = default(
-        (), "design: (), one see-through rate at every range (as before); derived per bin"
+        (),
+        "design: (), one see-through rate at every range (as before); derived per bin; at "
+        "most 100 rates, a design bound on the table's length",
     )
     existence_see_through_q_bin_m: float = default(
-        10.0, "design: 10 m, the bins Pd's range fall-off is read in (10-30, 30-40, 40-50 m)"
+        10.0, "design: 10 m bins, as the notebook's detection-rate tables read Pd by range"
     )
     existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
     existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
@@ -489,7 +495,7 @@ class MapPolicy:
         ):
             raise SlamError(
                 "map_policy.existence_see_through_q_by_range: expected a list of at most 100 "
-                f"rates in (0, 1], got {v!r}"
+                f"rates in (0, 1] (100: a design bound on the table's length), got {_shown(v)}"
             )
         object.__setattr__(self, "existence_see_through_q_by_range", tuple(float(q) for q in v))
         v = self.existence_see_through_q_bin_m

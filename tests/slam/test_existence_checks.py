@@ -83,3 +83,12 @@ def test_a_table_without_q_given_is_an_error_not_the_single_q():
         update_existence_persistent(*args[:4], np.zeros(1), args[4], 0.3, cfg)
     got = update_existence(*args, 1.0, cfg, q=np.array([0.6]))
     assert got[0] == pytest.approx(0.5 * 0.4 * 0.36 / (0.5 * 0.4 * 0.36 + 0.5), rel=1e-12)
+
+
+def test_a_long_bad_q_table_in_the_config_gives_a_short_error():
+    from slam import SlamConfig
+    from slam.errors import SlamError
+
+    with pytest.raises(SlamError, match="existence_see_through_q_by_range") as err:
+        SlamConfig().with_(**{"map_policy.existence_see_through_q_by_range": [0.5] * 5000 + [2]})
+    assert len(str(err.value)) < 300
