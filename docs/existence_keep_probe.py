@@ -87,6 +87,14 @@ K95 = math.sqrt(float(chi2.ppf(0.95, 2)))
 # uncertainty (`slam.existence`, "Beam footprint"; the data state no beam divergence)
 HALF_STEP = 0.5
 
+# the settings the four persistent, kept, bounded, fused variants with the tolerance share
+TOLERANT = {
+    "map_policy.existence_clutter": "persistent",
+    "map_policy.existence_keep_tentatives": True,
+    "map_policy.existence_unreached_scans": 100,
+    "map_policy.existence_fuse_tentatives": True,
+    "map_policy.existence_see_through_k": K95,
+}
 VARIANTS = {
     "uniform": {},
     "uniform, kept": {"map_policy.existence_keep_tentatives": True},
@@ -144,22 +152,14 @@ VARIANTS = {
         "range": "derived",
     },
     "persistent, kept, q derived, range, bounded, fused, tolerance": {
-        "map_policy.existence_clutter": "persistent",
-        "map_policy.existence_keep_tentatives": True,
-        "map_policy.existence_unreached_scans": 100,
-        "map_policy.existence_fuse_tentatives": True,
-        "map_policy.existence_see_through_k": K95,
+        **TOLERANT,
         "q": "derived",
         "range": "derived",
     },
     # a see-through beam's footprint (half the beam step, + k sd_bearing) inside the trunk
     # (`existence_see_through_footprint`), q derived with the same count
     "persistent, kept, q derived, range, bounded, fused, tolerance, footprint": {
-        "map_policy.existence_clutter": "persistent",
-        "map_policy.existence_keep_tentatives": True,
-        "map_policy.existence_unreached_scans": 100,
-        "map_policy.existence_fuse_tentatives": True,
-        "map_policy.existence_see_through_k": K95,
+        **TOLERANT,
         "map_policy.existence_see_through_footprint": HALF_STEP,
         "q": "derived",
         "range": "derived",
@@ -167,20 +167,12 @@ VARIANTS = {
     # see_through_q per 10 m range bin, derived on the derivation half
     # (`existence_rates.derive_see_through_by_range`; with the footprint: its count)
     "persistent, kept, q by range, range, bounded, fused, tolerance": {
-        "map_policy.existence_clutter": "persistent",
-        "map_policy.existence_keep_tentatives": True,
-        "map_policy.existence_unreached_scans": 100,
-        "map_policy.existence_fuse_tentatives": True,
-        "map_policy.existence_see_through_k": K95,
+        **TOLERANT,
         "q": "by range",
         "range": "derived",
     },
     "persistent, kept, q by range, range, bounded, fused, tolerance, footprint": {
-        "map_policy.existence_clutter": "persistent",
-        "map_policy.existence_keep_tentatives": True,
-        "map_policy.existence_unreached_scans": 100,
-        "map_policy.existence_fuse_tentatives": True,
-        "map_policy.existence_see_through_k": K95,
+        **TOLERANT,
         "map_policy.existence_see_through_footprint": HALF_STEP,
         "q": "by range",
         "range": "derived",
