@@ -41,7 +41,7 @@ def sightings_after_gaps(log):
     order = np.lexsort((t, log.obs_landmark))
     landmark, t = log.obs_landmark[order], t[order]
     nu, S = log.obs_innov[order], log.obs_innov_cov[order]
-    nis = np.einsum("ni,nij,nj->n", nu, np.linalg.inv(S), nu)
+    nis = np.einsum("ni,ni->n", nu, np.linalg.solve(S, nu[:, :, None])[:, :, 0])
     gap = np.r_[np.nan, np.diff(t)]
     gap[np.r_[True, landmark[1:] != landmark[:-1]]] = np.nan
     return t, gap, nis

@@ -66,6 +66,7 @@ class _Ledger:
         self.timings: dict[str, float] = {}
         self.owned: dict[str, tuple[set[str], set[str]]] = {}
         self.deferred: list[tuple[str, Batch, Callable]] = []
+        self.commit = git_commit()  # the code the run started from, not the tree at its end
 
     def fail(self, name: str, exc: BaseException, files: set[str], keys: set[str]) -> None:
         log.error("experiment %s failed: %s", name, exc)
@@ -150,7 +151,8 @@ class _Ledger:
             "experiments": names,
             "quick": ctx.quick,
             "seed": ctx.seed,
-            "git_commit": git_commit(),
+            "git_commit": self.commit,
+            **_changed_during(self.commit),
             "finished": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": machine(),
             "versions": versions(),
@@ -160,6 +162,14 @@ class _Ledger:
             "failed": self.failed,
             "outputs": sorted(_files(self.stage)),
         }
+
+
+def _changed_during(started: str | None) -> dict:
+    """{"git_commit_at_end": ...} when the checkout changed while the run ran (a commit, or an
+    edit that made it dirty), else {}: the manifest names the code a run started from and says
+    when its tree moved under it."""
+    now = git_commit()
+    return {} if now == started else {"git_commit_at_end": now}
 
 
 def run_experiments(
