@@ -411,7 +411,7 @@ def test_a_map_that_no_rigid_motion_fits_is_refused(tree_sd_m, scale):
     """The recent landmarks bent (each moved by up to 0.21 m x scale, within the
     constellation's match_m, by the bearing from the centre of the stand): no rigid motion
     puts them on the old trees within their (1 cm) precision and the trunks' own error
-    (tree_sd_m: none, as for circles; 5 cm, the default, against a bend 1.6 times larger),
+    (tree_sd_m: none, as for circles; 5 cm, about the default, against a bend 1.6 times larger),
     so the closure is refused."""
     rng = np.random.default_rng(11)
     pts = _stand(rng, 20)[:12]
