@@ -475,10 +475,14 @@ def test_the_pass_offset_criterion_sees_correlated_error_on_scans_1_2000(vp_dir)
     assert min(po.median_white) > 4 * CHI2_1_MEDIAN and po.landmarks > 50
     assert 0.02 < min(po.sd_m) and max(po.sd_m) < 0.1
     # the drift (experiments.eval.pass_drift) from the same run: its between-pass sill, a
-    # second criterion on other pairs of sightings, gives the same s within 25% per axis
+    # second criterion on other pairs of sightings, gives the same s within 25% across the line
+    # of sight. Along it the two agreed within 25% at latency 0 and parted when the preset
+    # gained its laser latency (sill 0.072 m against 0.040 m; lab notebook, the calibration
+    # re-run): there both see a correlated error, the sill more
     d = po.drift
     assert d.bins >= 10 and 0 < d.corr_rad < math.inf
-    np.testing.assert_allclose(d.sd_between_m, po.sd_m, rtol=0.25)
+    np.testing.assert_allclose(d.sd_between_m[1], po.sd_m[1], rtol=0.25)
+    assert d.sd_between_m[0] > po.sd_m[0] > 0.02
 
 
 # ---- the laser latency (experiments/paper/victoria_park/calibration.py) ----------------------
