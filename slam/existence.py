@@ -393,14 +393,13 @@ def update_existence(
     r = np.asarray(r, dtype=np.float64)
     pd = np.asarray(pd, dtype=np.float64)
     det = np.asarray(detected, bool)
-    _check_q(q, cfg, "update_existence")
+    q = _see_through_rate(q, cfg, "update_existence")
     if det.any() and not kappa > 0:
         raise ValueError(
             f"update_existence: a detection needs clutter density kappa > 0, got {kappa!r}"
         )
     g = np.where(det, np.asarray(likelihood, dtype=np.float64), 0.0)
     yes_det, no_det = r * pd * g, (1.0 - r) * kappa
-    q = cfg.see_through_q if q is None else np.asarray(q, dtype=np.float64)
     pass_through = q ** np.asarray(through, dtype=np.float64)
     yes_miss, no_miss = r * (1.0 - pd) * pass_through, 1.0 - r
     yes = np.where(det, yes_det, yes_miss)
@@ -432,14 +431,13 @@ def update_existence_persistent(
     r = np.asarray(r, dtype=np.float64)
     pd = np.asarray(pd, dtype=np.float64)
     det = np.asarray(detected, bool)
-    _check_q(q, cfg, "update_existence_persistent")
+    q = _see_through_rate(q, cfg, "update_existence_persistent")
     if not 0.0 < repeat_prob < 1.0:
         raise ValueError(
             f"update_existence_persistent: repeat_prob must be in (0, 1), got {repeat_prob!r}"
         )
     g = np.where(det, np.asarray(likelihood, dtype=np.float64), 0.0)
     g0 = np.where(det, np.asarray(likelihood_object, dtype=np.float64), 0.0)
-    q = cfg.see_through_q if q is None else np.asarray(q, dtype=np.float64)
     pass_through = q ** np.asarray(through, dtype=np.float64)
     # neither hypothesis reports what the beams cannot reach (a detection has pd > 0: the
     # caller gives a paired landmark pd_max)
@@ -452,13 +450,18 @@ def update_existence_persistent(
     return np.where(total > 0, yes / np.where(total > 0, total, 1.0), r)
 
 
-def _check_q(q, cfg: ExistenceConfig, name: str) -> None:
-    if q is None and cfg.q_by_range:
+def _see_through_rate(q, cfg: ExistenceConfig, name: str):
+    """The see-through rate the updates charge: the landmarks' q (L,), or cfg.see_through_q
+    when none is given; an error when none is given but cfg.q_by_range is set."""
+    if q is not None:
+        return np.asarray(q, dtype=np.float64)
+    if cfg.q_by_range:
         raise ValueError(
             f"{name}: cfg.q_by_range is set, so each landmark's q must be given "
             "(q=see_through_q(range, cfg)); got q=None, which would charge the single "
             "see_through_q"
         )
+    return cfg.see_through_q
 
 
 def decide(r: np.ndarray, cfg: ExistenceConfig) -> tuple[np.ndarray, np.ndarray]:

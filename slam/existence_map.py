@@ -93,7 +93,7 @@ class LandmarkExistence:
             pd_range_scale_m=float(policy.existence_pd_range_scale_m),
             see_through_k=float(policy.existence_see_through_k),
             footprint_steps=float(policy.existence_see_through_footprint),
-            q_by_range=tuple(float(q) for q in policy.existence_see_through_q_by_range),
+            q_by_range=policy.existence_see_through_q_by_range,
             q_bin_m=float(policy.existence_see_through_q_bin_m),
         )
         fov = float(view.fov[1] - view.fov[0])
