@@ -363,6 +363,16 @@ def _fifo_at(name: str):
     return after
 
 
+def _fifo_file(path: Path) -> Path:
+    os.mkfifo(path)
+    return path
+
+
+def _written(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
 def _fifo_bag(folder: Path) -> Path:
     p = folder / "pipe.bag"
     os.mkfifo(p)
@@ -811,6 +821,15 @@ def _input_option_cases() -> list:
             "extract", "DRIVE", "--config", "/dev/zero", "--out", "OUT")),
         _opt("a sweep file at /dev/zero", "/dev/zero", lambda f: [
             "sweep", "/dev/zero", "--out", f / "s"]),
+        _opt("bench cold --keep /dev/zero", "--keep", lambda f: [
+            "bench", "cold", "--commands", "check", "--keep", "/dev/zero"]),
+        _opt("bench cold --keep a FIFO", "--keep", lambda f: [
+            "bench", "cold", "--commands", "check", "--keep", _fifo_file(f / "kept.md")]),
+        _opt("bench cold --keep a folder", "--keep", lambda f: [
+            "bench", "cold", "--commands", "check", "--keep", f]),
+        _opt("bench cold --keep a table of another benchmark", "--keep", lambda f: [
+            "bench", "cold", "--commands", "check", "--keep", _written(
+                f / "kept.md", "A table (a machine)\n\n| a |\n|---|\n| 1 |\n")]),
         _opt("a sweep file at /dev/urandom", "/dev/urandom", lambda f: [
             "sweep", "/dev/urandom", "--out", f / "s"]),
         _opt("a config of 20 MB", "big.toml", _with_drive(*S, "--config", "BIGCONF")),

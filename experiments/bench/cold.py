@@ -9,7 +9,9 @@ load average before it: the wall figures of a busy machine are not its idle ones
 figures nearly are.
 
 Commands: `make check`, `make test`, `trunkslam reproduce --quick` (into a folder of the clone).
-Uncommitted changes of the checkout are not in the clone: commit first.
+Uncommitted changes of the checkout are not in the clone: commit first. Each row names the
+commit it measured, so that a table can keep rows of an earlier run (`keep_rows`: `make test`
+takes half an hour, the others minutes) and still say what each row is.
 """
 
 from __future__ import annotations
@@ -27,7 +29,16 @@ from experiments.errors import DataError
 from experiments.io.provenance import machine
 from experiments.io.writers import markdown_table
 
-__all__ = ["COMMANDS", "bench_cold", "clear_caches", "cold_seconds", "format_cold", "project_root"]
+__all__ = [
+    "COMMANDS",
+    "bench_cold",
+    "clear_caches",
+    "cold_seconds",
+    "format_cold",
+    "keep_rows",
+    "project_root",
+    "read_cold",
+]
 
 COMMANDS: dict[str, list[str]] = {
     "check": ["make", "check"],
@@ -115,6 +126,7 @@ def bench_cold(
         except (OSError, subprocess.SubprocessError) as exc:
             why = getattr(exc, "stderr", None) or exc
             raise DataError(f"bench cold: cannot clone {repo}: {why}") from None
+        commit = _short_head(clone)
         steps = [("install", "-", ["make", "install"])]
         for n in names:
             steps += [(n, "cold", COMMANDS[n]), (n, "warm", COMMANDS[n])]
@@ -126,21 +138,44 @@ def bench_cold(
             wall, cpu = _timed(args, clone, env, Path(tmp) / f"{name}-{run}.log")
             command = " ".join(args).replace(".venv/bin/", "")
             rows.append(
-                {"command": command, "run": run, "wall_s": wall, "cpu_s": cpu, "load_1min": load}
+                {
+                    "command": command,
+                    "run": run,
+                    "commit": commit,
+                    "wall_s": wall,
+                    "cpu_s": cpu,
+                    "load_1min": load,
+                }
             )
             if progress is not None:
                 progress("bench cold", i + 1, len(steps))
     return rows
 
 
+def _short_head(clone: Path) -> str:
+    """The short hash of `clone`'s HEAD."""
+    try:
+        out = subprocess.run(
+            ["git", "-C", str(clone), "rev-parse", "--short=7", "HEAD"],
+            capture_output=True,
+            text=True,
+            check=True,
+            timeout=60,
+        )
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise DataError(f"bench cold: cannot read the clone's commit: {exc}") from None
+    return out.stdout.strip()
+
+
 def format_cold(rows: list[dict]) -> str:
     """Markdown table of `bench_cold` rows, with the machine."""
     body = markdown_table(
-        ["command", "run", "wall (s)", "CPU (s)", "load before (1 min)"],
+        ["command", "run", "commit", "wall (s)", "CPU (s)", "load before (1 min)"],
         [
             [
                 r["command"],
                 r["run"],
+                r.get("commit") or "-",
                 f"{r['wall_s']:.0f}",
                 f"{r['cpu_s']:.0f}",
                 f"{r['load_1min']:.1f}",
@@ -152,7 +187,51 @@ def format_cold(rows: list[dict]) -> str:
         f"A fresh clone, cold and warm ({machine()})\n\n{body}\n"
         "Cold: numba's caches and pytest's removed first, as in a fresh clone; warm: the same "
         "command again at once. CPU: every process the command started. The install row is "
-        "`make install` of the fresh clone (pip from its local cache).\n"
+        "`make install` of the fresh clone (pip from its local cache). Commit: the clone's "
+        "HEAD that row measured (rows of one command are from one run).\n"
+    )
+
+
+def read_cold(text: str) -> list[dict]:
+    """The rows of a table `format_cold` wrote (wall and CPU seconds as printed, whole
+    seconds); a table written before rows named their commit gives commit "-"."""
+    rows = []
+    for line in text.splitlines():
+        if not line.startswith("| "):
+            continue
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 5:
+            cells.insert(2, "-")
+        if len(cells) != 6 or cells[0] == "command" or set(cells[0]) <= set("-: "):
+            continue
+        try:
+            wall, cpu, load = (float(c) for c in cells[3:])
+        except ValueError:
+            raise DataError(
+                f"bench cold table: a row that is not a measurement: {line!r}"
+            ) from None
+        rows.append(
+            {
+                "command": cells[0],
+                "run": cells[1],
+                "commit": cells[2],
+                "wall_s": wall,
+                "cpu_s": cpu,
+                "load_1min": load,
+            }
+        )
+    return rows
+
+
+def keep_rows(rows: list[dict], kept: list[dict]) -> list[dict]:
+    """`rows` (one benchmark's) with the rows of `kept` (an earlier table's, `read_cold`)
+    whose command `rows` did not measure, each command's rows together, in `COMMANDS`' order
+    (the install row first: the new one when `rows` has one)."""
+    measured = {r["command"] for r in rows}
+    order = ["make install"] + [" ".join(a).replace(".venv/bin/", "") for a in COMMANDS.values()]
+    merged = rows + [r for r in kept if r["command"] not in measured]
+    return sorted(
+        merged, key=lambda r: order.index(r["command"]) if r["command"] in order else len(order)
     )
 
 
@@ -161,11 +240,7 @@ def cold_seconds(text: str, command: str, run: str) -> float:
     --quick") run `run` (cold, warm) in a table of `format_cold`: what the README and
     getting-started quote, checked against the table the benchmark wrote."""
     found = [
-        float(cells[2])
-        for line in text.splitlines()
-        if line.startswith("| ")
-        for cells in [[c.strip() for c in line.strip("|").split("|")]]
-        if len(cells) == 5 and cells[0].startswith(command) and cells[1] == run
+        r["wall_s"] for r in read_cold(text) if r["command"].startswith(command) and r["run"] == run
     ]
     if len(found) != 1:
         raise DataError(

@@ -107,12 +107,32 @@ def _measure_smoother(progress, *, chunks, per_pose, data, seed) -> str:
     return format_table(bench(data, chunks, per_pose, seed, progress=progress))
 
 
-def _measure_cold(progress, *, commands, repo) -> str:
+def _kept_table(options: dict) -> dict:
+    """--keep read into the rows it keeps, or a usage error naming the file."""
+    keep = options["keep"]
+    if keep is None:
+        return {**options, "keep": []}
+    from experiments.bench.cold import read_cold
+    from experiments.errors import DataError
+    from experiments.io.paths import check_input_file, read_text_file
+
+    try:  # a regular file, read up to 1 MiB (a FIFO or /dev/zero is refused)
+        rows = read_cold(read_text_file(check_input_file(keep, "--keep table"), "bench table"))
+    except DataError as exc:
+        raise typer.BadParameter(str(exc), param_hint="--keep") from None
+    if not rows:
+        raise typer.BadParameter(
+            f"{keep}: no row of a `trunkslam bench cold` table in it", param_hint="--keep"
+        )
+    return {**options, "keep": rows}
+
+
+def _measure_cold(progress, *, commands, repo, keep) -> str:
     from experiments.bench.cold import bench_cold as bench
-    from experiments.bench.cold import format_cold
+    from experiments.bench.cold import format_cold, keep_rows
 
     names = [n.strip() for n in commands.split(",") if n.strip()]
-    return format_cold(bench(names, repo, progress=progress))
+    return format_cold(keep_rows(bench(names, repo, progress=progress), keep))
 
 
 def _measure_reproduce(progress, *, names, quick, workers, dask) -> str:
@@ -278,8 +298,21 @@ BENCHES = (
                 ],
                 None,
             ),
+            (
+                "keep",
+                Annotated[
+                    Path | None,
+                    typer.Option(
+                        help="a table this benchmark wrote before (e.g. the --out file): its "
+                        "rows of the commands not run now are kept, each naming the commit it "
+                        "measured [default: none]"
+                    ),
+                ],
+                None,
+            ),
         ),
         _measure_cold,
+        check=_kept_table,
     ),
     Bench(
         "reproduce",

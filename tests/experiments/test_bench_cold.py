@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from experiments.bench.cold import clear_caches, format_cold, project_root
+from experiments.bench.cold import clear_caches, format_cold, keep_rows, project_root, read_cold
 from experiments.cli import app
 from experiments.errors import DataError
 
@@ -32,10 +32,77 @@ def test_the_table_names_each_run_and_the_load(tmp_path):
         {"command": "make check", "run": "cold", "wall_s": 58.7, "cpu_s": 99.6, "load_1min": 1.2},
         {"command": "make check", "run": "warm", "wall_s": 31.4, "cpu_s": 52.0, "load_1min": 1.9},
     ]
+    for r in rows:
+        r["commit"] = "abc1234"
     text = format_cold(rows)
-    assert "| make check | cold | 59 | 100 | 1.2 |" in text
-    assert "| make check | warm | 31 | 52 | 1.9 |" in text
+    assert "| make check | cold | abc1234 | 59 | 100 | 1.2 |" in text
+    assert "| make check | warm | abc1234 | 31 | 52 | 1.9 |" in text
     assert "cores" in text.splitlines()[0]
+
+
+def _row(command, run, commit, wall):
+    return {
+        "command": command,
+        "run": run,
+        "commit": commit,
+        "wall_s": wall,
+        "cpu_s": 2.0 * wall,
+        "load_1min": 0.5,
+    }
+
+
+def test_read_cold_reads_back_every_row_and_an_old_table_without_commits():
+    rows = [_row("make install", "-", "aaa1111", 61.0), _row("make test", "cold", "aaa1111", 900.0)]
+    assert read_cold(format_cold(rows)) == rows
+    old = (
+        "A fresh clone (a machine)\n\n"
+        "| command | run | wall (s) | CPU (s) | load before (1 min) |\n|---|---|---|---|---|\n"
+        "| make check | cold | 97 | 174 | 0.9 |\n"
+    )
+    assert read_cold(old) == [
+        {"command": "make check", "run": "cold", "commit": "-", "wall_s": 97.0, "cpu_s": 174.0,
+         "load_1min": 0.9}
+    ]  # fmt: skip
+    with pytest.raises(DataError, match="not a measurement"):
+        read_cold(old.replace("| 97 |", "| fast |"))
+
+
+def test_kept_rows_fill_in_the_commands_not_measured_in_the_benchmarks_order():
+    kept = [
+        _row("make install", "-", "old0000", 70.0),
+        _row("make check", "cold", "old0000", 97.0),
+        _row("make check", "warm", "old0000", 59.0),
+        _row("make test", "cold", "old0000", 900.0),
+        _row("make test", "warm", "old0000", 600.0),
+    ]
+    new = [
+        _row("make install", "-", "new1111", 65.0),
+        _row("make check", "cold", "new1111", 80.0),
+        _row("make check", "warm", "new1111", 50.0),
+        _row("trunkslam reproduce --quick --out quick_results", "cold", "new1111", 60.0),
+        _row("trunkslam reproduce --quick --out quick_results", "warm", "new1111", 15.0),
+    ]
+    merged = keep_rows(new, kept)
+    assert [(r["command"].split()[1], r["run"], r["commit"]) for r in merged] == [
+        ("install", "-", "new1111"),
+        ("check", "cold", "new1111"),
+        ("check", "warm", "new1111"),
+        ("test", "cold", "old0000"),
+        ("test", "warm", "old0000"),
+        ("reproduce", "cold", "new1111"),
+        ("reproduce", "warm", "new1111"),
+    ]
+    assert keep_rows(new, []) == new
+
+
+def test_keep_that_is_not_a_bench_cold_table_is_refused_before_any_clone(tmp_path):
+    other = tmp_path / "other.md"
+    other.write_text("A table (a machine)\n\n| a |\n|---|\n| 1 |\n")
+    for keep, says in ((other, "no row of a `trunkslam bench cold` table"), (tmp_path, "folder")):
+        args = ["bench", "cold", "--commands", "check", "--keep", str(keep)]
+        res = CliRunner().invoke(app, args, env={"COLUMNS": "300"})
+        assert res.exit_code == 2, res.output
+        assert says in res.output, res.output
 
 
 def test_project_root_is_this_checkout_and_a_plain_folder_is_refused(tmp_path):
