@@ -84,11 +84,31 @@ def run_draw(inp, cfg, draw: int) -> dict:
     return {"log": lg, "errors": errors, "scored": scored, "clutter": clutter}
 
 
+def snapshot_rows() -> list[dict]:
+    """The snapshot's rows of the clutter draws."""
+    with SNAPSHOT.open() as f:
+        return [r for r in csv.DictReader(f) if r["run"] == rfs.ROWS["clutter"]]
+
+
 def snapshot_rmse() -> dict:
     """draw -> the snapshot's protocol RMSE of that clutter draw."""
-    with SNAPSHOT.open() as f:
-        rows = [r for r in csv.DictReader(f) if r["run"] == rfs.ROWS["clutter"]]
-    return {int(r["draw"]): float(r["rmse_protocol_m"]) for r in rows}
+    return {int(r["draw"]): float(r["rmse_protocol_m"]) for r in snapshot_rows()}
+
+
+def snapshot_pooled(far_m: float = 4.0) -> str:
+    """The snapshot's pooled RMSE over its draws (each draw's squared RMSE weighted by its
+    scans scored), and the same without the draws above `far_m`."""
+    rows = snapshot_rows()
+    e = np.array([float(r["rmse_protocol_m"]) for r in rows])
+    n = np.array([float(r["scans_scored"]) for r in rows])
+    keep = e <= far_m
+    pooled = math.sqrt(np.sum(n * e**2) / n.sum())
+    near = math.sqrt(np.sum(n[keep] * e[keep] ** 2) / n[keep].sum())
+    return (
+        f"snapshot: {len(rows)} draws pooled {pooled:.3f} m, median draw {np.median(e):.3f} m; "
+        f"without the {int((~keep).sum())} draws above {far_m} m ({np.sort(e[~keep]).round(2)}"
+        f"): {near:.3f} m"
+    )
 
 
 def id_map(lg, lg0, real: np.ndarray) -> dict:
@@ -156,6 +176,20 @@ def clutter_updates(lg, lg0, clut, upto: int, ids: dict) -> list[str]:
     return lines
 
 
+def largest_p_clutter(lg, clut) -> str:
+    """The largest P(clutter) (`p_clutter`) of any false detection an update used in the run,
+    with the preset's densities and with the protocol's added."""
+    model, worst = CostModel(), [0.0, 0.0]
+    for i in np.flatnonzero(clut & (lg.meas_status >= 0)):
+        k = lg.meas_scan[i]
+        j = np.flatnonzero((lg.obs_scan == k) & (lg.obs_feature == lg.meas_feature[i]))[0]
+        nu, S = lg.obs_innov[j], lg.obs_innov_cov[j]
+        d2 = float(nu @ np.linalg.solve(S, nu))
+        worst[0] = max(worst[0], p_clutter(d2, S, model))
+        worst[1] = max(worst[1], p_clutter(d2, S, model, PROTOCOL_DENSITY))
+    return f"preset {worst[0]:.1e}, + protocol {worst[1]:.1e}"
+
+
 def lost_pairings(lg, lg0, real, ids, k0: int, k1: int) -> tuple[int, int]:
     """(real detections the run without clutter paired with a landmark in scans k0..k1, of
     them those the draw did not pair with the same landmark)."""
@@ -196,6 +230,9 @@ def report(draw: int, got: dict, base: dict, snap: dict) -> None:
         f"false detections {got['clutter']}"
     )
     print(f"  clutter: {clutter_fate(lg, clut)}")
+    print(
+        f"  largest P(clutter) of a false detection an update used: {largest_p_clutter(lg, clut)}"
+    )
     dep = departures(lg, lg0)
     t0 = lg.scan_t[0]
     print(
@@ -265,6 +302,7 @@ def main() -> None:
         f"the protocol's clutter density {PROTOCOL_DENSITY:.4f} per m rad"
     )
     snap = snapshot_rmse()
+    print(snapshot_pooled())
     with threadpool_limits(1):
         base = run_draw(inp, cfg, 0)
         for d in args.draws:
