@@ -3,7 +3,7 @@
 clutter, scan by scan.
 
     TRUNKSLAM_DATA=../shared/datasets PYTHONPATH=. .venv/bin/python docs/rfs_draw_probe.py \
-        [--draws 72 90 12 99 21]
+        [--draws 72 90 12 99 21] [--protocol-density | --joint-check]
 
 Each draw is re-run exactly as `trunkslam reproduce victoria-park-rfs` runs it
 (`experiments.paper.victoria_park.rfs`: the protocol's input, the draw's seed spawned from the
@@ -32,6 +32,12 @@ run without clutter's own pairings in the 30 scans before the departure (how nea
 already was). With --protocol-density each draw is run a second time with IHGR's clutter
 density the preset's plus the protocol's (`association.params.clutter_density`), and its RMSE
 and whether every measurement's decision is the same as the preset's are printed.
+
+With --joint-check (issue 39: `[association] joint_check`, off in the preset) only the run
+without clutter and the draws are run, each with the joint test of a scan's pairings on, and
+printed beside the snapshot's figure of the same run (the preset, check off): protocol RMSE,
+landmarks, the pairings the check dropped (false detections, real ones, scans) and the false
+detections an update still used.
 """
 
 from __future__ import annotations
@@ -290,12 +296,47 @@ def with_protocol_density(inp, cfg, draw: int, got: dict) -> None:
     )
 
 
+def snapshot_no_clutter() -> float:
+    """The snapshot's protocol RMSE of the run without clutter."""
+    with SNAPSHOT.open() as f:
+        rows = [r for r in csv.DictReader(f) if r["run"] == rfs.ROWS["no clutter"]]
+    return float(rows[0]["rmse_protocol_m"])
+
+
+def with_joint_check(inp, cfg, draws: list[int], snap: dict) -> None:
+    """The run without clutter (draw 0) and `draws` with `association.joint_check` on, each
+    beside the snapshot's figure (module doc)."""
+    on = cfg.with_(**{"association.joint_check": True})
+    snap = {0: snapshot_no_clutter(), **snap}
+    for d in [0, *draws]:
+        got = run_draw(inp, on, d)
+        lg = got["log"]
+        clut = ~np.isfinite(lg.meas_radius_m)
+        dropped = np.array(lg.joint_dropped, np.int64).reshape(-1, 3)
+        first = np.searchsorted(lg.meas_scan, dropped[:, 0])  # each scan's first row
+        was_clutter = clut[first + dropped[:, 1]]
+        print(
+            f"draw {d}: joint check on: protocol RMSE {rfs.pooled_rmse([got['errors']]):.4f} m "
+            f"(snapshot, check off: {snap.get(d, math.nan):.4f} m), landmarks "
+            f"{lg.landmark_xy.shape[0]}; pairings dropped {len(dropped)} (false detections "
+            f"{int(was_clutter.sum())}, real {int((~was_clutter).sum())}) in "
+            f"{len(set(dropped[:, 0].tolist()))} scans; false detections still used by an "
+            f"update {int((clut & (lg.meas_status >= 0)).sum())}",
+            flush=True,
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--draws", type=int, nargs="+", default=[72, 90, 12, 99, 21])
     ap.add_argument("--protocol-density", action="store_true")
+    ap.add_argument("--joint-check", action="store_true")
     args = ap.parse_args()
     inp, cfg = load()
+    if args.joint_check:
+        with threadpool_limits(1):
+            with_joint_check(inp, cfg, args.draws, snapshot_rmse())
+        return
     print(
         f"preset closure enabled: {cfg.closure.enabled}; association {cfg.association.method}"
         f", gate_prob {cfg.association.gate_prob}; IHGR densities (preset): {CostModel()}; "

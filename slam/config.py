@@ -776,6 +776,12 @@ class AssociationConfig:
         view are still offered to the association.
     params: extra keyword arguments of the associator (`association.associate`; for
         "ihgr-window" the `CostModel` densities and the rounding options).
+    joint_check: after the association, test the scan's pairings with mapped landmarks
+        jointly (their stacked innovation and its full covariance, the pose's correlations
+        included) against chi2_2k(gate_prob), and while the test fails drop the pairing whose
+        removal lowers the joint distance most (`association.joint`, Neira and Tardos 2001); a
+        dropped measurement is ignored (status AMBIGUOUS: it lies in a landmark's gate, where
+        an unassigned measurement is ignored). Off: the associator's pairings as they are.
     """
 
     method: str = default("ihgr", "paper: IHGR, the paper's associator")
@@ -793,9 +799,16 @@ class AssociationConfig:
         math.radians(10.0), "design: landmarks 10 deg beyond the field of view are still offered"
     )
     params: dict = default(dict, "design: none, the associator's own defaults", factory=True)
+    joint_check: bool = default(
+        False, "design: off, the associator's pairings as they are (measured: docs/notebook.md)"
+    )
 
     def __post_init__(self) -> None:
         _choice("association", "method", self.method, ASSOCIATION_METHODS)
+        if not isinstance(self.joint_check, bool):
+            raise SlamError(
+                f"association.joint_check: must be true or false, got {self.joint_check!r}"
+            )
         for name in ("gate_prob", "new_feature_gate_prob"):
             v = getattr(self, name)
             if not 0.0 < v < 1.0:

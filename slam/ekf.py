@@ -379,13 +379,47 @@ class Filter(_Estimate):
         pose and the observed landmarks' columns.
         """
         idx = np.asarray(idx, dtype=np.int64).reshape(-1)
-        k = idx.size
-        if k == 0:
+        if idx.size == 0:
             return UpdateResult(np.zeros((0, 2)), np.zeros((0, 0)), math.nan)
+        nu, cols, Hc, R_blk = self._batch(idx, z, R, laser_pose, "update")
+        P = self._P
+        HP = Hc @ _sym_rows(P, cols)  # (q, d) = (P H^T)^T, from whole rows of P
+        S = Hc @ HP[:, cols].T + R_blk
+        S = 0.5 * (S + S.T)
+        L = np.linalg.cholesky(S)  # S = L L^T
+        # W = P H^T L^-T (d, q), in Fortran order for BLAS: K = W L^-1, K S K^T = W W^T.
+        W = blas.dtrsm(1.0, L, HP.T, side=1, lower=1, trans_a=1, overwrite_b=1)
+        v = blas.dtrsv(L, nu.reshape(-1), lower=1)  # L^-1 nu
+        nis = float(v @ v)
+        logdet = 2.0 * float(np.log(np.diag(L)).sum())
+        self.x += W @ v  # K nu
+        self.x[2] = float(wrap_angle(self.x[2]))
+        # Joseph form with the optimal gain: P - K S K^T = P - W W^T (lower triangle only)
+        _subtract_gram(P, W, mirror=False)
+        self._mirrored = False
+        return UpdateResult(nu, S, nis, logdet)
+
+    def innovation(
+        self, idx: np.ndarray, z: np.ndarray, R: np.ndarray, laser_pose: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(nu (k, 2), S (2 k, 2 k)): the innovations of measurements z (k, 2) of the landmarks
+        at state positions idx (k,) and their joint covariance H P H^T + R (the pose's
+        correlations included), as `update` computes them, without updating (a joint gate's)."""
+        idx = np.asarray(idx, dtype=np.int64).reshape(-1)
+        if idx.size == 0:
+            return np.zeros((0, 2)), np.zeros((0, 0))
+        nu, cols, Hc, R_blk = self._batch(idx, z, R, laser_pose, "innovation")
+        S = Hc @ (Hc @ _sym_rows(self._P, cols))[:, cols].T + R_blk
+        return nu, 0.5 * (S + S.T)
+
+    def _batch(self, idx: np.ndarray, z, R, laser_pose, who: str):
+        """(nu, cols, Hc, R_blk) of a batch of measurements z (k, 2), R (k, 2, 2) of the
+        landmarks at positions idx (k,), k >= 1, checked (`who`: the caller, for errors)."""
+        k = idx.size
         n = self.landmarks_xy.shape[0]
         if idx.min() < 0 or idx.max() >= n:  # the kernel below reads idx unchecked
             raise SlamError(
-                f"update.idx: landmark positions must be in [0, {n}), got {idx.tolist()}"
+                f"{who}.idx: landmark positions must be in [0, {n}), got {idx.tolist()}"
             )
         z = np.ascontiguousarray(z, dtype=np.float64).reshape(k, 2)
         R = np.ascontiguousarray(R, dtype=np.float64).reshape(k, 2, 2)
@@ -406,23 +440,8 @@ class Filter(_Estimate):
         else:  # another observation model put in its place (the closed-form tests' linear one)
             nu, cols, Hc, R_blk, twice = self._batch_inputs_of(observe, idx, z, R, laser_pose)
         if twice:
-            raise SlamError("update.idx: a landmark appears twice in one batch")
-        P = self._P
-        HP = Hc @ _sym_rows(P, cols)  # (q, d) = (P H^T)^T, from whole rows of P
-        S = Hc @ HP[:, cols].T + R_blk
-        S = 0.5 * (S + S.T)
-        L = np.linalg.cholesky(S)  # S = L L^T
-        # W = P H^T L^-T (d, q), in Fortran order for BLAS: K = W L^-1, K S K^T = W W^T.
-        W = blas.dtrsm(1.0, L, HP.T, side=1, lower=1, trans_a=1, overwrite_b=1)
-        v = blas.dtrsv(L, nu.reshape(-1), lower=1)  # L^-1 nu
-        nis = float(v @ v)
-        logdet = 2.0 * float(np.log(np.diag(L)).sum())
-        self.x += W @ v  # K nu
-        self.x[2] = float(wrap_angle(self.x[2]))
-        # Joseph form with the optimal gain: P - K S K^T = P - W W^T (lower triangle only)
-        _subtract_gram(P, W, mirror=False)
-        self._mirrored = False
-        return UpdateResult(nu, S, nis, logdet)
+            raise SlamError(f"{who}.idx: a landmark appears twice in one batch")
+        return nu, cols, Hc, R_blk
 
     def _batch_inputs_of(self, observe_fn, idx, z, R, laser_pose):
         """`_batch_inputs` by the numpy steps it fused, through `observe_fn` (an observation

@@ -83,6 +83,9 @@ class SlamLog:
         scan, reason, existence] each: reason "existence" (its existence fell below
         map_policy.existence_remove_prob, the figure logged) or "pruned" (the map policy's
         pruner; existence NaN). Merged landmarks are in `closures` / `closure_duplicates`.
+    joint_dropped: with `[association] joint_check`, every pairing the joint test dropped
+        (`slam.joint_gate`), [scan, measurement, landmark id] each; the measurement's status
+        is then AMBIGUOUS (None without the check).
     """
 
     scan_t: np.ndarray
@@ -135,6 +138,7 @@ class SlamLog:
     antenna_pose: np.ndarray | None = None
     landmark_existence: np.ndarray | None = None
     departures: list | None = None
+    joint_dropped: list | None = None
 
     @property
     def n_scans(self) -> int:
@@ -243,6 +247,7 @@ class LogBuilder:
         closures: list | None = None,
         closure_duplicates: list | None = None,
         existence=None,
+        joint_dropped: list | None = None,
     ) -> SlamLog:
         """The `SlamLog`; existence: the run's `slam.existence_map.LandmarkExistence` (None
         without map policy "existence")."""
@@ -296,6 +301,7 @@ class LogBuilder:
             meas_track_unmerged=meas["track"].copy() if h.alias else None,
             landmark_existence=None if existence is None else existence.of(ids),
             departures=list(self.departures),
+            joint_dropped=joint_dropped,
         )
 
 

@@ -8,8 +8,10 @@ scan's record (`ScanResult`) collects it for the log and the visualiser:
    NEW_TENTATIVE or OUT_OF_RANGE;
 3. associate, 5. manage: the map manager (`slam.map_managers`: tentatives with a single-scan
    associator, or the K-scan IHGR window; one contract) pairs measurements with landmarks
-   (`ScanAssociation`) and decides what joins the map (`MapDecisions`: every measurement's
-   final status and track, the landmarks that joined, earlier measurements re-tracked);
+   (`ScanAssociation`; with `[association] joint_check` the pairings the joint test refuses
+   are dropped, `slam.joint_gate`) and decides what joins the map (`MapDecisions`: every
+   measurement's final status and track, the landmarks that joined, earlier measurements
+   re-tracked);
 4. update: all measurements paired with landmarks at once (Joseph form, `slam.ekf.Filter`);
    returns the landmark each measurement updated.
 A scan after which the odometry has moved the vehicle less than `vehicle.min_travel_m` since
@@ -51,6 +53,7 @@ from slam.ekf import Filter, initial_state
 from slam.errors import SlamError
 from slam.existence_map import LandmarkExistence
 from slam.history import RunHistory
+from slam.joint_gate import JointGate
 from slam.log import NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED, LogBuilder, SlamLog
 from slam.map_managers import MapDecisions, Pruner, ScanAssociation, make_map_manager
 from slam.measurement import pass_inflation
@@ -175,6 +178,8 @@ class Slam:
             else None
         )
         self.rest = RestGate(self.motion, self.scan_t, p.min_travel_m)
+        joint = p.association.joint_check
+        self.joint = JointGate(p.association.gate_prob, self.laser) if joint else None
         sd = p.pass_offset_sd_m
         by_state = p.pass_offset_model == "state" and (sd[0] != 0.0 or sd[1] != 0.0)
         self.passes = (
@@ -196,6 +201,8 @@ class Slam:
             return self._skipped(meas, clock)
         revisit = Revisit() if self.closer is None else self.closer.revisit(self.state, k)
         a = self.map_manager.associate(self.state, meas, drift, revisit.hidden)
+        if self.joint is not None:  # `[association] joint_check`: a joint test of its pairings
+            a = self.joint(self.state, meas, a)
         if self.existence is not None:  # on the predicted state, before the update
             tent = getattr(self.map_manager, "tent", None)
             self.existence.update(self.state, meas, a, tent, revisit.hidden)
@@ -410,6 +417,7 @@ def run_slam(
         existence=loop.existence,
         closures=None if closer is None else [e.to_dict() for e in closer.events],
         closure_duplicates=None if closer is None else [list(d) for d in closer.duplicates],
+        joint_dropped=None if loop.joint is None else list(loop.joint.dropped),
     )
 
 

@@ -196,6 +196,13 @@ def _str(p) -> str | None:
     return None if p is None else str(p)
 
 
+def _joint_dropped(lg: SlamLog) -> dict:
+    """The summary's joint_check part: the pairings `[association] joint_check` dropped and
+    the scans it dropped any in."""
+    scans = {row[0] for row in lg.joint_dropped}
+    return {"dropped": len(lg.joint_dropped), "scans": len(scans)}
+
+
 def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
     """Counts, timings per phase, the configuration, errors against GPS (when the sequence has
     GPS) and against the truth (scans the truth covers, the first left out since the run may
@@ -224,6 +231,7 @@ def summarise(lg: SlamLog, seq: Sequence, seconds: float) -> dict:
         "config": json_types(lg.config),
         **({"window": lg.window_stats} if lg.window_stats else {}),
         **({"closures": _closures(lg)} if lg.closures is not None else {}),
+        **({"joint_check": _joint_dropped(lg)} if lg.joint_dropped is not None else {}),
     }
     if seq.gps_t is not None:
         vouched = vouched_for_sequence(seq, SlamConfig.from_dict(lg.config))
