@@ -14,12 +14,12 @@ hypotheses (`association.jcbb`).
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
 
 from association.errors import AssociationError
-from association.jcbb import _joint_gates
 
 __all__ = ["JointCheck", "joint_check"]
 
@@ -33,6 +33,14 @@ class JointCheck(NamedTuple):
     d2_before: float
     d2_after: float
     dropped: tuple[int, ...]
+
+
+@lru_cache(maxsize=64)
+def _gate(gate_prob: float, dof: int) -> float:
+    """chi2_dof(gate_prob): the joint gate of dof / 2 pairings (JCBB's, `association.jcbb`)."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(gate_prob, dof))
 
 
 def _d2_and_drop_gain(nu: np.ndarray, S: np.ndarray) -> tuple[float, np.ndarray]:
@@ -65,14 +73,13 @@ def joint_check(nu, S, gate_prob: float) -> JointCheck:
     keep = np.ones(k, bool)
     if k == 0:
         return JointCheck(keep, 0.0, 0.0, ())
-    gates = _joint_gates(float(gate_prob), k)
     dropped, d2_before = [], None
     try:
         while keep.any():
             rows = np.repeat(keep, 2)
             d2, gain = _d2_and_drop_gain(nu[rows], S[np.ix_(rows, rows)])
             d2_before = d2 if d2_before is None else d2_before
-            if d2 <= gates[int(keep.sum())]:
+            if d2 <= _gate(float(gate_prob), 2 * int(keep.sum())):
                 break
             j = int(np.flatnonzero(keep)[int(np.argmax(gain))])
             keep[j] = False
