@@ -36,8 +36,9 @@ and whether every measurement's decision is the same as the preset's are printed
 With --joint-check (issue 39: `[association] joint_check`, off in the preset) only the run
 without clutter and the draws are run, each with the joint test of a scan's pairings on, and
 printed beside the snapshot's figure of the same run (the preset, check off): protocol RMSE,
-landmarks, the pairings the check dropped (false detections, real ones, scans) and the false
-detections an update still used.
+landmarks, the pairings the check dropped (false detections, real ones, scans), the false
+detections an update still used, and the scans where the check dropped a real pairing and
+kept a false one (the first three with their NIS after the check).
 """
 
 from __future__ import annotations
@@ -315,15 +316,25 @@ def with_joint_check(inp, cfg, draws: list[int], snap: dict) -> None:
         dropped = np.array(lg.joint_dropped, np.int64).reshape(-1, 3)
         first = np.searchsorted(lg.meas_scan, dropped[:, 0])  # each scan's first row
         was_clutter = clut[first + dropped[:, 1]]
+        used = clut & (lg.meas_status >= 0)
+        kept_false = {int(k) for k in lg.meas_scan[used]} & set(dropped[~was_clutter, 0].tolist())
         print(
             f"draw {d}: joint check on: protocol RMSE {rfs.pooled_rmse([got['errors']]):.4f} m "
             f"(snapshot, check off: {snap.get(d, math.nan):.4f} m), landmarks "
             f"{lg.landmark_xy.shape[0]}; pairings dropped {len(dropped)} (false detections "
             f"{int(was_clutter.sum())}, real {int((~was_clutter).sum())}) in "
             f"{len(set(dropped[:, 0].tolist()))} scans; false detections still used by an "
-            f"update {int((clut & (lg.meas_status >= 0)).sum())}",
+            f"update {int(used.sum())}; scans where it dropped a real pairing and kept a "
+            f"false one {len(kept_false)}",
             flush=True,
         )
+        for k in sorted(kept_false)[:3]:  # the first few, scan by scan
+            rows = dropped[dropped[:, 0] == k]
+            print(
+                f"  scan {k} ({lg.scan_t[k] - lg.scan_t[0]:.1f} s): NIS {lg.scan_nis[k]:.1f} on "
+                f"{lg.scan_nis_dof[k]} dof after the check; dropped {len(rows)} real pairing(s)"
+                f", kept {int((used & (lg.meas_scan == k)).sum())} false one(s)"
+            )
 
 
 def main() -> None:
