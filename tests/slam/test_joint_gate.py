@@ -103,6 +103,10 @@ def test_off_by_default_and_a_clean_run_is_the_same_with_it_on():
     assert np.array_equal(off.pose, on.pose)
     assert np.array_equal(off.landmark_xy, on.landmark_xy)
     assert np.all(on.n_associated[5:] >= 2)  # the test had pairings to check
+    from experiments.pipeline.slam import summarise
+
+    assert "joint_check" not in summarise(off, seq, 0.0)
+    assert summarise(on, seq, 0.0)["joint_check"] == {"dropped": 0, "scans": 0}
 
 
 def test_a_non_boolean_is_refused():
