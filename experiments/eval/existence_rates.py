@@ -32,6 +32,13 @@ rate's; no truth):
    noise G R G^T each, plus the odometry increment's), s^2 = max(0, mean(|d|^2 - trace of
    their covariance)) / 4 (two sightings, two axes).
 
+Persistent clutter by range (`derive_repeat_by_range`, used only when asked for):
+4b. repeat_prob_by_range: repeat_prob of 4. per range bin [i bin_m, (i + 1) bin_m) up to the
+   view's range, each never-mapped track in the bin of its sightings' median range (the
+   measured range; `slam.existence.range_bin`, the filter's rule); a bin with no such track
+   takes the pooled repeat_prob of 4. It is the rate the non-tree hypothesis re-reports an
+   object at that range, measured where it is, so it is not scaled by Pd's fall-off.
+
 See-through (`derive_see_through`, used only when asked for; `docs/existence_keep_probe.py`):
 6. see_through_q: the chance that a beam
    passes a real trunk's place in a scan where the trunk was not reported: of the beams that
@@ -76,6 +83,7 @@ __all__ = [
     "derive_existence",
     "derive_pd_range",
     "derive_persistent",
+    "derive_repeat_by_range",
     "derive_see_through",
     "derive_see_through_by_range",
     "range_detection_rates",
@@ -378,6 +386,44 @@ def truncated_geometric_p(k: np.ndarray, cut: int) -> float:
     p = np.linspace(1e-4, 1 - 1e-4, 9999)
     norm = np.log(np.sum(p[:, None] ** np.arange(cut)[None, :], axis=1))
     return float(p[np.argmax(extra * np.log(p) - k.size * norm)])
+
+
+def _never_mapped(lg, scans: tuple[int, int]) -> np.ndarray:
+    """(n,) bool over the run's measurements: in `scans`, on a track that never became a
+    landmark (nor left the map)."""
+    in_half = (lg.meas_scan >= scans[0]) & (lg.meas_scan < scans[1]) & (lg.meas_track >= 0)
+    gone = [row[0] for row in (lg.departures or [])]
+    return in_half & ~np.isin(lg.meas_track, lg.landmark_id) & ~np.isin(lg.meas_track, gone)
+
+
+def derive_repeat_by_range(lg, seq, scans: tuple[int, int], bin_m: float = 10.0) -> dict:
+    """repeat_prob per range bin measured on the run `lg` (a confirm_scans run of `seq`) on
+    `scans` (module doc, 4b): {"settings": {"map_policy.existence_repeat_prob_by_range":
+    [...], "..._bin_m": bin_m}, the tracks per bin}. Each bin's rate is
+    `truncated_geometric_p` of its tracks' runs (clipped as `derive_persistent`'s)."""
+    if not (isinstance(bin_m, (int, float)) and 0.0 < bin_m < math.inf):
+        raise DataError(f"derive_repeat_by_range: bin_m must be finite and > 0, got {bin_m!r}")
+    max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
+    n = max(int(math.ceil(max_range / bin_m)), 1)
+    never = _never_mapped(lg, scans)
+    tracks, k = np.unique(lg.meas_track[never], return_counts=True)
+    cut = max(int(lg.config["map_policy"]["confirm_scans"]) - 1, 1)
+    pooled = truncated_geometric_p(np.minimum(k, cut), cut)
+    rng = np.array([np.median(lg.meas_z[never & (lg.meas_track == t), 0]) for t in tracks])
+    b = range_bin(rng, bin_m, n) if tracks.size else np.zeros(0, np.int64)
+    rates, counts = [], []
+    for i in range(n):
+        runs = np.minimum(k[b == i], cut)
+        counts.append(int(runs.size))
+        rates.append(truncated_geometric_p(runs, cut) if runs.size else pooled)
+    return {
+        "settings": {
+            "map_policy.existence_repeat_prob_by_range": [float(p) for p in rates],
+            "map_policy.existence_repeat_prob_bin_m": float(bin_m),
+        },
+        "never_mapped_tracks_by_bin": counts,
+        "pooled_repeat_prob": pooled,
+    }
 
 
 def derive_persistent(lg, scans: tuple[int, int]) -> dict:
