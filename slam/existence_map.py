@@ -19,7 +19,8 @@ the trunk (`slam.existence`, "Beam footprint"); a landmark's radius is the last 
 With `existence_see_through_q_by_range` a landmark's see-through rate is its range bin's
 (`slam.existence.see_through_q`). With `existence_repeat_prob_by_range` (persistent clutter) a
 landmark's or window track's non-tree repeat rate is its range bin's, not repeat_prob scaled by
-the range fall-off (`slam.existence.repeat_rate`).
+the range fall-off (`slam.existence.repeat_rate`). With `existence_birth_prob_by_range` a new
+tentative (or a window track) starts at its range bin's birth probability.
 The map managers read it (`slam.map_managers`): a tentative joins the map when its existence
 reaches `join_prob` (in a scan it was seen in), a window track joins when the existence of its
 sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`
@@ -49,6 +50,7 @@ from slam.existence import (
     detection_probability,
     falloff,
     gaussian_likelihood,
+    range_bin,
     repeat_rate,
     see_through_q,
     update_existence,
@@ -106,6 +108,8 @@ class LandmarkExistence:
             float(policy.existence_false_per_scan), float(view.max_range), max(fov, 1e-9)
         )
         self.birth = float(policy.existence_birth_prob)
+        self.birth_table = np.asarray(policy.existence_birth_prob_by_range, dtype=np.float64)
+        self.birth_bin_m = float(policy.existence_birth_prob_bin_m)
         # map_policy.existence_clutter "persistent": re-sightings weighed against a non-tree
         # object at the place (`slam.existence`, "Persistent clutter"); None: uniform clutter
         self.repeat = (
@@ -124,10 +128,18 @@ class LandmarkExistence:
         # scan a dict of (n,) arrays over the landmarks and tentatives it updated
         self.trace: list | None = None
 
-    def born(self, lid: int, radius_m: float) -> None:
-        """A new tentative `lid` seen with a circle of radius_m (NaN: unknown)."""
-        self.r[int(lid)] = self.birth
+    def born(self, lid: int, radius_m: float, range_m: float = math.nan) -> None:
+        """A new tentative `lid` seen with a circle of radius_m (NaN: unknown) at range_m (the
+        birth table's bin; NaN or no table: the single birth probability)."""
+        self.r[int(lid)] = self._birth_at(range_m)
         self._radius(lid, radius_m)
+
+    def _birth_at(self, range_m: float) -> float:
+        """The birth probability of a track starting at range_m (module doc)."""
+        if not self.birth_table.size or not math.isfinite(range_m):
+            return self.birth
+        i = range_bin(np.array([range_m]), self.birth_bin_m, self.birth_table.size)[0]
+        return float(self.birth_table[i])
 
     def of(self, ids) -> np.ndarray:
         """(n,) the existence of these ids (NaN for an id never seen)."""
@@ -177,7 +189,8 @@ class LandmarkExistence:
                 repeat /= 1.0 if f is None else max(float(f[0]), 1e-300)
             ratio = self.cfg.pd_max * g / (repeat * _mean_nis_likelihood(S, S + self.shape_var * J))
         # in log-odds: ratio ** n overflows (an OverflowError, not inf) for tiny clutter rates
-        lo = math.log(max(self.birth, 1e-300)) - math.log(max(1.0 - self.birth, 1e-300))
+        birth = self._birth_at(float(range_m))
+        lo = math.log(max(birth, 1e-300)) - math.log(max(1.0 - birth, 1e-300))
         lo += max(n_sightings - 1, 0) * math.log(max(ratio, 1e-300))
         return 1.0 / (1.0 + math.exp(-lo)) if lo > -700.0 else 0.0
 

@@ -17,6 +17,11 @@ of the sequence `seq` with the paper's map policy (confirm_scans), on the scans 
    that of simulated parks without this park's clutter.
 3. birth_prob: of the tracks started (a new tentative), the share that joined the map.
 
+Birth by range (`derive_birth_by_range`, used only when asked for):
+3b. birth_prob_by_range: birth_prob of 3. per range bin [i bin_m, (i + 1) bin_m) up to the
+   view's range, each started track in the bin of the range of the circle that started it
+   (`slam.existence.range_bin`); a bin where no track started takes the pooled birth_prob.
+
 Persistent clutter (`derive_persistent`, map policy `existence_clutter = "persistent"`), from
 the same run's tracks that never became a landmark (the run's own verdict, as the clutter
 rate's; no truth):
@@ -80,6 +85,7 @@ __all__ = [
     "MAX_BEAMS",
     "WELL_SEEN",
     "beam_detection_rates",
+    "derive_birth_by_range",
     "derive_existence",
     "derive_pd_range",
     "derive_persistent",
@@ -369,6 +375,38 @@ def derive_existence(lg, seq, scans: tuple[int, int], established: int = ESTABLI
         "tracks_started": n_started,
         "tracks_joined": n_joined,
         "scans_used": n_scans,
+    }
+
+
+def derive_birth_by_range(lg, seq, scans: tuple[int, int], bin_m: float = 10.0) -> dict:
+    """birth_prob per range bin measured on the run `lg` (a confirm_scans run of `seq`) on
+    `scans` (module doc, 3b): {"settings": {"map_policy.existence_birth_prob_by_range": [...],
+    "..._bin_m": bin_m}, the tracks started and joined per bin}. Each bin's share is clipped to
+    [1e-6, 1], as derive_existence's."""
+    if not (isinstance(bin_m, (int, float)) and 0.0 < bin_m < math.inf):
+        raise DataError(f"derive_birth_by_range: bin_m must be finite and > 0, got {bin_m!r}")
+    max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
+    n = max(int(math.ceil(max_range / bin_m)), 1)
+    in_half = (lg.meas_scan >= scans[0]) & (lg.meas_scan < scans[1])
+    rows = np.flatnonzero(in_half & (lg.meas_status == NEW_TENTATIVE) & (lg.meas_track >= 0))
+    tracks, first = np.unique(lg.meas_track[rows], return_index=True)
+    gone = [row[0] for row in (lg.departures or [])]
+    joined = np.isin(tracks, lg.landmark_id) | np.isin(tracks, gone)
+    b = range_bin(lg.meas_z[rows[first], 0], bin_m, n)
+    started = np.bincount(b, minlength=n)
+    hits = np.bincount(b, weights=joined.astype(np.float64), minlength=n)
+    pooled = float(min(max(joined.sum() / max(tracks.size, 1), 1e-6), 1.0))
+    share = np.where(started > 0, hits / np.maximum(started, 1), pooled)
+    return {
+        "settings": {
+            "map_policy.existence_birth_prob_by_range": [
+                float(min(max(x, 1e-6), 1.0)) for x in share
+            ],
+            "map_policy.existence_birth_prob_bin_m": float(bin_m),
+        },
+        "tracks_started_by_bin": started.tolist(),
+        "tracks_joined_by_bin": [int(x) for x in hits],
+        "pooled_birth_prob": pooled,
     }
 
 

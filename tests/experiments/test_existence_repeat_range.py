@@ -1,12 +1,15 @@
-"""Persistent clutter's repeat rate by range on a simulated drive: derived per range bin from
-the run's never-mapped tracks (`experiments.eval.existence_rates.derive_repeat_by_range`, no
-truth), and used by the run's map loop in place of the single rate (`slam.existence_map`)."""
+"""Persistent clutter's repeat rate and the birth by range on a simulated drive: derived per
+range bin from the run's own tracks (`experiments.eval.existence_rates.derive_repeat_by_range`,
+`derive_birth_by_range`; no truth), and used by the run's map loop in place of the single
+rate (`slam.existence_map`)."""
 
 import numpy as np
 import pytest
 
 from experiments.errors import DataError
 from experiments.eval.existence_rates import (
+    derive_birth_by_range,
+    derive_existence,
     derive_persistent,
     derive_repeat_by_range,
     truncated_geometric_p,
@@ -70,3 +73,30 @@ def test_the_loop_weighs_each_landmark_against_its_bins_rate(drive):
     far = ex.with_(**{"map_policy.existence_repeat_prob_by_range": [0.3, 0.9]})
     c = run_slam(seq, far, features=feats)
     assert not np.array_equal(a.landmark_existence, c.landmark_existence)
+
+
+def test_each_birth_bin_holds_the_tracks_started_at_its_range_and_their_share_joined(drive):
+    """The bins' started tracks sum to derive_existence's, their joined ones too, each bin's
+    birth is its share (the pooled where none started), and a one-bin table of the single birth
+    runs the same to the bit as the single birth."""
+    seq, cfg, feats, lg = drive
+    h = (0, seq.n_scans)
+    d = derive_birth_by_range(lg, seq, h, bin_m=5.0)
+    e = derive_existence(lg, seq, h)
+    started, joined = d["tracks_started_by_bin"], d["tracks_joined_by_bin"]
+    assert sum(started) == e["tracks_started"] > 0 and sum(joined) == e["tracks_joined"]
+    birth = d["settings"]["map_policy.existence_birth_prob_by_range"]
+    assert d["pooled_birth_prob"] == e["settings"]["map_policy.existence_birth_prob"]
+    for b, n, k in zip(birth, started, joined):
+        assert b == (max(k / n, 1e-6) if n else d["pooled_birth_prob"])
+    assert any(n == 0 for n in started) and len(set(birth)) > 1  # both cases are exercised
+    with pytest.raises(DataError, match="bin_m"):
+        derive_birth_by_range(lg, seq, h, bin_m=-1.0)
+    ex = cfg.with_(**{"map_policy.policy": "existence", "map_policy.existence_birth_prob": 0.2})
+    a = run_slam(seq, ex, features=feats)
+    b = run_slam(
+        seq, ex.with_(**{"map_policy.existence_birth_prob_by_range": [0.2]}), features=feats
+    )
+    np.testing.assert_array_equal(a.landmark_existence, b.landmark_existence)
+    far = ex.with_(**{"map_policy.existence_birth_prob_by_range": [0.2, 0.2, 1e-4]})
+    assert run_slam(seq, far, features=feats).landmark_id.size < a.landmark_id.size

@@ -71,3 +71,40 @@ def test_off_by_default_and_checked():
     with pytest.raises(ValueError, match="repeat_bin_m"):
         ExistenceConfig(repeat_bin_m=0.0)
     assert ExistenceConfig(repeat_by_range=[0.2]).repeat_by_range == (0.2,)  # hashable
+
+
+class _View:
+    fov, max_range = (-1.5, 1.5), 80.0
+
+
+def test_a_new_tentative_starts_at_its_range_bins_birth():
+    """Birth table (0.5, 0.2, 0.05) by 10 m: circles at 5, 15 and 99 m (the last bin beyond),
+    and one of unknown range (the single birth 0.3); a window track of 1 sighting starts the
+    same, and without a table every range starts at the single birth."""
+    from slam.config import MapPolicy
+    from slam.existence_map import LandmarkExistence
+
+    pol = MapPolicy(existence_birth_prob=0.3, existence_birth_prob_by_range=(0.5, 0.2, 0.05))
+    book = LandmarkExistence(pol, _View(), np.zeros(3))
+    for lid, d in ((1, 5.0), (2, 15.0), (3, 99.0), (4, math.nan)):
+        book.born(lid, 0.15, d)
+    assert book.of([1, 2, 3, 4]).tolist() == [0.5, 0.2, 0.05, 0.3]
+    R = np.diag([0.01, 1e-4])
+    assert book.track_existence(1, R, 15.0) == pytest.approx(0.2, rel=1e-12)
+    plain = LandmarkExistence(MapPolicy(existence_birth_prob=0.3), _View(), np.zeros(3))
+    plain.born(1, 0.15, 15.0)
+    assert plain.of([1]).tolist() == [0.3]
+
+
+def test_the_birth_table_is_off_by_default_and_checked():
+    policy = SlamConfig().map_policy
+    assert policy.existence_birth_prob_by_range == ()
+    assert policy.existence_birth_prob_bin_m == 10.0
+    for bad in ([0.0], [1.5], [math.nan], [True], "0.1", [0.1] * 101):
+        with pytest.raises(SlamError, match="existence_birth_prob_by_range"):
+            SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": bad})
+    for bad in (0.0, -1.0, math.inf, math.nan, True):
+        with pytest.raises(SlamError, match="existence_birth_prob_bin_m"):
+            SlamConfig().with_(**{"map_policy.existence_birth_prob_bin_m": bad})
+    cfg = SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": [1, 0.5]})
+    assert cfg.map_policy.existence_birth_prob_by_range == (1.0, 0.5)
