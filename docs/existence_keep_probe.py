@@ -27,8 +27,11 @@ on scans 1-2000 of the detections' confirm run, the first variant named: `real_r
 The variants ending in "footprint" count a see-through beam only when its footprint, half the
 beam step (HALF_STEP) + k sd_bearing, lies inside the trunk (`existence_see_through_footprint`),
 with q derived with the same count; "q by range" takes q per 10 m range bin
-(`derive_see_through_by_range`). The lab notebook's entry "a see-through beam's footprint, and
-the see-through rate by range" was measured with them once.
+(`derive_see_through_by_range`); "repeat by range" takes persistent clutter's repeat rate per
+10 m range bin (`derive_repeat_by_range`), not scaled by Pd's fall-off; "birth by range" a
+new track's birth per 10 m bin of its first circle's range (`derive_birth_by_range`). The
+lab notebook's entry "a see-through beam's footprint, and the see-through rate by range" was
+measured with them once (before "repeat by range" existed).
 
 sim: `reproduce sim-clutter`'s 20 drives (its seeds: root seed 0), both scenes, `paper` and
 `geometric`: the confirm run, then the existence policy with the settings derived from it
@@ -65,9 +68,11 @@ from scipy.stats import chi2
 
 from experiments.eval.existence_rates import (
     MAX_BEAMS,
+    derive_birth_by_range,
     derive_existence,
     derive_pd_range,
     derive_persistent,
+    derive_repeat_by_range,
     derive_see_through,
     derive_see_through_by_range,
     range_detection_rates,
@@ -177,6 +182,26 @@ VARIANTS = {
         "q": "by range",
         "range": "derived",
     },
+    # persistent clutter's repeat rate per 10 m range bin, derived on the derivation half
+    # (`existence_rates.derive_repeat_by_range`): a far sighting weighs Pd(d) / repeat(d)
+    "persistent, kept, q by range, range, bounded, fused, tolerance, footprint, repeat by range": {
+        **TOLERANT,
+        "map_policy.existence_see_through_footprint": HALF_STEP,
+        "q": "by range",
+        "range": "derived",
+        "repeat": "by range",
+    },
+    # and the birth per 10 m range bin of the circle that starts a track, derived on the
+    # derivation half (`existence_rates.derive_birth_by_range`)
+    "persistent, kept, q by range, range, bounded, fused, tolerance, footprint, repeat by range, "
+    "birth by range": {
+        **TOLERANT,
+        "map_policy.existence_see_through_footprint": HALF_STEP,
+        "q": "by range",
+        "range": "derived",
+        "repeat": "by range",
+        "birth": "by range",
+    },
     "uniform, kept, q derived, range, bounded, fused, tolerance": {
         "map_policy.existence_keep_tentatives": True,
         "map_policy.existence_unreached_scans": 100,
@@ -201,8 +226,12 @@ def _settings(derived: dict, variant: str) -> dict:
         own |= derived["q_by_range_footprint" if footprint else "q_by_range"]
     if own.pop("range", None) == "derived":
         own |= derived["pd_range"]
+    if own.pop("repeat", None) == "by range":
+        own |= derived["repeat_by_range"]
+    if own.pop("birth", None) == "by range":
+        own |= derived["birth_by_range"]
     mine = ("see_through_q", "see_through_q_footprint", "pd_range", "q_by_range")
-    mine += ("q_by_range_footprint",)
+    mine += ("q_by_range_footprint", "repeat_by_range", "birth_by_range")
     return {k: v for k, v in derived.items() if k not in mine} | own
 
 
@@ -317,6 +346,8 @@ def _base(extractor: str):
             qr = derive_see_through_by_range(lg, seq, h, min_beams, footprint_steps=f)
             derived[_tag(h)][key] = qr["settings"]
         derived[_tag(h)]["pd_range"] = derive_pd_range(lg, seq, h, min_beams)["settings"]
+        derived[_tag(h)]["repeat_by_range"] = derive_repeat_by_range(lg, seq, h)["settings"]
+        derived[_tag(h)]["birth_by_range"] = derive_birth_by_range(lg, seq, h)["settings"]
     return seq, ref, base, feats, lg, derived
 
 
@@ -380,6 +411,8 @@ def _sim_drive(seed: int, variants: list[str]) -> list[dict]:
                 qr = derive_see_through_by_range(lg, seq, n, mb, footprint_steps=f)
                 settings[key] = qr["settings"]
             settings["pd_range"] = derive_pd_range(lg, seq, n, mb)["settings"]
+            settings["repeat_by_range"] = derive_repeat_by_range(lg, seq, n)["settings"]
+            settings["birth_by_range"] = derive_birth_by_range(lg, seq, n)["settings"]
             for variant in variants:
                 cfg = scfg.with_(
                     **{"map_policy.policy": "existence", **_settings(settings, variant)}
@@ -435,6 +468,8 @@ def full(variant: str) -> dict:
         qr = derive_see_through_by_range(lg, seq2000, h, mb, footprint_steps=f)
         settings[key] = qr["settings"]
     settings["pd_range"] = derive_pd_range(lg, seq2000, h, mb)["settings"]
+    settings["repeat_by_range"] = derive_repeat_by_range(lg, seq2000, h)["settings"]
+    settings["birth_by_range"] = derive_birth_by_range(lg, seq2000, h)["settings"]
     cfg = base.with_(**{"map_policy.policy": "existence", **_settings(settings, variant)})
     row, run, _ = _one(variant, load_victoria_park(full=True), cfg, load_ss2002_reference())
     keep = ("rmse_vouched_m", "fixes_vouched", "rmse_m", "fixes", "rmse_2001_7249_m")

@@ -393,6 +393,22 @@ class MapPolicy:
         the default: one q at every range). Derived per bin on a run's own established
         landmarks (`existence_rates.derive_see_through_by_range`). At most 100 rates: a
         design bound on the table's length, not a measured one.
+    existence_repeat_prob_by_range, existence_repeat_prob_bin_m: with persistent clutter, the
+        non-tree object's re-report rate per range bin [i bin, (i + 1) bin) (the last bin's
+        beyond the table), each in (0, 1), in place of existence_repeat_prob scaled by Pd's
+        range fall-off (`slam.existence`, "Repeat rate by range"; (), the default: that
+        scaled single rate). A detection then weighs Pd(d) against the rate at its range, so
+        a far sighting, where the extractor's false circles are common, is weaker evidence.
+        Derived per bin from a run's own never-mapped tracks
+        (`existence_rates.derive_repeat_by_range`). At most 100 rates (a design bound).
+    existence_birth_prob_by_range, existence_birth_prob_bin_m: a new tentative's existence per
+        range bin of the circle that starts it [i bin, (i + 1) bin) (the last bin's beyond the
+        table), each in (0, 1], in place of existence_birth_prob (`slam.existence_map`; (), the
+        default: one birth at every range). Of the circles seen where nothing was mapped, the
+        share that are new trunks at that range: far away, where the extractor's false
+        circles are common, a new track starts less probable. Derived per bin as the share of
+        a run's tracks started there that joined (`existence_rates.derive_birth_by_range`).
+        At most 100 rates (a design bound).
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -458,6 +474,22 @@ class MapPolicy:
     existence_see_through_q_bin_m: float = default(
         10.0, "design: 10 m bins, as the notebook's detection-rate tables read Pd by range"
     )
+    existence_repeat_prob_by_range: tuple[float, ...] = default(
+        (),
+        "design: (), one repeat rate scaled by Pd's fall-off (as before); derived per bin; at "
+        "most 100 rates, a design bound on the table's length",
+    )
+    existence_repeat_prob_bin_m: float = default(
+        10.0, "design: 10 m bins, as the see-through rate's by range"
+    )
+    existence_birth_prob_by_range: tuple[float, ...] = default(
+        (),
+        "design: (), one birth probability at every range (as before); derived per bin; at "
+        "most 100 rates, a design bound on the table's length",
+    )
+    existence_birth_prob_bin_m: float = default(
+        10.0, "design: 10 m bins, as the see-through rate's by range"
+    )
     existence_join_prob: float = default(0.99, "design: 99% probable that it is a real trunk")
     existence_remove_prob: float = default(0.01, "design: below 1% probable that it is real")
 
@@ -502,6 +534,41 @@ class MapPolicy:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
             raise SlamError(
                 f"map_policy.existence_see_through_q_bin_m: must be finite and > 0, got {v!r}"
+            )
+
+    def _check_birth_by_range(self) -> None:
+        v = self.existence_birth_prob_by_range
+        ok = isinstance(v, (tuple, list)) and len(v) <= 100
+        if not ok or not all(
+            isinstance(p, (int, float)) and not isinstance(p, bool) and 0.0 < p <= 1.0 for p in v
+        ):
+            raise SlamError(
+                "map_policy.existence_birth_prob_by_range: expected a list of at most 100 "
+                f"probabilities in (0, 1] (100: a design bound on the table's length), got "
+                f"{_shown(v)}"
+            )
+        object.__setattr__(self, "existence_birth_prob_by_range", tuple(float(p) for p in v))
+        v = self.existence_birth_prob_bin_m
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_birth_prob_bin_m: must be finite and > 0, got {v!r}"
+            )
+
+    def _check_repeat_by_range(self) -> None:
+        v = self.existence_repeat_prob_by_range
+        ok = isinstance(v, (tuple, list)) and len(v) <= 100
+        if not ok or not all(
+            isinstance(p, (int, float)) and not isinstance(p, bool) and 0.0 < p < 1.0 for p in v
+        ):
+            raise SlamError(
+                "map_policy.existence_repeat_prob_by_range: expected a list of at most 100 "
+                f"rates in (0, 1) (100: a design bound on the table's length), got {_shown(v)}"
+            )
+        object.__setattr__(self, "existence_repeat_prob_by_range", tuple(float(p) for p in v))
+        v = self.existence_repeat_prob_bin_m
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
+            raise SlamError(
+                f"map_policy.existence_repeat_prob_bin_m: must be finite and > 0, got {v!r}"
             )
 
     def _check_existence(self) -> None:
@@ -564,6 +631,8 @@ class MapPolicy:
                 f"map_policy.existence_see_through_footprint: must be finite and >= 0, got {v!r}"
             )
         self._check_q_by_range()
+        self._check_repeat_by_range()
+        self._check_birth_by_range()
         v = self.existence_unreached_scans
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise SlamError(

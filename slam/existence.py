@@ -92,6 +92,15 @@ extractor can see. Each scan:
    range d uses q_by_range[i], i = floor(d / q_bin_m) (the last bin's beyond the table):
    the rate measured per bin on the run's own established landmarks
    (`experiments.eval.existence_rates.derive_see_through_by_range`).
+   **Repeat rate by range** (`repeat_by_range` non-empty; (), the default: repeat_prob scaled
+   by the range fall-off). Against persistent clutter a detection weighs Pd g against the
+   non-tree object's re-report rate: with one repeat_prob scaled by the trees' own fall-off
+   f(d) the ratio Pd / repeat is the same at every range, so a far sighting (a thin object
+   seen by 1-3 beams) is as strong evidence of a tree as a near one. With a table, a landmark
+   at range d is weighed against repeat_by_range[i], i = floor(d / repeat_bin_m) (the last
+   bin's beyond the table), not scaled by f(d): the rate measured per bin on the run's own
+   never-mapped tracks, so a detection weighs Pd(d) / repeat(d), the extractor's false
+   re-reports where they are (`experiments.eval.existence_rates.derive_repeat_by_range`).
 4. **Decisions** (`decide`): a tentative joins the map when r >= `join_prob` ("at least this
    probable that it is a real trunk"); a landmark is removed when r < `remove_prob` ("less
    probable than this that it is real"). A new tentative starts at `initial_existence(birth,
@@ -137,6 +146,7 @@ __all__ = [
     "initial_existence",
     "predict_existence",
     "range_bin",
+    "repeat_rate",
     "see_through_q",
     "update_existence",
     "update_existence_persistent",
@@ -160,6 +170,9 @@ class ExistenceConfig:
         trunk for the beam to count as see-through (module doc, "Beam footprint"; 0: none).
     q_by_range, q_bin_m: see_through_q per range bin [i q_bin_m, (i + 1) q_bin_m), each in
         (0, 1] (module doc, "See-through rate by range"; (): see_through_q at every range), m.
+    repeat_by_range, repeat_bin_m: persistent clutter's repeat_prob per range bin
+        [i repeat_bin_m, (i + 1) repeat_bin_m), each in (0, 1), not scaled by the fall-off
+        (module doc, "Repeat rate by range"; (): repeat_prob f(d) at every range), m.
     """
 
     pd_max: float = 0.9
@@ -176,6 +189,8 @@ class ExistenceConfig:
     footprint_steps: float = 0.0
     q_by_range: tuple[float, ...] = ()
     q_bin_m: float = 10.0
+    repeat_by_range: tuple[float, ...] = ()
+    repeat_bin_m: float = 10.0
 
     def __post_init__(self) -> None:
         for name in ("pd_max", "survival", "join_prob", "remove_prob"):
@@ -224,6 +239,21 @@ class ExistenceConfig:
         v = self.q_bin_m
         if not (isinstance(v, (int, float)) and 0.0 < v < math.inf):
             raise ValueError(f"ExistenceConfig.q_bin_m: must be finite and > 0, got {v!r}")
+        self._check_repeat_by_range()
+
+    def _check_repeat_by_range(self) -> None:
+        v = self.repeat_by_range
+        if not isinstance(v, (tuple, list)) or not all(
+            isinstance(p, (int, float)) and not isinstance(p, bool) and 0.0 < p < 1.0 for p in v
+        ):
+            shown = repr(v) if len(repr(v)) <= 80 else repr(v)[:77] + "..."
+            raise ValueError(
+                f"ExistenceConfig.repeat_by_range: each must be in (0, 1), got {shown}"
+            )
+        object.__setattr__(self, "repeat_by_range", tuple(float(p) for p in v))
+        v = self.repeat_bin_m
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and 0.0 < v < math.inf):
+            raise ValueError(f"ExistenceConfig.repeat_bin_m: must be finite and > 0, got {v!r}")
 
 
 class BeamEvidence(NamedTuple):
@@ -335,6 +365,16 @@ def see_through_q(lm_range_m: np.ndarray, cfg: ExistenceConfig) -> np.ndarray:
     return table[range_bin(d, cfg.q_bin_m, table.size)]
 
 
+def repeat_rate(lm_range_m: np.ndarray, cfg: ExistenceConfig) -> np.ndarray:
+    """(L,) persistent clutter's repeat rate of landmarks at these ranges from the
+    repeat_by_range table (its bin; the last beyond the table; module doc, "Repeat rate by
+    range"). An error without a table: the single repeat_prob is the map policy's."""
+    if not cfg.repeat_by_range:
+        raise ValueError("repeat_rate: cfg.repeat_by_range is empty (no table to read)")
+    table = np.asarray(cfg.repeat_by_range, dtype=np.float64)
+    return table[range_bin(lm_range_m, cfg.repeat_bin_m, table.size)]
+
+
 def range_bin(range_m: np.ndarray, bin_m: float, n: int) -> np.ndarray:
     """(L,) int64 the range bin [i bin_m, (i + 1) bin_m) of each range, i = floor(range /
     bin_m) (Python's //, so that the filter and the derivation agree at every edge), clipped
@@ -415,7 +455,7 @@ def update_existence_persistent(
     likelihood: np.ndarray,
     likelihood_object: np.ndarray,
     through: np.ndarray,
-    repeat_prob: float,
+    repeat_prob: float | np.ndarray,
     cfg: ExistenceConfig,
     falloff: np.ndarray | None = None,
     q: np.ndarray | None = None,
@@ -425,14 +465,15 @@ def update_existence_persistent(
     again with probability repeat_prob in a scan whose beams reach it (pd > 0), its circle's
     centre spread by its shape (likelihood_object: N(nu; 0, S + the shape's covariance));
     "tree" is as `update_existence`. likelihood: N(nu; 0, S) where detected. falloff: (L,)
-    the range fall-off f(d) that scales repeat_prob as it scales Pd (module doc; None: 1).
+    the range fall-off f(d) that scales repeat_prob as it scales Pd (module doc; None: 1);
+    repeat_prob may be (L,), each landmark's (`repeat_rate`, then falloff None).
     q: (L,) each landmark's see-through rate (`see_through_q`; None: cfg.see_through_q, an
     error when cfg.q_by_range is set)."""
     r = np.asarray(r, dtype=np.float64)
     pd = np.asarray(pd, dtype=np.float64)
     det = np.asarray(detected, bool)
     q = _see_through_rate(q, cfg, "update_existence_persistent")
-    if not 0.0 < repeat_prob < 1.0:
+    if not np.all((np.asarray(repeat_prob) > 0.0) & (np.asarray(repeat_prob) < 1.0)):
         raise ValueError(
             f"update_existence_persistent: repeat_prob must be in (0, 1), got {repeat_prob!r}"
         )

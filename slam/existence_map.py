@@ -17,7 +17,10 @@ beside the pose's). With `existence_see_through_footprint` > 0 a see-through bea
 (that many beam steps either side of its ray, + k sd_bearing with the tolerance) must lie inside
 the trunk (`slam.existence`, "Beam footprint"); a landmark's radius is the last circle's.
 With `existence_see_through_q_by_range` a landmark's see-through rate is its range bin's
-(`slam.existence.see_through_q`).
+(`slam.existence.see_through_q`). With `existence_repeat_prob_by_range` (persistent clutter) a
+landmark's or window track's non-tree repeat rate is its range bin's, not repeat_prob scaled by
+the range fall-off (`slam.existence.repeat_rate`). With `existence_birth_prob_by_range` a new
+tentative (or a window track) starts at its range bin's birth probability.
 The map managers read it (`slam.map_managers`): a tentative joins the map when its existence
 reaches `join_prob` (in a scan it was seen in), a window track joins when the existence of its
 sightings (`track_existence`) does, and a landmark whose existence falls below `remove_prob`
@@ -47,6 +50,8 @@ from slam.existence import (
     detection_probability,
     falloff,
     gaussian_likelihood,
+    range_bin,
+    repeat_rate,
     see_through_q,
     update_existence,
     update_existence_persistent,
@@ -95,12 +100,16 @@ class LandmarkExistence:
             footprint_steps=float(policy.existence_see_through_footprint),
             q_by_range=policy.existence_see_through_q_by_range,
             q_bin_m=float(policy.existence_see_through_q_bin_m),
+            repeat_by_range=policy.existence_repeat_prob_by_range,
+            repeat_bin_m=float(policy.existence_repeat_prob_bin_m),
         )
         fov = float(view.fov[1] - view.fov[0])
         self.kappa = clutter_density(
             float(policy.existence_false_per_scan), float(view.max_range), max(fov, 1e-9)
         )
         self.birth = float(policy.existence_birth_prob)
+        self.birth_table = np.asarray(policy.existence_birth_prob_by_range, dtype=np.float64)
+        self.birth_bin_m = float(policy.existence_birth_prob_bin_m)
         # map_policy.existence_clutter "persistent": re-sightings weighed against a non-tree
         # object at the place (`slam.existence`, "Persistent clutter"); None: uniform clutter
         self.repeat = (
@@ -119,10 +128,18 @@ class LandmarkExistence:
         # scan a dict of (n,) arrays over the landmarks and tentatives it updated
         self.trace: list | None = None
 
-    def born(self, lid: int, radius_m: float) -> None:
-        """A new tentative `lid` seen with a circle of radius_m (NaN: unknown)."""
-        self.r[int(lid)] = self.birth
+    def born(self, lid: int, radius_m: float, range_m: float = math.nan) -> None:
+        """A new tentative `lid` seen with a circle of radius_m (NaN: unknown) at range_m (the
+        birth table's bin; NaN or no table: the single birth probability)."""
+        self.r[int(lid)] = self._birth_at(range_m)
         self._radius(lid, radius_m)
+
+    def _birth_at(self, range_m: float) -> float:
+        """The birth probability of a track starting at range_m (module doc)."""
+        if not self.birth_table.size or not math.isfinite(range_m):
+            return self.birth
+        i = range_bin(np.array([range_m]), self.birth_bin_m, self.birth_table.size)[0]
+        return float(self.birth_table[i])
 
     def of(self, ids) -> np.ndarray:
         """(n,) the existence of these ids (NaN for an id never seen)."""
@@ -166,13 +183,14 @@ class LandmarkExistence:
         ratio = self.cfg.pd_max * (1.0 if f is None else float(f[0])) * g / self.kappa
         if self.repeat is not None:  # persistent clutter: against an object at the place
             J = np.diag([1.0, 1.0 / max(float(range_m), 1e-3) ** 2])  # world xy -> range, bearing
-            ratio = (
-                self.cfg.pd_max
-                * g
-                / (self.repeat * _mean_nis_likelihood(S, S + self.shape_var * J))
-            )
+            repeat = self.repeat
+            if self.cfg.repeat_by_range:  # the range bin's rate against Pd's fall-off
+                repeat = float(repeat_rate(np.array([float(range_m)]), self.cfg)[0])
+                repeat /= 1.0 if f is None else max(float(f[0]), 1e-300)
+            ratio = self.cfg.pd_max * g / (repeat * _mean_nis_likelihood(S, S + self.shape_var * J))
         # in log-odds: ratio ** n overflows (an OverflowError, not inf) for tiny clutter rates
-        lo = math.log(max(self.birth, 1e-300)) - math.log(max(1.0 - self.birth, 1e-300))
+        birth = self._birth_at(float(range_m))
+        lo = math.log(max(birth, 1e-300)) - math.log(max(1.0 - birth, 1e-300))
         lo += max(n_sightings - 1, 0) * math.log(max(ratio, 1e-300))
         return 1.0 / (1.0 + math.exp(-lo)) if lo > -700.0 else 0.0
 
@@ -226,6 +244,9 @@ class LandmarkExistence:
                 r, pd, detected[idx], g[idx], ev.through, kappa=self.kappa, cfg=self.cfg, q=q
             )
         else:
+            repeat, f_repeat = self.repeat, f
+            if self.cfg.repeat_by_range:  # the bin's rate, measured where it is: no f(d)
+                repeat, f_repeat = repeat_rate(z_hat[idx, 0], self.cfg), None
             r = update_existence_persistent(
                 r,
                 pd,
@@ -233,9 +254,9 @@ class LandmarkExistence:
                 g[idx],
                 g_obj[idx],
                 through=ev.through,
-                repeat_prob=self.repeat,
+                repeat_prob=repeat,
                 cfg=self.cfg,
-                falloff=f,
+                falloff=f_repeat,
                 q=q,
             )
         for lid, v in zip(ids[idx].tolist(), r.tolist()):

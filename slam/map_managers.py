@@ -289,7 +289,7 @@ class TentativeMap:
             mxy, C = sighting(pose, pose_cov, z[i], R[i], ctx.laser)
             lid = ctx.new_id()
             if book is not None:
-                book.born(lid, float(radii(meas)[i]))
+                book.born(lid, float(radii(meas)[i]), float(z[i, 0]))
             new.append((mxy, C, lid))
             new_meas.append(int(i))
             track[i] = lid

@@ -17,6 +17,11 @@ of the sequence `seq` with the paper's map policy (confirm_scans), on the scans 
    that of simulated parks without this park's clutter.
 3. birth_prob: of the tracks started (a new tentative), the share that joined the map.
 
+Birth by range (`derive_birth_by_range`, used only when asked for):
+3b. birth_prob_by_range: birth_prob of 3. per range bin [i bin_m, (i + 1) bin_m) up to the
+   view's range, each started track in the bin of the range of the circle that started it
+   (`slam.existence.range_bin`); a bin where no track started takes the pooled birth_prob.
+
 Persistent clutter (`derive_persistent`, map policy `existence_clutter = "persistent"`), from
 the same run's tracks that never became a landmark (the run's own verdict, as the clutter
 rate's; no truth):
@@ -31,6 +36,13 @@ rate's; no truth):
    scan; the pose error of consecutive scans is shared, so d carries the two measurements'
    noise G R G^T each, plus the odometry increment's), s^2 = max(0, mean(|d|^2 - trace of
    their covariance)) / 4 (two sightings, two axes).
+
+Persistent clutter by range (`derive_repeat_by_range`, used only when asked for):
+4b. repeat_prob_by_range: repeat_prob of 4. per range bin [i bin_m, (i + 1) bin_m) up to the
+   view's range, each never-mapped track in the bin of its sightings' median range (the
+   measured range; `slam.existence.range_bin`, the filter's rule); a bin with no such track
+   takes the pooled repeat_prob of 4. It is the rate the non-tree hypothesis re-reports an
+   object at that range, measured where it is, so it is not scaled by Pd's fall-off.
 
 See-through (`derive_see_through`, used only when asked for; `docs/existence_keep_probe.py`):
 6. see_through_q: the chance that a beam
@@ -73,9 +85,11 @@ __all__ = [
     "MAX_BEAMS",
     "WELL_SEEN",
     "beam_detection_rates",
+    "derive_birth_by_range",
     "derive_existence",
     "derive_pd_range",
     "derive_persistent",
+    "derive_repeat_by_range",
     "derive_see_through",
     "derive_see_through_by_range",
     "range_detection_rates",
@@ -364,6 +378,38 @@ def derive_existence(lg, seq, scans: tuple[int, int], established: int = ESTABLI
     }
 
 
+def derive_birth_by_range(lg, seq, scans: tuple[int, int], bin_m: float = 10.0) -> dict:
+    """birth_prob per range bin measured on the run `lg` (a confirm_scans run of `seq`) on
+    `scans` (module doc, 3b): {"settings": {"map_policy.existence_birth_prob_by_range": [...],
+    "..._bin_m": bin_m}, the tracks started and joined per bin}. Each bin's share is clipped to
+    [1e-6, 1], as derive_existence's."""
+    if not (isinstance(bin_m, (int, float)) and 0.0 < bin_m < math.inf):
+        raise DataError(f"derive_birth_by_range: bin_m must be finite and > 0, got {bin_m!r}")
+    max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
+    n = max(int(math.ceil(max_range / bin_m)), 1)
+    in_half = (lg.meas_scan >= scans[0]) & (lg.meas_scan < scans[1])
+    rows = np.flatnonzero(in_half & (lg.meas_status == NEW_TENTATIVE) & (lg.meas_track >= 0))
+    tracks, first = np.unique(lg.meas_track[rows], return_index=True)
+    gone = [row[0] for row in (lg.departures or [])]
+    joined = np.isin(tracks, lg.landmark_id) | np.isin(tracks, gone)
+    b = range_bin(lg.meas_z[rows[first], 0], bin_m, n)
+    started = np.bincount(b, minlength=n)
+    hits = np.bincount(b, weights=joined.astype(np.float64), minlength=n)
+    pooled = float(min(max(joined.sum() / max(tracks.size, 1), 1e-6), 1.0))
+    share = np.where(started > 0, hits / np.maximum(started, 1), pooled)
+    return {
+        "settings": {
+            "map_policy.existence_birth_prob_by_range": [
+                float(min(max(x, 1e-6), 1.0)) for x in share
+            ],
+            "map_policy.existence_birth_prob_bin_m": float(bin_m),
+        },
+        "tracks_started_by_bin": started.tolist(),
+        "tracks_joined_by_bin": [int(x) for x in hits],
+        "pooled_birth_prob": pooled,
+    }
+
+
 def truncated_geometric_p(k: np.ndarray, cut: int) -> float:
     """The maximum-likelihood p of runs k (>= 1) drawn with P(k) proportional to p^(k - 1) for
     k = 1 .. cut (module doc, 4), on a grid of 1e-4 in (0, 1); 0.5 / (runs + 1) when no run
@@ -378,6 +424,44 @@ def truncated_geometric_p(k: np.ndarray, cut: int) -> float:
     p = np.linspace(1e-4, 1 - 1e-4, 9999)
     norm = np.log(np.sum(p[:, None] ** np.arange(cut)[None, :], axis=1))
     return float(p[np.argmax(extra * np.log(p) - k.size * norm)])
+
+
+def _never_mapped(lg, scans: tuple[int, int]) -> np.ndarray:
+    """(n,) bool over the run's measurements: in `scans`, on a track that never became a
+    landmark (nor left the map)."""
+    in_half = (lg.meas_scan >= scans[0]) & (lg.meas_scan < scans[1]) & (lg.meas_track >= 0)
+    gone = [row[0] for row in (lg.departures or [])]
+    return in_half & ~np.isin(lg.meas_track, lg.landmark_id) & ~np.isin(lg.meas_track, gone)
+
+
+def derive_repeat_by_range(lg, seq, scans: tuple[int, int], bin_m: float = 10.0) -> dict:
+    """repeat_prob per range bin measured on the run `lg` (a confirm_scans run of `seq`) on
+    `scans` (module doc, 4b): {"settings": {"map_policy.existence_repeat_prob_by_range":
+    [...], "..._bin_m": bin_m}, the tracks per bin}. Each bin's rate is
+    `truncated_geometric_p` of its tracks' runs (clipped as `derive_persistent`'s)."""
+    if not (isinstance(bin_m, (int, float)) and 0.0 < bin_m < math.inf):
+        raise DataError(f"derive_repeat_by_range: bin_m must be finite and > 0, got {bin_m!r}")
+    max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
+    n = max(int(math.ceil(max_range / bin_m)), 1)
+    never = _never_mapped(lg, scans)
+    tracks, k = np.unique(lg.meas_track[never], return_counts=True)
+    cut = max(int(lg.config["map_policy"]["confirm_scans"]) - 1, 1)
+    pooled = truncated_geometric_p(np.minimum(k, cut), cut)
+    rng = np.array([np.median(lg.meas_z[never & (lg.meas_track == t), 0]) for t in tracks])
+    b = range_bin(rng, bin_m, n) if tracks.size else np.zeros(0, np.int64)
+    rates, counts = [], []
+    for i in range(n):
+        runs = np.minimum(k[b == i], cut)
+        counts.append(int(runs.size))
+        rates.append(truncated_geometric_p(runs, cut) if runs.size else pooled)
+    return {
+        "settings": {
+            "map_policy.existence_repeat_prob_by_range": [float(p) for p in rates],
+            "map_policy.existence_repeat_prob_bin_m": float(bin_m),
+        },
+        "never_mapped_tracks_by_bin": counts,
+        "pooled_repeat_prob": pooled,
+    }
 
 
 def derive_persistent(lg, scans: tuple[int, int]) -> dict:
