@@ -77,11 +77,17 @@ def _feed(h, value) -> None:
         h.update(repr(value).encode())
 
 
+# fields of options added after a baseline, None when the option is off: left out then, so a
+# baseline saved before the option still matches a run with it off
+OFF_WHEN_NONE = ("joint_dropped",)
+
+
 def log_digest(log) -> str:
-    """SHA-256 over the `SlamLog`'s fields (its timings and config aside), field order."""
+    """SHA-256 over the `SlamLog`'s fields (its timings and config aside, and the fields of
+    `OFF_WHEN_NONE` when None), field order."""
     h = hashlib.sha256()
     for name, value in vars(log).items():
-        if name in ("timing_s", "config"):
+        if name in ("timing_s", "config") or (name in OFF_WHEN_NONE and value is None):
             continue
         h.update(f"{name}|".encode())
         _feed(h, value)

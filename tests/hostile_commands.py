@@ -769,7 +769,8 @@ def _sweep_with(text: str):
 
 
 def option_cases() -> list[CommandCase]:
-    return [_expand(c) for c in _executor_option_cases() + _input_option_cases()]
+    cases = _executor_option_cases() + _input_option_cases() + _kept_table_cases()
+    return [_expand(c) for c in cases]
 
 
 def _executor_option_cases() -> list:
@@ -809,6 +810,21 @@ def _executor_option_cases() -> list:
     ]  # fmt: skip
 
 
+def _kept_table_cases() -> list:
+    """`bench cold --keep`: what is not a bench cold table, refused before any clone."""
+    return [
+        _opt("bench cold --keep /dev/zero", "--keep", lambda f: [
+            "bench", "cold", "--commands", "check", "--keep", "/dev/zero"]),
+        _opt("bench cold --keep a FIFO", "--keep", lambda f: [
+            "bench", "cold", "--commands", "check", "--keep", _fifo_file(f / "kept.md")]),
+        _opt("bench cold --keep a folder", "--keep", lambda f: [
+            "bench", "cold", "--commands", "check", "--keep", f]),
+        _opt("bench cold --keep a table of another benchmark", "--keep", lambda f: [
+            "bench", "cold", "--commands", "check", "--keep", _written(
+                f / "kept.md", "A table (a machine)\n\n| a |\n|---|\n| 1 |\n")]),
+    ]  # fmt: skip
+
+
 def _input_option_cases() -> list:
     """Options naming inputs and outputs (configs, sweeps, scenes, paths) and numeric options."""
     S = ["slam", "DRIVE", "--out", "OUT"]
@@ -821,15 +837,6 @@ def _input_option_cases() -> list:
             "extract", "DRIVE", "--config", "/dev/zero", "--out", "OUT")),
         _opt("a sweep file at /dev/zero", "/dev/zero", lambda f: [
             "sweep", "/dev/zero", "--out", f / "s"]),
-        _opt("bench cold --keep /dev/zero", "--keep", lambda f: [
-            "bench", "cold", "--commands", "check", "--keep", "/dev/zero"]),
-        _opt("bench cold --keep a FIFO", "--keep", lambda f: [
-            "bench", "cold", "--commands", "check", "--keep", _fifo_file(f / "kept.md")]),
-        _opt("bench cold --keep a folder", "--keep", lambda f: [
-            "bench", "cold", "--commands", "check", "--keep", f]),
-        _opt("bench cold --keep a table of another benchmark", "--keep", lambda f: [
-            "bench", "cold", "--commands", "check", "--keep", _written(
-                f / "kept.md", "A table (a machine)\n\n| a |\n|---|\n| 1 |\n")]),
         _opt("a sweep file at /dev/urandom", "/dev/urandom", lambda f: [
             "sweep", "/dev/urandom", "--out", f / "s"]),
         _opt("a config of 20 MB", "big.toml", _with_drive(*S, "--config", "BIGCONF")),
