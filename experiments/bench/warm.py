@@ -26,7 +26,9 @@ It prints one line when it starts and one with its time, so a cold first run is 
 from __future__ import annotations
 
 import argparse
+import io
 import os
+import pickle
 import shutil
 import subprocess
 import sys
@@ -60,6 +62,8 @@ def warm_every_kernel() -> float:
     vouched_for_sequence(seq, base)
     _warm_unicycle()
     _warm_full_circle()
+    _warm_matcher()
+    _warm_closure_helpers()
     return time.perf_counter() - t0
 
 
@@ -78,6 +82,7 @@ def _warm_extractors() -> None:
     seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=WARM_SCANS))
     vouched_for_sequence(seq, SlamConfig().with_(**{"closure.enabled": True}))
     _warm_unicycle()
+    _warm_matcher()
 
 
 def _warm_loop() -> None:
@@ -92,6 +97,7 @@ def _warm_loop() -> None:
     base = SlamConfig().with_(**{"closure.enabled": True})
     for method in ("ihgr", "jcbb", "nn", "ihgr-window"):
         run_slam(seq, base, features=feats, association=method, warm_up=False)
+    _warm_closure_helpers()
 
 
 PARTS = {"extractors": _warm_extractors, "loop": _warm_loop}
@@ -106,6 +112,29 @@ def _warm_unicycle() -> None:
 
     t = np.linspace(0.0, 1.0, 5)
     UnicycleMotion(t, np.ones(5), np.zeros(5)).integrate(np.zeros(3), 0.0, 1.0)
+
+
+def _warm_matcher() -> None:
+    """Loop closure's constellation match (`slam.closure.hypotheses`), which the warm-up's
+    drives, too short to come back to a place, never reach: a cold `make check` compiled it in
+    each test worker (about 11 s of CPU each; lab notebook, 2026-11-29). In the extractors'
+    part, the shorter one."""
+    import numpy as np
+
+    from slam.closure import hypotheses
+
+    old = np.random.default_rng(0).uniform(-20.0, 20.0, (12, 2))
+    hypotheses(old[:6] + [1.0, -0.5], old, np.array([0.5, 3.0, 0.3, 15.0, 6.0]))
+
+
+def _warm_closure_helpers() -> None:
+    """Loop closure's dead-reckoned covariance, which only a return to a place reaches, with
+    the run's array types (about 3 s of CPU in a test worker)."""
+    import numpy as np
+
+    from slam.closure import dead_reckoned_cov
+
+    dead_reckoned_cov(np.zeros((4, 3)), np.zeros((4, 3, 3)), 0, 3)
 
 
 def _warm_full_circle() -> None:
@@ -176,16 +205,30 @@ def warm_in_parts(target: Path) -> float:
 
 def merge_loses_nothing(parts: list[Path]) -> bool:
     """Whether `merge_kernels` of `parts` leaves out no signature: every kernel that more than
-    one part holds has the same index in each (the same signatures, as the same files), so the
-    one part's files it takes hold them all. When it does, the last pass over the whole warm-up
-    would only load (about 4 s of one core, after the parts: lab notebook, 2026-11-29)."""
-    seen: dict[Path, bytes] = {}
+    one part holds has the same signatures in each (`_index_entries`), so the one part's files
+    it takes hold them all. When it does, the last pass over the whole warm-up would only load
+    (about 4 s of one core, after the parts: lab notebook, 2026-11-29)."""
+    seen: dict[Path, object] = {}
     for part in parts:
         for index in part.rglob("*.nbi"):
-            key, data = index.relative_to(part), index.read_bytes()
-            if seen.setdefault(key, data) != data:
+            key, entries = index.relative_to(part), _index_entries(index)
+            if seen.setdefault(key, entries) != entries:
                 return False
     return True
+
+
+def _index_entries(index: Path) -> object:
+    """The (format, source stamp, signatures) of a numba cache index (numba.core.caching's
+    `IndexDataCacheFile`: a pickled version, then a pickled (stamp, {key: data file})); its
+    bytes when it cannot be read so (equal only to the same bytes)."""
+    data = index.read_bytes()
+    try:
+        with io.BytesIO(data) as f:
+            version = pickle.load(f)
+            stamp, overloads = pickle.loads(f.read())
+        return (version, stamp, frozenset(overloads))
+    except Exception:  # not an index numba wrote: compared as bytes
+        return data
 
 
 def _holds_kernels(folder: Path) -> bool:
