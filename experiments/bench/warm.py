@@ -2,8 +2,9 @@
 
 `python -m experiments.bench.warm` runs every extractor on a small scan (`local.warm_kernels`),
 then a short simulated drive through the loop once per association method, with the single-scan
-and the window associator, loop closure on, the smoother's input and the GPS scoring: the kernels
-and signatures a run and the test suite use. `make test`, `make check` and CI run it before
+and the window associator, loop closure on (and its match, which so short a drive never
+reaches), the smoother's input and the GPS scoring: the kernels and signatures a run and the
+test suite use. `make test`, `make check` and CI run it before
 the test workers start (tests/conftest.py), into a cache folder that each worker then copies
 as its own: a fresh clone compiles each kernel once instead of once per worker.
 
