@@ -386,9 +386,8 @@ def prepare(z, R, z_hat, H, P, gate_prob: float, *, validate: bool = True) -> Pr
     rank_feat = _ranks_of(z_hat, S_feat.reshape(n, 4))
 
     if m and n:
-        ii, jj, nu, S, d2, l11, l22, bad = _gated_pairs(
-            z, np.ascontiguousarray(R), z_hat, S_feat, gate
-        )
+        f = _kernel_array
+        ii, jj, nu, S, d2, l11, l22, bad = _gated_pairs(f(z), f(R), f(z_hat), S_feat, gate)
         if bad[0] >= 0:  # cannot happen with R > 0 and H P H^T >= 0, kept as a guard
             raise AssociationError(
                 f"P, R: innovation covariance S[{bad[0]}, {bad[1]}] is not positive definite"
@@ -433,7 +432,7 @@ def _trusted_prepared(z, R, z_hat, H, P, *, gate: float) -> Prepared:
     """`prepare`'s trusted path for at most `_KERNEL_RANKS` measurements and features: the
     same kernels (`_project_cov_trusted`, `_rank_kernel`, `_gated_pairs`) in one call,
     the pairs sorted by their (unique) rank pairs as np.lexsort sorts them."""
-    f = np.ascontiguousarray
+    f = _kernel_array
     z, R, z_hat = f(z), f(R), f(z_hat)
     S_feat, rank_meas, rank_feat, ii, jj, nu, S, d2, l11, l22, bad = _trusted_kernel(
         z, R, z_hat, H, P, gate
@@ -634,8 +633,16 @@ def _ranks_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     kernel, the same ranks without building the keys and the lexsort's arrays."""
     if a.shape[0] > _KERNEL_RANKS:
         return _ranks(np.column_stack([a, b]))
-    f = np.ascontiguousarray
-    return _rank_kernel(f(a, np.float64), f(b, np.float64))
+    return _rank_kernel(_kernel_array(a), _kernel_array(b))
+
+
+def _kernel_array(a: np.ndarray) -> np.ndarray:
+    """`a` as the kernels take it: float64, C-contiguous and writable, copied only when it is
+    not. numba compiles a kernel again for a read-only array (a `Features` array, or a 2 x 2
+    R broadcast to one measurement, which numpy calls contiguous): one more signature of
+    `_trusted_kernel`, `_gated_pairs` and `_rank_kernel`, about 6 s of CPU in each process
+    that met one (lab notebook, 2026-11-29). The same values, so the same results."""
+    return np.require(a, np.float64, ["C", "W"])
 
 
 @njit(cache=True)

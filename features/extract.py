@@ -268,6 +268,17 @@ class _Found(NamedTuple):
 
 
 @njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _copy_block(out, k, block):
+    """out[k] = block for a 2-d `block`, element by element. The kernels assign no array to an
+    array's slice: numba compiles that assignment's shape-mismatch error message (f-strings,
+    str.join, int to str) once per process and per rank, about 5 s of CPU in every process that
+    compiles a kernel holding one (lab notebook, 2026-11-29)."""
+    for r in range(block.shape[0]):
+        for q in range(block.shape[1]):
+            out[k, r, q] = block[r, q]
+
+
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _fit_method(cfg, x, y):
     """The circle fit of `cfg.method` (a `_Settings`) to the points: (x0, y0, r, ok)."""
     if cfg.method == 0:
@@ -543,7 +554,7 @@ def _extract_kernel(beams, settings):
                 circ[nc, 0] = cx
                 circ[nc, 1] = cy
                 circ[nc, 2] = cr
-                circ_cov[nc] = cov
+                _copy_block(circ_cov, nc, cov)
                 circ_beams[nc, 0] = a
                 circ_beams[nc, 1] = b
                 circ_rms[nc] = math.sqrt(ssr / m)
@@ -551,8 +562,8 @@ def _extract_kernel(beams, settings):
         elif kind[k] == 1:
             line[nl, 0] = alpha
             line[nl, 1] = rho
-            line_cov[nl] = lcov
-            line_end[nl] = lend
+            _copy_block(line_cov, nl, lcov)
+            _copy_block(line_end, nl, lend)
             line_beams[nl, 0] = a
             line_beams[nl, 1] = b
             line_rms[nl] = math.sqrt(ssr_l / m)

@@ -45,6 +45,24 @@ def _in_view(z_hat, lo, hi, every, r_max):
 
 
 @njit(cache=True)
+def _put_row(out, k, src, i):
+    """out[k] = src[i] for 2-d arrays, element by element. These kernels assign no array to an
+    array's slice: numba compiles that assignment's shape-mismatch error message (f-strings,
+    str.join, int to str) once per process and per rank, about 5 s of CPU in every process that
+    compiles a kernel holding one (lab notebook, 2026-11-29)."""
+    for q in range(src.shape[1]):
+        out[k, q] = src[i, q]
+
+
+@njit(cache=True)
+def _put_block(out, k, src, i):
+    """out[k] = src[i] for 3-d arrays, element by element (see `_put_row`)."""
+    for r in range(src.shape[1]):
+        for q in range(src.shape[2]):
+            out[k, r, q] = src[i, r, q]
+
+
+@njit(cache=True)
 def _sym(P, r, c):
     """P[r, c] of a symmetric P kept in its lower triangle."""
     return P[r, c] if r >= c else P[c, r]
@@ -86,7 +104,7 @@ def scan_candidates(
     for a in range(n):
         src_z, src_H, i = (z_lm, H_lm, lm_idx[a]) if a < n_l else (z_t, H_t, t_idx[a - n_l])
         zh[a, 0], zh[a, 1] = src_z[i, 0], src_z[i, 1]
-        H5[a] = src_H[i]
+        _put_block(H5, a, src_H, i)
         for u in range(3):
             for v in range(3):
                 C5[a, u, v] = _sym(P, u, v)
@@ -103,8 +121,8 @@ def scan_candidates(
     z_use = np.empty((use.size, 2))
     R_use = np.empty((use.size, 2, 2))
     for r in range(use.size):
-        z_use[r] = z[use[r]]
-        R_use[r] = R[use[r]]
+        _put_row(z_use, r, z, use[r])
+        _put_block(R_use, r, R, use[r])
     S = project_blocks(H5, C5)
     any_feat = np.zeros(n, np.bool_)
     if use.size and n:
@@ -117,7 +135,7 @@ def scan_candidates(
     cand = np.flatnonzero(any_feat)
     zh_cand = np.empty((cand.size, 2))
     for a in range(cand.size):
-        zh_cand[a] = zh[cand[a]]
+        _put_row(zh_cand, a, zh, cand[a])
     # the sub-state [pose, candidate landmarks, candidate tentatives]
     c_lm = cand[cand < n_l]
     c_t = t_idx[cand[cand >= n_l] - n_l]
@@ -171,10 +189,14 @@ def sub_problem(H5, cand, P_lm, cov_t):
             H[j, r, 4 + 2 * j] = H5[c, r, 4]
     P_sub = np.zeros((d, d))
     n_sub = P_lm.shape[0]
-    P_sub[:n_sub, :n_sub] = P_lm
+    for r in range(n_sub):  # element by element: see `_put_row`
+        for q in range(n_sub):
+            P_sub[r, q] = P_lm[r, q]
     for t in range(cov_t.shape[0]):
         a = n_sub + 2 * t
-        P_sub[a : a + 2, a : a + 2] = cov_t[t]
+        for r in range(2):
+            for q in range(2):
+                P_sub[a + r, a + q] = cov_t[t, r, q]
     return H, P_sub
 
 
@@ -199,7 +221,7 @@ def revisit_spread(P, lm_xy, seen_s, before_s, sensor, sensor_yaw, heading, boun
     H5 = np.empty((cand.size, 2, 5))
     C5 = np.empty((cand.size, 5, 5))
     for a in range(cand.size):
-        H5[a] = H5_all[keep[a]]
+        _put_block(H5, a, H5_all, keep[a])
         i = cand[a]
         for u in range(5):
             cu = u if u < 3 else 3 + 2 * i + (u - 3)

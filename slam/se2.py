@@ -171,7 +171,9 @@ def observe_kernel(m, px, py, dpx, dpy, th, sth):
         z[i, 0] = r
         b[i] = math.atan2(dy, dx) - th - sth
         _jacobian_row(H, i, dx, dy, q, r, dpx, dpy)
-    z[:, 1] = np.pi - np.mod(np.pi - b, 2.0 * np.pi)  # `wrap_angle`
+    wrapped = np.pi - np.mod(np.pi - b, 2.0 * np.pi)  # `wrap_angle`
+    for i in range(k):  # not `z[:, 1] = wrapped`: see slam.scan_candidates._put_row
+        z[i, 1] = wrapped[i]
     return z, H
 
 

@@ -46,6 +46,7 @@ settings.load_profile("dev")  # `--hypothesis-profile=ci` loads `ci` after this 
 
 
 WARM_CACHE_ENV = "TRUNKSLAM_WARM_NUMBA_CACHE"  # the controller's warm cache, for the workers
+WARMED_MARKER = "warmed"  # in the warm cache folder once a warm-up there has succeeded
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -68,15 +69,29 @@ def _cache_folder(config: pytest.Config, name: str) -> Path:
 
 
 def _kernel_sources_digest(root: Path) -> str:
-    """A digest of every source file of the packages that hold numba kernels. numba drops a
-    cached kernel only when its own file changes, not when a kernel it calls from another file
-    does (`slam.scan_candidates` calls `slam.se2.observe_kernel`): a warm cache keyed by every
-    source never serves a kernel compiled against an older callee."""
-    h = hashlib.sha256()
+    """A digest of every source file of the packages that hold numba kernels (and of the other
+    files that hold one), and of numba's version. numba drops a cached kernel only when its own
+    file changes, not when a kernel it calls from another file does (`slam.scan_candidates`
+    calls `slam.se2.observe_kernel`): a warm cache keyed by every source never serves a kernel
+    compiled against an older callee. A folder of this digest that a warm-up has completed
+    (`WARMED_MARKER`) holds every kernel the warm-up compiles, so it is not run again there."""
+    h = hashlib.sha256(_numba_version().encode() + b"\0")
     for package in ("features", "association", "slam"):
         for path in sorted((root / package).rglob("*.py")):
             h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes() + b"\0")
+    for path in sorted((root / "experiments").rglob("*.py")):  # its kernels (eval/vouched.py)
+        if b"@njit" in (text := path.read_bytes()):
+            h.update(str(path.relative_to(root)).encode() + b"\0" + text + b"\0")
     return h.hexdigest()[:16]
+
+
+def _numba_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("numba")
+    except PackageNotFoundError:
+        return "?"
 
 
 def _warm_shared_cache(config: pytest.Config) -> None:
@@ -88,6 +103,10 @@ def _warm_shared_cache(config: pytest.Config) -> None:
         if old != folder and old.is_dir():
             shutil.rmtree(old, ignore_errors=True)
     folder.mkdir(parents=True, exist_ok=True)
+    done_marker = folder / WARMED_MARKER
+    if done_marker.is_file():  # warmed by an earlier run: the warm-up would only load
+        os.environ[WARM_CACHE_ENV] = str(folder)
+        return
     env = {**os.environ, "NUMBA_CACHE_DIR": str(folder), "OMP_NUM_THREADS": "1"}
     try:  # its two lines show at once: a cold warm-up takes a minute
         done = subprocess.run(
@@ -102,6 +121,7 @@ def _warm_shared_cache(config: pytest.Config) -> None:
     if done.returncode != 0:
         sys.stderr.write("numba warm-up failed (above); each worker compiles its own kernels\n")
         return
+    done_marker.touch()
     os.environ[WARM_CACHE_ENV] = str(folder)
 
 

@@ -2,8 +2,9 @@
 
 `python -m experiments.bench.warm` runs every extractor on a small scan (`local.warm_kernels`),
 then a short simulated drive through the loop once per association method, with the single-scan
-and the window associator, loop closure on, the smoother's input and the GPS scoring: the kernels
-and signatures a run and the test suite use. `make test`, `make check` and CI run it before
+and the window associator, loop closure on (and its match, which so short a drive never
+reaches), the smoother's input and the GPS scoring: the kernels and signatures a run and the
+test suite use. `make test`, `make check` and CI run it before
 the test workers start (tests/conftest.py), into a cache folder that each worker then copies
 as its own: a fresh clone compiles each kernel once instead of once per worker.
 
@@ -12,10 +13,12 @@ two cores or more), the compilation is split in two processes (`PARTS`: the extr
 GPS scoring; the loop's kernels on a drive of given features), each into a folder of its own:
 numba's cache is not safe for two processes writing one kernel, so neither writes the other's
 folder. Their kernels are then copied into the cache folder, each kernel's files from one part
-(`merge_kernels`), and the whole warm-up runs once more in this process: it loads them, and
-compiles whatever signature the parts left out. The parts share no kernel (a cold run of both
-compiled none twice, and the last pass compiled none), so on two idle cores the cold warm-up
-takes the longer part's time instead of the sum. A folder that holds kernels already is warmed
+(`merge_kernels`). When a part failed, or two parts compiled one kernel with different
+signatures (the merge takes one part's), the whole warm-up runs once more in this process: it
+loads the kernels and compiles what the parts left out; otherwise that pass would only load,
+and is skipped (`merge_loses_nothing`). The parts share one kernel, the vehicle model's, with
+the same signature (both drive a Cycab), so on two idle cores the cold warm-up takes the
+longer part's time instead of the sum. A folder that holds kernels already is warmed
 in this process alone, as before.
 
 It prints one line when it starts and one with its time, so a cold first run is not a silence.
@@ -24,7 +27,9 @@ It prints one line when it starts and one with its time, so a cold first run is 
 from __future__ import annotations
 
 import argparse
+import io
 import os
+import pickle
 import shutil
 import subprocess
 import sys
@@ -32,7 +37,7 @@ import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["PARTS", "merge_kernels", "warm_every_kernel", "warm_in_parts"]
+__all__ = ["PARTS", "merge_kernels", "merge_loses_nothing", "warm_every_kernel", "warm_in_parts"]
 
 WARM_SCANS = 30  # enough for landmarks to join the map, be re-observed and the window to fill
 AVENUE_TREES = 60  # the loop part's drive (`experiments.sim.landmarks.avenue`): 35 scans
@@ -58,6 +63,8 @@ def warm_every_kernel() -> float:
     vouched_for_sequence(seq, base)
     _warm_unicycle()
     _warm_full_circle()
+    _warm_matcher()
+    _warm_closure_helpers()
     return time.perf_counter() - t0
 
 
@@ -76,6 +83,7 @@ def _warm_extractors() -> None:
     seq = simulate_cycab_run(np.random.default_rng(0), "tree_park", CycabParams(n_scans=WARM_SCANS))
     vouched_for_sequence(seq, SlamConfig().with_(**{"closure.enabled": True}))
     _warm_unicycle()
+    _warm_matcher()
 
 
 def _warm_loop() -> None:
@@ -90,6 +98,7 @@ def _warm_loop() -> None:
     base = SlamConfig().with_(**{"closure.enabled": True})
     for method in ("ihgr", "jcbb", "nn", "ihgr-window"):
         run_slam(seq, base, features=feats, association=method, warm_up=False)
+    _warm_closure_helpers()
 
 
 PARTS = {"extractors": _warm_extractors, "loop": _warm_loop}
@@ -104,6 +113,29 @@ def _warm_unicycle() -> None:
 
     t = np.linspace(0.0, 1.0, 5)
     UnicycleMotion(t, np.ones(5), np.zeros(5)).integrate(np.zeros(3), 0.0, 1.0)
+
+
+def _warm_matcher() -> None:
+    """Loop closure's constellation match (`slam.closure.hypotheses`), which the warm-up's
+    drives, too short to come back to a place, never reach: a cold `make check` compiled it in
+    each test worker (about 11 s of CPU each; lab notebook, 2026-11-29). In the extractors'
+    part, the shorter one."""
+    import numpy as np
+
+    from slam.closure import hypotheses
+
+    old = np.random.default_rng(0).uniform(-20.0, 20.0, (12, 2))
+    hypotheses(old[:6] + [1.0, -0.5], old, np.array([0.5, 3.0, 0.3, 15.0, 6.0]))
+
+
+def _warm_closure_helpers() -> None:
+    """Loop closure's dead-reckoned covariance, which only a return to a place reaches, with
+    the run's array types (about 3 s of CPU in a test worker)."""
+    import numpy as np
+
+    from slam.closure import dead_reckoned_cov
+
+    dead_reckoned_cov(np.zeros((4, 3)), np.zeros((4, 3, 3)), 0, 3)
 
 
 def _warm_full_circle() -> None:
@@ -162,11 +194,42 @@ def warm_in_parts(target: Path) -> float:
             args = [sys.executable, "-m", "experiments.bench.warm", "--part", name]
             runs.append(subprocess.Popen(args, env=env))
         done = [run.wait() == 0 for run in runs]
-        merge_kernels(target, [scratch / n for n, ok in zip(PARTS, done) if ok])
+        merged = [scratch / n for n, ok in zip(PARTS, done) if ok]
+        merge_kernels(target, merged)
+        whole = all(done) and merge_loses_nothing(merged)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    warm_every_kernel()
+    if not whole:  # a part failed, or a signature of a kernel two parts hold was left out
+        warm_every_kernel()
     return time.perf_counter() - t0
+
+
+def merge_loses_nothing(parts: list[Path]) -> bool:
+    """Whether `merge_kernels` of `parts` leaves out no signature: every kernel that more than
+    one part holds has the same signatures in each (`_index_entries`), so the one part's files
+    it takes hold them all. When it does, the last pass over the whole warm-up would only load
+    (about 4 s of one core, after the parts: lab notebook, 2026-11-29)."""
+    seen: dict[Path, object] = {}
+    for part in parts:
+        for index in part.rglob("*.nbi"):
+            key, entries = index.relative_to(part), _index_entries(index)
+            if seen.setdefault(key, entries) != entries:
+                return False
+    return True
+
+
+def _index_entries(index: Path) -> object:
+    """The (format, source stamp, signatures) of a numba cache index (numba.core.caching's
+    `IndexDataCacheFile`: a pickled version, then a pickled (stamp, {key: data file})); its
+    bytes when it cannot be read so (equal only to the same bytes)."""
+    data = index.read_bytes()
+    try:
+        with io.BytesIO(data) as f:
+            version = pickle.load(f)
+            stamp, overloads = pickle.loads(f.read())
+        return (version, stamp, frozenset(overloads))
+    except Exception:  # not an index numba wrote: compared as bytes
+        return data
 
 
 def _holds_kernels(folder: Path) -> bool:

@@ -93,3 +93,19 @@ def test_a_kernel_merged_from_a_part_is_loaded_not_compiled(tmp_path):
     assert call(tmp_path / "part") == [0, 1]  # compiled, into the part's folder
     assert merge_kernels(tmp_path / "merged", [tmp_path / "part"]) == 1
     assert call(tmp_path / "merged") == [1, 0]  # loaded from the merged folder
+
+
+def test_the_last_pass_is_skipped_only_when_the_merge_loses_no_signature(tmp_path):
+    """A kernel two parts hold with one index (the same signatures) loses nothing in the merge;
+    with two different indexes, the merge keeps one part's and the last pass must run."""
+    from experiments.bench.warm import merge_loses_nothing
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    _kernel(a, "extract.f-10.py311", 1, b"a")
+    _kernel(b, "extract.h-30.py311", 1, b"b")
+    assert merge_loses_nothing([a, b])
+    _kernel(b, "extract.f-10.py311", 1, b"a")  # the same index in both parts
+    assert merge_loses_nothing([a, b])
+    _kernel(b, "extract.f-10.py311", 2, b"b")  # another signature in b's
+    assert not merge_loses_nothing([a, b])
+    assert merge_loses_nothing([a])
