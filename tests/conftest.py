@@ -70,7 +70,8 @@ def _cache_folder(config: pytest.Config, name: str) -> Path:
 
 def _kernel_sources_digest(root: Path) -> str:
     """A digest of every source file of the packages that hold numba kernels (and of the other
-    files that hold one), and of numba's version. numba drops a cached kernel only when its own
+    files that hold one, and of the warm-up that decides what is compiled), and of numba's
+    version. numba drops a cached kernel only when its own
     file changes, not when a kernel it calls from another file does (`slam.scan_candidates`
     calls `slam.se2.observe_kernel`): a warm cache keyed by every source never serves a kernel
     compiled against an older callee. A folder of this digest that a warm-up has completed
@@ -79,8 +80,10 @@ def _kernel_sources_digest(root: Path) -> str:
     for package in ("features", "association", "slam"):
         for path in sorted((root / package).rglob("*.py")):
             h.update(str(path.relative_to(root)).encode() + b"\0" + path.read_bytes() + b"\0")
+    warm_up = root / "experiments" / "bench" / "warm.py"  # what is compiled: a new kernel
     for path in sorted((root / "experiments").rglob("*.py")):  # its kernels (eval/vouched.py)
-        if b"@njit" in (text := path.read_bytes()):
+        text = path.read_bytes()
+        if path == warm_up or b"@njit" in text:
             h.update(str(path.relative_to(root)).encode() + b"\0" + text + b"\0")
     return h.hexdigest()[:16]
 
@@ -97,16 +100,23 @@ def _numba_version() -> str:
 def _warm_shared_cache(config: pytest.Config) -> None:
     """Compile every kernel once, in one process, into the folder the workers copy (see the
     module docstring), a folder per state of the kernels' sources (`_kernel_sources_digest`;
-    the others are removed). A warm-up that fails leaves the workers to compile as they go."""
+    the others are removed). A warm-up that fails leaves the workers to compile as they go.
+    Two test runs started together (two checkouts' `make check`, or CI beside a developer's
+    run) take turns on one folder: the first warms it, the second waits and finds it marked."""
     folder = _cache_folder(config, f"warm-{_kernel_sources_digest(config.rootpath)}")
-    for old in folder.parent.glob(folder.name.split("-warm-")[0] + "-warm-*"):
-        if old != folder and old.is_dir():
-            shutil.rmtree(old, ignore_errors=True)
-    folder.mkdir(parents=True, exist_ok=True)
-    done_marker = folder / WARMED_MARKER
-    if done_marker.is_file():  # warmed by an earlier run: the warm-up would only load
-        os.environ[WARM_CACHE_ENV] = str(folder)
-        return
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    with open(folder.parent / f"{folder.name}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        for old in folder.parent.glob(folder.name.split("-warm-")[0] + "-warm-*"):
+            if old != folder and old.is_dir():
+                shutil.rmtree(old, ignore_errors=True)
+        folder.mkdir(parents=True, exist_ok=True)
+        if (folder / WARMED_MARKER).is_file() or _run_warm_up(config, folder):
+            os.environ[WARM_CACHE_ENV] = str(folder)
+
+
+def _run_warm_up(config: pytest.Config, folder: Path) -> bool:
+    """`python -m experiments.bench.warm` into `folder`; marks it warmed when it succeeds."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(folder), "OMP_NUM_THREADS": "1"}
     try:  # its two lines show at once: a cold warm-up takes a minute
         done = subprocess.run(
@@ -117,12 +127,12 @@ def _warm_shared_cache(config: pytest.Config) -> None:
         )
     except (OSError, subprocess.SubprocessError) as exc:
         sys.stderr.write(f"numba warm-up failed ({exc}); each worker compiles its own kernels\n")
-        return
+        return False
     if done.returncode != 0:
         sys.stderr.write("numba warm-up failed (above); each worker compiles its own kernels\n")
-        return
-    done_marker.touch()
-    os.environ[WARM_CACHE_ENV] = str(folder)
+        return False
+    (folder / WARMED_MARKER).touch()
+    return True
 
 
 # the BLAS (and OpenMP) threads a worker may use, and the limit each one holds
@@ -171,7 +181,9 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     if os.environ.get("PYTEST_XDIST_WORKER") or not warm or exitstatus not in (0, 1):
         return
     pattern = _cache_folder(session.config, "gw0").name.replace("gw0", "gw*")
-    _absorb_kernels(Path(warm), sorted(Path(warm).parent.glob(pattern)))
+    with open(Path(warm).parent / f"{Path(warm).name}.lock", "a") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # not while another run warms or absorbs into it
+        _absorb_kernels(Path(warm), sorted(Path(warm).parent.glob(pattern)))
 
 
 def _absorb_kernels(warm: Path, workers: list[Path]) -> None:
@@ -188,11 +200,25 @@ def _absorb_kernels(warm: Path, workers: list[Path]) -> None:
                 and n > best.get((sub, stem), (0, folder))[0]
             ):
                 best[(sub, stem)] = (n, folder)
+    if not best:
+        return
+    # unmarked while it changes: a run killed here leaves a folder the next run warms again
+    # (its warm-up loads what is whole and compiles what is not) instead of one it trusts
+    (warm / WARMED_MARKER).unlink(missing_ok=True)
     for (sub, stem), (_, folder) in best.items():
         (warm / sub).mkdir(parents=True, exist_ok=True)
         for data in sorted((folder / sub).glob(f"{stem}.*.nbc")):
-            shutil.copy2(data, warm / sub / data.name)
-        shutil.copy2(folder / sub / f"{stem}.nbi", warm / sub / f"{stem}.nbi")
+            _copy_whole(data, warm / sub / data.name)
+        _copy_whole(folder / sub / f"{stem}.nbi", warm / sub / f"{stem}.nbi")
+    (warm / WARMED_MARKER).touch()
+
+
+def _copy_whole(source: Path, target: Path) -> None:
+    """`source` to `target` by a temporary file renamed over it: `target` is the old file or
+    the whole new one, never a part."""
+    part = target.with_name(f".{target.name}.part")
+    shutil.copy2(source, part)
+    os.replace(part, target)
 
 
 def _missing_data(message: str) -> None:

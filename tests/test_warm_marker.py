@@ -44,3 +44,87 @@ def test_the_folder_follows_the_kernels_sources_and_numbas_version(monkeypatch):
     assert digest == conftest._kernel_sources_digest(ROOT)
     monkeypatch.setattr(conftest, "_numba_version", lambda: "0.0.0")
     assert conftest._kernel_sources_digest(ROOT) != digest
+
+
+def test_two_runs_at_once_warm_the_folder_once(tmp_path, monkeypatch):
+    """The second run waits for the first's warm-up (a lock beside the folder), then finds the
+    folder marked and does not warm it again."""
+    import threading
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv(conftest.WARM_CACHE_ENV, "")
+    config = SimpleNamespace(rootpath=ROOT)
+    started, release, runs = threading.Event(), threading.Event(), []
+
+    def run(args, **kw):
+        runs.append(kw["env"]["NUMBA_CACHE_DIR"])
+        started.set()
+        assert release.wait(30)
+        return subprocess.CompletedProcess(args, 0)
+
+    monkeypatch.setattr(conftest.subprocess, "run", run)
+    first = threading.Thread(target=conftest._warm_shared_cache, args=(config,))
+    first.start()
+    assert started.wait(30)
+    second = threading.Thread(target=conftest._warm_shared_cache, args=(config,))
+    second.start()
+    second.join(0.5)
+    assert second.is_alive()  # waiting on the lock while the first warms
+    release.set()
+    first.join(30)
+    second.join(30)
+    assert not first.is_alive() and not second.is_alive()
+    assert len(runs) == 1
+
+
+def test_absorbing_unmarks_the_folder_while_it_changes_and_copies_whole_files(tmp_path):
+    warm, worker = tmp_path / "warm", tmp_path / "gw0"
+    for folder in (warm, worker):
+        (folder / "features").mkdir(parents=True)
+    (warm / conftest.WARMED_MARKER).touch()
+    (warm / "features" / "k-1.py311.nbi").write_bytes(b"old index")
+    (warm / "features" / "k-1.py311.1.nbc").write_bytes(b"one")
+    (worker / "features" / "k-1.py311.nbi").write_bytes(b"new index")
+    for i in (1, 2):
+        (worker / "features" / f"k-1.py311.{i}.nbc").write_bytes(b"sig %d" % i)
+    seen = []
+    real = conftest._copy_whole
+
+    def copy(source, target):
+        seen.append((target.name, (warm / conftest.WARMED_MARKER).exists()))
+        real(source, target)
+
+    conftest._copy_whole = copy
+    try:
+        conftest._absorb_kernels(warm, [worker])
+    finally:
+        conftest._copy_whole = real
+    assert seen == [
+        ("k-1.py311.1.nbc", False),
+        ("k-1.py311.2.nbc", False),
+        ("k-1.py311.nbi", False),  # the index last
+    ]
+    assert (warm / conftest.WARMED_MARKER).is_file()
+    assert (warm / "features" / "k-1.py311.nbi").read_bytes() == b"new index"
+    assert sorted(p.name for p in (warm / "features").iterdir()) == [
+        "k-1.py311.1.nbc",
+        "k-1.py311.2.nbc",
+        "k-1.py311.nbi",
+    ]  # no part file left
+    conftest._absorb_kernels(warm, [worker])  # nothing more to take: the mark stays
+    assert (warm / conftest.WARMED_MARKER).is_file()
+
+
+def test_the_digest_follows_the_warm_up_but_not_other_experiment_files(tmp_path):
+    for name, text in (
+        ("features/k.py", "@njit\ndef k(): pass\n"),
+        ("experiments/bench/warm.py", "WARM = 1\n"),
+        ("experiments/cli/x.py", "X = 1\n"),
+    ):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    digest = conftest._kernel_sources_digest(tmp_path)
+    (tmp_path / "experiments/cli/x.py").write_text("X = 2\n")
+    assert conftest._kernel_sources_digest(tmp_path) == digest
+    (tmp_path / "experiments/bench/warm.py").write_text("WARM = 2\n")
+    assert conftest._kernel_sources_digest(tmp_path) != digest

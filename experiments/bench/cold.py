@@ -38,6 +38,7 @@ __all__ = [
     "keep_rows",
     "project_root",
     "read_cold",
+    "table_machine",
 ]
 
 COMMANDS: dict[str, list[str]] = {
@@ -221,6 +222,15 @@ def read_cold(text: str) -> list[dict]:
             }
         )
     return rows
+
+
+def table_machine(text: str) -> str:
+    """The machine a table of `format_cold` names in its first line; `DataError` without one."""
+    first = text.splitlines()[0] if text else ""
+    head = "A fresh clone, cold and warm ("
+    if not (first.startswith(head) and first.endswith(")")):
+        raise DataError("bench cold table: its first line does not name the machine")
+    return first[len(head) : -1]
 
 
 def keep_rows(rows: list[dict], kept: list[dict]) -> list[dict]:

@@ -112,17 +112,28 @@ def _kept_table(options: dict) -> dict:
     keep = options["keep"]
     if keep is None:
         return {**options, "keep": []}
-    from experiments.bench.cold import read_cold
+    from experiments.bench.cold import read_cold, table_machine
     from experiments.errors import DataError
     from experiments.io.paths import check_input_file, read_text_file
+    from experiments.io.provenance import machine
 
     try:  # a regular file, read up to 1 MiB (a FIFO or /dev/zero is refused)
-        rows = read_cold(read_text_file(check_input_file(keep, "--keep table"), "bench table"))
+        text = read_text_file(check_input_file(keep, "--keep table"), "bench table")
+        rows = read_cold(text)
     except DataError as exc:
         raise typer.BadParameter(str(exc), param_hint="--keep") from None
     if not rows:
         raise typer.BadParameter(
             f"{keep}: no row of a `trunkslam bench cold` table in it", param_hint="--keep"
+        )
+    try:  # the table names one machine (processor and cores): rows of another cannot join it
+        measured_on = table_machine(text)
+    except DataError as exc:
+        raise typer.BadParameter(f"{keep}: {exc}", param_hint="--keep") from None
+    if measured_on.split(", ")[:2] != machine().split(", ")[:2]:
+        raise typer.BadParameter(
+            f"{keep}: measured on {measured_on}, not on this machine ({machine()})",
+            param_hint="--keep",
         )
     return {**options, "keep": rows}
 

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 from experiments.bench.cold import clear_caches, format_cold, keep_rows, project_root, read_cold
 from experiments.cli import app
 from experiments.errors import DataError
+from experiments.io.provenance import machine
 
 
 def test_clear_caches_removes_numba_and_pytest_caches_but_not_the_venv(tmp_path):
@@ -98,7 +99,15 @@ def test_kept_rows_fill_in_the_commands_not_measured_in_the_benchmarks_order():
 def test_keep_that_is_not_a_bench_cold_table_is_refused_before_any_clone(tmp_path):
     other = tmp_path / "other.md"
     other.write_text("A table (a machine)\n\n| a |\n|---|\n| 1 |\n")
-    for keep, says in ((other, "no row of a `trunkslam bench cold` table"), (tmp_path, "folder")):
+    elsewhere = tmp_path / "elsewhere.md"
+    row = {"command": "make test", "run": "cold", "wall_s": 900.0, "cpu_s": 1700.0}
+    text = format_cold([{**row, "load_1min": 0.5, "commit": "abc1234"}])
+    elsewhere.write_text(text.replace(f"({machine()}", "(Another CPU, 64 cores, Python 3.11.7"))
+    for keep, says in (
+        (other, "no row of a `trunkslam bench cold` table"),
+        (tmp_path, "folder"),
+        (elsewhere, "measured on Another CPU, 64 cores, Python 3.11.7, not on this machine"),
+    ):
         args = ["bench", "cold", "--commands", "check", "--keep", str(keep)]
         res = CliRunner().invoke(app, args, env={"COLUMNS": "300"})
         assert res.exit_code == 2, res.output
