@@ -272,7 +272,10 @@ def _copy_block(out, k, block):
     """out[k] = block for a 2-d `block`, element by element. The kernels assign no array to an
     array's slice: numba compiles that assignment's shape-mismatch error message (f-strings,
     str.join, int to str) once per process and per rank, about 5 s of CPU in every process that
-    compiles a kernel holding one (lab notebook, 2026-11-29)."""
+    compiles a kernel holding one (lab notebook, 2026-11-29). A block of another shape raises
+    (a constant message: cheap to compile), as the slice's assignment did."""
+    if block.shape[0] != out.shape[1] or block.shape[1] != out.shape[2]:
+        raise ValueError("_copy_block: the blocks differ in shape")
     for r in range(block.shape[0]):
         for q in range(block.shape[1]):
             out[k, r, q] = block[r, q]

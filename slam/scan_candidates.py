@@ -49,7 +49,10 @@ def _put_row(out, k, src, i):
     """out[k] = src[i] for 2-d arrays, element by element. These kernels assign no array to an
     array's slice: numba compiles that assignment's shape-mismatch error message (f-strings,
     str.join, int to str) once per process and per rank, about 5 s of CPU in every process that
-    compiles a kernel holding one (lab notebook, 2026-11-29)."""
+    compiles a kernel holding one (lab notebook, 2026-11-29). Rows of another length raise (a
+    constant message: cheap to compile), as the slice's assignment did."""
+    if src.shape[1] != out.shape[1]:
+        raise ValueError("_put_row: the rows differ in length")
     for q in range(src.shape[1]):
         out[k, q] = src[i, q]
 
@@ -57,6 +60,8 @@ def _put_row(out, k, src, i):
 @njit(cache=True)
 def _put_block(out, k, src, i):
     """out[k] = src[i] for 3-d arrays, element by element (see `_put_row`)."""
+    if src.shape[1] != out.shape[1] or src.shape[2] != out.shape[2]:
+        raise ValueError("_put_block: the blocks differ in shape")
     for r in range(src.shape[1]):
         for q in range(src.shape[2]):
             out[k, r, q] = src[i, r, q]
