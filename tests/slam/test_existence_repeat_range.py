@@ -103,11 +103,14 @@ def test_the_birth_table_is_off_by_default_and_checked():
     for bad in ([0.0], [1.5], [math.nan], [True], "0.1", [0.1] * 101):
         with pytest.raises(SlamError, match="existence_birth_prob_by_range"):
             SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": bad})
+    for bad in ([0.5, 1.0], [1]):  # a birth of 1: no evidence would ever lower it
+        with pytest.raises(SlamError, match=r"existence_birth_prob_by_range: .* in \(0, 1\) "):
+            SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": bad})
     for bad in (0.0, -1.0, math.inf, math.nan, True):
         with pytest.raises(SlamError, match="existence_birth_prob_bin_m"):
             SlamConfig().with_(**{"map_policy.existence_birth_prob_bin_m": bad})
-    cfg = SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": [1, 0.5]})
-    assert cfg.map_policy.existence_birth_prob_by_range == (1.0, 0.5)
+    cfg = SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": [0.999, 0.5]})
+    assert cfg.map_policy.existence_birth_prob_by_range == (0.999, 0.5)
 
 
 def test_a_window_track_is_born_in_its_first_sightings_bin_not_its_latest():
