@@ -401,6 +401,8 @@ class MapPolicy:
         a far sighting, where the extractor's false circles are common, is weaker evidence.
         Derived per bin from a run's own never-mapped tracks
         (`existence_rates.derive_repeat_by_range`). At most 100 rates (a design bound).
+        Accepted and ignored with existence_clutter "uniform" (as existence_repeat_prob is)
+        and with policy "confirm" (as every existence_ setting is).
     existence_birth_prob_by_range, existence_birth_prob_bin_m: a new tentative's existence per
         range bin of the circle that starts it [i bin, (i + 1) bin) (the last bin's beyond the
         table), each in (0, 1) (1 would keep the landmark forever: no evidence lowers an
@@ -409,7 +411,8 @@ class MapPolicy:
         share that are new trunks at that range: far away, where the extractor's false
         circles are common, a new track starts less probable. Derived per bin as the share of
         a run's tracks started there that joined (`existence_rates.derive_birth_by_range`).
-        At most 100 rates (a design bound).
+        At most 100 rates (a design bound). Accepted and ignored with policy "confirm" (as
+        every existence_ setting is).
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")

@@ -128,3 +128,21 @@ def test_a_bin_whose_every_track_joined_derives_just_below_one_not_one():
     SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": birth})  # accepted
     with pytest.raises(SlamError, match="existence_birth_prob_by_range"):
         SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": [1.0, *birth[1:]]})
+
+
+def test_the_tables_are_accepted_and_ignored_where_their_model_is_off(drive):
+    """As existence_repeat_prob: the repeat table changes nothing with uniform clutter, and
+    neither table changes the confirm policy's run (`MapPolicy` doc)."""
+    seq, cfg, feats, lg = drive
+    repeat = {"map_policy.existence_repeat_prob_by_range": [0.1, 0.9]}
+    birth = {"map_policy.existence_birth_prob_by_range": [0.5, 1e-4]}
+    ex = cfg.with_(**{"map_policy.policy": "existence", "map_policy.existence_clutter": "uniform"})
+    a = run_slam(seq, ex, features=feats)
+    b = run_slam(seq, ex.with_(**repeat), features=feats)
+    np.testing.assert_array_equal(a.landmark_existence, b.landmark_existence)
+    np.testing.assert_array_equal(a.landmark_xy, b.landmark_xy)
+    assert cfg.map_policy.policy == "confirm"
+    c = run_slam(seq, cfg.with_(**repeat, **birth), features=feats)
+    np.testing.assert_array_equal(lg.landmark_xy, c.landmark_xy)
+    np.testing.assert_array_equal(lg.landmark_id, c.landmark_id)
+    # the same tables do act where their model is on: the tests above
