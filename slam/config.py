@@ -401,14 +401,18 @@ class MapPolicy:
         a far sighting, where the extractor's false circles are common, is weaker evidence.
         Derived per bin from a run's own never-mapped tracks
         (`existence_rates.derive_repeat_by_range`). At most 100 rates (a design bound).
+        Accepted and ignored with existence_clutter "uniform" (as existence_repeat_prob is)
+        and with policy "confirm" (as every existence_ setting is).
     existence_birth_prob_by_range, existence_birth_prob_bin_m: a new tentative's existence per
         range bin of the circle that starts it [i bin, (i + 1) bin) (the last bin's beyond the
-        table), each in (0, 1], in place of existence_birth_prob (`slam.existence_map`; (), the
+        table), each in (0, 1) (1 would keep the landmark forever: no evidence lowers an
+        existence of 1), in place of existence_birth_prob (`slam.existence_map`; (), the
         default: one birth at every range). Of the circles seen where nothing was mapped, the
         share that are new trunks at that range: far away, where the extractor's false
         circles are common, a new track starts less probable. Derived per bin as the share of
         a run's tracks started there that joined (`existence_rates.derive_birth_by_range`).
-        At most 100 rates (a design bound).
+        At most 100 rates (a design bound). Accepted and ignored with policy "confirm" (as
+        every existence_ setting is).
     """
 
     confirm_scans: int = default(3, "paper: a tentative feature joins the map after 3 scans")
@@ -519,57 +523,26 @@ class MapPolicy:
         """Whether landmarks join and leave the map by their existence (`slam.existence`)."""
         return self.policy == "existence"
 
-    def _check_q_by_range(self) -> None:
-        v = self.existence_see_through_q_by_range
+    def _check_by_range(self, name: str, noun: str, top: str) -> None:
+        """existence_{name}_by_range: at most 100 of `noun` in (0, 1] (top "]") or (0, 1) (top
+        ")"), kept as a tuple; existence_{name}_bin_m: finite and > 0."""
+        table, v = f"existence_{name}_by_range", getattr(self, f"existence_{name}_by_range")
         ok = isinstance(v, (tuple, list)) and len(v) <= 100
         if not ok or not all(
-            isinstance(q, (int, float)) and not isinstance(q, bool) and 0.0 < q <= 1.0 for q in v
+            isinstance(p, (int, float))
+            and not isinstance(p, bool)
+            and 0.0 < p
+            and (p <= 1.0 if top == "]" else p < 1.0)
+            for p in v
         ):
             raise SlamError(
-                "map_policy.existence_see_through_q_by_range: expected a list of at most 100 "
-                f"rates in (0, 1] (100: a design bound on the table's length), got {_shown(v)}"
+                f"map_policy.{table}: expected a list of at most 100 {noun} in (0, 1{top} (100: "
+                f"a design bound on the table's length), got {_shown(v)}"
             )
-        object.__setattr__(self, "existence_see_through_q_by_range", tuple(float(q) for q in v))
-        v = self.existence_see_through_q_bin_m
+        object.__setattr__(self, table, tuple(float(p) for p in v))
+        v = getattr(self, f"existence_{name}_bin_m")
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
-            raise SlamError(
-                f"map_policy.existence_see_through_q_bin_m: must be finite and > 0, got {v!r}"
-            )
-
-    def _check_birth_by_range(self) -> None:
-        v = self.existence_birth_prob_by_range
-        ok = isinstance(v, (tuple, list)) and len(v) <= 100
-        if not ok or not all(
-            isinstance(p, (int, float)) and not isinstance(p, bool) and 0.0 < p <= 1.0 for p in v
-        ):
-            raise SlamError(
-                "map_policy.existence_birth_prob_by_range: expected a list of at most 100 "
-                f"probabilities in (0, 1] (100: a design bound on the table's length), got "
-                f"{_shown(v)}"
-            )
-        object.__setattr__(self, "existence_birth_prob_by_range", tuple(float(p) for p in v))
-        v = self.existence_birth_prob_bin_m
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
-            raise SlamError(
-                f"map_policy.existence_birth_prob_bin_m: must be finite and > 0, got {v!r}"
-            )
-
-    def _check_repeat_by_range(self) -> None:
-        v = self.existence_repeat_prob_by_range
-        ok = isinstance(v, (tuple, list)) and len(v) <= 100
-        if not ok or not all(
-            isinstance(p, (int, float)) and not isinstance(p, bool) and 0.0 < p < 1.0 for p in v
-        ):
-            raise SlamError(
-                "map_policy.existence_repeat_prob_by_range: expected a list of at most 100 "
-                f"rates in (0, 1) (100: a design bound on the table's length), got {_shown(v)}"
-            )
-        object.__setattr__(self, "existence_repeat_prob_by_range", tuple(float(p) for p in v))
-        v = self.existence_repeat_prob_bin_m
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0.0 < v < math.inf:
-            raise SlamError(
-                f"map_policy.existence_repeat_prob_bin_m: must be finite and > 0, got {v!r}"
-            )
+            raise SlamError(f"map_policy.existence_{name}_bin_m: must be finite and > 0, got {v!r}")
 
     def _check_existence(self) -> None:
         if self.policy not in ("confirm", "existence"):
@@ -630,9 +603,10 @@ class MapPolicy:
             raise SlamError(
                 f"map_policy.existence_see_through_footprint: must be finite and >= 0, got {v!r}"
             )
-        self._check_q_by_range()
-        self._check_repeat_by_range()
-        self._check_birth_by_range()
+        self._check_by_range("see_through_q", "rates", "]")
+        self._check_by_range("repeat_prob", "rates", ")")
+        # a birth of 1 would keep its landmark forever: update_existence never lowers r = 1
+        self._check_by_range("birth_prob", "probabilities", ")")
         v = self.existence_unreached_scans
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
             raise SlamError(

@@ -228,32 +228,26 @@ class ExistenceConfig:
         v = self.footprint_steps
         if isinstance(v, bool) or not (isinstance(v, (int, float)) and 0.0 <= v < math.inf):
             raise ValueError(f"ExistenceConfig.footprint_steps: must be finite and >= 0, got {v!r}")
-        v = self.q_by_range
-        if not isinstance(v, (tuple, list)) or not all(
-            isinstance(q, (int, float)) and not isinstance(q, bool) and 0.0 < q <= 1.0 for q in v
-        ):
-            shown = repr(v) if len(repr(v)) <= 80 else repr(v)[:77] + "..."
-            raise ValueError(f"ExistenceConfig.q_by_range: each must be in (0, 1], got {shown}")
-        # a tuple, so that the frozen config stays hashable when given a list
-        object.__setattr__(self, "q_by_range", tuple(float(q) for q in v))
-        v = self.q_bin_m
-        if not (isinstance(v, (int, float)) and 0.0 < v < math.inf):
-            raise ValueError(f"ExistenceConfig.q_bin_m: must be finite and > 0, got {v!r}")
-        self._check_repeat_by_range()
+        self._check_rates("q_by_range", "q_bin_m", "]")
+        self._check_rates("repeat_by_range", "repeat_bin_m", ")")
 
-    def _check_repeat_by_range(self) -> None:
-        v = self.repeat_by_range
+    def _check_rates(self, table: str, bin_name: str, top: str) -> None:
+        """table: rates in (0, 1] (top "]") or (0, 1) (top ")"), kept as a tuple (the frozen
+        config stays hashable when given a list); bin_name: finite and > 0."""
+        v = getattr(self, table)
         if not isinstance(v, (tuple, list)) or not all(
-            isinstance(p, (int, float)) and not isinstance(p, bool) and 0.0 < p < 1.0 for p in v
+            isinstance(p, (int, float))
+            and not isinstance(p, bool)
+            and 0.0 < p
+            and (p <= 1.0 if top == "]" else p < 1.0)
+            for p in v
         ):
             shown = repr(v) if len(repr(v)) <= 80 else repr(v)[:77] + "..."
-            raise ValueError(
-                f"ExistenceConfig.repeat_by_range: each must be in (0, 1), got {shown}"
-            )
-        object.__setattr__(self, "repeat_by_range", tuple(float(p) for p in v))
-        v = self.repeat_bin_m
+            raise ValueError(f"ExistenceConfig.{table}: each must be in (0, 1{top}, got {shown}")
+        object.__setattr__(self, table, tuple(float(p) for p in v))
+        v = getattr(self, bin_name)
         if isinstance(v, bool) or not (isinstance(v, (int, float)) and 0.0 < v < math.inf):
-            raise ValueError(f"ExistenceConfig.repeat_bin_m: must be finite and > 0, got {v!r}")
+            raise ValueError(f"ExistenceConfig.{bin_name}: must be finite and > 0, got {v!r}")
 
 
 class BeamEvidence(NamedTuple):

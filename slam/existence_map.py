@@ -170,10 +170,18 @@ class LandmarkExistence:
             i: 0 if i in hit else self.out_of_reach.get(i, 0) + 1 for i in t_ids.tolist()
         }
 
-    def track_existence(self, n_sightings: int, R: np.ndarray, range_m: float = math.inf) -> float:
+    def track_existence(
+        self,
+        n_sightings: int,
+        R: np.ndarray,
+        range_m: float = math.inf,
+        first_range_m: float | None = None,
+    ) -> float:
         """The existence of a window track seen in n_sightings scans, each a detection with the
         likelihood of an innovation of NIS 2 (its mean) under S = 2 R (two sightings' noise);
-        range_m: its range (the range fall-off of Pd, persistent clutter's shape term).
+        range_m: its latest sighting's range (the range fall-off of Pd, persistent clutter's
+        shape term); first_range_m: its first sighting's, the circle that starts it, whose
+        range bin gives its birth (None: range_m).
         Against persistent clutter a track gains about pd_max / repeat_prob a sighting, and a
         window holds at most window_scans of them: it joins only when that is enough (the
         single-scan associator's tentatives have no such limit)."""
@@ -189,7 +197,7 @@ class LandmarkExistence:
                 repeat /= 1.0 if f is None else max(float(f[0]), 1e-300)
             ratio = self.cfg.pd_max * g / (repeat * _mean_nis_likelihood(S, S + self.shape_var * J))
         # in log-odds: ratio ** n overflows (an OverflowError, not inf) for tiny clutter rates
-        birth = self._birth_at(float(range_m))
+        birth = self._birth_at(float(range_m if first_range_m is None else first_range_m))
         lo = math.log(max(birth, 1e-300)) - math.log(max(1.0 - birth, 1e-300))
         lo += max(n_sightings - 1, 0) * math.log(max(ratio, 1e-300))
         return 1.0 / (1.0 + math.exp(-lo)) if lo > -700.0 else 0.0

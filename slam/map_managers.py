@@ -340,6 +340,8 @@ class WindowMap:
                 self.assoc.K,
             )
         self.scans: list = []  # [(use (m_use,) int, Q (3, 3))], oldest first
+        self.ranges: list = []  # [(m,) each scan's measured ranges], aligned with self.scans
+        self.first_range = np.zeros(0)  # (m,) this scan's: its track's first sighting's range
         self.counts = dict.fromkeys(
             ("steps", "fractional_lps", "rounded_steps", "lp_solves", "track_hypotheses"), 0
         )
@@ -397,7 +399,9 @@ class WindowMap:
         sightings = np.zeros(m, np.int64)
         sightings[use] = self.assoc.last.sightings
         tracks = self._tracks(self.assoc.last, use)
+        self.first_range = self._first_ranges(meas, tracks)
         self.scans = (self.scans + [(use, drift)])[-(K - 1) :] if K > 1 else []
+        self.ranges = (self.ranges + [meas.z[:, 0].copy()])[-(K - 1) :] if K > 1 else []
         ambiguous &= assign < 0
         return ScanAssociation(
             assign=assign,
@@ -429,6 +433,17 @@ class WindowMap:
                 ]
         return tracks
 
+    def _first_ranges(self, meas: Measurements, tracks: dict) -> np.ndarray:
+        """(m,) each measurement's track's first (oldest) sighting's range in the window, its
+        own where it has no earlier one: the circle that starts the track (its birth's range
+        bin, as `existence_rates.derive_birth_by_range` bins a track)."""
+        first = meas.z[:, 0].astype(np.float64, copy=True)
+        for i, members in tracks.items():
+            ago, j = max(members)
+            if ago > 0:
+                first[i] = self.ranges[-ago][j]
+        return first
+
     def manage(
         self, state: Filter, meas: Measurements, a: ScanAssociation, paired: np.ndarray
     ) -> MapDecisions:
@@ -452,7 +467,9 @@ class WindowMap:
             r = (
                 None
                 if book is None
-                else book.track_existence(int(a.sightings[i]), meas.R[i], meas.z[i, 0])
+                else book.track_existence(
+                    int(a.sightings[i]), meas.R[i], meas.z[i, 0], self.first_range[i]
+                )
             )
             if (a.sightings[i] < need) if r is None else (r < book.cfg.join_prob):
                 n_open += 1

@@ -381,8 +381,10 @@ def derive_existence(lg, seq, scans: tuple[int, int], established: int = ESTABLI
 def derive_birth_by_range(lg, seq, scans: tuple[int, int], bin_m: float = 10.0) -> dict:
     """birth_prob per range bin measured on the run `lg` (a confirm_scans run of `seq`) on
     `scans` (module doc, 3b): {"settings": {"map_policy.existence_birth_prob_by_range": [...],
-    "..._bin_m": bin_m}, the tracks started and joined per bin}. Each bin's share is clipped to
-    [1e-6, 1], as derive_existence's."""
+    "..._bin_m": bin_m}, the tracks started and joined per bin}. Each track falls in the bin of
+    its first sighting (the circle that starts it). Each bin's share is clipped to
+    [1e-6, 1 - 1e-6]: a bin whose every track joined would give 1, an existence no evidence
+    lowers (the setting refuses it)."""
     if not (isinstance(bin_m, (int, float)) and 0.0 < bin_m < math.inf):
         raise DataError(f"derive_birth_by_range: bin_m must be finite and > 0, got {bin_m!r}")
     max_range = min(float(seq.scan_max_range), float(lg.config["measurement"]["max_range_m"]))
@@ -400,7 +402,7 @@ def derive_birth_by_range(lg, seq, scans: tuple[int, int], bin_m: float = 10.0) 
     return {
         "settings": {
             "map_policy.existence_birth_prob_by_range": [
-                float(min(max(x, 1e-6), 1.0)) for x in share
+                float(min(max(x, 1e-6), 1.0 - 1e-6)) for x in share
             ],
             "map_policy.existence_birth_prob_bin_m": float(bin_m),
         },

@@ -88,7 +88,7 @@ def test_each_birth_bin_holds_the_tracks_started_at_its_range_and_their_share_jo
     birth = d["settings"]["map_policy.existence_birth_prob_by_range"]
     assert d["pooled_birth_prob"] == e["settings"]["map_policy.existence_birth_prob"]
     for b, n, k in zip(birth, started, joined):
-        assert b == (max(k / n, 1e-6) if n else d["pooled_birth_prob"])
+        assert b == min(max(k / n if n else d["pooled_birth_prob"], 1e-6), 1.0 - 1e-6)
     assert any(n == 0 for n in started) and len(set(birth)) > 1  # both cases are exercised
     with pytest.raises(DataError, match="bin_m"):
         derive_birth_by_range(lg, seq, h, bin_m=-1.0)
@@ -100,3 +100,49 @@ def test_each_birth_bin_holds_the_tracks_started_at_its_range_and_their_share_jo
     np.testing.assert_array_equal(a.landmark_existence, b.landmark_existence)
     far = ex.with_(**{"map_policy.existence_birth_prob_by_range": [0.2, 0.2, 1e-4]})
     assert run_slam(seq, far, features=feats).landmark_id.size < a.landmark_id.size
+
+
+def test_a_bin_whose_every_track_joined_derives_just_below_one_not_one():
+    """Tracks 1 and 2 start at 5 m and both join, track 3 starts at 25 m (seen again at 15 m)
+    and does not: bin 0 would be 1, an existence no evidence lowers, and is 1 - 1e-6; the track
+    seen again nearer stays in its first sighting's bin (bin 2: 0 clipped to 1e-6)."""
+    from types import SimpleNamespace
+
+    from slam import SlamConfig
+    from slam.errors import SlamError
+    from slam.log import NEW_TENTATIVE
+
+    lg = SimpleNamespace(
+        meas_scan=np.array([0, 0, 0, 1]),
+        meas_status=np.full(4, NEW_TENTATIVE),
+        meas_track=np.array([1, 2, 3, 3]),
+        meas_z=np.array([[5.0, 0.0], [5.0, 0.1], [25.0, 0.2], [15.0, 0.2]]),
+        landmark_id=np.array([1, 2]),
+        departures=[],
+        config={"measurement": {"max_range_m": 30.0}},
+    )
+    d = derive_birth_by_range(lg, SimpleNamespace(scan_max_range=30.0), (0, 2), bin_m=10.0)
+    assert d["tracks_started_by_bin"] == [2, 0, 1]
+    birth = d["settings"]["map_policy.existence_birth_prob_by_range"]
+    assert birth[0] == 1.0 - 1e-6 and birth[2] == 1e-6
+    SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": birth})  # accepted
+    with pytest.raises(SlamError, match="existence_birth_prob_by_range"):
+        SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": [1.0, *birth[1:]]})
+
+
+def test_the_tables_are_accepted_and_ignored_where_their_model_is_off(drive):
+    """As existence_repeat_prob: the repeat table changes nothing with uniform clutter, and
+    neither table changes the confirm policy's run (`MapPolicy` doc)."""
+    seq, cfg, feats, lg = drive
+    repeat = {"map_policy.existence_repeat_prob_by_range": [0.1, 0.9]}
+    birth = {"map_policy.existence_birth_prob_by_range": [0.5, 1e-4]}
+    ex = cfg.with_(**{"map_policy.policy": "existence", "map_policy.existence_clutter": "uniform"})
+    a = run_slam(seq, ex, features=feats)
+    b = run_slam(seq, ex.with_(**repeat), features=feats)
+    np.testing.assert_array_equal(a.landmark_existence, b.landmark_existence)
+    np.testing.assert_array_equal(a.landmark_xy, b.landmark_xy)
+    assert cfg.map_policy.policy == "confirm"
+    c = run_slam(seq, cfg.with_(**repeat, **birth), features=feats)
+    np.testing.assert_array_equal(lg.landmark_xy, c.landmark_xy)
+    np.testing.assert_array_equal(lg.landmark_id, c.landmark_id)
+    # the same tables do act where their model is on: the tests above

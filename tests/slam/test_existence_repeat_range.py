@@ -103,8 +103,40 @@ def test_the_birth_table_is_off_by_default_and_checked():
     for bad in ([0.0], [1.5], [math.nan], [True], "0.1", [0.1] * 101):
         with pytest.raises(SlamError, match="existence_birth_prob_by_range"):
             SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": bad})
+    for bad in ([0.5, 1.0], [1]):  # a birth of 1: no evidence would ever lower it
+        with pytest.raises(SlamError, match=r"existence_birth_prob_by_range: .* in \(0, 1\) "):
+            SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": bad})
     for bad in (0.0, -1.0, math.inf, math.nan, True):
         with pytest.raises(SlamError, match="existence_birth_prob_bin_m"):
             SlamConfig().with_(**{"map_policy.existence_birth_prob_bin_m": bad})
-    cfg = SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": [1, 0.5]})
-    assert cfg.map_policy.existence_birth_prob_by_range == (1.0, 0.5)
+    cfg = SlamConfig().with_(**{"map_policy.existence_birth_prob_by_range": [0.999, 0.5]})
+    assert cfg.map_policy.existence_birth_prob_by_range == (0.999, 0.5)
+
+
+def test_a_window_track_is_born_in_its_first_sightings_bin_not_its_latest():
+    """Birth table (0.5, 1e-4) by 10 m: a trunk seen at 9.95 m (bin 0), then at 10.05 m (bin
+    1) joins with the existence its first circle's birth gives (0.5, as
+    `existence_rates.derive_birth_by_range` bins a track), not its latest's (1e-4)."""
+    from slam.ekf import Filter, initial_state
+    from slam.log import NEW_TENTATIVE
+    from slam.sources import Measurements
+    from tests.slam.test_map_managers import _existence_manager, _existence_scan
+
+    manager, book = _existence_manager(
+        "ihgr-window",
+        existence_birth_prob_by_range=(0.5, 1e-4),
+        existence_birth_prob_bin_m=10.0,
+        existence_join_prob=0.99,
+    )
+    state = Filter(initial_state(np.zeros(3), np.eye(3) * 1e-6))
+    R = np.tile(np.diag([1e-2, 1e-4]), (1, 1, 1))
+    for k, d in enumerate((9.95, 10.05)):
+        z = np.array([[d, 0.1]])
+        meas = Measurements(k, None, None, z, R, np.full(1, NEW_TENTATIVE, np.int64))
+        _existence_scan(manager, book, state, meas)
+    assert manager.first_range.tolist() == [9.95]
+    first = book.track_existence(2, R[0], 10.05, 9.95)
+    latest = book.track_existence(2, R[0], 10.05)
+    assert first > 0.99 > latest  # only the first bin's birth lets it join after 2 sightings
+    assert state.landmark_ids.tolist() == [int(state.landmark_ids[0])]
+    assert book.of(state.landmark_ids).tolist() == [first]
