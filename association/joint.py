@@ -7,7 +7,7 @@ Given the stacked innovation nu (k, 2) of k pairings and its joint covariance S 
 D2 = nu^T S^-1 nu is tested against chi2_{2k}(gate_prob), the probability of the individual
 gates (no new number). While it fails, the pairing whose removal lowers D2 the most is dropped.
 Without pairing a, D2 falls by a^T (S^-1)_aa^-1 a with a = (S^-1 nu)_a, the block of S^-1 nu
-(the Schur complement of the partitioned inverse), so each step costs one solve of S.
+(the Schur complement of the partitioned inverse), so each step costs one Cholesky factor of S.
 This is a greedy pruning of the one hypothesis the associator chose, not JCBB's search over
 hypotheses (`association.jcbb`).
 """
@@ -18,6 +18,7 @@ from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
+from scipy.linalg import cho_factor, cho_solve
 
 from association.errors import AssociationError
 
@@ -45,9 +46,11 @@ def _gate(gate_prob: float, dof: int) -> float:
 
 def _d2_and_drop_gain(nu: np.ndarray, S: np.ndarray) -> tuple[float, np.ndarray]:
     """(D2, (k,) the fall of D2 without each pairing) of innovations nu (2k,), S (2k, 2k)."""
-    L = np.linalg.cholesky(S)
-    Si = np.linalg.solve(L.T, np.linalg.solve(L, np.eye(S.shape[0])))  # S^-1
-    a = Si @ nu
+    c = cho_factor(S, lower=True)
+    a = cho_solve(c, nu)  # S^-1 nu
+    # The fall of D2 without pairing j needs the 2x2 diagonal block j of S^-1 itself (module
+    # doc), for every j: every column of S^-1 is used, so it is formed, from the same factor.
+    Si = cho_solve(c, np.eye(S.shape[0]))
     k = nu.size // 2
     gain = np.empty(k)
     for j in range(k):
@@ -59,8 +62,8 @@ def _d2_and_drop_gain(nu: np.ndarray, S: np.ndarray) -> tuple[float, np.ndarray]
 def joint_check(nu, S, gate_prob: float) -> JointCheck:
     """The pairings of one scan kept by the joint test (module doc): nu (k, 2) innovations
     (z - z_hat, bearing wrapped), S (2k, 2k) their joint covariance, symmetric positive
-    definite; gate_prob in (0, 1). Raises `AssociationError` for shapes that do not agree or an
-    S that is not positive definite."""
+    definite; gate_prob in (0, 1). Raises `AssociationError` for shapes that do not agree, values
+    that are not finite or an S that is not positive definite."""
     nu = np.asarray(nu, dtype=np.float64).reshape(-1)
     S = np.asarray(S, dtype=np.float64)
     k = nu.size // 2
@@ -68,6 +71,8 @@ def joint_check(nu, S, gate_prob: float) -> JointCheck:
         raise AssociationError(
             f"joint_check: nu must be (k, 2) and S (2k, 2k), got {nu.size} values and {S.shape}"
         )
+    if not (np.isfinite(nu).all() and np.isfinite(S).all()):
+        raise AssociationError("joint_check: nu and S must be finite")
     if not 0.0 < gate_prob < 1.0:
         raise AssociationError(f"joint_check: gate_prob must be in (0, 1), got {gate_prob!r}")
     keep = np.ones(k, bool)

@@ -3,7 +3,7 @@
 clutter, scan by scan.
 
     TRUNKSLAM_DATA=../shared/datasets PYTHONPATH=. .venv/bin/python docs/rfs_draw_probe.py \
-        [--draws 72 90 12 99 21] [--protocol-density | --joint-check]
+        [--draws 72 90 12 99 21] [--protocol-density | --joint-check [--window T0 T1]]
 
 Each draw is re-run exactly as `trunkslam reproduce victoria-park-rfs` runs it
 (`experiments.paper.victoria_park.rfs`: the protocol's input, the draw's seed spawned from the
@@ -38,7 +38,11 @@ without clutter and the draws are run, each with the joint test of a scan's pair
 printed beside the snapshot's figure of the same run (the preset, check off): protocol RMSE,
 landmarks, the pairings the check dropped (false detections, real ones, scans), the false
 detections an update still used, and the scans where the check dropped a real pairing and
-kept a false one (the first three with their NIS after the check).
+kept a false one (the first three with their NIS after the check). With --window T0 T1
+(seconds from the first scan) each run's scans in [T0, T1] where the check dropped a pairing or
+an update used a false detection are printed too: the scan's NIS and dof after the check, each
+pairing dropped (false or real, the landmark's id) and each false detection used (the landmark's
+id, its d2).
 """
 
 from __future__ import annotations
@@ -304,7 +308,31 @@ def snapshot_no_clutter() -> float:
     return float(rows[0]["rmse_protocol_m"])
 
 
-def with_joint_check(inp, cfg, draws: list[int], snap: dict) -> None:
+def joint_window(lg, clut, dropped, was_clutter, window) -> None:
+    """Print the scans in window (t0, t1) s from the first scan where the check dropped a
+    pairing or an update used a false detection (module doc)."""
+    t = lg.scan_t - lg.scan_t[0]
+    used = clut & (lg.meas_status >= 0)
+    scans = set(dropped[:, 0].tolist()) | {int(k) for k in lg.meas_scan[used]}
+    for k in sorted(k for k in scans if window[0] <= t[k] <= window[1]):
+        drops = [
+            f"{'false' if f else 'real'} (lm {lid})"
+            for (scan, _, lid), f in zip(dropped, was_clutter)
+            if scan == k
+        ]
+        taken = []
+        for i in np.flatnonzero(used & (lg.meas_scan == k)):
+            j = np.flatnonzero((lg.obs_scan == k) & (lg.obs_feature == lg.meas_feature[i]))[0]
+            nu, S = lg.obs_innov[j], lg.obs_innov_cov[j]
+            taken.append(f"lm {int(lg.meas_status[i])} d2 {nu @ np.linalg.solve(S, nu):.1f}")
+        print(
+            f"  scan {k} ({t[k]:.1f} s): NIS {lg.scan_nis[k]:.1f} on {lg.scan_nis_dof[k]} dof "
+            f"after the check; dropped: {', '.join(drops) or 'none'}; false detections used: "
+            f"{', '.join(taken) or 'none'}"
+        )
+
+
+def with_joint_check(inp, cfg, draws: list[int], snap: dict, window=None) -> None:
     """The run without clutter (draw 0) and `draws` with `association.joint_check` on, each
     beside the snapshot's figure (module doc)."""
     on = cfg.with_(**{"association.joint_check": True})
@@ -335,6 +363,8 @@ def with_joint_check(inp, cfg, draws: list[int], snap: dict) -> None:
                 f"{lg.scan_nis_dof[k]} dof after the check; dropped {len(rows)} real pairing(s)"
                 f", kept {int((used & (lg.meas_scan == k)).sum())} false one(s)"
             )
+        if window is not None:
+            joint_window(lg, clut, dropped, was_clutter, window)
 
 
 def main() -> None:
@@ -342,11 +372,14 @@ def main() -> None:
     ap.add_argument("--draws", type=int, nargs="+", default=[72, 90, 12, 99, 21])
     ap.add_argument("--protocol-density", action="store_true")
     ap.add_argument("--joint-check", action="store_true")
+    ap.add_argument("--window", type=float, nargs=2, metavar=("T0", "T1"))
     args = ap.parse_args()
+    if args.window is not None and not args.joint_check:
+        ap.error("--window is read with --joint-check only")
     inp, cfg = load()
     if args.joint_check:
         with threadpool_limits(1):
-            with_joint_check(inp, cfg, args.draws, snapshot_rmse())
+            with_joint_check(inp, cfg, args.draws, snapshot_rmse(), args.window)
         return
     print(
         f"preset closure enabled: {cfg.closure.enabled}; association {cfg.association.method}"

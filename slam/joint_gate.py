@@ -8,7 +8,8 @@ the measurements' covariance as measured (the gates' white model). The joint tes
 individual gates' probability (`association.gate_prob`). A dropped measurement is no longer
 paired and is marked ambiguous: it lies in that landmark's gate, inside the wider new-feature
 gate, where the map managers ignore an unpaired measurement (status AMBIGUOUS) rather than
-start a landmark. Pairings with tentatives are not tested (they update nothing).
+start a landmark. Pairings with tentatives are not tested (they update nothing). Off (the
+default), the run loop holds a `NoJointGate`, which passes every association unchanged.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from slam.ekf import Filter
 from slam.map_managers import ScanAssociation
 from slam.sources import Measurements
 
-__all__ = ["JointGate"]
+__all__ = ["JointGate", "NoJointGate", "make_joint_gate"]
 
 
 class JointGate:
@@ -32,6 +33,10 @@ class JointGate:
     def __init__(self, gate_prob: float, laser: np.ndarray) -> None:
         self.gate_prob, self.laser = float(gate_prob), laser
         self.dropped: list[list[int]] = []
+
+    def record(self) -> list[list[int]]:
+        """`SlamLog.joint_dropped`: the pairings dropped, [scan, measurement, landmark id]."""
+        return list(self.dropped)
 
     def __call__(self, state: Filter, meas: Measurements, a: ScanAssociation) -> ScanAssociation:
         """The association `a` of scan meas.k without the pairings the joint test drops."""
@@ -49,3 +54,20 @@ class JointGate:
         assign, ambiguous = a.assign.copy(), a.ambiguous.copy()
         assign[rows], ambiguous[rows] = -1, True
         return dataclasses.replace(a, assign=assign, ambiguous=ambiguous)
+
+
+class NoJointGate:
+    """`[association] joint_check` off: every association passes unchanged, and the run log
+    has no record (`SlamLog.joint_dropped` None)."""
+
+    def __call__(self, state: Filter, meas: Measurements, a: ScanAssociation) -> ScanAssociation:
+        return a
+
+    def record(self) -> None:
+        return None
+
+
+def make_joint_gate(on: bool, gate_prob: float, laser: np.ndarray) -> JointGate | NoJointGate:
+    """The run's joint gate, chosen once: `JointGate` when `[association] joint_check` is on,
+    else `NoJointGate`."""
+    return JointGate(gate_prob, laser) if on else NoJointGate()

@@ -53,7 +53,7 @@ from slam.ekf import Filter, initial_state
 from slam.errors import SlamError
 from slam.existence_map import LandmarkExistence
 from slam.history import RunHistory
-from slam.joint_gate import JointGate
+from slam.joint_gate import make_joint_gate
 from slam.log import NEW_TENTATIVE, OUT_OF_RANGE, SKIPPED, LogBuilder, SlamLog
 from slam.map_managers import MapDecisions, Pruner, ScanAssociation, make_map_manager
 from slam.measurement import pass_inflation
@@ -179,7 +179,7 @@ class Slam:
         )
         self.rest = RestGate(self.motion, self.scan_t, p.min_travel_m)
         joint = p.association.joint_check
-        self.joint = JointGate(p.association.gate_prob, self.laser) if joint else None
+        self.joint = make_joint_gate(joint, p.association.gate_prob, self.laser)
         sd = p.pass_offset_sd_m
         by_state = p.pass_offset_model == "state" and (sd[0] != 0.0 or sd[1] != 0.0)
         self.passes = (
@@ -201,8 +201,7 @@ class Slam:
             return self._skipped(meas, clock)
         revisit = Revisit() if self.closer is None else self.closer.revisit(self.state, k)
         a = self.map_manager.associate(self.state, meas, drift, revisit.hidden)
-        if self.joint is not None:  # `[association] joint_check`: a joint test of its pairings
-            a = self.joint(self.state, meas, a)
+        a = self.joint(self.state, meas, a)  # `[association] joint_check`, else unchanged
         if self.existence is not None:  # on the predicted state, before the update
             tent = getattr(self.map_manager, "tent", None)
             self.existence.update(self.state, meas, a, tent, revisit.hidden)
@@ -417,7 +416,7 @@ def run_slam(
         existence=loop.existence,
         closures=None if closer is None else [e.to_dict() for e in closer.events],
         closure_duplicates=None if closer is None else [list(d) for d in closer.duplicates],
-        joint_dropped=None if loop.joint is None else list(loop.joint.dropped),
+        joint_dropped=loop.joint.record(),
     )
 
 

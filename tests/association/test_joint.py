@@ -49,23 +49,37 @@ def test_a_consistent_scan_is_untouched():
     assert c.d2_before <= chi2.ppf(GATE_PROB, 8)
 
 
-def test_the_pairing_dropped_is_the_one_whose_removal_lowers_the_joint_distance_most():
-    """Against brute force: the removal chosen leaves the smallest D2 of the remaining ones
-    (the Schur-complement fall used by joint_check is the direct recomputation's)."""
+def without(nu: np.ndarray, S: np.ndarray, rows: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The innovations and joint covariance of the pairings `rows` only."""
+    idx = (2 * np.array(rows, int)[:, None] + np.arange(2)).reshape(-1)
+    return nu[rows], S[np.ix_(idx, idx)]
+
+
+def test_each_pairing_dropped_is_the_one_whose_removal_lowers_the_joint_distance_most():
+    """Against brute force, at every drop of every draw: the removal chosen leaves the smallest
+    D2 of the pairings still kept (the Schur-complement fall used by joint_check is the direct
+    recomputation's); the kept set failed the joint gate before each drop and passes it after
+    the last. The innovations are drawn at 3 sd against an S whose diagonal is about 1.5, so
+    every draw fails the joint gate at first and is checked."""
     rng = np.random.default_rng(5)
-    for _ in range(20):
-        k = 5
+    k, draws, steps = 5, 20, 0
+    for _ in range(draws):
         A = rng.standard_normal((2 * k, 2 * k))
         S = A @ A.T / (2 * k) + shared_pose(k, 0.5, 0.01)
         nu = rng.standard_normal((k, 2)) * 3.0
         c = joint_check(nu, S, GATE_PROB)
-        if not c.dropped:
-            continue
-        rest = [[j for j in range(k) if j != i] for i in range(k)]
-        left = [d2(nu[r], S[np.ix_(np.repeat(np.array(r) * 2, 2) + np.tile([0, 1], k - 1),
-                                   np.repeat(np.array(r) * 2, 2) + np.tile([0, 1], k - 1))])
-                for r in rest]  # fmt: skip
-        assert c.dropped[0] == int(np.argmin(left))
+        assert c.d2_before > chi2.ppf(GATE_PROB, 2 * k) and c.dropped
+        kept = list(range(k))
+        for j in c.dropped:
+            assert d2(*without(nu, S, kept)) > chi2.ppf(GATE_PROB, 2 * len(kept))
+            left = [d2(*without(nu, S, [r for r in kept if r != i])) for i in kept]
+            assert j == kept[int(np.argmin(left))]
+            kept.remove(j)
+            steps += 1
+        assert c.keep.tolist() == [i in kept for i in range(k)]
+        assert c.d2_after == pytest.approx(d2(*without(nu, S, kept)), rel=1e-9)
+        assert c.d2_after <= chi2.ppf(GATE_PROB, 2 * len(kept))
+    assert steps >= draws  # every draw dropped at least one pairing, each drop was checked
 
 
 def test_a_single_pairing_outside_its_gate_is_dropped_and_nothing_is_left():
@@ -79,5 +93,9 @@ def test_bad_inputs_are_named():
         joint_check(np.zeros((2, 2)), np.eye(2), GATE_PROB)
     with pytest.raises(AssociationError, match="gate_prob"):
         joint_check(np.zeros((1, 2)), np.eye(2), 1.0)
+    with pytest.raises(AssociationError, match="finite"):
+        joint_check(np.array([[np.nan, 0.0]]), np.eye(2), GATE_PROB)
+    with pytest.raises(AssociationError, match="finite"):
+        joint_check(np.zeros((1, 2)), np.diag([1.0, np.inf]), GATE_PROB)
     with pytest.raises(AssociationError, match="positive definite"):
         joint_check(np.ones((1, 2)), -np.eye(2), GATE_PROB)

@@ -10,7 +10,7 @@ from scipy.stats import chi2
 from slam import SlamConfig, SlamError, run_slam
 from slam.config import AssociationConfig
 from slam.ekf import Filter, initial_state
-from slam.joint_gate import JointGate
+from slam.joint_gate import JointGate, NoJointGate, make_joint_gate
 from slam.map_managers import ScanAssociation
 from slam.sources import Measurements
 
@@ -77,6 +77,20 @@ def test_a_consistent_scan_is_untouched():
     meas, a = scan(measured(LM, (0.6, -0.3)))
     gate = JointGate(0.999, LASER)
     assert gate(f, meas, a) is a and gate.dropped == []
+
+
+def test_off_the_gate_passes_even_an_incompatible_scan_unchanged():
+    """The gate is chosen once: off, `NoJointGate` returns the association itself (the scan
+    the joint test would prune) and records nothing; on, the run's gate records its drops."""
+    f = filter_with_uncertain_pose()
+    z = np.concatenate([measured(LM[:2], (0.6, 0.0)), measured(LM[2:], (-0.6, 0.0))])
+    meas, a = scan(z)
+    off = make_joint_gate(False, 0.999, LASER)
+    assert isinstance(off, NoJointGate)
+    assert off(f, meas, a) is a and off.record() is None
+    on = make_joint_gate(True, 0.999, LASER)
+    assert isinstance(on, JointGate) and on(f, meas, a) is not a
+    assert on.record() == [[7, 2, 2]]
 
 
 def test_innovation_is_the_updates():
