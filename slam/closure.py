@@ -98,7 +98,6 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
-from scipy.stats import chi2
 
 from slam import rigid, se2
 from slam.config import ClosureConfig
@@ -217,7 +216,7 @@ class LoopCloser:
         self.cfg, self.view, self.laser, self.history = cfg, view, laser, history
         self.hold_frame = bool(hold_frame)
         self.scan_t = history.scan_t
-        self.gate_radius = math.sqrt(chi2.ppf(gate_prob, 2))  # in sds, 2 dof
+        self.gate_radius = math.sqrt(_chi2_ppf(gate_prob, 2))  # in sds, 2 dof
         # (None: a closer used without a view, by its parts' tests; the steps that need it ask)
         self._view_bounds = None if view is None else view_bounds(view)
         self.events: list[ClosureEvent] = []
@@ -405,7 +404,7 @@ class LoopCloser:
         drop = state.landmark_ids[recent[pairs[:, 0]]].copy()
         t_from = float(self.history.seen_at(keep, math.nan).max())  # the excursion began
         common["nis"] = rigid.same_landmarks_nis(state, keep, drop)
-        common["nis_bound"] = float(chi2.ppf(cfg.jc_prob, 2 * keep.size))
+        common["nis_bound"] = float(_chi2_ppf(cfg.jc_prob, 2 * keep.size))
         if not common["nis"] <= common["nis_bound"]:
             if not cfg.re_register:
                 return ClosureEvent(**common, outcome="not jointly compatible")
@@ -416,7 +415,7 @@ class LoopCloser:
             shape, _, _ = rigid.rigid_fit(state, keep, drop, cfg.tree_sd_m)
             common |= {
                 "shape_nis": shape,
-                "shape_bound": float(chi2.ppf(cfg.jc_prob, 2 * keep.size - 3)),
+                "shape_bound": float(_chi2_ppf(cfg.jc_prob, 2 * keep.size - 3)),
             }
             if not shape <= common["shape_bound"]:
                 return ClosureEvent(**common, outcome="not jointly compatible")
@@ -444,7 +443,7 @@ class LoopCloser:
             v = np.linalg.solve(np.linalg.cholesky(C), d)
         except np.linalg.LinAlgError:  # no odometry noise: dead reckoning allows no drift
             v = np.full(3, np.inf)
-        return {"drift_nis": float(v @ v), "drift_bound": float(chi2.ppf(self.cfg.jc_prob, 3))}
+        return {"drift_nis": float(v @ v), "drift_bound": float(_chi2_ppf(self.cfg.jc_prob, 3))}
 
     def _dead_reckoning(self, k: int, t_from: float) -> np.ndarray:
         """(3, 3) the world-frame covariance of the vehicle's pose at scan k from the odometry
@@ -592,7 +591,7 @@ class LoopCloser:
             drop.append(b)
         if not keep:
             return []
-        if rigid.same_landmarks_nis(state, keep, drop) > chi2.ppf(self.cfg.jc_prob, 2 * len(keep)):
+        if rigid.same_landmarks_nis(state, keep, drop) > _chi2_ppf(self.cfg.jc_prob, 2 * len(keep)):
             return []
         return self.merge(state, keep, drop, t, update=not local)
 
@@ -613,11 +612,20 @@ def _pairs_within(xy: np.ndarray, r: float) -> np.ndarray:
     return out[:p]
 
 
+def _chi2_ppf(prob: float, dof: int):
+    """scipy's `chi2.ppf(prob, dof)`, scipy.stats imported on first use: its import costs
+    about a second of CPU, and every command that imports the run loop imports this module,
+    while only a run with closure asks for a quantile."""
+    from scipy.stats import chi2
+
+    return chi2.ppf(prob, dof)
+
+
 @functools.lru_cache(maxsize=32)
 def _chi2_quantile(prob: float, dof: int) -> float:
     """float(chi2.ppf(prob, dof)), kept: the duplicate sweep asks for the same one at every
     sweep, and scipy's ppf costs more than the sweep's own arithmetic."""
-    return float(chi2.ppf(prob, dof))
+    return float(_chi2_ppf(prob, dof))
 
 
 @njit(cache=True)

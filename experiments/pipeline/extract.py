@@ -10,8 +10,8 @@ from experiments.errors import ConfigError
 from experiments.io.outputs import check_outputs
 from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import FEATURES_SCHEMA, dumps_json, features_to_dict, write_atomic
+from experiments.render.recording import open_recording
 from experiments.render.rerun_sink import recording_file
-from experiments.render.viz import open_recording
 from features import ExtractorParams, extract_features
 from features.bailey import BaileyParams
 

@@ -24,8 +24,8 @@ from experiments.io.sequence_file import load_sequence
 from experiments.io.writers import atomic_folder, dumps_json, json_types, write_atomic
 from experiments.pipeline.built_in import built_in_note
 from experiments.render.compiling import compile_seconds, watch_compiles
+from experiments.render.recording import open_recording
 from experiments.render.rerun_sink import recording_file
-from experiments.render.viz import open_recording
 from slam import Sequence, SlamConfig, SlamLog, interpolate_poses, run_slam, se2
 from slam.closure import closure_counts
 
