@@ -32,6 +32,17 @@ def test_getting_started_quotes_the_bench_cold_table_for_reproduce_quick():
     ) in text
 
 
+def test_the_readme_quotes_the_bench_cold_table_for_make_test():
+    table = (REPO / "docs" / "results" / "bench_cold.md").read_text()
+    assert "2 cores" in table.splitlines()[0]  # "on two idle cores"
+    cold = format_duration(cold_seconds(table, "make test", "cold"))
+    warm = format_duration(cold_seconds(table, "make test", "warm"))
+    assert (
+        f"`make test` took {cold} on a fresh clone, compiling the kernels, and {warm} run "
+        "again, on two idle cores"
+    ) in _words(REPO / "README.md")
+
+
 def test_cold_seconds_reads_back_what_format_cold_wrote():
     rows = [
         {"command": "make install", "run": "-", "wall_s": 61.2, "cpu_s": 50.1, "load_1min": 0.4},
